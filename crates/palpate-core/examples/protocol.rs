@@ -1,0 +1,45 @@
+//! Quick timing of the benchmark protocol from Rust: `cargo run --release --example protocol -- 1350`.
+#[path = "../tests/support/protocol.rs"]
+mod protocol;
+
+use palpate_core::integrate::{static_solve, StaticOptions};
+use palpate_core::{step, Integrator, ModelBuilder, State, Vec3, Workspace};
+use std::time::Instant;
+
+fn main() {
+    let name = std::env::args().nth(1).unwrap_or_else(|| "190".into());
+    let steps: usize = std::env::args().nth(2).and_then(|s| s.parse().ok()).unwrap_or(1000);
+    let case = protocol::load_case(&name).expect("shared meshes");
+    for integ in [Integrator::SemiImplicit, Integrator::BackwardEulerLinear, Integrator::newton()] {
+        let t0 = Instant::now();
+        let model = ModelBuilder::new(case.mesh.clone(), protocol::material()).fixed_nodes(case.fixed.clone()).integrator(integ).build().unwrap();
+        let build = t0.elapsed().as_secs_f64();
+        let mut f = vec![Vec3::zeros(); model.n_nodes()];
+        for &i in &case.loaded { f[i] = case.f_node; }
+        let stat = static_solve(&model, &f, &StaticOptions::default()).unwrap();
+        let u_static: Vec<Vec3> = stat.x.iter().zip(model.mesh().points()).map(|(x, x0)| x - x0).collect();
+        let mut st = State::rest(&model);
+        let mut ws = Workspace::new(&model);
+        let mut wall = 0.0;
+        let mut mean = vec![Vec3::zeros(); model.n_nodes()];
+        let mut cnt = 0;
+        let mut umax: f64 = 0.0;
+        for k in 0..steps {
+            let s = protocol::ramp(st.t);
+            for &i in &case.loaded { st.f_ext[i] = case.f_node * s; }
+            let t = Instant::now();
+            step(&model, &mut st, &mut ws, protocol::DT).unwrap();
+            wall += t.elapsed().as_secs_f64();
+            for (i, (x, x0)) in st.x.iter().zip(model.mesh().points()).enumerate() {
+                let u = x - x0;
+                umax = umax.max(u.norm());
+                if k >= steps / 2 { mean[i] += u; }
+            }
+            if k >= steps / 2 { cnt += 1; }
+        }
+        let num: f64 = mean.iter().zip(&u_static).map(|(m, u)| (m / cnt as f64 - u).norm_squared()).sum::<f64>().sqrt();
+        let den: f64 = u_static.iter().map(|u| u.norm_squared()).sum::<f64>().sqrt();
+        println!("{name:>5} {:?}: build {:.3}s nnzL {} | {:.0} steps/s | max|u| {:.3e} m | rel L2 vs static {:.2}% | static iters {}",
+            integ, build, model.factor_nnz(), steps as f64 / wall, umax, 100.0 * num / den, stat.iterations);
+    }
+}

@@ -1,0 +1,98 @@
+//! Typed errors. Bad input is reported once, at the boundary (mesh validation, material and model
+//! compilation); the step loop assumes a valid model and reports only numerical failures.
+
+use thiserror::Error;
+
+/// A tetrahedral mesh that cannot be used. Every variant names the offending element or node.
+/// `source` is the file the mesh came from when known (filled by the caller, e.g. the Python loader).
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum MeshError {
+    #[error("empty mesh: {what}")]
+    Empty { what: &'static str },
+    #[error("node {node}: non-finite coordinate ({x}, {y}, {z})")]
+    NonFiniteNode { node: usize, x: f64, y: f64, z: f64 },
+    #[error("tet {tet}: node index {index} out of range (mesh has {n_nodes} nodes)")]
+    IndexOutOfRange { tet: usize, index: i64, n_nodes: usize },
+    #[error("tet {tet}: node {node} appears twice")]
+    RepeatedNode { tet: usize, node: usize },
+    #[error("tet {tet}: degenerate (volume {volume:e} m^3, relative {relative:e} of its edge length cubed)")]
+    Degenerate { tet: usize, volume: f64, relative: f64 },
+    #[error("tet {tet}: duplicate of tet {other}")]
+    DuplicateTet { tet: usize, other: usize },
+    #[error("node {node} is used by no tetrahedron")]
+    UnusedNode { node: usize },
+    #[error("cells of type '{cell_type}' are not tetrahedra (block {block})")]
+    NotTetrahedral { cell_type: String, block: usize },
+    #[error("{what}: expected shape {expected}, got {got}")]
+    Shape { what: &'static str, expected: String, got: String },
+    #[error("{file}: {source}")]
+    InFile { file: String, source: Box<MeshError> },
+}
+
+impl MeshError {
+    /// Attach the file name the mesh came from.
+    pub fn in_file(self, file: impl Into<String>) -> MeshError {
+        MeshError::InFile { file: file.into(), source: Box::new(self) }
+    }
+}
+
+/// A material whose parameters are not physical.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum MaterialError {
+    #[error("{name} = {value} is not finite")]
+    NonFinite { name: &'static str, value: f64 },
+    #[error("{name} = {value} {unit} must be positive")]
+    NotPositive { name: &'static str, value: f64, unit: &'static str },
+    #[error("{name} = {value} {unit} must not be negative")]
+    Negative { name: &'static str, value: f64, unit: &'static str },
+    #[error("Poisson ratio nu = {0} must lie in (-1, 0.5) (0.5 is incompressible, which linear tetrahedra cannot represent)")]
+    Poisson(f64),
+    #[error("Lame parameters lambda = {lambda} Pa, mu = {mu} Pa give a non-positive bulk modulus")]
+    Bulk { lambda: f64, mu: f64 },
+}
+
+/// A model that cannot be compiled.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum ModelError {
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    #[error(transparent)]
+    Material(#[from] MaterialError),
+    #[error("fixed node {node} out of range (mesh has {n_nodes} nodes)")]
+    FixedOutOfRange { node: usize, n_nodes: usize },
+    #[error("gravity ({0}, {1}, {2}) m/s^2 is not finite")]
+    Gravity(f64, f64, f64),
+    #[error("integrator: {0}")]
+    Integrator(String),
+}
+
+/// A linear or nonlinear solve that failed.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum SolveError {
+    #[error("matrix not positive definite: pivot {pivot:e} at dof {dof} (node {node})")]
+    NotPositiveDefinite { dof: usize, node: usize, pivot: f64 },
+    #[error("Newton did not converge in {iterations} iterations (residual {residual:e} N, tolerance {tolerance:e} N)")]
+    NoConvergence { iterations: usize, residual: f64, tolerance: f64 },
+    #[error("non-finite value in {what} at node {node}")]
+    NonFinite { what: &'static str, node: usize },
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// A step that could not be completed. The state is left as it was before the step.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum StepError {
+    #[error("time step dt = {0} s must be positive and finite")]
+    BadTimeStep(f64),
+    #[error("non-finite {what} at node {node} (t = {time} s): the state was restored to the start of the step")]
+    NonFinite { what: &'static str, node: usize, time: f64 },
+    #[error("external force at node {node} is not finite")]
+    NonFiniteForce { node: usize },
+    #[error(transparent)]
+    Solve(#[from] SolveError),
+}

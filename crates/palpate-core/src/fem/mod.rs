@@ -1,0 +1,5 @@
+//! Finite elements: the linear tetrahedron of paper §3.1 (eq. 12-22).
+
+pub mod tet4;
+
+pub use tet4::TetRest;

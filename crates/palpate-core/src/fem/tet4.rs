@@ -1,0 +1,243 @@
+//! The linear (4-node) tetrahedron, paper §3.1, as pure functions of plain values.
+//!
+//! **Rest data.** The paper precomputes `Gamma = B(u)^-1` (eq. 18-21), the inverse of the 4x4
+//! matrix of rest coordinates padded with ones. Its rows are `[grad N_j^T | N_j(0)]`: only the
+//! shape-function gradients matter for strain and force, so palpate stores the equivalent
+//! `Dm^-1` with `Dm = [u1-u0, u2-u0, u3-u0]`, whose rows are `grad N_1 .. grad N_3`
+//! (`grad N_0 = -(grad N_1 + grad N_2 + grad N_3)`), and the rest volume `V = det(Dm)/6` (eq. 17).
+//!
+//! **Kinematics** (eq. 21): `F = sum_j x_j grad N_j^T = Ds Dm^-1`, `Fdot = sum_j v_j grad N_j^T`.
+//!
+//! **Force convention.** The paper's eq. (22) carries `vol/2` from O'Brien & Hodgins, whose Green
+//! strain lacks the 1/2 of eq. (4); combined, it would halve the stiffness. palpate implements
+//! the energy-consistent nodal force
+//!
+//! ```text
+//! f_i = -V F (S + S_v) grad N_i,      i = 0..3,
+//! ```
+//!
+//! `S` the elastic stress of eq. (9), `S_v` the viscous stress of eq. (11). The elastic part is
+//! exactly minus the gradient of the element's strain energy `V (mu E:E + lambda/2 tr(E)^2)`
+//! (checked by finite differences in the tests), so small loads reproduce linear elasticity with
+//! the same Lame constants, and the forces of an element sum to zero (momentum conservation).
+
+use crate::material::{self, Material};
+use crate::math::{Mat3, Vec3};
+
+/// Rest data of one tetrahedron.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TetRest {
+    /// Rest volume \[m^3\] (positive for a positively oriented tet).
+    pub volume: f64,
+    /// `Dm^-1` \[1/m\]: its rows are the gradients of the shape functions N_1..N_3.
+    pub dm_inv: Mat3,
+}
+
+impl TetRest {
+    /// Rest data from the four rest positions \[m\]. The caller guarantees a non-degenerate tet.
+    pub fn new(u: &[Vec3; 4]) -> TetRest {
+        let dm = Mat3::from_columns(&[u[1] - u[0], u[2] - u[0], u[3] - u[0]]);
+        let volume = dm.determinant() / 6.0;
+        let dm_inv = dm.try_inverse().unwrap_or_else(Mat3::zeros);
+        TetRest { volume, dm_inv }
+    }
+
+    /// Shape-function gradients `grad N_0 .. grad N_3` \[1/m\] (constant over the element).
+    #[inline]
+    pub fn grads(&self) -> [Vec3; 4] {
+        let g1 = self.dm_inv.row(0).transpose();
+        let g2 = self.dm_inv.row(1).transpose();
+        let g3 = self.dm_inv.row(2).transpose();
+        [-(g1 + g2 + g3), g1, g2, g3]
+    }
+}
+
+/// Deformation gradient `F = Ds Dm^-1` of positions `x` (eq. 21). Applied to velocities it gives `Fdot`.
+#[inline]
+pub fn deformation_gradient(x: &[Vec3; 4], rest: &TetRest) -> Mat3 {
+    let ds = Mat3::from_columns(&[x[1] - x[0], x[2] - x[0], x[3] - x[0]]);
+    ds * rest.dm_inv
+}
+
+/// Strain energy of the element \[J\]: `V (mu E:E + lambda/2 tr(E)^2)`.
+#[inline]
+pub fn strain_energy(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> f64 {
+    let e = material::green_strain(&deformation_gradient(x, rest));
+    let tr = e.trace();
+    rest.volume * (m.mu() * e.norm_squared() + 0.5 * m.lambda() * tr * tr)
+}
+
+/// Nodal forces \[N\] `f_i = -V F (S + S_v) grad N_i` of positions `x` \[m\] and velocities `v` \[m/s\].
+/// Pass `v = None` for the elastic force alone.
+#[inline]
+pub fn forces(x: &[Vec3; 4], v: Option<&[Vec3; 4]>, rest: &TetRest, m: &Material) -> [Vec3; 4] {
+    let f = deformation_gradient(x, rest);
+    let mut s = material::stress(m, &material::green_strain(&f));
+    if let Some(v) = v {
+        let f_dot = deformation_gradient(v, rest);
+        s += material::viscous_stress(m, &material::strain_rate(&f, &f_dot));
+    }
+    // H = -V P Dm^-T, P = F S: column j is the force on node j (j = 1..3).
+    let h = -rest.volume * (f * s) * rest.dm_inv.transpose();
+    let (h1, h2, h3) = (h.column(0).into_owned(), h.column(1).into_owned(), h.column(2).into_owned());
+    [-(h1 + h2 + h3), h1, h2, h3]
+}
+
+/// Force Jacobian blocks `K_ab = d f_a / d x_b` (3x3 each) of the elastic force at positions `x`,
+/// and, if the material is damped, `D_ab = d f_a / d v_b` of the viscous force (its dependence on
+/// `x` through `F` is not included).
+///
+/// With `g = grad N`, `S` the elastic stress and `F` the deformation gradient:
+/// `K_ab = -V [ (g_a . S g_b) I + lambda (F g_a)(F g_b)^T + mu (g_a . g_b) F F^T + mu (F g_b)(F g_a)^T ]`,
+/// and `D_ab` is the same without the first (geometric) term and with `(phi, psi)` for `(lambda, mu)`.
+/// At rest (`F = I`, `S = 0`) `K` is the stiffness matrix of linear elasticity (negated).
+pub fn jacobians(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> ([[Mat3; 4]; 4], Option<[[Mat3; 4]; 4]>) {
+    let f = deformation_gradient(x, rest);
+    let s = material::stress(m, &material::green_strain(&f));
+    let g = rest.grads();
+    let fg: [Vec3; 4] = [f * g[0], f * g[1], f * g[2], f * g[3]];
+    let sg: [Vec3; 4] = [s * g[0], s * g[1], s * g[2], s * g[3]];
+    let fft = f * f.transpose();
+    let vol = rest.volume;
+    let (lam, mu) = (m.lambda(), m.mu());
+    let dmp = m.damping();
+    let damped = !m.is_undamped();
+    let mut k = [[Mat3::zeros(); 4]; 4];
+    let mut d = [[Mat3::zeros(); 4]; 4];
+    for a in 0..4 {
+        for b in 0..4 {
+            let gg = g[a].dot(&g[b]);
+            let outer_ab = fg[a] * fg[b].transpose();
+            let outer_ba = fg[b] * fg[a].transpose();
+            k[a][b] = -vol * (Mat3::from_diagonal_element(g[a].dot(&sg[b])) + lam * outer_ab + (mu * gg) * fft + mu * outer_ba);
+            if damped {
+                d[a][b] = -vol * (dmp.phi * outer_ab + (dmp.psi * gg) * fft + dmp.psi * outer_ba);
+            }
+        }
+    }
+    (k, if damped { Some(d) } else { None })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::material::{Damping, Elasticity};
+
+    fn mat(damped: bool) -> Material {
+        let d = if damped { Damping { phi: 3.0, psi: 7.0 } } else { Damping::NONE };
+        Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, d).unwrap()
+    }
+
+    fn rest_tet() -> [Vec3; 4] {
+        [Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.011, 0.001, -0.002), Vec3::new(0.002, 0.009, 0.001), Vec3::new(-0.001, 0.002, 0.012)]
+    }
+
+    fn deformed() -> [Vec3; 4] {
+        let u = rest_tet();
+        let a = Mat3::new(1.1, 0.05, -0.03, 0.02, 0.93, 0.08, -0.04, 0.06, 1.07);
+        let w = [Vec3::new(1e-4, -2e-4, 3e-4), Vec3::new(-3e-4, 1e-4, 2e-4), Vec3::new(2e-4, 2e-4, -1e-4), Vec3::new(0.0, -1e-4, 1e-4)];
+        [a * u[0] + w[0], a * u[1] + w[1], a * u[2] + w[2], a * u[3] + w[3]]
+    }
+
+    #[test]
+    fn gamma_equivalence_rest_volume_and_gradients() {
+        let u = rest_tet();
+        let r = TetRest::new(&u);
+        // grad N_j . (u_k - u_0) = delta_jk - delta_j0 (shape functions interpolate the nodes).
+        let g = r.grads();
+        for j in 0..4 {
+            for k in 0..4 {
+                let expect = (j == k) as i32 as f64 - (j == 0) as i32 as f64;
+                assert!((g[j].dot(&(u[k] - u[0])) - expect).abs() < 1e-12);
+            }
+        }
+        let vol = crate::mesh::signed_volume(&u[0], &u[1], &u[2], &u[3]);
+        assert!((r.volume - vol).abs() < 1e-20);
+    }
+
+    #[test]
+    fn force_is_minus_energy_gradient() {
+        let m = mat(false);
+        let r = TetRest::new(&rest_tet());
+        let x = deformed();
+        let f = forces(&x, None, &r, &m);
+        let h = 1e-8;
+        for a in 0..4 {
+            for c in 0..3 {
+                let (mut xp, mut xm) = (x, x);
+                xp[a][c] += h;
+                xm[a][c] -= h;
+                let fd = -(strain_energy(&xp, &r, &m) - strain_energy(&xm, &r, &m)) / (2.0 * h);
+                assert!((fd - f[a][c]).abs() <= 1e-6 * f[a].norm().max(1e-12), "node {a} comp {c}: fd {fd} vs {}", f[a][c]);
+            }
+        }
+    }
+
+    #[test]
+    fn jacobians_match_finite_differences() {
+        let m = mat(true);
+        let r = TetRest::new(&rest_tet());
+        let x = deformed();
+        let v = [Vec3::new(0.1, -0.2, 0.05), Vec3::new(0.0, 0.1, 0.2), Vec3::new(-0.1, 0.0, 0.1), Vec3::new(0.2, 0.1, -0.1)];
+        let (k, d) = jacobians(&x, &r, &m);
+        let d = d.unwrap();
+        let h = 1e-8;
+        let elastic = |x: &[Vec3; 4]| forces(x, None, &r, &m);
+        let viscous = |v: &[Vec3; 4]| {
+            let fv = forces(&x, Some(v), &r, &m);
+            let fe = forces(&x, None, &r, &m);
+            [fv[0] - fe[0], fv[1] - fe[1], fv[2] - fe[2], fv[3] - fe[3]]
+        };
+        let scale_k = k.iter().flatten().map(|b| b.norm()).fold(0.0, f64::max);
+        let scale_d = d.iter().flatten().map(|b| b.norm()).fold(0.0, f64::max);
+        for b in 0..4 {
+            for c in 0..3 {
+                let (mut xp, mut xm) = (x, x);
+                xp[b][c] += h;
+                xm[b][c] -= h;
+                let (fp, fm) = (elastic(&xp), elastic(&xm));
+                let (mut vp, mut vm) = (v, v);
+                vp[b][c] += h;
+                vm[b][c] -= h;
+                let (gp, gm) = (viscous(&vp), viscous(&vm));
+                for a in 0..4 {
+                    let col = (fp[a] - fm[a]) / (2.0 * h);
+                    let err = (col - k[a][b].column(c)).norm();
+                    assert!(err <= 1e-6 * scale_k, "K[{a}][{b}] col {c}: {err}");
+                    let col = (gp[a] - gm[a]) / (2.0 * h);
+                    let err = (col - d[a][b].column(c)).norm();
+                    assert!(err <= 1e-6 * scale_d, "D[{a}][{b}] col {c}: {err}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn rigid_motion_gives_zero_force_and_rigid_velocity_zero_viscous_force() {
+        let m = mat(true);
+        let u = rest_tet();
+        let r = TetRest::new(&u);
+        let rot = nalgebra::Rotation3::from_euler_angles(0.7, -1.1, 2.3).into_inner();
+        let t = Vec3::new(0.3, -0.2, 0.5);
+        let x = u.map(|p| rot * p + t);
+        // Rigid velocity field v = w x (x - c) + v0 at the rotated configuration.
+        let w = Vec3::new(1.5, -0.4, 2.0);
+        let v = x.map(|p| w.cross(&p) + Vec3::new(0.1, 0.2, -0.3));
+        let f = forces(&x, Some(&v), &r, &m);
+        let scale = r.volume * m.lambda() / 0.01; // force of a unit strain on this element
+        for fi in f {
+            assert!(fi.norm() <= 1e-10 * scale, "{}", fi.norm());
+        }
+    }
+
+    #[test]
+    fn element_forces_sum_to_zero() {
+        let m = mat(true);
+        let r = TetRest::new(&rest_tet());
+        let x = deformed();
+        let v = x.map(|p| Vec3::new(p.y, -p.z, p.x) * 10.0);
+        let f = forces(&x, Some(&v), &r, &m);
+        let s: Vec3 = f.iter().sum();
+        assert!(s.norm() <= 1e-12 * f[0].norm());
+    }
+}

@@ -1,0 +1,35 @@
+//! # palpate-core
+//!
+//! The physics of palpate, a real-time soft-tissue simulator for haptic interaction, after
+//! M. G. Mero and A. Susin, *Deformable Hybrid Approach for Haptic Interaction* (the "paper").
+//!
+//! Units are SI throughout: positions in metres \[m\], forces in newtons \[N\], time in seconds \[s\],
+//! moduli in pascals \[Pa\], densities in \[kg/m^3\], viscosities in \[Pa s\]. Arrays of points are
+//! `(n_nodes)` slices of [`Vec3`] in the world frame.
+//!
+//! The data flow follows MuJoCo's split of `mjModel` and `mjData`:
+//!
+//! ```text
+//! TetMesh (validated) + Material + fixed nodes ──ModelBuilder::build──▶ Model (immutable)
+//!                                                                       │
+//!                         State (x, v, t, f_ext) ◀── State::rest ───────┤
+//!                         Workspace (scratch, factorisations) ◀─────────┘
+//!      step(&Model, &mut State, &mut Workspace, dt) -> Result<StepReport, StepError>
+//! ```
+#![forbid(unsafe_code)]
+
+pub mod error;
+pub mod fem;
+pub mod integrate;
+pub mod linalg;
+pub mod material;
+pub mod math;
+pub mod mesh;
+pub mod scene;
+
+pub use error::{MaterialError, MeshError, ModelError, SolveError, StepError};
+pub use integrate::{step, Integrator, StepReport};
+pub use material::Material;
+pub use math::{Mat3, Real, Vec3};
+pub use mesh::TetMesh;
+pub use scene::{Model, ModelBuilder, State, Workspace};

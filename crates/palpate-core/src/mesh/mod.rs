@@ -1,0 +1,10 @@
+//! Meshes: the validated tetrahedral mesh and generators of the paper's geometries.
+//!
+//! File formats are read in Python (meshio) and handed here as arrays; everything that can be
+//! wrong with a mesh is checked here, once, in [`TetMesh::from_arrays`].
+
+pub mod generate;
+mod tet_mesh;
+
+pub use tet_mesh::{signed_volume, MeshWarning, TetMesh};
+

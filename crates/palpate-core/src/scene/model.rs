@@ -1,0 +1,361 @@
+//! The immutable compiled model of a tetrahedral body.
+
+use crate::error::{ModelError, SolveError};
+use crate::fem::tet4::{self, TetRest};
+use crate::integrate::Integrator;
+use crate::linalg::{ordering, BlockPattern, Ldl};
+use crate::material::Material;
+use crate::math::{is_finite3, Mat3, Vec3};
+use crate::mesh::TetMesh;
+
+pub(crate) const NONE: usize = usize::MAX;
+
+/// Describes a body before compilation: mesh, material, boundary conditions, integrator.
+#[derive(Debug, Clone)]
+pub struct ModelBuilder {
+    mesh: TetMesh,
+    material: Material,
+    fixed: Vec<usize>,
+    gravity: Vec3,
+    integrator: Integrator,
+}
+
+impl ModelBuilder {
+    /// A body of `mesh` (positions in \[m\]) made of `material`; no fixed nodes, no gravity,
+    /// the rest-linearised backward Euler integrator.
+    pub fn new(mesh: TetMesh, material: Material) -> ModelBuilder {
+        ModelBuilder { mesh, material, fixed: Vec::new(), gravity: Vec3::zeros(), integrator: Integrator::BackwardEulerLinear }
+    }
+    /// Nodes held at their rest position (indices into the mesh's nodes).
+    pub fn fixed_nodes(mut self, nodes: Vec<usize>) -> Self {
+        self.fixed = nodes;
+        self
+    }
+    /// Gravitational acceleration \[m/s^2\], world frame (default zero).
+    pub fn gravity(mut self, g: Vec3) -> Self {
+        self.gravity = g;
+        self
+    }
+    /// Time integrator used by [`crate::step`].
+    pub fn integrator(mut self, i: Integrator) -> Self {
+        self.integrator = i;
+        self
+    }
+
+    /// Validate and precompute: rest shape inverses and volumes, lumped masses, the sparsity
+    /// pattern over the free nodes, the rest Jacobians, a fill-reducing order and the symbolic
+    /// factorisation used by the implicit integrators and the static solve.
+    pub fn build(self) -> Result<Model, ModelError> {
+        let ModelBuilder { mesh, material, fixed, gravity, integrator } = self;
+        let n = mesh.n_nodes();
+        if !is_finite3(&gravity) {
+            return Err(ModelError::Gravity(gravity.x, gravity.y, gravity.z));
+        }
+        integrator.validate().map_err(ModelError::Integrator)?;
+        let mut is_fixed = vec![false; n];
+        for &i in &fixed {
+            if i >= n {
+                return Err(ModelError::FixedOutOfRange { node: i, n_nodes: n });
+            }
+            is_fixed[i] = true;
+        }
+
+        // Element rest data and lumped masses: each tet gives a quarter of rho V to each node.
+        let pts = mesh.points();
+        let rest: Vec<TetRest> = mesh.tets().iter().map(|t| TetRest::new(&t.map(|i| pts[i]))).collect();
+        let mut mass = vec![0.0; n];
+        for (t, r) in mesh.tets().iter().zip(&rest) {
+            for &i in t {
+                mass[i] += 0.25 * material.density() * r.volume;
+            }
+        }
+
+        // Free nodes and their adjacency (through shared tets).
+        let mut node_to_free = vec![NONE; n];
+        let mut free_nodes = Vec::new();
+        for i in 0..n {
+            if !is_fixed[i] {
+                node_to_free[i] = free_nodes.len();
+                free_nodes.push(i);
+            }
+        }
+        let nf = free_nodes.len();
+        let mut adj: Vec<Vec<usize>> = vec![Vec::new(); nf];
+        for t in mesh.tets() {
+            for &a in t {
+                for &b in t {
+                    let (fa, fb) = (node_to_free[a], node_to_free[b]);
+                    if fa != NONE && fb != NONE && fa != fb {
+                        adj[fa].push(fb);
+                    }
+                }
+            }
+        }
+        for a in adj.iter_mut() {
+            a.sort_unstable();
+            a.dedup();
+        }
+        let pattern = BlockPattern::from_adjacency(&adj);
+        let tet_blocks: Vec<[usize; 16]> = mesh
+            .tets()
+            .iter()
+            .map(|t| {
+                let mut b = [NONE; 16];
+                for a in 0..4 {
+                    for c in 0..4 {
+                        let (fa, fc) = (node_to_free[t[a]], node_to_free[t[c]]);
+                        if fa != NONE && fc != NONE {
+                            b[4 * a + c] = pattern.find(fa, fc).expect("pattern holds every tet pair");
+                        }
+                    }
+                }
+                b
+            })
+            .collect();
+
+        // Rest Jacobians: K0 = df/dx and D0 = df/dv at rest, on the free pattern, and every
+        // node's diagonal block (the paper's per-node J_F of eq. 34, "neighbours fixed").
+        let mut k0 = vec![Mat3::zeros(); pattern.nnz()];
+        let mut d0 = vec![Mat3::zeros(); pattern.nnz()];
+        let mut node_k0 = vec![Mat3::zeros(); n];
+        let mut node_d0 = vec![Mat3::zeros(); n];
+        for ((t, r), blocks) in mesh.tets().iter().zip(&rest).zip(&tet_blocks) {
+            let x = t.map(|i| pts[i]);
+            let (k, d) = tet4::jacobians(&x, r, &material);
+            for a in 0..4 {
+                node_k0[t[a]] += k[a][a];
+                if let Some(d) = &d {
+                    node_d0[t[a]] += d[a][a];
+                }
+                for c in 0..4 {
+                    let bi = blocks[4 * a + c];
+                    if bi != NONE {
+                        k0[bi] += k[a][c];
+                        if let Some(d) = &d {
+                            d0[bi] += d[a][c];
+                        }
+                    }
+                }
+            }
+        }
+
+        // Fill-reducing order of the free nodes and the scalar upper-triangular pattern of the
+        // permuted system, with the map from block entries to its values.
+        let coords: Vec<Vec3> = free_nodes.iter().map(|&i| pts[i]).collect();
+        let order = ordering::fill_reducing_order(&adj, &coords);
+        let mut node_pos = vec![0usize; nf];
+        for (k, &i) in order.iter().enumerate() {
+            node_pos[i] = k;
+        }
+        let ndof = 3 * nf;
+        let mut columns: Vec<Vec<(usize, usize)>> = vec![Vec::new(); ndof]; // (row, block entry)
+        for i in 0..nf {
+            for bi in pattern.row_ptr[i]..pattern.row_ptr[i + 1] {
+                let j = pattern.col[bi];
+                for r in 0..3 {
+                    for c in 0..3 {
+                        let (p, q) = (3 * node_pos[i] + r, 3 * node_pos[j] + c);
+                        if p <= q {
+                            columns[q].push((p, 9 * bi + 3 * r + c));
+                        }
+                    }
+                }
+            }
+        }
+        let mut ap = Vec::with_capacity(ndof + 1);
+        let mut ai = Vec::new();
+        let mut entry_to_a = vec![NONE; 9 * pattern.nnz()];
+        ap.push(0);
+        for col in columns.iter_mut() {
+            col.sort_unstable();
+            for &(p, e) in col.iter() {
+                entry_to_a[e] = ai.len();
+                ai.push(p);
+            }
+            ap.push(ai.len());
+        }
+        let ldl = Ldl::symbolic(ndof, ap, ai);
+
+        Ok(Model {
+            mesh,
+            material,
+            rest,
+            mass,
+            fixed: is_fixed,
+            gravity,
+            integrator,
+            free_nodes,
+            pattern,
+            tet_blocks,
+            k0,
+            d0,
+            node_k0,
+            node_d0,
+            node_pos,
+            entry_to_a,
+            ldl,
+        })
+    }
+}
+
+/// A compiled, immutable tetrahedral body: rest geometry, element data, masses, material,
+/// boundary conditions and the structures of the linear solver. Shareable between threads.
+#[derive(Debug, Clone)]
+pub struct Model {
+    pub(crate) mesh: TetMesh,
+    pub(crate) material: Material,
+    pub(crate) rest: Vec<TetRest>,
+    pub(crate) mass: Vec<f64>,
+    pub(crate) fixed: Vec<bool>,
+    pub(crate) gravity: Vec3,
+    pub(crate) integrator: Integrator,
+    pub(crate) free_nodes: Vec<usize>,
+    /// Block pattern over the free nodes.
+    pub(crate) pattern: BlockPattern,
+    /// Per tet, the pattern block of node pair (a, c) at `4a + c`, or NONE if either is fixed.
+    pub(crate) tet_blocks: Vec<[usize; 16]>,
+    pub(crate) k0: Vec<Mat3>,
+    pub(crate) d0: Vec<Mat3>,
+    pub(crate) node_k0: Vec<Mat3>,
+    pub(crate) node_d0: Vec<Mat3>,
+    /// Free node -> position in the elimination order (its unknowns are 3 pos .. 3 pos + 2).
+    pub(crate) node_pos: Vec<usize>,
+    /// Block entry `9 bi + 3 r + c` -> index into the permuted upper-triangular values, or NONE.
+    pub(crate) entry_to_a: Vec<usize>,
+    /// Symbolic factorisation (cloned into each workspace for the numeric factors).
+    pub(crate) ldl: Ldl,
+}
+
+impl Model {
+    /// The validated mesh (rest positions \[m\]).
+    pub fn mesh(&self) -> &TetMesh { &self.mesh }
+    /// Number of nodes.
+    pub fn n_nodes(&self) -> usize { self.mesh.n_nodes() }
+    /// Number of tets.
+    pub fn n_tets(&self) -> usize { self.mesh.n_tets() }
+    /// The material.
+    pub fn material(&self) -> &Material { &self.material }
+    /// The integrator `step` uses.
+    pub fn integrator(&self) -> Integrator { self.integrator }
+    /// Lumped node masses \[kg\], `(n_nodes)`.
+    pub fn masses(&self) -> &[f64] { &self.mass }
+    /// `true` for fixed nodes, `(n_nodes)`.
+    pub fn fixed(&self) -> &[bool] { &self.fixed }
+    /// Gravity \[m/s^2\].
+    pub fn gravity(&self) -> Vec3 { self.gravity }
+    /// Per-tet rest data.
+    pub fn rest(&self) -> &[TetRest] { &self.rest }
+    /// The paper's per-node Jacobian block `J_F` of eq. (34), `d f_i / d x_i` at rest \[N/m\].
+    pub fn node_jacobians(&self) -> &[Mat3] { &self.node_k0 }
+    /// Number of unknowns of the implicit systems (3 per free node).
+    pub fn n_dofs(&self) -> usize { 3 * self.free_nodes.len() }
+    /// Off-diagonal nonzeros of the sparse factor L.
+    pub fn factor_nnz(&self) -> usize { self.ldl.nnz_l() }
+
+    /// Total strain energy \[J\] at positions `x` `(n_nodes)` \[m\].
+    pub fn strain_energy(&self, x: &[Vec3]) -> f64 {
+        self.mesh.tets().iter().zip(&self.rest).map(|(t, r)| tet4::strain_energy(&t.map(|i| x[i]), r, &self.material)).sum()
+    }
+
+    /// Kinetic energy \[J\] of velocities `v` `(n_nodes)` \[m/s\] with the lumped masses.
+    pub fn kinetic_energy(&self, v: &[Vec3]) -> f64 {
+        0.5 * v.iter().zip(&self.mass).map(|(v, m)| m * v.norm_squared()).sum::<f64>()
+    }
+
+    /// Total linear momentum \[kg m/s\].
+    pub fn momentum(&self, v: &[Vec3]) -> Vec3 {
+        v.iter().zip(&self.mass).map(|(v, m)| v * *m).sum()
+    }
+
+    /// Internal (elastic plus, with `v`, viscous) nodal forces \[N\] into `out` `(n_nodes)`, overwritten.
+    pub fn internal_forces(&self, x: &[Vec3], v: Option<&[Vec3]>, out: &mut [Vec3]) {
+        out.iter_mut().for_each(|f| *f = Vec3::zeros());
+        let damped = !self.material.is_undamped();
+        for (t, r) in self.mesh.tets().iter().zip(&self.rest) {
+            let xe = t.map(|i| x[i]);
+            let ve = match v {
+                Some(v) if damped => Some(t.map(|i| v[i])),
+                _ => None,
+            };
+            let f = tet4::forces(&xe, ve.as_ref(), r, &self.material);
+            for a in 0..4 {
+                out[t[a]] += f[a];
+            }
+        }
+    }
+
+    /// Total applied force on each node \[N\]: `f_ext + m g` added to `out`.
+    pub(crate) fn add_applied(&self, f_ext: &[Vec3], out: &mut [Vec3]) {
+        for i in 0..out.len() {
+            out[i] += f_ext[i] + self.mass[i] * self.gravity;
+        }
+    }
+
+    /// Assemble the tangent Jacobians at `x` into `k` (and `d` if damped) on the free pattern.
+    pub(crate) fn assemble_jacobians(&self, x: &[Vec3], k: &mut [Mat3], d: &mut [Mat3]) {
+        k.iter_mut().for_each(|b| *b = Mat3::zeros());
+        d.iter_mut().for_each(|b| *b = Mat3::zeros());
+        for ((t, r), blocks) in self.mesh.tets().iter().zip(&self.rest).zip(&self.tet_blocks) {
+            let (ke, de) = tet4::jacobians(&t.map(|i| x[i]), r, &self.material);
+            for e in 0..16 {
+                let bi = blocks[e];
+                if bi != NONE {
+                    k[bi] += ke[e / 4][e % 4];
+                    if let Some(de) = &de {
+                        d[bi] += de[e / 4][e % 4];
+                    }
+                }
+            }
+        }
+    }
+
+    /// Values of the permuted system matrix `cm M + cd D + ck K` into `a` (length `ldl.nnz_a()`).
+    pub(crate) fn system_values(&self, cm: f64, cd: f64, ck: f64, k: &[Mat3], d: &[Mat3], a: &mut [f64]) {
+        a.iter_mut().for_each(|v| *v = 0.0);
+        for i in 0..self.free_nodes.len() {
+            for bi in self.pattern.row_ptr[i]..self.pattern.row_ptr[i + 1] {
+                let mut blk = ck * k[bi];
+                if cd != 0.0 {
+                    blk += cd * d[bi];
+                }
+                if bi == self.pattern.diag[i] {
+                    blk += Mat3::from_diagonal_element(cm * self.mass[self.free_nodes[i]]);
+                }
+                for r in 0..3 {
+                    for c in 0..3 {
+                        let p = self.entry_to_a[9 * bi + 3 * r + c];
+                        if p != NONE {
+                            a[p] += blk[(r, c)];
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Factor the system values `a` into `ldl`, translating a failed pivot into a node.
+    pub(crate) fn factor(&self, ldl: &mut Ldl, a: &[f64]) -> Result<(), SolveError> {
+        ldl.factor(a).map_err(|e| {
+            let pos = e.column / 3;
+            let free = self.node_pos.iter().position(|&p| p == pos).unwrap_or(0);
+            SolveError::NotPositiveDefinite { dof: e.column, node: self.free_nodes.get(free).copied().unwrap_or(0), pivot: e.pivot }
+        })
+    }
+
+    /// Scatter per-node vectors of the free nodes into the permuted unknown vector `b`.
+    pub(crate) fn gather_free(&self, per_node: &[Vec3], b: &mut [f64]) {
+        for (fi, &node) in self.free_nodes.iter().enumerate() {
+            let p = 3 * self.node_pos[fi];
+            b[p] = per_node[node].x;
+            b[p + 1] = per_node[node].y;
+            b[p + 2] = per_node[node].z;
+        }
+    }
+
+    /// The value of free node `fi` in the permuted unknown vector `b`.
+    #[inline]
+    pub(crate) fn free_value(&self, fi: usize, b: &[f64]) -> Vec3 {
+        let p = 3 * self.node_pos[fi];
+        Vec3::new(b[p], b[p + 1], b[p + 2])
+    }
+}
