@@ -40,6 +40,6 @@ fn main() {
         let num: f64 = mean.iter().zip(&u_static).map(|(m, u)| (m / cnt as f64 - u).norm_squared()).sum::<f64>().sqrt();
         let den: f64 = u_static.iter().map(|u| u.norm_squared()).sum::<f64>().sqrt();
         println!("{name:>5} {:?}: build {:.3}s nnzL {} | {:.0} steps/s | max|u| {:.3e} m | rel L2 vs static {:.2}% | static iters {}",
-            integ, build, model.factor_nnz(), steps as f64 / wall, umax, 100.0 * num / den, stat.iterations);
+            integ, build, model.factor_blocks(), steps as f64 / wall, umax, 100.0 * num / den, stat.iterations);
     }
 }

@@ -40,14 +40,11 @@ pub(super) fn step_linear(model: &Model, state: &mut State, ws: &mut Workspace, 
             }
             b -= dt * dv;
         }
-        let q = 3 * model.node_pos[fi];
-        ws.rhs[q] = b.x;
-        ws.rhs[q + 1] = b.y;
-        ws.rhs[q + 2] = b.z;
+        ws.rhs[model.node_pos[fi]] = b;
     }
     ws.ldl.solve_in_place(&mut ws.rhs);
     for (fi, &node) in model.free_nodes.iter().enumerate() {
-        let v = model.free_value(fi, &ws.rhs);
+        let v = ws.rhs[model.node_pos[fi]];
         state.v[node] = v;
         state.x[node] += dt * v;
     }
@@ -66,10 +63,7 @@ fn residual(model: &Model, state: &State, ws: &mut Workspace, dt: f64) -> f64 {
     for (fi, &node) in model.free_nodes.iter().enumerate() {
         let r = model.mass[node] * (ws.v_trial[node] - state.v[node]) - dt * ws.force[node];
         norm2 += r.norm_squared();
-        let q = 3 * model.node_pos[fi];
-        ws.rhs[q] = -r.x;
-        ws.rhs[q + 1] = -r.y;
-        ws.rhs[q + 2] = -r.z;
+        ws.rhs[model.node_pos[fi]] = -r;
     }
     norm2.sqrt()
 }
@@ -97,7 +91,7 @@ pub(super) fn step_newton(
         model.factor(&mut ws.ldl, &ws.a_values)?;
         ws.ldl.solve_in_place(&mut ws.rhs);
         for (fi, &node) in model.free_nodes.iter().enumerate() {
-            ws.v_trial[node] += model.free_value(fi, &ws.rhs);
+            ws.v_trial[node] += ws.rhs[model.node_pos[fi]];
         }
         solves += 1;
         r = residual(model, state, ws, dt);

@@ -84,7 +84,7 @@ pub fn static_solve(model: &Model, f_ext: &[Vec3], opts: &StaticOptions) -> Resu
             let mut alpha = 1.0;
             loop {
                 for (fi, &node) in model.free_nodes.iter().enumerate() {
-                    trial[node] = x[node] + alpha * model.free_value(fi, &ws.rhs);
+                    trial[node] = x[node] + alpha * ws.rhs[model.node_pos[fi]];
                 }
                 let rt = residual(model, &trial, &applied, lam, &mut ws);
                 if rt < r || alpha < 1e-4 {

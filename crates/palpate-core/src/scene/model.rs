@@ -147,34 +147,28 @@ impl ModelBuilder {
         for (k, &i) in order.iter().enumerate() {
             node_pos[i] = k;
         }
-        let ndof = 3 * nf;
-        let mut columns: Vec<Vec<(usize, usize)>> = vec![Vec::new(); ndof]; // (row, block entry)
+        let mut columns: Vec<Vec<(usize, usize)>> = vec![Vec::new(); nf]; // (block row, pattern block)
         for i in 0..nf {
             for bi in pattern.row_ptr[i]..pattern.row_ptr[i + 1] {
-                let j = pattern.col[bi];
-                for r in 0..3 {
-                    for c in 0..3 {
-                        let (p, q) = (3 * node_pos[i] + r, 3 * node_pos[j] + c);
-                        if p <= q {
-                            columns[q].push((p, 9 * bi + 3 * r + c));
-                        }
-                    }
+                let (p, q) = (node_pos[i], node_pos[pattern.col[bi]]);
+                if p <= q {
+                    columns[q].push((p, bi));
                 }
             }
         }
-        let mut ap = Vec::with_capacity(ndof + 1);
+        let mut ap = Vec::with_capacity(nf + 1);
         let mut ai = Vec::new();
-        let mut entry_to_a = vec![NONE; 9 * pattern.nnz()];
+        let mut entry_to_a = vec![NONE; pattern.nnz()];
         ap.push(0);
         for col in columns.iter_mut() {
             col.sort_unstable();
-            for &(p, e) in col.iter() {
-                entry_to_a[e] = ai.len();
+            for &(p, bi) in col.iter() {
+                entry_to_a[bi] = ai.len();
                 ai.push(p);
             }
             ap.push(ai.len());
         }
-        let ldl = Ldl::symbolic(ndof, ap, ai);
+        let ldl = Ldl::symbolic(nf, ap, ai);
 
         Ok(Model {
             mesh,
@@ -192,6 +186,7 @@ impl ModelBuilder {
             node_k0,
             node_d0,
             node_pos,
+            order,
             entry_to_a,
             ldl,
         })
@@ -220,7 +215,10 @@ pub struct Model {
     pub(crate) node_d0: Vec<Mat3>,
     /// Free node -> position in the elimination order (its unknowns are 3 pos .. 3 pos + 2).
     pub(crate) node_pos: Vec<usize>,
-    /// Block entry `9 bi + 3 r + c` -> index into the permuted upper-triangular values, or NONE.
+    /// Position in the elimination order -> free node (inverse of `node_pos`).
+    pub(crate) order: Vec<usize>,
+    /// Pattern block -> index into the permuted upper block triangle of the system, or NONE
+    /// (blocks below the diagonal after permutation, given by symmetry).
     pub(crate) entry_to_a: Vec<usize>,
     /// Symbolic factorisation (cloned into each workspace for the numeric factors).
     pub(crate) ldl: Ldl,
@@ -249,8 +247,8 @@ impl Model {
     pub fn node_jacobians(&self) -> &[Mat3] { &self.node_k0 }
     /// Number of unknowns of the implicit systems (3 per free node).
     pub fn n_dofs(&self) -> usize { 3 * self.free_nodes.len() }
-    /// Off-diagonal nonzeros of the sparse factor L.
-    pub fn factor_nnz(&self) -> usize { self.ldl.nnz_l() }
+    /// Off-diagonal 3x3 blocks of the sparse factor L.
+    pub fn factor_blocks(&self) -> usize { self.ldl.nnz_l() }
 
     /// Total strain energy \[J\] at positions `x` `(n_nodes)` \[m\].
     pub fn strain_energy(&self, x: &[Vec3]) -> f64 {
@@ -309,11 +307,14 @@ impl Model {
         }
     }
 
-    /// Values of the permuted system matrix `cm M + cd D + ck K` into `a` (length `ldl.nnz_a()`).
-    pub(crate) fn system_values(&self, cm: f64, cd: f64, ck: f64, k: &[Mat3], d: &[Mat3], a: &mut [f64]) {
-        a.iter_mut().for_each(|v| *v = 0.0);
+    /// Blocks of the permuted system matrix `cm M + cd D + ck K` into `a` (length `ldl.nnz_a()`).
+    pub(crate) fn system_values(&self, cm: f64, cd: f64, ck: f64, k: &[Mat3], d: &[Mat3], a: &mut [Mat3]) {
         for i in 0..self.free_nodes.len() {
             for bi in self.pattern.row_ptr[i]..self.pattern.row_ptr[i + 1] {
+                let p = self.entry_to_a[bi];
+                if p == NONE {
+                    continue;
+                }
                 let mut blk = ck * k[bi];
                 if cd != 0.0 {
                     blk += cd * d[bi];
@@ -321,41 +322,24 @@ impl Model {
                 if bi == self.pattern.diag[i] {
                     blk += Mat3::from_diagonal_element(cm * self.mass[self.free_nodes[i]]);
                 }
-                for r in 0..3 {
-                    for c in 0..3 {
-                        let p = self.entry_to_a[9 * bi + 3 * r + c];
-                        if p != NONE {
-                            a[p] += blk[(r, c)];
-                        }
-                    }
-                }
+                a[p] = blk;
             }
         }
     }
 
-    /// Factor the system values `a` into `ldl`, translating a failed pivot into a node.
-    pub(crate) fn factor(&self, ldl: &mut Ldl, a: &[f64]) -> Result<(), SolveError> {
-        ldl.factor(a).map_err(|e| {
-            let pos = e.column / 3;
-            let free = self.node_pos.iter().position(|&p| p == pos).unwrap_or(0);
-            SolveError::NotPositiveDefinite { dof: e.column, node: self.free_nodes.get(free).copied().unwrap_or(0), pivot: e.pivot }
+    /// Factor the system blocks `a` into `ldl`, translating a failed pivot into a node.
+    pub(crate) fn factor(&self, ldl: &mut Ldl, a: &[Mat3]) -> Result<(), SolveError> {
+        ldl.factor(a).map_err(|e| SolveError::NotPositiveDefinite {
+            dof: 3 * e.column,
+            node: self.free_nodes[self.order[e.column]],
+            pivot: e.pivot,
         })
     }
 
     /// Scatter per-node vectors of the free nodes into the permuted unknown vector `b`.
-    pub(crate) fn gather_free(&self, per_node: &[Vec3], b: &mut [f64]) {
+    pub(crate) fn gather_free(&self, per_node: &[Vec3], b: &mut [Vec3]) {
         for (fi, &node) in self.free_nodes.iter().enumerate() {
-            let p = 3 * self.node_pos[fi];
-            b[p] = per_node[node].x;
-            b[p + 1] = per_node[node].y;
-            b[p + 2] = per_node[node].z;
+            b[self.node_pos[fi]] = per_node[node];
         }
-    }
-
-    /// The value of free node `fi` in the permuted unknown vector `b`.
-    #[inline]
-    pub(crate) fn free_value(&self, fi: usize, b: &[f64]) -> Vec3 {
-        let p = 3 * self.node_pos[fi];
-        Vec3::new(b[p], b[p + 1], b[p + 2])
     }
 }
