@@ -1,1 +1,61 @@
-fn main() {}
+//! Criterion benchmarks of one 1 ms step under the protocol's probe load (shared/bench/PROTOCOL.md),
+//! single thread, on the paper's ~188-tet ellipsoid wall and the four shared meshes.
+//!
+//! `cargo bench -p palpate-core --bench step` (the shared meshes are found beside the repository
+//! or through `PALPATE_SHARED`; missing ones are skipped).
+#[path = "../tests/support/protocol.rs"]
+mod protocol;
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use palpate_core::mesh::generate::{ellipsoid_wall, EllipsoidWall};
+use palpate_core::{step, Integrator, ModelBuilder, State, Vec3, Workspace};
+
+fn ellipsoid_case() -> protocol::Case {
+    // The paper's Ellipsoids Model (192 tets), in mesh units so that the protocol's load applies:
+    // semi-axes 2.0/2.0/3.5 and 2.6/2.6/4.2 (x 1 cm); the base (z <= 0) half is held fixed.
+    let mesh = ellipsoid_wall(&EllipsoidWall { inner: [2.0, 2.0, 3.5], outer: [2.6, 2.6, 4.2], ..EllipsoidWall::default() });
+    let pts: Vec<[f64; 3]> = mesh.points().iter().map(|p| [p.x, p.y, p.z]).collect();
+    let tets: Vec<[i64; 4]> = mesh.tets().iter().map(|t| t.map(|i| i as i64)).collect();
+    protocol::case_from_mesh_units(&pts, &tets)
+}
+
+fn bench_steps(c: &mut Criterion) {
+    let mut cases = vec![("ellipsoid_192".to_string(), ellipsoid_case())];
+    for name in ["190", "1350", "10k", "50k"] {
+        if let Some(case) = protocol::load_case(name) {
+            cases.push((format!("lv_{name}"), case));
+        }
+    }
+    let mut group = c.benchmark_group("step_1ms");
+    group.sample_size(20);
+    for (name, case) in &cases {
+        let mut integrators = vec![("semi_implicit", Integrator::SemiImplicit), ("backward_euler_linear", Integrator::BackwardEulerLinear)];
+        if case.mesh.n_tets() < 2000 {
+            integrators.push(("backward_euler_newton", Integrator::newton()));
+        }
+        for (iname, integ) in integrators {
+            let model = ModelBuilder::new(case.mesh.clone(), protocol::material())
+                .fixed_nodes(case.fixed.clone())
+                .integrator(integ)
+                .build()
+                .expect("model");
+            let mut state = State::rest(&model);
+            let mut ws = Workspace::new(&model);
+            for &i in &case.loaded {
+                state.f_ext[i] = case.f_node;
+            }
+            // Warm up into the loaded regime (and make the first-step factorisation).
+            for _ in 0..50 {
+                step(&model, &mut state, &mut ws, protocol::DT).expect("stable");
+            }
+            let _ = Vec3::zeros();
+            group.bench_with_input(BenchmarkId::new(iname, name), &(), |b, _| {
+                b.iter(|| step(&model, &mut state, &mut ws, protocol::DT).expect("stable"))
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_steps);
+criterion_main!(benches);

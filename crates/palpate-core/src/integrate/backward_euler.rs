@@ -13,7 +13,9 @@
 //!   full nonlinear force, so steady states are exact equilibria whatever the linearisation.
 //! * **Newton** (`BackwardEulerNewton`): iterate `(M - dt D(x~) - dt^2 K(x~)) dv = -r(v+)` on the
 //!   residual `r(v+) = M (v+ - v) - dt f(x + dt v+, v+)`, with the tangent at `x~ = x + dt v+`,
-//!   refactorised every iteration (the pattern and ordering are reused).
+//!   refactorised every iteration (the pattern and ordering are reused). The iterations stop when
+//!   `|r| <= tolerance (|r_0| + |(M v, dt f_applied)|)`: relative to the momenta that make up the
+//!   residual, so that a step near equilibrium does not chase round-off.
 
 use crate::error::{SolveError, StepError};
 use crate::math::Vec3;
@@ -79,9 +81,17 @@ pub(super) fn step_newton(
     ws.v_trial.copy_from_slice(&state.v);
     ws.x_trial.copy_from_slice(&state.x);
     let r0 = residual(model, state, ws, dt);
+    // The residual is a difference of momenta; measure it against the momenta that make it up
+    // (not r0 alone, which is ~0 near equilibrium and would ask for accuracy below round-off).
+    let mut scale2 = 0.0;
+    for &node in &model.free_nodes {
+        let m = model.mass[node];
+        scale2 += (m * state.v[node]).norm_squared() + (dt * (state.f_ext[node] + m * model.gravity)).norm_squared();
+    }
+    let scale = r0 + scale2.sqrt();
     let mut r = r0;
     let mut solves = 0;
-    while r > tolerance * r0 && solves < max_iterations {
+    while r > tolerance * scale && solves < max_iterations {
         if !r.is_finite() {
             return Err(StepError::Solve(SolveError::NonFinite { what: "Newton residual", node: 0 }));
         }
@@ -101,6 +111,6 @@ pub(super) fn step_newton(
         state.v[node] = ws.v_trial[node];
         state.x[node] += dt * ws.v_trial[node];
     }
-    let rel = if r0 > 0.0 { r / r0 } else { 0.0 };
-    Ok(StepReport { solves, converged: r <= tolerance * r0, residual: rel })
+    let rel = if scale > 0.0 { r / scale } else { 0.0 };
+    Ok(StepReport { solves, converged: r <= tolerance * scale, residual: rel })
 }
