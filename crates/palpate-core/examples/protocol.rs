@@ -10,7 +10,11 @@ fn main() {
     let name = std::env::args().nth(1).unwrap_or_else(|| "190".into());
     let steps: usize = std::env::args().nth(2).and_then(|s| s.parse().ok()).unwrap_or(1000);
     let case = protocol::load_case(&name).expect("shared meshes");
-    for integ in [Integrator::SemiImplicit, Integrator::BackwardEulerLinear, Integrator::newton()] {
+    let mut integrators = vec![Integrator::SemiImplicit, Integrator::BackwardEulerLinear];
+    if case.mesh.n_tets() < 2000 {
+        integrators.push(Integrator::newton());
+    }
+    for integ in integrators {
         let t0 = Instant::now();
         let model = ModelBuilder::new(case.mesh.clone(), protocol::material()).fixed_nodes(case.fixed.clone()).integrator(integ).build().unwrap();
         let build = t0.elapsed().as_secs_f64();
@@ -25,10 +29,13 @@ fn main() {
         let mut cnt = 0;
         let mut umax: f64 = 0.0;
         for k in 0..steps {
-            let s = protocol::ramp(st.t);
+            let s = protocol::ramp((k + 1) as f64 * protocol::DT); // as shared/bench/common.py: the load at the step's end
             for &i in &case.loaded { st.f_ext[i] = case.f_node * s; }
             let t = Instant::now();
-            step(&model, &mut st, &mut ws, protocol::DT).unwrap();
+            if let Err(e) = step(&model, &mut st, &mut ws, protocol::DT) {
+                println!("{name:>5} {:?}: UNSTABLE after {k} steps: {e}", integ);
+                break;
+            }
             wall += t.elapsed().as_secs_f64();
             for (i, (x, x0)) in st.x.iter().zip(model.mesh().points()).enumerate() {
                 let u = x - x0;
@@ -37,9 +44,10 @@ fn main() {
             }
             if k >= steps / 2 { cnt += 1; }
         }
+        if cnt == 0 { continue; }
         let num: f64 = mean.iter().zip(&u_static).map(|(m, u)| (m / cnt as f64 - u).norm_squared()).sum::<f64>().sqrt();
         let den: f64 = u_static.iter().map(|u| u.norm_squared()).sum::<f64>().sqrt();
-        println!("{name:>5} {:?}: build {:.3}s nnzL {} | {:.0} steps/s | max|u| {:.3e} m | rel L2 vs static {:.2}% | static iters {}",
+        println!("{name:>5} {:?}: build {:.3}s nnzL {} | {:.0} steps/s | max|u| {:.3e} m | rel L2 vs static {:.3}% | static iters {}",
             integ, build, model.factor_blocks(), steps as f64 / wall, umax, 100.0 * num / den, stat.iterations);
     }
 }
