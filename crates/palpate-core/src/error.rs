@@ -91,6 +91,8 @@ pub enum StepError {
     BadTimeStep(f64),
     #[error("non-finite {what} at node {node} (t = {time} s): the state was restored to the start of the step")]
     NonFinite { what: &'static str, node: usize, time: f64 },
+    #[error("state does not fit the model ({nodes} nodes): x has {x} rows, v {v}, f_ext {f_ext}")]
+    StateShape { nodes: usize, x: usize, v: usize, f_ext: usize },
     #[error("external force at node {node} is not finite")]
     NonFiniteForce { node: usize },
     #[error(transparent)]

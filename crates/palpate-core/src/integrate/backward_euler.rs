@@ -93,7 +93,8 @@ pub(super) fn step_newton(
     let mut solves = 0;
     while r > tolerance * scale && solves < max_iterations {
         if !r.is_finite() {
-            return Err(StepError::Solve(SolveError::NonFinite { what: "Newton residual", node: 0 }));
+            let node = model.free_nodes.iter().copied().find(|&i| !crate::math::is_finite3(&ws.force[i])).unwrap_or(0);
+            return Err(StepError::Solve(SolveError::NonFinite { what: "Newton residual", node }));
         }
         // Tangent at the current iterate (x_trial was set by `residual`).
         model.assemble_jacobians(&ws.x_trial, &mut ws.k, &mut ws.d);

@@ -74,6 +74,10 @@ pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Re
     if !(dt > 0.0 && dt.is_finite()) {
         return Err(StepError::BadTimeStep(dt));
     }
+    let n = model.n_nodes();
+    if state.x.len() != n || state.v.len() != n || state.f_ext.len() != n {
+        return Err(StepError::StateShape { nodes: n, x: state.x.len(), v: state.v.len(), f_ext: state.f_ext.len() });
+    }
     if let Some(node) = state.f_ext.iter().position(|f| !is_finite3(f)) {
         return Err(StepError::NonFiniteForce { node });
     }

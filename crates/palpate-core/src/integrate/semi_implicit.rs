@@ -10,10 +10,22 @@
 //! are fixed", precomputed once ([`crate::Model::node_jacobians`]). It is negative semi-definite,
 //! so `I - dt^2/m J_F` is positive definite (the paper's README notes the sign). palpate adds the
 //! viscous block in the same way, `(I - dt/m D_ii - dt^2/m J_ii)^-1`, so that damping is treated
-//! as implicitly as stiffness. The per-node filter is unconditionally stable for the local
-//! oscillation but damps every mode by `1/(1 + dt^2 k_ii/m)` per step, a factor that grows as the
-//! mesh is refined (`k_ii/m ~ 1/h^2`): on fine meshes the scheme is over-damped and lags behind the
-//! equilibrium (measured in BENCHMARKS.md).
+//! as implicitly as stiffness.
+//!
+//! Properties, measured (tests/dynamics.rs, BENCHMARKS.md):
+//! * **Not unconditionally stable.** The filter stabilises each node against its own stiffness
+//!   with its neighbours held fixed; the coupling to the neighbours stays explicit. The step is
+//!   stable while `dt^2 lambda_max(M^-1 K)` stays within about `2 dt^2 k_ii/m + 4`: true at 1 ms on
+//!   the benchmark's lv_190 .. lv_10k meshes (spectral radius 0.993 on lv_190, 0.998 on lv_1350)
+//!   but not on the 48k-tet mesh nor on the default truncated wall generator (radius 1.32), and
+//!   damping makes it worse.
+//! * **Over-damped on fine meshes.** Every mode is damped by about `1/(1 + dt^2 k_ii/m)` per step
+//!   and `k_ii/m ~ 1/h^2`, so on finer meshes the motion creeps toward equilibrium and lags behind it.
+//! * **Does not conserve linear momentum**: each node's velocity is scaled by its own matrix, so
+//!   even a rigid translation is slowed.
+//!
+//! Backward Euler (`BackwardEulerLinear`) has none of these defects at a similar cost on small
+//! meshes; the semi-implicit scheme is kept as the paper's reference.
 
 use crate::math::Mat3;
 use crate::scene::{Model, State, Workspace};

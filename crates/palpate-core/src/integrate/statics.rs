@@ -4,6 +4,7 @@
 //! increments for large loads. Used to validate the dynamic schemes and as a reference.
 
 use crate::error::SolveError;
+use crate::fem::tet4;
 use crate::math::{is_finite3, Vec3};
 use crate::scene::{Model, Workspace};
 
@@ -12,7 +13,8 @@ use crate::scene::{Model, Workspace};
 pub struct StaticOptions {
     /// Newton iteration cap over all load increments.
     pub max_iterations: usize,
-    /// Convergence: `max_i |r_i| <= tolerance * max_i |f_ext,i + m_i g|` over free nodes.
+    /// Convergence: `max_i |r_i| <= tolerance * max_i |f_ext,i + m_i g|` over free nodes, or the
+    /// round-off level of the internal forces (see `round_off_floor`), whichever is larger.
     pub tolerance: f64,
     /// The load is applied in this many equal increments (1 for small loads).
     pub load_steps: usize,
@@ -34,6 +36,29 @@ pub struct StaticSolution {
     /// Final residual `max_i |r_i|` \[N\].
     pub residual: f64,
 }
+
+/// Round-off level of the assembled internal force at `x` \[N\], below which a residual cannot
+/// be resolved. Two sources, summed per node over its tets: the force sum itself
+/// (`eps |f_e|`), and the deformation gradient, whose differences of positions lose
+/// `eps |x| |Dm^-1|` of strain, i.e. a force of `V (lambda + 2 mu) |Dm^-1|^2 eps |x|`.
+fn round_off_floor(model: &Model, x: &[Vec3], per_node: &mut [f64]) -> f64 {
+    per_node.iter_mut().for_each(|v| *v = 0.0);
+    let modulus = model.material.lambda() + 2.0 * model.material.mu();
+    for (t, r) in model.mesh.tets().iter().zip(&model.rest) {
+        let xe = t.map(|i| x[i]);
+        let f = tet4::forces(&xe, None, r, &model.material);
+        let xmax = xe.iter().map(|p| p.norm()).fold(0.0, f64::max);
+        let strain_noise = r.volume * modulus * r.dm_inv.norm_squared() * xmax;
+        for a in 0..4 {
+            per_node[t[a]] += f[a].norm() + strain_noise;
+        }
+    }
+    let worst = model.free_nodes.iter().map(|&i| per_node[i]).fold(0.0, f64::max);
+    ROUND_OFF_FACTOR * f64::EPSILON * worst
+}
+
+/// Multiple of the estimated round-off taken as converged.
+const ROUND_OFF_FACTOR: f64 = 16.0;
 
 fn residual(model: &Model, x: &[Vec3], applied: &[Vec3], lam: f64, ws: &mut Workspace) -> f64 {
     model.internal_forces(x, None, &mut ws.force);
@@ -63,15 +88,22 @@ pub fn static_solve(model: &Model, f_ext: &[Vec3], opts: &StaticOptions) -> Resu
     let tol = opts.tolerance * scale;
     let mut ws = Workspace::new(model);
     let mut trial = x.clone();
+    let mut magnitudes = vec![0.0; n];
     let mut iterations = 0;
     let mut r = 0.0;
     let steps = opts.load_steps.max(1);
     for s in 1..=steps {
         let lam = s as f64 / steps as f64;
         r = residual(model, &x, &applied, lam, &mut ws);
-        while r > tol {
+        loop {
+            // Converged at the requested tolerance, or at the round-off level of the forces
+            // (a tolerance below it could never be met).
+            let floor = round_off_floor(model, &x, &mut magnitudes);
+            if r <= tol.max(floor) {
+                break;
+            }
             if iterations >= opts.max_iterations {
-                return Err(SolveError::NoConvergence { iterations, residual: r, tolerance: tol });
+                return Err(SolveError::NoConvergence { iterations, residual: r, tolerance: tol.max(floor) });
             }
             iterations += 1;
             // Newton direction: (-K) dx = f.
