@@ -137,17 +137,12 @@ fn small_loads_respond_linearly() {
     }
 }
 
-/// KNOWN ISSUE (reported): `static_solve` with `StaticOptions::default()` (relative residual
-/// tolerance 1e-10 of the largest load) never converges when the load is small, because the
-/// internal forces carry a round-off of ~ eps |x| / h of the element force scale, which relative
-/// to a load producing strain `e` is ~ eps |x| / (h e): 1.4e-9 for this bar at e = 1e-6. Newton
-/// then spins for `max_iterations` (the line search accepts non-decreasing steps once
-/// alpha < 1e-4) and returns `NoConvergence` with a residual of 4e-15 N against a tolerance of
-/// 3e-16 N, although the solution is exact to 1e-9. A fix would stop on a round-off-aware floor
-/// (e.g. tolerance relative to max(|load|, eps * sum of |element forces| at the node)) or on
-/// stagnation. Un-ignore when fixed.
+/// Regression (found by this suite): with `StaticOptions::default()` (tolerance 1e-10 of the
+/// largest load) a small load asked for a residual below the round-off of the internal forces
+/// (~ eps |x| / h of the stress scale: 1.4e-9 of the load for this bar at strain 1e-6), and Newton
+/// spun to `max_iterations`. The solve now also accepts the estimated round-off floor; the
+/// answer must still be exact to 1e-5.
 #[test]
-#[ignore = "known issue: default static tolerance is below the force round-off floor at small strain"]
 fn default_static_tolerance_is_reachable_at_small_strain() {
     let model = bar();
     let p_total = E * W * W * 1e-6;

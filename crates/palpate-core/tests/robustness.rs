@@ -1,0 +1,229 @@
+//! Robustness of the step API: no allocation in the loop, typed errors instead of panics, and a
+//! state left exactly as it was when a step fails.
+//!
+//! What a wrong implementation would do: a `Vec` built inside `step` (a scratch buffer, a
+//! `collect`, a cloned factor) is counted by the allocator below; a step that writes the state
+//! before detecting a NaN leaves a half-updated state (caught by the bitwise comparison); an
+//! unchecked `dt` or force panics or silently produces NaN; a builder that accepts an
+//! out-of-range fixed node panics later, inside `step`.
+
+#[path = "support/common.rs"]
+mod common;
+
+use common::*;
+use palpate_core::mesh::generate::{base_nodes, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
+use palpate_core::{step, Integrator, Model, ModelBuilder, ModelError, SolveError, State, StepError, Vec3, Workspace};
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+// ---------------------------------------------------------------------------------------------
+// A counting allocator. The count is per thread, so tests running in parallel do not disturb
+// each other (const-initialised `Cell`: no allocation and no destructor in the TLS access).
+// ---------------------------------------------------------------------------------------------
+
+struct Counting;
+
+thread_local! {
+    static ALLOCS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn bump() {
+    let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        bump();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        bump();
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        bump();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+fn allocations() -> usize {
+    ALLOCS.with(|c| c.get())
+}
+
+const SCHEMES: [(&str, Integrator); 3] = [
+    ("semi-implicit", Integrator::SemiImplicit),
+    ("BE linear", Integrator::BackwardEulerLinear),
+    ("BE Newton", Integrator::BackwardEulerNewton { max_iterations: 8, tolerance: 1e-8 }),
+];
+
+/// A small clamped wall with damping and gravity, so every code path of the step is exercised.
+fn model(integ: Integrator) -> Model {
+    let p = TruncatedEllipsoidWall::with_resolution(3);
+    let mesh = truncated_ellipsoid_wall(&p);
+    let fixed = base_nodes(&mesh, p.z_cut, 1e-9);
+    ModelBuilder::new(mesh, material(3.0e4, 0.4, 1000.0, 0.5, 0.5))
+        .fixed_nodes(fixed)
+        .gravity(Vec3::new(0.0, 0.0, -9.81))
+        .integrator(integ)
+        .build()
+        .unwrap()
+}
+
+/// Bitwise equality of two states (NaN-safe, unlike `==`).
+fn same_state(a: &State, b: &State) -> bool {
+    let bits = |v: &[Vec3]| v.iter().flat_map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]).collect::<Vec<_>>();
+    bits(&a.x) == bits(&b.x) && bits(&a.v) == bits(&b.v) && a.t.to_bits() == b.t.to_bits() && bits(&a.f_ext) == bits(&b.f_ext)
+}
+
+#[test]
+fn step_allocates_nothing_after_the_first_step() {
+    for (name, integ) in SCHEMES {
+        let model = model(integ);
+        let mut s = State::rest(&model);
+        let mut ws = Workspace::new(&model);
+        let top = (0..model.n_nodes()).max_by(|&a, &b| model.mesh().points()[a].z.total_cmp(&model.mesh().points()[b].z)).unwrap();
+        step(&model, &mut s, &mut ws, 1e-3).unwrap(); // warm-up
+        let before = allocations();
+        for k in 0..100 {
+            // A changing load and, every 10th step, a different dt (refactorisation / new filters).
+            s.f_ext[top] = Vec3::new(0.01 * (k as f64 * 0.1).sin(), 0.0, -0.01);
+            let dt = if k % 10 == 5 { 5e-4 } else { 1e-3 };
+            step(&model, &mut s, &mut ws, dt).unwrap();
+        }
+        let n = allocations() - before;
+        println!("{name}: {n} allocations in 100 steps");
+        assert_eq!(n, 0, "{name}: step allocated {n} times in 100 steps");
+    }
+}
+
+#[test]
+fn allocation_counter_works() {
+    // Guard against a vacuous pass of the test above.
+    let before = allocations();
+    let v: Vec<u64> = std::hint::black_box((0..100).collect());
+    assert!(allocations() > before && v.len() == 100);
+}
+
+#[test]
+fn non_finite_external_force_is_refused_and_state_unchanged() {
+    for (name, integ) in SCHEMES {
+        let model = model(integ);
+        let mut s = State::rest(&model);
+        let mut ws = Workspace::new(&model);
+        for _ in 0..3 {
+            step(&model, &mut s, &mut ws, 1e-3).unwrap();
+        }
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            let node = model.n_nodes() - 2;
+            s.f_ext[node] = Vec3::new(0.0, bad, 0.0);
+            let before = s.clone();
+            let r = step(&model, &mut s, &mut ws, 1e-3);
+            assert_eq!(r, Err(StepError::NonFiniteForce { node }), "{name}: {bad}");
+            assert!(same_state(&s, &before), "{name}: state changed by a refused step");
+            s.f_ext[node] = Vec3::zeros();
+        }
+        // And the simulation carries on normally afterwards.
+        step(&model, &mut s, &mut ws, 1e-3).unwrap();
+    }
+}
+
+#[test]
+fn bad_time_steps_are_refused() {
+    for (name, integ) in SCHEMES {
+        let model = model(integ);
+        let mut s = State::rest(&model);
+        let mut ws = Workspace::new(&model);
+        for dt in [0.0, -1e-3, f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -0.0] {
+            let before = s.clone();
+            let r = step(&model, &mut s, &mut ws, dt);
+            assert!(matches!(r, Err(StepError::BadTimeStep(d)) if d.to_bits() == dt.to_bits()), "{name}: dt {dt} gave {r:?}");
+            assert!(same_state(&s, &before), "{name}: state changed");
+        }
+    }
+}
+
+/// A 1e12 N force (a ~1e16 m/s^2 acceleration of a 0.1 g node) drives the state to overflow.
+/// Every step must return Ok or a typed error — never panic — and a failed step must leave the
+/// state bit-for-bit as it was.
+#[test]
+fn huge_forces_give_typed_errors_and_restore_the_state() {
+    for (name, integ) in SCHEMES {
+        let model = model(integ);
+        let mut s = State::rest(&model);
+        let mut ws = Workspace::new(&model);
+        let top = (0..model.n_nodes()).max_by(|&a, &b| model.mesh().points()[a].z.total_cmp(&model.mesh().points()[b].z)).unwrap();
+        s.f_ext[top] = Vec3::new(1e12, -3e11, 5e11);
+        let mut first_error = None;
+        let mut errors = 0;
+        let mut unconverged = 0;
+        for k in 0..200 {
+            let before = s.clone();
+            match step(&model, &mut s, &mut ws, 1e-3) {
+                Ok(rep) => {
+                    unconverged += !rep.converged as usize;
+                    assert!(s.x.iter().chain(&s.v).all(|p| p.iter().all(|c| c.is_finite())), "{name}: Ok step left a non-finite state");
+                }
+                Err(e) => {
+                    match &e {
+                        StepError::NonFinite { node, .. } => assert!(*node < model.n_nodes()),
+                        StepError::Solve(SolveError::NonFinite { .. } | SolveError::NotPositiveDefinite { .. }) => {}
+                        other => panic!("{name}: unexpected error {other:?}"),
+                    }
+                    assert!(same_state(&s, &before), "{name}: a failed step changed the state");
+                    errors += 1;
+                    first_error.get_or_insert((k, e));
+                }
+            }
+        }
+        println!("{name}: first error {first_error:?}, {errors} failed steps of 200, {unconverged} accepted unconverged, max|u| {:.2e} m", max_norm(&s.displacements(&model)));
+    }
+}
+
+#[test]
+fn all_nodes_fixed_is_a_valid_model() {
+    for (name, integ) in SCHEMES {
+        let p = TruncatedEllipsoidWall::with_resolution(3);
+        let mesh = truncated_ellipsoid_wall(&p);
+        let all: Vec<usize> = (0..mesh.n_nodes()).collect();
+        let model = ModelBuilder::new(mesh, material(3.0e4, 0.4, 1000.0, 0.0, 0.0))
+            .fixed_nodes(all)
+            .gravity(Vec3::new(0.0, 0.0, -9.81))
+            .integrator(integ)
+            .build()
+            .unwrap();
+        let mut s = State::rest(&model);
+        s.f_ext[3] = Vec3::new(1.0, 0.0, 0.0);
+        let mut ws = Workspace::new(&model);
+        step(&model, &mut s, &mut ws, 1e-3).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(s.x, model.mesh().points(), "{name}: a fixed node moved");
+        assert!(s.v.iter().all(|v| *v == Vec3::zeros()));
+    }
+}
+
+#[test]
+fn model_builder_rejects_bad_input() {
+    let p = TruncatedEllipsoidWall::with_resolution(3);
+    let mesh = truncated_ellipsoid_wall(&p);
+    let n = mesh.n_nodes();
+    let mat = material(3.0e4, 0.4, 1000.0, 0.0, 0.0);
+    let b = || ModelBuilder::new(mesh.clone(), mat);
+
+    assert_eq!(b().fixed_nodes(vec![0, n]).build().unwrap_err(), ModelError::FixedOutOfRange { node: n, n_nodes: n });
+    assert!(matches!(b().fixed_nodes(vec![usize::MAX]).build(), Err(ModelError::FixedOutOfRange { .. })));
+    for g in [Vec3::new(f64::NAN, 0.0, 0.0), Vec3::new(0.0, f64::INFINITY, 0.0), Vec3::new(0.0, 0.0, f64::NEG_INFINITY)] {
+        assert!(matches!(b().gravity(g).build(), Err(ModelError::Gravity(..))), "gravity {g:?} accepted");
+    }
+    for (max_iterations, tolerance) in [(0, 1e-8), (8, 0.0), (8, -1e-8), (8, 1.0), (8, 2.0), (8, f64::NAN), (8, f64::INFINITY)] {
+        let r = b().integrator(Integrator::BackwardEulerNewton { max_iterations, tolerance }).build();
+        assert!(matches!(r, Err(ModelError::Integrator(_))), "Newton ({max_iterations}, {tolerance}) accepted");
+    }
+    // Duplicated fixed nodes are harmless.
+    assert!(b().fixed_nodes(vec![0, 0, 1]).build().is_ok());
+    assert!(b().integrator(Integrator::newton()).build().is_ok());
+}
