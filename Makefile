@@ -1,0 +1,55 @@
+# palpate: one-command set-up on a fresh machine (needs python3 with venv, and cargo).
+#   make demo   set up .venv, build the extension (release), run the demo
+#   make test   set up, then cargo test --release (core) and pytest
+# The set-up is stamp-file driven: a warm re-run is a no-op, an edit to any .rs / Cargo.toml /
+# pyproject.toml rebuilds the extension. Python sources are installed editable (maturin develop),
+# so edits to python/palpate/*.py need no rebuild.
+
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+# Versions that build together on this machine (see shared/design/stack-notes.md).
+PY_DEPS := maturin==1.16.0 numpy==2.4.6 meshio==5.3.5 matplotlib==3.11.2 pytest==9.2.0 \
+           scipy==1.17.1 scikit-fem==12.0.2  # the last two: independent reference in python/tests
+
+RUST_INPUTS := $(shell find crates python/src -name '*.rs' 2>/dev/null) \
+               $(wildcard crates/*/Cargo.toml) Cargo.toml $(wildcard Cargo.lock) python/Cargo.toml python/pyproject.toml
+
+export MPLBACKEND ?= Agg
+
+.PHONY: all setup demo test cargo-test pytest clean distclean
+
+all: setup
+
+setup: $(VENV)/.built
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+
+$(VENV)/.deps: $(BIN)/python Makefile
+	$(BIN)/python -m pip install -q --disable-pip-version-check --upgrade pip
+	$(BIN)/python -m pip install -q --disable-pip-version-check $(PY_DEPS)
+	touch $@
+
+$(VENV)/.built: $(VENV)/.deps $(RUST_INPUTS)
+	cd python && VIRTUAL_ENV=$(CURDIR)/$(VENV) ../$(BIN)/maturin develop --release -q
+	touch $@
+
+demo: setup
+	$(BIN)/python -m palpate.demo
+
+test: cargo-test pytest
+
+cargo-test:
+	cargo test --release -q
+
+pytest: setup
+	$(BIN)/python -m pytest -q python/tests
+
+clean:
+	rm -f $(VENV)/.built python/palpate/*.so
+	rm -rf out
+
+distclean: clean
+	rm -rf $(VENV) target

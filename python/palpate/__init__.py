@@ -1,0 +1,61 @@
+"""palpate: real-time soft-tissue FEM for haptic interaction.
+
+After M. G. Mero and A. Susin, "Deformable Hybrid Approach for Haptic Interaction". The physics
+runs in Rust (``palpate-core``); this package is a thin Python layer over it.
+
+Units are SI throughout: positions and displacements [m], velocities [m/s], forces [N], time [s],
+moduli and stresses [Pa], densities [kg/m^3], viscosities [Pa s]. Per-node arrays are float64 of
+shape (n, 3) in the world frame; tets are integer arrays of shape (m, 4), 0-based.
+
+>>> import numpy as np, palpate
+>>> mesh = palpate.box_mesh(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
+>>> body = palpate.Body(mesh, palpate.Material(young=3e4, poisson=0.4, density=1000.0),
+...                     fixed=np.flatnonzero(mesh.points[:, 0] == 0.0),
+...                     integrator=palpate.BackwardEuler())
+>>> f = np.zeros((body.n_nodes, 3)); f[mesh.points[:, 0] == 0.1, 2] = -1e-3   # [N]
+>>> body.set_forces(f); _ = body.step(100, dt=1e-3)
+>>> bool(np.isfinite(body.positions).all())
+True
+"""
+from ._palpate import (
+    BackwardEuler,
+    Body,
+    Material,
+    MaterialError,
+    MeshError,
+    MeshWarning,
+    ModelError,
+    PalpateError,
+    SemiImplicit,
+    SolveError,
+    StepError,
+    TetMesh,
+    __version__,
+    box_mesh,
+    ellipsoid_wall,
+    truncated_ellipsoid_wall,
+)
+from .io import UNITS, VtuSeries, load_mesh, read_mesh_arrays
+
+__all__ = [
+    "BackwardEuler",
+    "Body",
+    "Material",
+    "MaterialError",
+    "MeshError",
+    "MeshWarning",
+    "ModelError",
+    "PalpateError",
+    "SemiImplicit",
+    "SolveError",
+    "StepError",
+    "TetMesh",
+    "UNITS",
+    "VtuSeries",
+    "__version__",
+    "box_mesh",
+    "ellipsoid_wall",
+    "load_mesh",
+    "read_mesh_arrays",
+    "truncated_ellipsoid_wall",
+]

@@ -1,0 +1,386 @@
+"""Small, strict ASCII readers for gmsh MSH 2.2 / 4.1 and TetGen .node/.ele files.
+
+meshio reads these formats too, but it maps unknown gmsh node tags silently (a tag of 0 or -1 wraps
+around to the last node) and its TetGen reader stops at comments without saying where. These
+readers report every defect with the file, the line and the element, which is what
+:func:`palpate.load_mesh` promises. Binary gmsh files and MSH 4.0 go to meshio.
+
+Each reader returns ``(points, blocks, node_labels)``: ``points`` a float64 ``(n, 3)`` array in
+the file's units, ``blocks`` a list of :class:`CellBlock` with 0-based node indices (int64) and, per
+cell, a human-readable label (e.g. ``"gmsh element 12, line 40"``), ``node_labels`` the file's name
+of each node (e.g. ``"gmsh node 7"``), both for error messages.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from ._palpate import MeshError
+
+#: gmsh element type code -> (meshio-style name, nodes per element, topological dimension)
+GMSH_TYPES: Dict[int, Tuple[str, int, int]] = {
+    1: ("line", 2, 1), 2: ("triangle", 3, 2), 3: ("quad", 4, 2), 4: ("tetra", 4, 3),
+    5: ("hexahedron", 8, 3), 6: ("wedge", 6, 3), 7: ("pyramid", 5, 3), 8: ("line3", 3, 1),
+    9: ("triangle6", 6, 2), 10: ("quad9", 9, 2), 11: ("tetra10", 10, 3), 12: ("hexahedron27", 27, 3),
+    13: ("wedge18", 18, 3), 14: ("pyramid14", 14, 3), 15: ("vertex", 1, 0), 16: ("quad8", 8, 2),
+    17: ("hexahedron20", 20, 3), 18: ("wedge15", 15, 3), 19: ("pyramid13", 13, 3),
+    20: ("triangle9", 9, 2), 21: ("triangle10", 10, 2), 26: ("line4", 4, 1), 29: ("tetra20", 20, 3),
+}
+
+
+@dataclass
+class CellBlock:
+    """Cells of one type: ``data`` (n_cells, nodes_per_cell) 0-based int64; ``labels`` one per cell."""
+    type: str
+    dim: int
+    data: np.ndarray
+    labels: List[str] = field(default_factory=list)
+
+
+class _Lines:
+    """Line iterator with 1-based line numbers and a helpful end-of-file error."""
+
+    def __init__(self, path: str, text: str):
+        self.path = path
+        self.name = os.path.basename(path)
+        self.lines = text.splitlines()
+        self.i = 0  # index of the next line
+
+    @property
+    def lineno(self) -> int:
+        """1-based number of the line returned last."""
+        return self.i
+
+    def next(self, context: str) -> str:
+        while self.i < len(self.lines):
+            line = self.lines[self.i]
+            self.i += 1
+            if line.strip():
+                return line.strip()
+        raise MeshError(f"{self.name}: unexpected end of file (truncated?) while reading {context}")
+
+    def error(self, msg: str) -> MeshError:
+        return MeshError(f"{self.name}: line {self.lineno}: {msg}")
+
+    def ints(self, line: str, context: str) -> List[int]:
+        try:
+            return [int(t) for t in line.split()]
+        except ValueError:
+            raise self.error(f"expected integers in {context}, got {line[:60]!r}") from None
+
+    def floats(self, tokens: List[str], context: str) -> List[float]:
+        try:
+            return [float(t) for t in tokens]
+        except ValueError:
+            raise self.error(f"expected numbers in {context}, got {' '.join(tokens)[:60]!r}") from None
+
+
+def read_text(path: str) -> str:
+    """The file as text; a clear MeshError for a missing, empty or binary file."""
+    name = os.path.basename(path)
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read()
+    except FileNotFoundError:
+        raise MeshError(f"{name}: no such file ({path})") from None
+    except OSError as e:
+        raise MeshError(f"{name}: cannot read: {e.strerror or e}") from None
+    if not raw.strip():
+        raise MeshError(f"{name}: empty file")
+    if b"\x00" in raw:
+        raise MeshError(f"{name}: not a text file (contains NUL bytes: binary or garbage)")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise MeshError(f"{name}: not a text file (invalid UTF-8 at byte {e.start}: binary or garbage)") from None
+
+
+# ---------------------------------------------------------------------------------------------
+# gmsh
+# ---------------------------------------------------------------------------------------------
+
+def gmsh_format(path: str) -> Tuple[str, bool]:
+    """(version string, is_binary) from a gmsh file's $MeshFormat header."""
+    name = os.path.basename(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(256)
+    except FileNotFoundError:
+        raise MeshError(f"{name}: no such file ({path})") from None
+    if not head.strip():
+        raise MeshError(f"{name}: empty file")
+    lines = head.split(b"\n")
+    first = lines[0].strip()
+    if first != b"$MeshFormat":
+        shown = first[:40].decode("utf-8", "replace")
+        raise MeshError(f"{name}: line 1: not a gmsh MSH file: expected '$MeshFormat', got {shown!r}")
+    if len(lines) < 2:
+        raise MeshError(f"{name}: unexpected end of file (truncated?) in $MeshFormat")
+    parts = lines[1].split()
+    if len(parts) < 3:
+        raise MeshError(f"{name}: line 2: malformed $MeshFormat line {lines[1][:40]!r}: "
+                        "expected 'version file-type data-size'")
+    version = parts[0].decode("utf-8", "replace")
+    try:
+        binary = int(parts[1]) == 1
+    except ValueError:
+        raise MeshError(f"{name}: line 2: malformed $MeshFormat file-type {parts[1][:10]!r}") from None
+    if version.split(".")[0] not in ("2", "4"):
+        raise MeshError(f"{name}: line 2: unsupported gmsh MSH version {version!r} (palpate reads 2.x and 4.x)")
+    return version, binary
+
+
+def read_gmsh_ascii(path: str, version: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:
+    """Read an ASCII gmsh MSH 2.2 or 4.1 file (nodes and elements; other sections are skipped)."""
+    f = _Lines(path, read_text(path))
+    v4 = version.startswith("4")
+    nodes: Optional[Tuple[List[int], List[List[float]]]] = None
+    elements = None
+    while True:
+        try:
+            line = f.next("sections")
+        except MeshError:
+            break  # end of file between sections
+        if not line.startswith("$"):
+            raise f.error(f"expected a section header like '$Nodes', got {line[:60]!r}")
+        section = line[1:]
+        try:
+            if section == "Nodes":
+                nodes = _gmsh_nodes_v4(f) if v4 else _gmsh_nodes_v2(f)
+            elif section == "Elements":
+                elements = _gmsh_elements_v4(f) if v4 else _gmsh_elements_v2(f)
+            else:
+                _skip_section(f, section)
+                continue
+        except MeshError as e:
+            # A malformed last line of the file is a cut-off file, and is best reported as that.
+            if f.i >= len(f.lines) and "end of file" not in str(e):
+                reason = str(e).split(": ", 1)[-1]
+                raise MeshError(f"{f.name}: unexpected end of file (truncated?) in ${section} "
+                                f"at line {f.lineno}: {reason}") from None
+            raise
+        end = f.next(f"$End{section}")
+        if end != f"$End{section}":
+            raise f.error(f"expected '$End{section}', got {end[:60]!r} (wrong count in the section header?)")
+    if nodes is None:
+        raise MeshError(f"{f.name}: no $Nodes section (no points)")
+    if elements is None:
+        raise MeshError(f"{f.name}: no $Elements section (no cells)")
+    tags, coords = nodes
+    index = {t: i for i, t in enumerate(tags)}
+    if len(index) != len(tags):
+        seen = set()
+        for t in tags:
+            if t in seen:
+                raise MeshError(f"{f.name}: node tag {t} is defined twice in $Nodes")
+            seen.add(t)
+    points = np.array(coords, dtype=np.float64).reshape(-1, 3)
+    rows: Dict[str, List[List[int]]] = {}
+    labels: Dict[str, List[str]] = {}
+    for etype, etag, node_tags, lineno in elements:
+        name = GMSH_TYPES[etype][0]
+        conn = []
+        for t in node_tags:
+            i = index.get(t)
+            if i is None:
+                raise MeshError(f"{f.name}: line {lineno}: gmsh element {etag} ({name}) references node tag {t}, "
+                                f"which is not defined in $Nodes ({len(tags)} nodes"
+                                + (f", tags {min(tags)}..{max(tags)})" if tags else ")"))
+            conn.append(i)
+        rows.setdefault(name, []).append(conn)
+        labels.setdefault(name, []).append(f"gmsh element {etag}, line {lineno}")
+    dims = {name: dim for name, _, dim in GMSH_TYPES.values()}
+    blocks = [CellBlock(name, dims[name], np.array(r, dtype=np.int64), labels[name]) for name, r in rows.items()]
+    return points, blocks, [f"gmsh node {t}" for t in tags]
+
+
+def _skip_section(f: _Lines, section: str) -> None:
+    end = f"$End{section}"
+    while True:
+        line = f.next(f"${section}")
+        if line == end:
+            return
+
+
+def _coords(f: _Lines, tokens: List[str], tag: int) -> List[float]:
+    xyz = f.floats(tokens, f"the coordinates of node {tag}")
+    return xyz
+
+
+def _gmsh_nodes_v2(f: _Lines):
+    n = f.ints(f.next("$Nodes"), "the $Nodes count")
+    if len(n) != 1 or n[0] < 0:
+        raise f.error("expected the number of nodes")
+    tags, coords = [], []
+    for k in range(n[0]):
+        tok = f.next(f"$Nodes (node {k + 1} of {n[0]})").split()
+        if len(tok) != 4:
+            raise f.error(f"expected 'tag x y z', got {' '.join(tok)[:60]!r}")
+        tags.append(f.ints(tok[0], "a node tag")[0])
+        coords.append(_coords(f, tok[1:], tags[-1]))
+    return tags, coords
+
+
+def _gmsh_nodes_v4(f: _Lines):
+    head = f.ints(f.next("$Nodes"), "the $Nodes header")
+    if len(head) != 4:
+        raise f.error("expected 'numEntityBlocks numNodes minNodeTag maxNodeTag'")
+    n_blocks, n_nodes = head[0], head[1]
+    tags, coords = [], []
+    for _ in range(n_blocks):
+        bh = f.ints(f.next("a $Nodes entity block header"), "a $Nodes entity block header")
+        if len(bh) != 4:
+            raise f.error("expected 'entityDim entityTag parametric numNodesInBlock'")
+        parametric, count = bh[2], bh[3]
+        block_tags = [f.ints(f.next("$Nodes (node tags)"), "a node tag")[0] for _ in range(count)]
+        for t in block_tags:
+            tok = f.next(f"$Nodes (coordinates of node {t})").split()
+            if len(tok) < 3 or (not parametric and len(tok) != 3):
+                raise f.error(f"expected 'x y z' for node {t}, got {' '.join(tok)[:60]!r}")
+            coords.append(_coords(f, tok[:3], t))
+        tags.extend(block_tags)
+    if len(tags) != n_nodes:
+        raise f.error(f"$Nodes header announces {n_nodes} nodes, the blocks hold {len(tags)}")
+    return tags, coords
+
+
+def _element(f: _Lines, etype: int, nodes: List[int], etag: int):
+    if etype not in GMSH_TYPES:
+        raise f.error(f"gmsh element {etag} has unknown element type {etype}")
+    name, nn, _ = GMSH_TYPES[etype]
+    if len(nodes) != nn:
+        raise f.error(f"gmsh element {etag} ({name}) has {len(nodes)} nodes, expected {nn}")
+    return (etype, etag, nodes, f.lineno)
+
+
+def _gmsh_elements_v2(f: _Lines):
+    n = f.ints(f.next("$Elements"), "the $Elements count")
+    if len(n) != 1 or n[0] < 0:
+        raise f.error("expected the number of elements")
+    out = []
+    for k in range(n[0]):
+        v = f.ints(f.next(f"$Elements (element {k + 1} of {n[0]})"), "an element line")
+        if len(v) < 3 or len(v) < 3 + v[2]:
+            raise f.error("expected 'tag type ntags tags... nodes...'")
+        out.append(_element(f, v[1], v[3 + v[2]:], v[0]))
+    return out
+
+
+def _gmsh_elements_v4(f: _Lines):
+    head = f.ints(f.next("$Elements"), "the $Elements header")
+    if len(head) != 4:
+        raise f.error("expected 'numEntityBlocks numElements minElementTag maxElementTag'")
+    out = []
+    for _ in range(head[0]):
+        bh = f.ints(f.next("an $Elements entity block header"), "an $Elements entity block header")
+        if len(bh) != 4:
+            raise f.error("expected 'entityDim entityTag elementType numElementsInBlock'")
+        etype, count = bh[2], bh[3]
+        if etype not in GMSH_TYPES:
+            raise f.error(f"unknown gmsh element type {etype}")
+        for _ in range(count):
+            v = f.ints(f.next("$Elements"), "an element line")
+            out.append(_element(f, etype, v[1:], v[0]))
+    if len(out) != head[1]:
+        raise f.error(f"$Elements header announces {head[1]} elements, the blocks hold {len(out)}")
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# TetGen
+# ---------------------------------------------------------------------------------------------
+
+def _tetgen_rows(f: _Lines, what: str):
+    """Yield the non-comment token lists of a TetGen file ('#' starts a comment anywhere)."""
+    while f.i < len(f.lines):
+        line = f.lines[f.i].split("#", 1)[0].strip()
+        f.i += 1
+        if line:
+            yield line.split()
+
+
+def read_tetgen(path: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:
+    """Read a TetGen mesh given as ``NAME.node`` or ``NAME.ele`` (the other file must sit beside it)."""
+    stem, ext = os.path.splitext(path)
+    node_path, ele_path = stem + ".node", stem + ".ele"
+    given = os.path.basename(path)
+    for p, kind in ((node_path, ".node"), (ele_path, ".ele")):
+        if not os.path.exists(p):
+            raise MeshError(f"{given}: the TetGen {kind} file {os.path.basename(p)!r} is missing "
+                            f"(a TetGen mesh needs both NAME.node and NAME.ele)")
+    # --- nodes
+    f = _Lines(node_path, read_text(node_path))
+    rows = _tetgen_rows(f, "node")
+    head = next(rows, None)
+    if head is None:
+        raise MeshError(f"{f.name}: no header line")
+    h = f.ints(" ".join(head), "the .node header")
+    if len(h) < 2:
+        raise f.error("expected '<#points> <dimension> [<#attributes> <#boundary markers>]'")
+    n, dim = h[0], h[1]
+    n_attr = h[2] if len(h) > 2 else 0
+    n_mark = h[3] if len(h) > 3 else 0
+    if dim != 3:
+        raise f.error(f"dimension {dim}: palpate needs 3D points")
+    if n <= 0:
+        raise MeshError(f"{f.name}: no points (header announces {n})")
+    first_index = None
+    coords = []
+    for k in range(n):
+        tok = next(rows, None)
+        if tok is None:
+            raise MeshError(f"{f.name}: unexpected end of file (truncated?): header announces {n} points, found {k}")
+        if len(tok) != 4 + n_attr + n_mark:
+            raise f.error(f"point {k}: expected {4 + n_attr + n_mark} values (index x y z"
+                          f"{' attributes' if n_attr else ''}{' marker' if n_mark else ''}), got {len(tok)}")
+        idx = f.ints(tok[0], "a point index")[0]
+        if first_index is None:
+            first_index = idx
+            if idx not in (0, 1):
+                raise f.error(f"first point index is {idx}; TetGen numbers from 0 or 1")
+        if idx != first_index + k:
+            raise f.error(f"point index {idx} out of sequence (expected {first_index + k})")
+        coords.append(f.floats(tok[1:4], f"point {idx}"))
+    if next(rows, None) is not None:
+        raise f.error(f"more point lines than the {n} the header announces")
+    points = np.array(coords, dtype=np.float64)
+    # --- tets
+    g = _Lines(ele_path, read_text(ele_path))
+    rows = _tetgen_rows(g, "tet")
+    head = next(rows, None)
+    if head is None:
+        raise MeshError(f"{g.name}: no header line")
+    h = g.ints(" ".join(head), "the .ele header")
+    if len(h) < 2:
+        raise g.error("expected '<#tetrahedra> <nodes per tet> [<#attributes>]'")
+    m, npt = h[0], h[1]
+    n_attr = h[2] if len(h) > 2 else 0
+    if npt == 10:
+        raise g.error("quadratic (10-node) tetrahedra are not supported: palpate uses linear tets")
+    if npt != 4:
+        raise g.error(f"{npt} nodes per element: palpate reads 4-node tetrahedra")
+    if m <= 0:
+        raise MeshError(f"{g.name}: no tetrahedra (header announces {m})")
+    conn, labels = [], []
+    for k in range(m):
+        tok = next(rows, None)
+        if tok is None:
+            raise MeshError(f"{g.name}: unexpected end of file (truncated?): header announces {m} tets, found {k}")
+        if len(tok) != 5 + n_attr:
+            raise g.error(f"tet {k}: expected {5 + n_attr} values (index n1 n2 n3 n4"
+                          f"{' attributes' if n_attr else ''}), got {len(tok)}")
+        v = g.ints(" ".join(tok[:5]), "a tet line")
+        for i in v[1:5]:
+            if not first_index <= i < first_index + n:
+                raise g.error(f"TetGen element {v[0]}: node index {i} out of range "
+                              f"({os.path.basename(node_path)} numbers its {n} points "
+                              f"{first_index}..{first_index + n - 1})")
+        conn.append([i - first_index for i in v[1:5]])
+        labels.append(f"TetGen element {v[0]}, {g.name} line {g.lineno}")
+    if next(rows, None) is not None:
+        raise g.error(f"more tet lines than the {m} the header announces")
+    node_labels = [f"TetGen point {first_index + k}" for k in range(n)]
+    return points, [CellBlock("tetra", 3, np.array(conn, dtype=np.int64), labels)], node_labels

@@ -1,0 +1,161 @@
+"""The shared benchmark case (``shared/bench/PROTOCOL.md``, defined in code in ``shared/bench/common.py``).
+
+A left-ventricle-like wall (the region between the ellipsoids of semi-axes (2.0, 2.0, 3.5) and
+(2.6, 2.6, 4.2) mesh units, truncated at z = 0), mesh units x 0.01 = m. E = 3e4 Pa, nu = 0.4,
+density 1000 kg/m^3, no gravity. Nodes with z <= 1e-6 mesh units are fixed. The outer-surface
+nodes within 0.5 mesh units of the probe point P = (2.28629, 0, 2.0) (the nearest one if none)
+share 0.2 N along the inward normal n, ramped linearly over 0.1 s. 1000 steps of 1 ms, one thread.
+Figures: steps/s over the step calls only, stability (finite and max |u| < 2 cm), max |u|, the
+loaded nodes' mean |u| over the second half, and how far the second-half mean displacement field
+is from palpate's own static solution under the full load (``rel_L2_vs_static``).
+
+The generated mesh ``ellipsoid_192``: :func:`palpate.ellipsoid_wall` with the same semi-axes
+(the paper's ~188-tet "Ellipsoids Model" size: 192 tets, 54 nodes), a *closed* shell. The load
+definition is adapted as follows: the same probe point, normal, radius, force and ramp; every node
+with z <= 1e-6 mesh units is fixed (the LV's base plane, here clamping the bottom half-shell and
+the equator: 39 of the 54 nodes). Its coarse mesh has a single outer node within 0.5 mesh units
+of P (0.22 units away), which carries the whole 0.2 N.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from . import _palpate as _p
+from .io import read_mesh_arrays
+
+SCALE = 0.01          # mesh unit -> m
+E = 3.0e4             # Young's modulus [Pa]
+NU = 0.4              # Poisson ratio
+RHO = 1000.0          # density [kg/m^3]
+DT = 1e-3             # [s]
+STEPS = 1000
+BASE_TOL = 1e-6       # mesh units
+OUTER = np.array([2.6, 2.6, 4.2])
+INNER = np.array([2.0, 2.0, 3.5])
+PROBE_Z = 2.0         # mesh units
+PROBE_R = 0.5         # mesh units
+FORCE = 0.2           # [N]
+RAMP = 0.1            # [s]
+STABLE_LIMIT = 0.02   # [m]
+MESHES = ["190", "1350", "10k", "50k"]
+GENERATED = "ellipsoid_192"
+
+#: CLI names of the integrators.
+INTEGRATORS = {
+    "semi-implicit": lambda: _p.SemiImplicit(),
+    "backward-euler": lambda: _p.BackwardEuler(),
+    "newton": lambda: _p.BackwardEuler(newton=True),
+}
+
+
+def probe_point():
+    """Probe point P (mesh units) on the outer ellipsoid and the inward unit normal there."""
+    x = OUTER[0] * np.sqrt(1 - (PROBE_Z / OUTER[2]) ** 2)
+    p = np.array([x, 0.0, PROBE_Z])
+    n = p / OUTER ** 2
+    n /= np.linalg.norm(n)
+    return p, -n
+
+
+def material():
+    return _p.Material(young=E, poisson=NU, density=RHO)
+
+
+@dataclass
+class Case:
+    """One mesh set up for the protocol (SI units)."""
+    name: str
+    mesh: "_p.TetMesh"
+    fixed: np.ndarray
+    loaded: np.ndarray
+    total_force: np.ndarray   # [N], (3,)
+
+
+def setup(name: str, points_mu: np.ndarray, tets: np.ndarray) -> Case:
+    """Fixed and loaded nodes from points in mesh units, as common.setup does."""
+    p = np.asarray(points_mu, dtype=np.float64)
+    fixed = np.flatnonzero(p[:, 2] <= BASE_TOL)
+    level = np.sqrt(((p / OUTER) ** 2).sum(1))
+    outer = np.flatnonzero(np.abs(level - 1) < 1e-3)
+    P, n = probe_point()
+    d = np.linalg.norm(p[outer] - P, axis=1)
+    loaded = outer[d <= PROBE_R]
+    if len(loaded) == 0:
+        loaded = outer[[int(np.argmin(d))]]
+    mesh = _p.TetMesh(p * SCALE, tets, source=name)
+    return Case(name, mesh, fixed, loaded, FORCE * n)
+
+
+def load_case(path: str) -> Case:
+    """A protocol mesh file (.msh, .vtu, .npz; coordinates in mesh units)."""
+    points, tets, _, _ = read_mesh_arrays(path, unit="m")  # raw mesh units
+    return setup(Path(path).stem, points, tets)
+
+
+def generated_case() -> Case:
+    """The 192-tet closed ellipsoid wall with the adapted load (module docs)."""
+    m = _p.ellipsoid_wall(inner=tuple(INNER * SCALE), outer=tuple(OUTER * SCALE), subdivisions=1, layers=2)
+    return setup(GENERATED, m.points / SCALE, m.tets)
+
+
+def run(case: Case, integrator: str = "backward-euler", steps: int = STEPS, dt: float = DT,
+        max_wall_s: Optional[float] = None) -> Dict:
+    """Run the protocol on ``case``; returns the result dict (JSON keys of ``palpate bench``)."""
+    body = _p.Body(case.mesh, material(), fixed=case.fixed, integrator=INTEGRATORS[integrator]())
+    r = body.run_probe(case.loaded, case.total_force, RAMP, steps, dt=dt, stable_limit=STABLE_LIMIT,
+                       max_wall_s=max_wall_s)
+    # palpate's own static equilibrium under the full load (nonlinear, Newton).
+    f = np.zeros((body.n_nodes, 3))
+    f[case.loaded] = case.total_force / len(case.loaded)
+    static_err = None
+    try:
+        x_static = body.static_solve(f)
+        u_static = x_static - case.mesh.points
+        static_probe = float(np.linalg.norm(u_static, axis=1)[case.loaded].mean())
+        ref = float(np.linalg.norm(u_static))
+        rel = float(np.linalg.norm(r["mean_disp"] - u_static) / ref) if ref > 0 and r["steps"] > steps // 2 else None
+    except _p.SolveError as e:
+        static_probe, rel, static_err = None, None, str(e)
+    wall = r["wall_s"]
+    out = dict(
+        mesh=case.name, tets=case.mesh.n_tets, nodes=case.mesh.n_nodes, integrator=integrator,
+        steps=int(r["steps"]), wall_s=round(wall, 6),
+        steps_per_s=round(r["steps"] / wall, 1) if wall > 0 else None,
+        stable=bool(r["stable"]), max_disp_m=r["max_disp_m"], probe_disp_avg_m=r["probe_disp_avg_m"],
+        static_probe_disp_m=static_probe, rel_L2_vs_static=rel,
+        loaded_nodes=len(case.loaded), fixed_nodes=len(case.fixed),
+    )
+    if r["error"] or static_err:
+        out["error"] = "; ".join(e for e in (r["error"], static_err) if e)
+    return out
+
+
+def shared_dir() -> Optional[Path]:
+    """The project's shared folder: $PALPATE_SHARED, else ``<repo>/../shared``, else ``./../shared``.
+
+    Returns None if none of them holds ``bench/meshes``.
+    """
+    cands: List[Path] = []
+    env = os.environ.get("PALPATE_SHARED")
+    if env:
+        cands.append(Path(env))
+    here = Path(__file__).resolve()
+    cands += [here.parents[2] / ".." / "shared", Path.cwd() / ".." / "shared", Path.cwd() / "shared"]
+    for c in cands:
+        if (c / "bench" / "meshes").is_dir():
+            return c.resolve()
+    return None
+
+
+def bench_mesh_path(name: str) -> Optional[Path]:
+    """Path of the shared bench mesh ``lv_<name>.msh`` (None if the shared folder is absent)."""
+    s = shared_dir()
+    if s is None:
+        return None
+    p = s / "bench" / "meshes" / f"lv_{name}.msh"
+    return p if p.exists() else None

@@ -1,0 +1,270 @@
+"""Mesh files in, VTU time series out.
+
+:func:`load_mesh` reads a tetrahedral mesh from gmsh ``.msh`` (MSH 2 and 4), VTK ``.vtk``/``.vtu``
+(through meshio), TetGen ``.node``/``.ele`` and ``.npz`` (arrays ``points`` and ``tets``), scales it
+to metres and validates it in the Rust core. Every defect is raised as :class:`palpate.MeshError`
+naming the file, the element (as palpate counts it, 0-based among the file's tetrahedra, and as the
+file names it) and the reason.
+
+:class:`VtuSeries` writes one ``.vtu`` per frame plus a ``.pvd`` collection that ParaView opens.
+"""
+from __future__ import annotations
+
+import os
+import re
+import warnings
+from typing import List, Optional, Sequence, Tuple, Union
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from . import _readers
+from ._palpate import MeshError, TetMesh
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+#: Length units accepted by :func:`load_mesh`, as metres per unit.
+UNITS = {"m": 1.0, "cm": 1.0e-2, "mm": 1.0e-3}
+
+_MESHIO_FORMATS = {".vtk": "vtk", ".vtu": "vtu"}
+
+
+def unit_scale(unit: str) -> float:
+    """Metres per ``unit`` (one of ``"m"``, ``"cm"``, ``"mm"``); ``ValueError`` otherwise."""
+    try:
+        return UNITS[unit]
+    except (KeyError, TypeError):
+        raise ValueError(f"unit must be one of {sorted(UNITS)}, got {unit!r}") from None
+
+
+def _read_meshio(path: str, fmt: str):
+    import meshio
+
+    name = os.path.basename(path)
+    if not os.path.exists(path):
+        raise MeshError(f"{name}: no such file ({path})")
+    if os.path.getsize(path) == 0:
+        raise MeshError(f"{name}: empty file")
+    if fmt == "vtu":
+        _vtu_precheck(path)
+    # The format's own reader, not meshio.read: that one prints and calls sys.exit(1) on a ReadError.
+    reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": meshio.gmsh.read}[fmt]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            m = reader(path)
+    except MeshError:
+        raise
+    except (Exception, SystemExit) as e:  # ReadError, but also ValueError, KeyError, XML errors ...
+        reason = str(e).strip() or "malformed or truncated file"
+        raise MeshError(f"{name}: cannot read as {fmt.upper()} ({type(e).__name__}: {reason})") from None
+    points = np.asarray(m.points, dtype=np.float64)
+    if points.ndim != 2 or (len(points) and points.shape[1] not in (2, 3)):
+        raise MeshError(f"{name}: points have shape {points.shape}, expected (n, 3)")
+    if points.shape[1] == 2:
+        raise MeshError(f"{name}: 2D points: palpate needs a 3D tetrahedral mesh")
+    blocks, offset = [], 0
+    for cb in m.cells:
+        data = np.asarray(cb.data, dtype=np.int64)
+        labels = [f"{fmt.upper()} cell {offset + i}" for i in range(len(data))]
+        offset += len(data)
+        blocks.append(_readers.CellBlock(cb.type, int(cb.dim), data, labels))
+    return points, blocks, None
+
+
+def _vtu_precheck(path: str) -> None:
+    """Name the defects meshio's VTU reader reports obscurely (an empty piece)."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    counts = [int(v) for v in re.findall(rb'NumberOfPoints="\s*(\d+)\s*"', head)]
+    if counts and not any(counts):
+        raise MeshError(f"{os.path.basename(path)}: no points (NumberOfPoints = 0: empty mesh)")
+
+
+def _read_npz(path: str):
+    name = os.path.basename(path)
+    if not os.path.exists(path):
+        raise MeshError(f"{name}: no such file ({path})")
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            missing = [k for k in ("points", "tets") if k not in d.files]
+            if missing:
+                raise MeshError(f"{name}: missing array(s) {missing} (an .npz mesh holds 'points' (n, 3) "
+                                f"and 'tets' (m, 4)); found {d.files}")
+            points, tets = d["points"], d["tets"]
+    except MeshError:
+        raise
+    except Exception as e:
+        raise MeshError(f"{name}: cannot read as NPZ ({type(e).__name__}: {e})") from None
+    if points.ndim != 2 or points.shape[1] != 3 or not np.issubdtype(points.dtype, np.number):
+        raise MeshError(f"{name}: 'points' must be a numeric (n, 3) array, got {points.dtype} {points.shape}")
+    if tets.ndim != 2 or tets.shape[1] != 4 or not np.issubdtype(tets.dtype, np.integer):
+        raise MeshError(f"{name}: 'tets' must be an integer (m, 4) array, got {tets.dtype} {tets.shape}")
+    labels = [f"row {i} of 'tets'" for i in range(len(tets))]
+    return points.astype(np.float64), [_readers.CellBlock("tetra", 3, tets.astype(np.int64), labels)], None
+
+
+def read_mesh_arrays(path: PathLike, unit: str = "m") -> Tuple[np.ndarray, np.ndarray, List[str], Optional[List[str]]]:
+    """Read a mesh file without validating it in the core.
+
+    Returns ``(points, tets, tet_labels, node_labels)``: points ``(n, 3)`` float64 in metres, tets
+    ``(m, 4)`` int64 0-based, how the file names each tet and each node (``node_labels`` may be
+    ``None``). Non-tetrahedral 3D cells are an error; lower-dimensional cells (vertices, lines,
+    triangles, quads: e.g. gmsh's boundary and physical-group elements) are ignored when the file
+    also holds tetrahedra.
+    """
+    path = os.fspath(path)
+    scale = unit_scale(unit)
+    name = os.path.basename(path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext == ".msh":
+        version, binary = _readers.gmsh_format(path)
+        if binary or not (version.startswith("2") or version.startswith("4.1")):
+            points, blocks, node_labels = _read_meshio(path, "gmsh")
+        else:
+            points, blocks, node_labels = _readers.read_gmsh_ascii(path, version)
+    elif ext in _MESHIO_FORMATS:
+        points, blocks, node_labels = _read_meshio(path, _MESHIO_FORMATS[ext])
+    elif ext in (".node", ".ele"):
+        points, blocks, node_labels = _readers.read_tetgen(path)
+    elif ext == ".npz":
+        points, blocks, node_labels = _read_npz(path)
+    else:
+        raise MeshError(f"{name}: unsupported mesh format {ext or '(no extension)'!r}; "
+                        "palpate reads .msh (gmsh 2/4), .vtk, .vtu, .node/.ele (TetGen) and .npz")
+    if len(points) == 0:
+        raise MeshError(f"{name}: no points (empty mesh)")
+    blocks = [b for b in blocks if len(b.data)]
+    if not blocks:
+        raise MeshError(f"{name}: no cells (empty mesh): palpate needs tetrahedra")
+    bad = [b for b in blocks if b.type != "tetra" and b.dim >= 3]
+    if bad:
+        b = bad[0]
+        if b.type.startswith("tetra"):
+            why = "quadratic/high-order tetrahedra are not supported: palpate uses linear (4-node) tets"
+        else:
+            why = "palpate needs a mesh of linear tetrahedra"
+        raise MeshError(f"{name}: {b.labels[0]}: cells of type '{b.type}' ({len(b.data)} of them) are not "
+                        f"tetrahedra: {why}")
+    tet_blocks = [b for b in blocks if b.type == "tetra"]
+    if not tet_blocks:
+        kinds = ", ".join(f"'{b.type}' ({len(b.data)})" for b in blocks)
+        raise MeshError(f"{name}: no tetrahedra: the file holds only {kinds} cells; palpate needs a "
+                        "tetrahedral volume mesh")
+    tets = np.concatenate([b.data for b in tet_blocks], axis=0)
+    labels = [lab for b in tet_blocks for lab in b.labels]
+    return points * scale, tets, labels, node_labels
+
+
+def _with_label(msg: str, kind: str, index: Optional[int], labels: Optional[Sequence[str]]) -> str:
+    """Insert how the file names element ``index`` after the first ``"<kind> <index>"`` in ``msg``."""
+    if index is None or labels is None or not 0 <= index < len(labels):
+        return msg
+    pat = re.compile(rf"\b{kind} {index}\b")
+    if pat.search(msg):
+        return pat.sub(f"{kind} {index} ({labels[index]})", msg, count=1)
+    return f"{msg} [{kind} {index} is {labels[index]}]"
+
+
+def load_mesh(path: PathLike, unit: str = "m") -> TetMesh:
+    """Load and validate a tetrahedral mesh file.
+
+    Parameters
+    ----------
+    path:
+        ``.msh`` (gmsh MSH 2.2 / 4.1 ASCII read by palpate; binary and MSH 4.0 by meshio), ``.vtk``,
+        ``.vtu`` (meshio), ``.node`` or ``.ele`` (TetGen; the other file must sit beside it),
+        ``.npz`` (arrays ``points`` (n, 3) and ``tets`` (m, 4)).
+    unit:
+        Length unit of the file's coordinates: ``"m"``, ``"cm"`` or ``"mm"``. Points are scaled to
+        metres.
+
+    Returns
+    -------
+    TetMesh
+        Validated mesh in metres. Inverted tets are reoriented with a :class:`palpate.MeshWarning`.
+
+    Raises
+    ------
+    MeshError
+        The file is missing, unreadable, truncated, not a tetrahedral mesh, or a tet or node is
+        invalid. The message names the file, the element and the reason.
+    ValueError
+        ``unit`` is not one of the above.
+    """
+    path = os.fspath(path)
+    name = os.path.basename(path)
+    points, tets, labels, node_labels = read_mesh_arrays(path, unit)
+    try:
+        return TetMesh(points, tets, source=name)
+    except MeshError as e:
+        msg = str(e)
+        msg = _with_label(msg, "tet", getattr(e, "tet", None), labels)
+        msg = _with_label(msg, "node", getattr(e, "node", None), node_labels)
+        err = MeshError(msg)
+        err.tet, err.node = getattr(e, "tet", None), getattr(e, "node", None)
+        raise err from None
+
+
+class VtuSeries:
+    """Write frames of a body as ``<stem>_<k>.vtu`` plus ``<stem>.pvd`` (ParaView collection).
+
+    Point data written per frame: ``displacement`` [m] and ``velocity`` [m/s], both (n, 3).
+    Points are the deformed positions [m]; cells are the mesh's tets.
+    """
+
+    def __init__(self, outdir: PathLike, tets: np.ndarray, stem: str = "frame"):
+        self.outdir = os.fspath(outdir)
+        self.stem = stem
+        self.tets = np.asarray(tets, dtype=np.int64)
+        self.entries: List[Tuple[float, str]] = []
+        os.makedirs(self.outdir, exist_ok=True)
+        # Frames of an earlier run with the same stem would not match the new .pvd: remove them.
+        stale = re.compile(rf"{re.escape(stem)}_\d{{5}}\.vtu")
+        for f in os.listdir(self.outdir):
+            if stale.fullmatch(f):
+                os.remove(os.path.join(self.outdir, f))
+
+    @property
+    def pvd_path(self) -> str:
+        return os.path.join(self.outdir, f"{self.stem}.pvd")
+
+    def write(self, time: float, positions: np.ndarray, displacement: np.ndarray, velocity: np.ndarray) -> str:
+        """Write one frame at simulated ``time`` [s]; returns the .vtu path. Rewrites the .pvd."""
+        import meshio
+
+        fname = f"{self.stem}_{len(self.entries):05d}.vtu"
+        mesh = meshio.Mesh(
+            np.asarray(positions, dtype=np.float64),
+            [("tetra", self.tets)],
+            point_data={"displacement": np.asarray(displacement, dtype=np.float64),
+                        "velocity": np.asarray(velocity, dtype=np.float64)},
+        )
+        path = os.path.join(self.outdir, fname)
+        meshio.write(path, mesh, file_format="vtu")  # binary, zlib-compressed: ParaView reads it
+        self.entries.append((float(time), fname))
+        self._write_pvd()
+        return path
+
+    def _write_pvd(self) -> None:
+        lines = ['<?xml version="1.0"?>',
+                 '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
+                 "  <Collection>"]
+        for t, f in self.entries:
+            lines.append(f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(f)}/>')
+        lines += ["  </Collection>", "</VTKFile>", ""]
+        tmp = self.pvd_path + ".tmp"
+        with open(tmp, "w") as fh:
+            fh.write("\n".join(lines))
+        os.replace(tmp, self.pvd_path)
+
+
+def read_pvd(path: PathLike) -> List[Tuple[float, str]]:
+    """``[(time [s], absolute .vtu path), ...]`` from a ``.pvd`` collection."""
+    import xml.etree.ElementTree as ET
+
+    path = os.fspath(path)
+    root = ET.parse(path).getroot()
+    base = os.path.dirname(os.path.abspath(path))
+    return [(float(ds.get("timestep")), os.path.join(base, ds.get("file")))
+            for ds in root.iter("DataSet")]

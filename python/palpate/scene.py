@@ -1,0 +1,405 @@
+"""Scene files for ``palpate run``: a TOML description of a body, its loads and a run.
+
+Every length is in metres, force in newtons, time in seconds, modulus in pascals (SI), except a
+mesh file's coordinates, which are scaled by its ``unit``. A mesh path is relative to the scene
+file, and environment variables in it are expanded: ``$VAR``, ``${VAR}``, and ``${VAR:-default}``
+(``default`` when VAR is unset or empty).
+
+.. code-block:: toml
+
+    gravity = [0.0, 0.0, 0.0]          # [m/s^2], optional
+
+    [mesh]                             # either a file ...
+    file = "../../shared/bench/meshes/lv_1350.msh"
+    unit = "cm"                        # "m" (default), "cm" or "mm"
+    # ... or a generator: "ellipsoid_wall", "truncated_ellipsoid_wall" or "box_mesh",
+    # generator = "truncated_ellipsoid_wall"
+    # [mesh.params]                    # keyword arguments of palpate.<generator>
+    # circumferential = 20
+
+    [material]                         # young + poisson, or lame_lambda + lame_mu, or a preset
+    young = 3.0e4                      # [Pa]
+    poisson = 0.4
+    density = 1000.0                   # [kg/m^3]
+    # preset = "myocardium"            # or "paper_ellipsoids"; phi, psi [Pa s] optional
+
+    [fixed]                            # optional: node indices and/or a plane
+    z_below = 1e-8                     # fix every node with z <= this [m]
+    # nodes = [0, 1, 2]
+
+    [[loads]]                          # any number of probe loads
+    point = [0.0228629, 0.0, 0.02]     # [m]
+    radius = 0.005                     # nodes within this distance of point [m]
+    surface = true                     # only boundary-surface nodes (default true)
+    force = [-0.1896, 0.0, -0.0636]    # total force shared by those nodes [N]
+    ramp = 0.1                         # linear ramp from 0 over this time [s] (0: at once)
+
+    [integrator]
+    type = "backward_euler"            # "semi_implicit", "backward_euler" or "newton"
+    # max_iterations = 20              # newton only
+    # tolerance = 1e-9                 # newton only
+
+    [run]
+    dt = 1e-3                          # [s]
+    steps = 1000
+    output_every = 10                  # write a frame every k steps (and the first and last)
+    output = "out/lv_probe"            # output folder (relative to the current directory)
+
+Errors are raised as :class:`SceneError`, whose message names the file and the key as a dotted
+path (``material.young``, ``loads[0].radius``). Unknown keys are errors (a typo is not ignored).
+"""
+from __future__ import annotations
+
+import math
+import os
+import re
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+
+from . import _palpate as _p
+from .io import UNITS, VtuSeries, load_mesh
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+
+class SceneError(Exception):
+    """An invalid scene file; the message names the file and the key."""
+
+
+_GENERATORS = {
+    "ellipsoid_wall": _p.ellipsoid_wall,
+    "truncated_ellipsoid_wall": _p.truncated_ellipsoid_wall,
+    "box_mesh": _p.box_mesh,
+}
+_TOP_KEYS = {"gravity", "mesh", "material", "fixed", "loads", "integrator", "run"}
+_SECTION_KEYS = {
+    "mesh": {"file", "unit", "generator", "params"},
+    "material": {"young", "poisson", "lame_lambda", "lame_mu", "density", "phi", "psi", "preset"},
+    "fixed": {"z_below", "nodes"},
+    "load": {"point", "radius", "force", "ramp", "surface"},
+    "integrator": {"type", "max_iterations", "tolerance"},
+    "run": {"dt", "steps", "output_every", "output"},
+}
+
+
+@dataclass
+class Load:
+    nodes: np.ndarray       # node indices
+    force: np.ndarray       # total [N], (3,)
+    ramp: float             # [s]
+
+
+@dataclass
+class Scene:
+    path: Path
+    body: "_p.Body"
+    loads: List[Load]
+    dt: float
+    steps: int
+    output_every: int
+    output: Optional[str]
+    description: Dict[str, Any] = field(default_factory=dict)
+
+
+class _Ctx:
+    def __init__(self, path: Path):
+        self.path = path
+
+    def err(self, key: str, msg: str) -> SceneError:
+        return SceneError(f"{self.path.name}: {key}: {msg}")
+
+    def number(self, table: Dict, section: str, key: str, default=None, positive=False, nonneg=False,
+               integer=False, required=False):
+        label = f"{section}.{key}" if section else key
+        if key not in table:
+            if required:
+                raise self.err(label, "missing (required)")
+            return default
+        v = table[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.err(label, f"must be a {'whole ' if integer else ''}number, got {v!r}")
+        if integer and not isinstance(v, int):
+            raise self.err(label, f"must be a whole number, got {v!r}")
+        if not math.isfinite(v):
+            raise self.err(label, f"must be finite, got {v!r}")
+        if positive and not v > 0:
+            raise self.err(label, f"must be positive, got {v!r}")
+        if nonneg and v < 0:
+            raise self.err(label, f"must not be negative, got {v!r}")
+        return v
+
+    def vec3(self, table: Dict, section: str, key: str, default=None, required=False):
+        label = f"{section}.{key}" if section else key
+        if key not in table:
+            if required:
+                raise self.err(label, "missing (required)")
+            return default
+        v = table[key]
+        if (not isinstance(v, list) or len(v) != 3
+                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
+            raise self.err(label, f"must be a list of 3 finite numbers [x, y, z], got {v!r}")
+        return np.array(v, dtype=np.float64)
+
+    def table(self, doc: Dict, key: str, required=False) -> Dict:
+        if key not in doc:
+            if required:
+                raise self.err(key, "missing table (required)")
+            return {}
+        v = doc[key]
+        if not isinstance(v, dict):
+            raise self.err(key, f"must be a table, got {v!r}")
+        return v
+
+    def known(self, table: Dict, section: str, allowed=None):
+        allowed = allowed if allowed is not None else _SECTION_KEYS[section]
+        for k in table:
+            if k not in allowed:
+                where = f"{section}.{k}" if section else k
+                raise self.err(where, f"unknown key (expected one of: {', '.join(sorted(allowed))})")
+
+
+def _expand(text: str) -> str:
+    """Expand ``$VAR``, ``${VAR}`` and ``${VAR:-default}`` (the default when VAR is unset or empty)."""
+    def sub(m):
+        name, default = m.group(1) or m.group(3), m.group(2)
+        value = os.environ.get(name)
+        if value:
+            return value
+        return default if default is not None else m.group(0)
+    return re.sub(r"\$\{(\w+)(?::-([^}]*))?\}|\$(\w+)", sub, text)
+
+
+def _material_key(msg: str, given: Dict[str, float]) -> str:
+    """The [material] key a core MaterialError message is about."""
+    for word, key in (("Young", "young"), ("Poisson", "poisson"), ("Lame lambda", "lame_lambda"),
+                      ("shear modulus", "lame_mu"), ("density", "density"), ("phi", "phi"), ("psi", "psi")):
+        if word in msg:
+            return f"material.{key}"
+    return "material"
+
+
+def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Optional[int] = None) -> Scene:
+    """Parse and build a scene; raises :class:`SceneError` for any problem in the file."""
+    path = Path(path)
+    c = _Ctx(path)
+    try:
+        with open(path, "rb") as fh:
+            doc = tomllib.load(fh)
+    except FileNotFoundError:
+        raise SceneError(f"{path}: no such scene file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(f"{path.name}: invalid TOML: {e}") from None
+    c.known(doc, "", _TOP_KEYS)
+
+    # --- mesh
+    m = c.table(doc, "mesh", required=True)
+    c.known(m, "mesh")
+    if ("file" in m) == ("generator" in m):
+        raise c.err("mesh", "give exactly one of 'file' or 'generator'")
+    if "file" in m:
+        if not isinstance(m["file"], str):
+            raise c.err("mesh.file", f"must be a path string, got {m['file']!r}")
+        unit = m.get("unit", "m")
+        if unit not in UNITS:
+            raise c.err("mesh.unit", f"must be one of {sorted(UNITS)}, got {unit!r}")
+        if "params" in m:
+            raise c.err("mesh.params", "only used with 'generator'")
+        fname = _expand(m["file"])
+        if "$" in fname:
+            raise c.err("mesh.file", f"unset environment variable in {m['file']!r} (use ${{VAR:-default}})")
+        mesh_path = Path(fname) if os.path.isabs(fname) else (path.parent / fname).resolve()
+        try:
+            mesh = load_mesh(mesh_path, unit=unit)
+        except _p.MeshError as e:
+            raise c.err("mesh.file", str(e)) from None
+    else:
+        gen = m["generator"]
+        if gen not in _GENERATORS:
+            raise c.err("mesh.generator", f"must be one of {sorted(_GENERATORS)}, got {gen!r}")
+        if "unit" in m:
+            raise c.err("mesh.unit", "only used with 'file' (generators work in metres)")
+        params = m.get("params", {})
+        if not isinstance(params, dict):
+            raise c.err("mesh.params", "must be a table")
+        try:
+            mesh = _GENERATORS[gen](**params)
+        except (TypeError, ValueError) as e:
+            msg = str(e)
+            key = re.search(r"(?:keyword argument|argument) '(\w+)'", msg)
+            name = key.group(1) if key else next((k for k in params if msg.startswith(k)), None)
+            raise c.err(f"mesh.params.{name}" if name else "mesh.params", msg) from None
+
+    # --- material
+    mat = c.table(doc, "material", required=True)
+    c.known(mat, "material")
+    kw = {}
+    for k in ("young", "poisson", "lame_lambda", "lame_mu", "density", "phi", "psi"):
+        v = c.number(mat, "material", k)
+        if v is not None:
+            kw[k] = float(v)
+    if "preset" in mat:
+        presets = {"myocardium": _p.Material.myocardium, "paper_ellipsoids": _p.Material.paper_ellipsoids}
+        if mat["preset"] not in presets:
+            raise c.err("material.preset", f"must be one of {sorted(presets)}, got {mat['preset']!r}")
+        if kw:
+            raise c.err("material.preset", f"cannot be combined with {', '.join(sorted(kw))}")
+        material = presets[mat["preset"]]()
+    else:
+        try:
+            material = _p.Material(**kw)
+        except _p.MaterialError as e:
+            raise c.err(_material_key(str(e), kw), str(e)) from None
+
+    # --- fixed nodes
+    fx = c.table(doc, "fixed")
+    c.known(fx, "fixed")
+    fixed = set()
+    pts = mesh.points
+    if "z_below" in fx:
+        z = c.number(fx, "fixed", "z_below")
+        sel = np.flatnonzero(pts[:, 2] <= z)
+        if len(sel) == 0:
+            raise c.err("fixed.z_below", f"no node has z <= {z} m (the mesh spans z = {pts[:, 2].min():.4g} .. "
+                                           f"{pts[:, 2].max():.4g} m)")
+        fixed.update(int(i) for i in sel)
+    if "nodes" in fx:
+        nodes = fx["nodes"]
+        if not isinstance(nodes, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in nodes):
+            raise c.err("fixed.nodes", f"must be a list of node indices, got {nodes!r}")
+        bad = [i for i in nodes if not 0 <= i < mesh.n_nodes]
+        if bad:
+            raise c.err("fixed.nodes", f"node index {bad[0]} out of range (the mesh has {mesh.n_nodes} nodes)")
+        fixed.update(nodes)
+
+    gravity = c.vec3(doc, "", "gravity", default=np.zeros(3))
+
+    # --- integrator
+    it = c.table(doc, "integrator")
+    c.known(it, "integrator")
+    kind = it.get("type", "backward_euler")
+    if kind not in ("semi_implicit", "backward_euler", "newton"):
+        raise c.err("integrator.type", f"must be 'semi_implicit', 'backward_euler' or 'newton', got {kind!r}")
+    if kind != "newton":
+        for k in ("max_iterations", "tolerance"):
+            if k in it:
+                raise c.err(f"integrator.{k}", "only used with type = 'newton'")
+    if kind == "semi_implicit":
+        integrator = _p.SemiImplicit()
+    elif kind == "backward_euler":
+        integrator = _p.BackwardEuler()
+    else:
+        mi = c.number(it, "integrator", "max_iterations", 20, positive=True, integer=True)
+        tol = c.number(it, "integrator", "tolerance", 1e-9, positive=True)
+        if not tol < 1:
+            raise c.err("integrator.tolerance", f"must lie in (0, 1), got {tol!r}")
+        integrator = _p.BackwardEuler(newton=True, max_iterations=mi, tolerance=float(tol))
+
+    try:
+        body = _p.Body(mesh, material, fixed=sorted(fixed), gravity=gravity, integrator=integrator)
+    except _p.PalpateError as e:
+        raise c.err("fixed" if "fixed" in str(e) else "gravity" if "gravity" in str(e) else "scene", str(e)) from None
+
+    # --- loads
+    loads_doc = doc.get("loads", [])
+    if not isinstance(loads_doc, list):
+        raise c.err("loads", "must be an array of tables: write [[loads]]")
+    surface_nodes = None
+    loads = []
+    for i, ld in enumerate(loads_doc):
+        sec = f"loads[{i}]"
+        if not isinstance(ld, dict):
+            raise c.err(f"loads[{i}]", "must be a table")
+        c.known(ld, sec, _SECTION_KEYS["load"])
+        p = c.vec3(ld, sec, "point", required=True)
+        r = c.number(ld, sec, "radius", required=True, positive=True)
+        f = c.vec3(ld, sec, "force", required=True)
+        ramp = c.number(ld, sec, "ramp", 0.0, nonneg=True)
+        surface = ld.get("surface", True)
+        if not isinstance(surface, bool):
+            raise c.err(f"{sec}.surface", f"must be true or false, got {surface!r}")
+        if surface:
+            if surface_nodes is None:
+                surface_nodes = np.unique(mesh.boundary_faces())
+            cand = surface_nodes
+        else:
+            cand = np.arange(mesh.n_nodes)
+        d = np.linalg.norm(pts[cand] - p, axis=1)
+        sel = cand[d <= r]
+        if len(sel) == 0:
+            raise c.err(f"{sec}.radius", f"no {'surface ' if surface else ''}node within {r} m of point "
+                                           f"{p.tolist()} (the nearest is {d.min():.4g} m away)")
+        free = np.setdiff1d(sel, sorted(fixed))
+        if len(free) == 0:
+            raise c.err(f"{sec}.point", "every node of this load is fixed: it would do nothing")
+        loads.append(Load(sel, f, float(ramp)))
+
+    # --- run
+    run = c.table(doc, "run")
+    c.known(run, "run")
+    dt = c.number(run, "run", "dt", 1e-3, positive=True)
+    nsteps = c.number(run, "run", "steps", 1000, positive=True, integer=True)
+    every = c.number(run, "run", "output_every", 10, positive=True, integer=True)
+    out = run.get("output")
+    if out is not None and not isinstance(out, str):
+        raise c.err("run.output", f"must be a folder path string, got {out!r}")
+    if output is not None:
+        out = output
+    if out is None:
+        out = os.path.join("out", path.stem)
+    if steps is not None:
+        nsteps = steps
+    return Scene(path, body, loads, float(dt), int(nsteps), int(every), out,
+                 dict(mesh=m.get("file") or m.get("generator"), integrator=kind))
+
+
+def forces_at(scene: Scene, t: float) -> np.ndarray:
+    """External forces [N] (n, 3) at time ``t`` [s] (each load ramped by min(1, t / ramp))."""
+    f = np.zeros((scene.body.n_nodes, 3))
+    for ld in scene.loads:
+        s = min(1.0, t / ld.ramp) if ld.ramp > 0 else 1.0
+        f[ld.nodes] += s * ld.force / len(ld.nodes)
+    return f
+
+
+def run_scene(scene: Scene, write: bool = True, log=print) -> Dict[str, Any]:
+    """Run a scene, writing a VTU series; returns a summary dict.
+
+    Frames (deformed positions, point data ``displacement`` [m] and ``velocity`` [m/s]) are
+    written at step 0, every ``output_every`` steps and after the last step, into
+    ``scene.output`` with ``frame.pvd`` as the ParaView collection. Raises ``StepError`` if a step
+    fails (frames written so far are kept).
+    """
+    body = scene.body
+    series = VtuSeries(scene.output, body.mesh.tets) if write and scene.output else None
+
+    def frame():
+        if series is not None:
+            series.write(body.time, body.positions, body.displacements, body.velocities)
+
+    frame()
+    wall, umax = 0.0, 0.0
+    ramp_end = max([ld.ramp for ld in scene.loads], default=0.0)
+    for k in range(scene.steps):
+        t_next = (k + 1) * scene.dt
+        if k == 0 or t_next <= ramp_end + scene.dt:
+            body.set_forces(forces_at(scene, t_next))
+        t0 = time.perf_counter()
+        body.step(1, scene.dt)
+        wall += time.perf_counter() - t0
+        umax = max(umax, float(np.linalg.norm(body.displacements, axis=1).max()))
+        if (k + 1) % scene.output_every == 0 or k + 1 == scene.steps:
+            frame()
+    return dict(
+        scene=str(scene.path), nodes=body.n_nodes, tets=body.n_tets, steps=scene.steps, dt=scene.dt,
+        wall_s=wall, steps_per_s=scene.steps / wall if wall > 0 else float("inf"), max_disp_m=umax,
+        strain_energy_J=body.strain_energy(), kinetic_energy_J=body.kinetic_energy(),
+        frames=len(series.entries) if series else 0, pvd=series.pvd_path if series else None,
+    )

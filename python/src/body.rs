@@ -1,0 +1,406 @@
+//! `palpate.Body`: a compiled model with its state and workspace (`crates/palpate-core/src/scene`).
+//! Stepping, static solves and the timed probe run release the GIL.
+
+use std::time::Instant;
+
+use numpy::{PyArray1, PyArray2};
+use palpate_core::integrate::{static_solve, StaticOptions};
+use palpate_core::{step, Model, ModelBuilder, State, Vec3, Workspace};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::conv;
+use crate::errors;
+use crate::material::{integrator_from_py, integrator_to_py, PyMaterial};
+use crate::mesh::PyTetMesh;
+
+/// A deformable body: mesh + material + fixed nodes + gravity + integrator, and its state.
+///
+/// ``Body(mesh, material, fixed=None, gravity=(0, 0, 0), integrator=None)``
+///
+/// Parameters
+/// ----------
+/// mesh : TetMesh
+///     Rest geometry [m].
+/// material : Material
+/// fixed : array_like of int, shape (k,), or bool mask of shape (n,), optional
+///     Nodes held at their rest position (zero velocity).
+/// gravity : (3,) float
+///     Gravitational acceleration [m/s^2], world frame.
+/// integrator : SemiImplicit | BackwardEuler, optional
+///     Default ``BackwardEuler(newton=False)`` (rest-linearised, factorised once per dt).
+///
+/// All per-node arrays are (n, 3) float64 in SI units, world frame; getters return copies.
+#[pyclass(module = "palpate", name = "Body")]
+pub struct PyBody {
+    model: Model,
+    state: State,
+    ws: Workspace,
+    mesh: Py<PyTetMesh>,
+    material: Py<PyMaterial>,
+}
+
+/// Per-call summary of `step`.
+struct StepTotals {
+    steps: usize,
+    solves: usize,
+    unconverged: usize,
+    max_residual: f64,
+}
+
+impl PyBody {
+    fn run_steps(&mut self, n: usize, dt: f64) -> Result<StepTotals, (usize, palpate_core::StepError)> {
+        let mut tot = StepTotals { steps: 0, solves: 0, unconverged: 0, max_residual: 0.0 };
+        for k in 0..n {
+            let r = step(&self.model, &mut self.state, &mut self.ws, dt).map_err(|e| (k, e))?;
+            tot.steps += 1;
+            tot.solves += r.solves;
+            if !r.converged {
+                tot.unconverged += 1;
+            }
+            tot.max_residual = tot.max_residual.max(r.residual);
+        }
+        Ok(tot)
+    }
+}
+
+/// What `run_probe` measured (filled without the GIL, converted after).
+struct ProbeRun {
+    steps: usize,
+    wall_s: f64,
+    stable: bool,
+    max_disp: f64,
+    probe_disp_avg: f64,
+    mean_u: Vec<Vec3>,
+    probe_hist: Vec<f64>,
+    error: Option<String>,
+}
+
+#[pymethods]
+impl PyBody {
+    #[new]
+    #[pyo3(signature = (mesh, material, fixed = None, gravity = None, integrator = None))]
+    fn new(
+        py: Python<'_>,
+        mesh: Bound<'_, PyTetMesh>,
+        material: Bound<'_, PyMaterial>,
+        fixed: Option<&Bound<'_, PyAny>>,
+        gravity: Option<&Bound<'_, PyAny>>,
+        integrator: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
+        let n = mesh.get().inner.n_nodes();
+        let fixed = match fixed {
+            Some(f) if !f.is_none() => conv::node_indices(f, "fixed", n)?,
+            _ => Vec::new(),
+        };
+        let gravity = match gravity {
+            Some(g) if !g.is_none() => conv::vec3(g, "gravity")?,
+            _ => Vec3::zeros(),
+        };
+        let integrator = integrator_from_py(integrator)?;
+        let builder = ModelBuilder::new(mesh.get().inner.clone(), material.get().inner)
+            .fixed_nodes(fixed)
+            .gravity(gravity)
+            .integrator(integrator);
+        let model = py.detach(|| builder.build()).map_err(errors::model_error)?;
+        let state = State::rest(&model);
+        let ws = Workspace::new(&model);
+        Ok(PyBody { model, state, ws, mesh: mesh.unbind(), material: material.unbind() })
+    }
+
+    /// Advance ``n`` steps of ``dt`` [s] with the current external forces (GIL released).
+    ///
+    /// Returns a dict: ``steps``, ``solves`` (linear solves), ``unconverged_steps`` (Newton steps
+    /// that hit ``max_iterations``), ``max_residual`` (relative Newton residual).
+    ///
+    /// Raises ``StepError`` if a step fails (bad dt, non-finite force or result); the steps
+    /// before it are kept and the body is left as it was before the failing step.
+    ///
+    /// Other Python threads run meanwhile; they cannot use this body until the call returns
+    /// (doing so raises ``RuntimeError: Already borrowed``).
+    #[pyo3(signature = (n = 1, dt = 1e-3))]
+    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: usize, dt: f64) -> PyResult<Bound<'py, PyDict>> {
+        let this = &mut *slf;
+        let tot = py
+            .detach(|| this.run_steps(n, dt))
+            .map_err(|(k, e)| errors::step_error(e, &format!("in step {} of {n}", k + 1)))?;
+        let d = PyDict::new(py);
+        d.set_item("steps", tot.steps)?;
+        d.set_item("solves", tot.solves)?;
+        d.set_item("unconverged_steps", tot.unconverged)?;
+        d.set_item("max_residual", tot.max_residual)?;
+        Ok(d)
+    }
+
+    /// Set the external force on every node [N], array (n, 3); held until changed.
+    fn set_forces(&mut self, forces: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.state.f_ext = conv::vec3s(forces, "forces", self.model.n_nodes(), true)?;
+        Ok(())
+    }
+
+    /// External force on every node [N], (n, 3) (a copy).
+    #[getter]
+    fn forces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        conv::vec3s_to_py(py, &self.state.f_ext)
+    }
+
+    /// Node positions [m], (n, 3) (a copy).
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        conv::vec3s_to_py(py, &self.state.x)
+    }
+
+    /// Node velocities [m/s], (n, 3) (a copy).
+    #[getter]
+    fn velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        conv::vec3s_to_py(py, &self.state.v)
+    }
+
+    /// Displacements from the rest positions [m], (n, 3).
+    #[getter]
+    fn displacements<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        conv::vec3s_to_py(py, &self.state.displacements(&self.model))
+    }
+
+    /// Simulated time [s].
+    #[getter]
+    fn time(&self) -> f64 {
+        self.state.t
+    }
+
+    /// Number of nodes n.
+    #[getter]
+    fn n_nodes(&self) -> usize {
+        self.model.n_nodes()
+    }
+
+    /// Number of tets.
+    #[getter]
+    fn n_tets(&self) -> usize {
+        self.model.n_tets()
+    }
+
+    /// The rest mesh.
+    #[getter]
+    fn mesh(&self, py: Python<'_>) -> Py<PyTetMesh> {
+        self.mesh.clone_ref(py)
+    }
+
+    /// The material.
+    #[getter]
+    fn material(&self, py: Python<'_>) -> Py<PyMaterial> {
+        self.material.clone_ref(py)
+    }
+
+    /// The integrator (a SemiImplicit or BackwardEuler object).
+    #[getter]
+    fn integrator(&self, py: Python<'_>) -> PyResult<Py<PyAny>> {
+        integrator_to_py(py, self.model.integrator())
+    }
+
+    /// Indices of the fixed nodes, int64 (k,), ascending.
+    #[getter]
+    fn fixed<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        let idx: Vec<usize> = self.model.fixed().iter().enumerate().filter(|(_, &f)| f).map(|(i, _)| i).collect();
+        conv::usizes_to_py(py, &idx)
+    }
+
+    /// Lumped node masses [kg], (n,).
+    #[getter]
+    fn masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        conv::f64s_to_py(py, self.model.masses())
+    }
+
+    /// Gravitational acceleration [m/s^2], (3,).
+    #[getter]
+    fn gravity<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        let g = self.model.gravity();
+        conv::f64s_to_py(py, &[g.x, g.y, g.z])
+    }
+
+    /// Elastic strain energy of the current positions [J].
+    fn strain_energy(&self) -> f64 {
+        self.model.strain_energy(&self.state.x)
+    }
+
+    /// Kinetic energy of the current velocities [J].
+    fn kinetic_energy(&self) -> f64 {
+        self.model.kinetic_energy(&self.state.v)
+    }
+
+    /// Back to rest: rest positions, zero velocity, time 0, no external force.
+    fn reset(&mut self) {
+        self.state = State::rest(&self.model);
+    }
+
+    /// Static equilibrium under per-node forces [N] (n, 3) (default: the current external forces)
+    /// and gravity, by Newton's method on the full nonlinear forces (GIL released).
+    ///
+    /// Returns the equilibrium positions [m], (n, 3). The body's state is not changed.
+    /// Defaults are the core's (``StaticOptions::default``: 100 iterations, tolerance 1e-10 on
+    /// max |residual| relative to max |applied force|, 1 load step). ``load_steps`` > 1 applies
+    /// the load in increments (for large loads).
+    /// Raises ``SolveError`` if Newton does not converge.
+    #[pyo3(signature = (forces = None, *, max_iterations = None, tolerance = None, load_steps = None))]
+    fn static_solve<'py>(
+        &self,
+        py: Python<'py>,
+        forces: Option<&Bound<'py, PyAny>>,
+        max_iterations: Option<usize>,
+        tolerance: Option<f64>,
+        load_steps: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let d = StaticOptions::default();
+        let (max_iterations, tolerance, load_steps) =
+            (max_iterations.unwrap_or(d.max_iterations), tolerance.unwrap_or(d.tolerance), load_steps.unwrap_or(d.load_steps));
+        let f = match forces {
+            Some(f) if !f.is_none() => conv::vec3s(f, "forces", self.model.n_nodes(), true)?,
+            _ => self.state.f_ext.clone(),
+        };
+        if !(tolerance > 0.0 && tolerance.is_finite()) {
+            return Err(PyValueError::new_err(format!("tolerance = {tolerance} must be positive")));
+        }
+        let opts = StaticOptions { max_iterations, tolerance, load_steps: load_steps.max(1) };
+        let model = &self.model;
+        let sol = py.detach(|| static_solve(model, &f, &opts)).map_err(errors::solve_error)?;
+        Ok(conv::vec3s_to_py(py, &sol.x))
+    }
+
+    /// The benchmark's probe run, timed in Rust (GIL released).
+    ///
+    /// For step k = 0 .. steps-1 the nodes ``nodes`` each carry ``total_force / len(nodes)`` [N]
+    /// scaled by ``min(1, (k+1) dt / ramp_time)`` (the ramp starts at this call; every other node
+    /// carries no external force), then one step of ``dt`` [s] is taken. Only the step calls are
+    /// timed (``std::time::Instant``); the bookkeeping between them is not.
+    ///
+    /// Returns a dict:
+    ///   ``steps`` completed; ``wall_s`` [s] summed over the step calls; ``stable`` (every position
+    ///   finite and max |u| < ``stable_limit`` [m] throughout); ``max_disp_m`` max over nodes and
+    ///   steps of |u|; ``probe_disp_avg_m`` mean over the second half of the steps of the loaded
+    ///   nodes' mean |u|; ``mean_disp`` (n, 3) the displacement field averaged over steps
+    ///   k >= steps // 2 [m]; ``probe_disp`` (steps,) the loaded nodes' mean |u| after each step
+    ///   [m]; ``error`` (why the run stopped early, else None).
+    /// The run stops early if a step fails, max |u| exceeds 1 m, or the timed wall-clock exceeds
+    /// ``max_wall_s`` [s] (then ``stable`` covers the steps that ran).
+    #[pyo3(signature = (nodes, total_force, ramp_time, steps, dt = 1e-3, stable_limit = 0.02, max_wall_s = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn run_probe<'py>(
+        mut slf: PyRefMut<'py, Self>,
+        py: Python<'py>,
+        nodes: &Bound<'py, PyAny>,
+        total_force: &Bound<'py, PyAny>,
+        ramp_time: f64,
+        steps: usize,
+        dt: f64,
+        stable_limit: f64,
+        max_wall_s: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let this = &mut *slf;
+        let n = this.model.n_nodes();
+        let loaded = conv::node_indices(nodes, "nodes", n)?;
+        if loaded.is_empty() {
+            return Err(PyValueError::new_err("nodes: at least one loaded node is needed"));
+        }
+        let total = conv::vec3(total_force, "total_force")?;
+        if !(ramp_time >= 0.0 && ramp_time.is_finite()) {
+            return Err(PyValueError::new_err(format!("ramp_time = {ramp_time} s must be finite and >= 0")));
+        }
+        if steps == 0 {
+            return Err(PyValueError::new_err("steps must be at least 1"));
+        }
+        let per_node = total / loaded.len() as f64;
+        let run = py.detach(|| {
+            let x0: Vec<Vec3> = this.model.mesh().points().to_vec();
+            let half = steps / 2;
+            let mut out = ProbeRun {
+                steps: 0,
+                wall_s: 0.0,
+                stable: true,
+                max_disp: 0.0,
+                probe_disp_avg: 0.0,
+                mean_u: vec![Vec3::zeros(); n],
+                probe_hist: Vec::with_capacity(steps),
+                error: None,
+            };
+            let mut n_mean = 0usize;
+            for f in this.state.f_ext.iter_mut() {
+                *f = Vec3::zeros();
+            }
+            for k in 0..steps {
+                let s = if ramp_time > 0.0 { ((k + 1) as f64 * dt / ramp_time).min(1.0) } else { 1.0 };
+                for &i in &loaded {
+                    this.state.f_ext[i] = per_node * s;
+                }
+                let t0 = Instant::now();
+                let r = step(&this.model, &mut this.state, &mut this.ws, dt);
+                out.wall_s += t0.elapsed().as_secs_f64();
+                if let Err(e) = r {
+                    out.error = Some(format!("step {} of {steps}: {e}", k + 1));
+                    out.stable = false;
+                    break;
+                }
+                out.steps += 1;
+                // Bookkeeping (not timed).
+                let mut umax: f64 = 0.0;
+                let mut finite = true;
+                for (x, x0) in this.state.x.iter().zip(&x0) {
+                    let u = (x - x0).norm();
+                    finite &= u.is_finite();
+                    umax = umax.max(u);
+                }
+                let probe = loaded.iter().map(|&i| (this.state.x[i] - x0[i]).norm()).sum::<f64>() / loaded.len() as f64;
+                out.probe_hist.push(probe);
+                out.max_disp = out.max_disp.max(umax);
+                if !finite || !(umax < stable_limit) {
+                    out.stable = false;
+                }
+                if k >= half {
+                    for ((m, x), x0) in out.mean_u.iter_mut().zip(&this.state.x).zip(&x0) {
+                        *m += x - x0;
+                    }
+                    n_mean += 1;
+                }
+                if !finite || umax > 1.0 {
+                    out.error = Some(format!("blew up at step {} of {steps}: max |u| = {umax:.3e} m", k + 1));
+                    break;
+                }
+                if let Some(cap) = max_wall_s {
+                    if out.wall_s > cap && k + 1 < steps {
+                        out.error = Some(format!("stopped after {} of {steps} steps: wall-clock cap of {cap} s reached", k + 1));
+                        break;
+                    }
+                }
+            }
+            if n_mean > 0 {
+                for m in out.mean_u.iter_mut() {
+                    *m /= n_mean as f64;
+                }
+            }
+            let second = &out.probe_hist[out.probe_hist.len() / 2..];
+            out.probe_disp_avg = if second.is_empty() { f64::NAN } else { second.iter().sum::<f64>() / second.len() as f64 };
+            out
+        });
+        let d = PyDict::new(py);
+        d.set_item("steps", run.steps)?;
+        d.set_item("wall_s", run.wall_s)?;
+        d.set_item("stable", run.stable)?;
+        d.set_item("max_disp_m", run.max_disp)?;
+        d.set_item("probe_disp_avg_m", run.probe_disp_avg)?;
+        d.set_item("mean_disp", conv::vec3s_to_py(py, &run.mean_u))?;
+        d.set_item("probe_disp", conv::f64s_to_py(py, &run.probe_hist))?;
+        d.set_item("error", run.error)?;
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Body(n_nodes={}, n_tets={}, fixed={}, integrator={:?}, time={} s)",
+            self.model.n_nodes(),
+            self.model.n_tets(),
+            self.model.fixed().iter().filter(|&&f| f).count(),
+            self.model.integrator(),
+            self.state.t
+        )
+    }
+}

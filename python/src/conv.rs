@@ -1,0 +1,203 @@
+//! numpy <-> core conversions, with the checks that make a bad argument a clear error.
+//!
+//! * Inputs are numpy arrays or anything `numpy.asarray` accepts (nested lists ...).
+//! * Shape errors raise `ValueError`, dtype errors `TypeError`; both name the argument, the
+//!   expected and the actual shape / dtype.
+//! * Float arguments accept any real dtype (float64, float32, integers) and are converted to
+//!   float64; index arguments accept any integer dtype (never floats or bools, which would hide a
+//!   mistake). Non-contiguous arrays (slices, transposes) are read through their strides and
+//!   copied: nothing requires C order.
+//! * Outputs are fresh C-contiguous float64 / int64 arrays (copies, never views of the state).
+
+use numpy::ndarray::{Array1, Array2};
+use numpy::{Element, IntoPyArray, PyArray1, PyArray2, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
+use palpate_core::Vec3;
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+
+/// `obj` as a numpy array (converted with `numpy.asarray` if it is not one already).
+fn as_array<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Bound<'py, PyUntypedArray>> {
+    if let Ok(a) = obj.cast::<PyUntypedArray>() {
+        return Ok(a.clone());
+    }
+    let np = obj.py().import("numpy")?;
+    let conv = np.call_method1("asarray", (obj,)).map_err(|e| {
+        PyTypeError::new_err(format!("{what} must be an array-like of numbers, got {} ({e})", type_name(obj)))
+    })?;
+    conv.cast_into::<PyUntypedArray>()
+        .map_err(|_| PyTypeError::new_err(format!("{what} must be an array-like of numbers, got {}", type_name(obj))))
+}
+
+fn type_name(obj: &Bound<'_, PyAny>) -> String {
+    obj.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "?".into())
+}
+
+fn shape_str(shape: &[usize]) -> String {
+    match shape.len() {
+        1 => format!("({},)", shape[0]),
+        _ => format!("({})", shape.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(", ")),
+    }
+}
+
+fn dtype_str(a: &Bound<'_, PyUntypedArray>) -> String {
+    a.dtype().str().map(|s| s.to_string()).unwrap_or_else(|_| "?".into())
+}
+
+/// Copy an array of element type `T` (any strides) into a flat row-major `Vec<f64>` / `Vec<i64>`.
+fn flat<T: Element + Copy, U>(a: &Bound<'_, PyUntypedArray>, f: impl Fn(T) -> U) -> Option<Vec<U>> {
+    let typed = a.cast::<PyArrayDyn<T>>().ok()?;
+    let ro = typed.try_readonly().ok()?;
+    let view = ro.as_array();
+    Some(view.iter().map(|&x| f(x)).collect())
+}
+
+/// The elements of a real-valued array as f64, or a TypeError naming the dtype.
+fn to_f64(a: &Bound<'_, PyUntypedArray>, what: &str) -> PyResult<Vec<f64>> {
+    let kind = a.dtype().kind();
+    let out = match kind {
+        b'f' => flat::<f64, _>(a, |x| x).or_else(|| flat::<f32, _>(a, |x| x as f64)),
+        b'i' => flat::<i64, _>(a, |x| x as f64)
+            .or_else(|| flat::<i32, _>(a, |x| x as f64))
+            .or_else(|| flat::<i16, _>(a, |x| x as f64))
+            .or_else(|| flat::<i8, _>(a, |x| x as f64)),
+        b'u' => flat::<u64, _>(a, |x| x as f64)
+            .or_else(|| flat::<u32, _>(a, |x| x as f64))
+            .or_else(|| flat::<u16, _>(a, |x| x as f64))
+            .or_else(|| flat::<u8, _>(a, |x| x as f64)),
+        _ => None,
+    };
+    out.ok_or_else(|| {
+        PyTypeError::new_err(format!(
+            "{what} must hold real numbers (float64 preferred), got dtype {}",
+            dtype_str(a)
+        ))
+    })
+}
+
+/// The elements of an integer array as i64 (u64 above i64::MAX saturates, so it is reported as
+/// out of range rather than wrapped), or a TypeError naming the dtype.
+fn to_i64(a: &Bound<'_, PyUntypedArray>, what: &str) -> PyResult<Vec<i64>> {
+    let kind = a.dtype().kind();
+    let out = match kind {
+        b'i' => flat::<i64, _>(a, |x| x)
+            .or_else(|| flat::<i32, _>(a, |x| x as i64))
+            .or_else(|| flat::<i16, _>(a, |x| x as i64))
+            .or_else(|| flat::<i8, _>(a, |x| x as i64)),
+        b'u' => flat::<u64, _>(a, |x| i64::try_from(x).unwrap_or(i64::MAX))
+            .or_else(|| flat::<u32, _>(a, |x| x as i64))
+            .or_else(|| flat::<u16, _>(a, |x| x as i64))
+            .or_else(|| flat::<u8, _>(a, |x| x as i64)),
+        _ => None,
+    };
+    out.ok_or_else(|| {
+        let hint = if kind == b'f' { " (convert with .astype(np.int64) if the values are whole)" } else { "" };
+        PyTypeError::new_err(format!("{what} must be an integer array, got dtype {}{hint}", dtype_str(a)))
+    })
+}
+
+/// Check `a` has shape `(rows, cols)` (any `rows` if `None`); `form` describes it for the message.
+fn check_2d(a: &Bound<'_, PyUntypedArray>, what: &str, rows: Option<usize>, cols: usize, form: &str) -> PyResult<usize> {
+    let shape = a.shape();
+    let ok = shape.len() == 2 && shape[1] == cols && rows.map_or(true, |r| shape[0] == r);
+    if !ok {
+        return Err(PyValueError::new_err(format!("{what} must have shape {form}, got {}", shape_str(shape))));
+    }
+    Ok(shape[0])
+}
+
+/// Points / positions `(n, 3)` as float64 triples.
+pub fn points(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<[f64; 3]>> {
+    let a = as_array(obj, what)?;
+    check_2d(&a, what, None, 3, "(n, 3)")?;
+    let v = to_f64(&a, what)?;
+    Ok(v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+}
+
+/// Per-node vectors `(n, 3)` with `n` fixed, as `Vec3`; `finite` also refuses NaN / inf.
+pub fn vec3s(obj: &Bound<'_, PyAny>, what: &str, n: usize, finite: bool) -> PyResult<Vec<Vec3>> {
+    let a = as_array(obj, what)?;
+    check_2d(&a, what, Some(n), 3, &format!("({n}, 3) (one row per node)"))?;
+    let v = to_f64(&a, what)?;
+    let out: Vec<Vec3> = v.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
+    if finite {
+        if let Some(i) = out.iter().position(|f| !(f.x.is_finite() && f.y.is_finite() && f.z.is_finite())) {
+            return Err(PyValueError::new_err(format!("{what}: row {i} is not finite ({}, {}, {})", out[i].x, out[i].y, out[i].z)));
+        }
+    }
+    Ok(out)
+}
+
+/// Tets `(m, 4)` as signed indices (the core reports negative / out-of-range ones).
+pub fn tets(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<[i64; 4]>> {
+    let a = as_array(obj, what)?;
+    check_2d(&a, what, None, 4, "(m, 4)")?;
+    let v = to_i64(&a, what)?;
+    Ok(v.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect())
+}
+
+/// One 3-vector (a sequence or array of 3 real numbers), finite.
+pub fn vec3(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec3> {
+    let a = as_array(obj, what)?;
+    if a.shape() != [3] {
+        return Err(PyValueError::new_err(format!("{what} must be 3 numbers (x, y, z), got shape {}", shape_str(a.shape()))));
+    }
+    let v = to_f64(&a, what)?;
+    if !v.iter().all(|x| x.is_finite()) {
+        return Err(PyValueError::new_err(format!("{what} = ({}, {}, {}) is not finite", v[0], v[1], v[2])));
+    }
+    Ok(Vec3::new(v[0], v[1], v[2]))
+}
+
+/// Node indices: a 1-D integer array-like in `0..n`, or a boolean mask of length `n`.
+pub fn node_indices(obj: &Bound<'_, PyAny>, what: &str, n: usize) -> PyResult<Vec<usize>> {
+    let a = as_array(obj, what)?;
+    let shape = a.shape().to_vec();
+    if shape.len() != 1 {
+        return Err(PyValueError::new_err(format!(
+            "{what} must be a 1-D array of node indices (or a boolean mask of length {n}), got shape {}",
+            shape_str(&shape)
+        )));
+    }
+    if a.dtype().kind() == b'b' {
+        if shape[0] != n {
+            return Err(PyValueError::new_err(format!("{what}: a boolean mask must have length {n} (one per node), got {}", shape[0])));
+        }
+        let mask = flat::<bool, _>(&a, |x| x).ok_or_else(|| PyTypeError::new_err(format!("{what}: unreadable boolean mask")))?;
+        return Ok(mask.iter().enumerate().filter(|(_, &m)| m).map(|(i, _)| i).collect());
+    }
+    if shape[0] == 0 {
+        return Ok(Vec::new()); // `[]` arrives as float64: an empty list of indices is still fine
+    }
+    let v = to_i64(&a, what)?;
+    v.iter()
+        .map(|&i| {
+            if i < 0 || i as u64 >= n as u64 {
+                Err(PyValueError::new_err(format!("{what}: node index {i} out of range (the mesh has {n} nodes)")))
+            } else {
+                Ok(i as usize)
+            }
+        })
+        .collect()
+}
+
+/// `(n, 3)` float64 array from vectors.
+pub fn vec3s_to_py<'py>(py: Python<'py>, v: &[Vec3]) -> Bound<'py, PyArray2<f64>> {
+    let flat: Vec<f64> = v.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+    Array2::from_shape_vec((v.len(), 3), flat).expect("n x 3").into_pyarray(py)
+}
+
+/// `(m, k)` int64 array from index rows.
+pub fn index_rows_to_py<'py, const K: usize>(py: Python<'py>, rows: &[[usize; K]]) -> Bound<'py, PyArray2<i64>> {
+    let flat: Vec<i64> = rows.iter().flat_map(|r| r.map(|i| i as i64)).collect();
+    Array2::from_shape_vec((rows.len(), K), flat).expect("m x k").into_pyarray(py)
+}
+
+/// 1-D float64 array.
+pub fn f64s_to_py<'py>(py: Python<'py>, v: &[f64]) -> Bound<'py, PyArray1<f64>> {
+    Array1::from_vec(v.to_vec()).into_pyarray(py)
+}
+
+/// 1-D int64 array.
+pub fn usizes_to_py<'py>(py: Python<'py>, v: &[usize]) -> Bound<'py, PyArray1<i64>> {
+    Array1::from_vec(v.iter().map(|&i| i as i64).collect()).into_pyarray(py)
+}

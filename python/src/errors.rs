@@ -1,0 +1,120 @@
+//! Python exceptions: one base, `palpate.PalpateError`, and one subclass per core error enum
+//! (`crates/palpate-core/src/error.rs`). Malformed *arguments* (wrong dtype, wrong shape, wrong
+//! type) are reported as the usual `TypeError` / `ValueError` by `conv.rs`; everything the core
+//! refuses is a `PalpateError`.
+//!
+//! Structured details ride along as attributes: `MeshError.tet` / `.node` (the offending tet or
+//! node, 0-based, or `None`), `StepError.node` / `.time`.
+
+use palpate_core::error as core;
+use pyo3::exceptions::{PyException, PyUserWarning};
+use pyo3::prelude::*;
+use pyo3::{create_exception, PyErr};
+
+create_exception!(palpate, PalpateError, PyException, "Base class of every error raised by palpate.");
+create_exception!(
+    palpate,
+    MeshError,
+    PalpateError,
+    "A mesh (array or file) that cannot be used. The message names the file, the element and the reason; \
+     attributes `tet` and `node` hold the offending 0-based tet / node index, or None."
+);
+create_exception!(palpate, MaterialError, PalpateError, "Material parameters that are not physical.");
+create_exception!(
+    palpate,
+    ModelError,
+    PalpateError,
+    "A body that cannot be built (fixed node out of range, non-finite gravity, bad integrator settings)."
+);
+create_exception!(palpate, SolveError, PalpateError, "A static solve that failed (no convergence, singular system).");
+create_exception!(
+    palpate,
+    StepError,
+    PalpateError,
+    "A time step that could not be completed; the body is left as it was before that step. \
+     Attributes `node` and `time` [s] locate a non-finite value when known, else None."
+);
+create_exception!(palpate, MeshWarning, PyUserWarning, "Something in a mesh was repaired (e.g. inverted tets reoriented).");
+
+/// Register the classes on the module and give the detail attributes a class-level `None`.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("PalpateError", py.get_type::<PalpateError>())?;
+    m.add("MeshError", py.get_type::<MeshError>())?;
+    m.add("MaterialError", py.get_type::<MaterialError>())?;
+    m.add("ModelError", py.get_type::<ModelError>())?;
+    m.add("SolveError", py.get_type::<SolveError>())?;
+    m.add("StepError", py.get_type::<StepError>())?;
+    m.add("MeshWarning", py.get_type::<MeshWarning>())?;
+    let mesh = py.get_type::<MeshError>();
+    mesh.setattr("tet", py.None())?;
+    mesh.setattr("node", py.None())?;
+    let step = py.get_type::<StepError>();
+    step.setattr("node", py.None())?;
+    step.setattr("time", py.None())?;
+    Ok(())
+}
+
+/// Set `name = value` on the exception instance when `value` is known (class default: None).
+fn set_attr<'py, V: IntoPyObject<'py>>(py: Python<'py>, err: &PyErr, name: &str, value: Option<V>) {
+    if let Some(v) = value {
+        // Setting an attribute on a fresh exception instance cannot fail in practice; if it did,
+        // the error itself is still raised, only without the detail.
+        let _ = err.value(py).setattr(name, v);
+    }
+}
+
+/// The innermost tet / node a mesh error is about.
+fn mesh_location(e: &core::MeshError) -> (Option<usize>, Option<usize>) {
+    match e {
+        core::MeshError::NonFiniteNode { node, .. } | core::MeshError::UnusedNode { node } => (None, Some(*node)),
+        core::MeshError::IndexOutOfRange { tet, .. } | core::MeshError::Degenerate { tet, .. } | core::MeshError::DuplicateTet { tet, .. } => {
+            (Some(*tet), None)
+        }
+        core::MeshError::RepeatedNode { tet, node } => (Some(*tet), Some(*node)),
+        core::MeshError::InFile { source, .. } => mesh_location(source),
+        _ => (None, None),
+    }
+}
+
+pub fn mesh_error(e: core::MeshError) -> PyErr {
+    let (tet, node) = mesh_location(&e);
+    let err = MeshError::new_err(e.to_string());
+    Python::attach(|py| {
+        set_attr(py, &err, "tet", tet);
+        set_attr(py, &err, "node", node);
+    });
+    err
+}
+
+pub fn material_error(e: core::MaterialError) -> PyErr {
+    MaterialError::new_err(e.to_string())
+}
+
+pub fn model_error(e: core::ModelError) -> PyErr {
+    match e {
+        core::ModelError::Mesh(m) => mesh_error(m),
+        core::ModelError::Material(m) => material_error(m),
+        other => ModelError::new_err(other.to_string()),
+    }
+}
+
+pub fn solve_error(e: core::SolveError) -> PyErr {
+    SolveError::new_err(e.to_string())
+}
+
+/// A step error; `context` (e.g. "after 12 of 100 steps") is appended to the message.
+pub fn step_error(e: core::StepError, context: &str) -> PyErr {
+    let (node, time) = match &e {
+        core::StepError::NonFinite { node, time, .. } => (Some(*node), Some(*time)),
+        core::StepError::NonFiniteForce { node } => (Some(*node), None),
+        _ => (None, None),
+    };
+    let msg = if context.is_empty() { e.to_string() } else { format!("{e} ({context})") };
+    let err = StepError::new_err(msg);
+    Python::attach(|py| {
+        set_attr(py, &err, "node", node);
+        set_attr(py, &err, "time", time);
+    });
+    err
+}

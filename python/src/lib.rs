@@ -1,0 +1,34 @@
+//! `palpate._palpate`: the Python extension module, a thin layer over `palpate-core`.
+//!
+//! | file | binds |
+//! |---|---|
+//! | `errors.rs` | core error enums -> `palpate.PalpateError` and its subclasses |
+//! | `conv.rs` | numpy <-> core arrays (dtype / shape checks) |
+//! | `mesh.rs` | `TetMesh`, `ellipsoid_wall`, `truncated_ellipsoid_wall`, `box_mesh` |
+//! | `material.rs` | `Material`, `SemiImplicit`, `BackwardEuler` |
+//! | `body.rs` | `Body` (model + state + workspace; stepping releases the GIL) |
+//!
+//! The Pythonic layer (file IO, CLI, benchmark) lives in `python/palpate/*.py`.
+
+mod body;
+mod conv;
+mod errors;
+mod material;
+mod mesh;
+
+use pyo3::prelude::*;
+
+#[pymodule]
+fn _palpate(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    errors::register(m)?;
+    m.add_class::<mesh::PyTetMesh>()?;
+    m.add_class::<material::PyMaterial>()?;
+    m.add_class::<material::PySemiImplicit>()?;
+    m.add_class::<material::PyBackwardEuler>()?;
+    m.add_class::<body::PyBody>()?;
+    m.add_function(wrap_pyfunction!(mesh::ellipsoid_wall, m)?)?;
+    m.add_function(wrap_pyfunction!(mesh::truncated_ellipsoid_wall, m)?)?;
+    m.add_function(wrap_pyfunction!(mesh::box_mesh, m)?)?;
+    Ok(())
+}

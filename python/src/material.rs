@@ -1,0 +1,240 @@
+//! `palpate.Material` and the integrator classes (`crates/palpate-core/src/material`, `integrate`).
+
+use palpate_core::material::{Damping, Elasticity, Material};
+use palpate_core::Integrator;
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+
+use crate::errors::{self, MaterialError};
+
+/// An isotropic linear (St. Venant-Kirchhoff) material with viscous damping (paper eq. 9, 11).
+///
+/// ``Material(young=None, poisson=None, lame_lambda=None, lame_mu=None, density=1000.0, phi=0.0, psi=0.0)``
+///
+/// Give exactly one pair: ``young`` [Pa] and ``poisson`` [-] (in (-1, 0.5)), or ``lame_lambda``
+/// [Pa] and ``lame_mu`` [Pa] (shear modulus). ``density`` [kg/m^3]. ``phi`` and ``psi`` [Pa s] are
+/// the volumetric and shear viscosities of the viscous stress ``phi tr(nu) I + 2 psi nu`` with the
+/// strain rate ``nu = dE/dt`` (palpate's convention; the paper's values correspond to twice
+/// theirs, see ``palpate_core::material``).
+///
+/// Raises ``MaterialError`` for unphysical values or a missing / doubled pair.
+#[pyclass(module = "palpate", name = "Material", frozen)]
+#[derive(Clone)]
+pub struct PyMaterial {
+    pub inner: Material,
+}
+
+#[pymethods]
+impl PyMaterial {
+    #[new]
+    #[pyo3(signature = (young = None, poisson = None, lame_lambda = None, lame_mu = None, density = 1000.0, phi = 0.0, psi = 0.0))]
+    fn new(
+        young: Option<f64>,
+        poisson: Option<f64>,
+        lame_lambda: Option<f64>,
+        lame_mu: Option<f64>,
+        density: f64,
+        phi: f64,
+        psi: f64,
+    ) -> PyResult<Self> {
+        let elasticity = match (young, poisson, lame_lambda, lame_mu) {
+            (Some(young), Some(poisson), None, None) => Elasticity::YoungPoisson { young, poisson },
+            (None, None, Some(lambda), Some(mu)) => Elasticity::Lame { lambda, mu },
+            (None, None, None, None) => {
+                return Err(MaterialError::new_err(
+                    "give the elastic moduli: young and poisson, or lame_lambda and lame_mu",
+                ))
+            }
+            (y, p, l, m) if (y.is_some() || p.is_some()) && (l.is_some() || m.is_some()) => {
+                return Err(MaterialError::new_err(
+                    "give either (young, poisson) or (lame_lambda, lame_mu), not both",
+                ))
+            }
+            (y, _, None, None) => {
+                let missing = if y.is_none() { "young" } else { "poisson" };
+                return Err(MaterialError::new_err(format!("young and poisson go together: {missing} is missing")));
+            }
+            (_, _, l, _) => {
+                let missing = if l.is_none() { "lame_lambda" } else { "lame_mu" };
+                return Err(MaterialError::new_err(format!("lame_lambda and lame_mu go together: {missing} is missing")));
+            }
+        };
+        let inner = Material::new(elasticity, density, Damping { phi, psi }).map_err(errors::material_error)?;
+        Ok(PyMaterial { inner })
+    }
+
+    /// Myocardium-like soft tissue in SI: E = 30 kPa, nu = 0.4, density 1060 kg/m^3, no damping.
+    #[staticmethod]
+    fn myocardium() -> Self {
+        PyMaterial { inner: Material::myocardium() }
+    }
+
+    /// The paper's Table 1 "Ellipsoids Model" values in its normalised (unit-less) units:
+    /// lambda = 5.5, mu = 2.5, density 1, phi = psi = 9e-5 (paper convention, stored doubled).
+    #[staticmethod]
+    fn paper_ellipsoids() -> Self {
+        PyMaterial { inner: Material::paper_ellipsoids() }
+    }
+
+    /// Young's modulus E [Pa].
+    #[getter]
+    fn young(&self) -> f64 {
+        self.inner.young()
+    }
+    /// Poisson's ratio nu [-].
+    #[getter]
+    fn poisson(&self) -> f64 {
+        self.inner.poisson()
+    }
+    /// Lame's first parameter lambda [Pa].
+    #[getter]
+    fn lame_lambda(&self) -> f64 {
+        self.inner.lambda()
+    }
+    /// Shear modulus mu [Pa].
+    #[getter]
+    fn lame_mu(&self) -> f64 {
+        self.inner.mu()
+    }
+    /// Mass density [kg/m^3].
+    #[getter]
+    fn density(&self) -> f64 {
+        self.inner.density()
+    }
+    /// Volumetric viscosity phi [Pa s].
+    #[getter]
+    fn phi(&self) -> f64 {
+        self.inner.damping().phi
+    }
+    /// Shear viscosity psi [Pa s].
+    #[getter]
+    fn psi(&self) -> f64 {
+        self.inner.damping().psi
+    }
+    /// P-wave speed sqrt((lambda + 2 mu) / density) [m/s].
+    #[getter]
+    fn wave_speed(&self) -> f64 {
+        self.inner.wave_speed()
+    }
+
+    fn __repr__(&self) -> String {
+        let m = &self.inner;
+        format!(
+            "Material(young={}, poisson={}, density={}, phi={}, psi={})",
+            m.young(),
+            m.poisson(),
+            m.density(),
+            m.damping().phi,
+            m.damping().psi
+        )
+    }
+
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        other.cast::<PyMaterial>().map(|o| o.get().inner == self.inner).unwrap_or(false)
+    }
+}
+
+/// The paper's semi-implicit scheme (eq. 34): explicit elastic forces, each node's velocity
+/// filtered by its own 3x3 block ``(I - dt^2/m J_F)^-1`` precomputed at rest. Cheapest per step.
+#[pyclass(module = "palpate", name = "SemiImplicit", frozen)]
+#[derive(Clone)]
+pub struct PySemiImplicit;
+
+#[pymethods]
+impl PySemiImplicit {
+    #[new]
+    fn new() -> Self {
+        PySemiImplicit
+    }
+    fn __repr__(&self) -> &'static str {
+        "SemiImplicit()"
+    }
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        other.cast::<PySemiImplicit>().is_ok()
+    }
+}
+
+/// Backward Euler.
+///
+/// ``BackwardEuler(newton=False)``: linearised at rest; the system ``M - dt D0 - dt^2 K0`` is
+/// factorised once per time step size and each step is one sparse solve.
+///
+/// ``BackwardEuler(newton=True, max_iterations=20, tolerance=1e-9)``: Newton's method with the
+/// current tangent, refactorised each iteration, until the residual has dropped by
+/// ``tolerance`` (relative) or after ``max_iterations`` (the step is then accepted and reported
+/// unconverged).
+#[pyclass(module = "palpate", name = "BackwardEuler", frozen)]
+#[derive(Clone)]
+pub struct PyBackwardEuler {
+    #[pyo3(get)]
+    newton: bool,
+    #[pyo3(get)]
+    max_iterations: usize,
+    #[pyo3(get)]
+    tolerance: f64,
+}
+
+#[pymethods]
+impl PyBackwardEuler {
+    #[new]
+    #[pyo3(signature = (newton = false, max_iterations = 20, tolerance = 1e-9))]
+    fn new(newton: bool, max_iterations: usize, tolerance: f64) -> PyResult<Self> {
+        if max_iterations == 0 {
+            return Err(PyValueError::new_err("max_iterations must be at least 1"));
+        }
+        if !(tolerance > 0.0 && tolerance < 1.0) {
+            return Err(PyValueError::new_err(format!("tolerance = {tolerance} must lie in (0, 1) (a relative residual reduction)")));
+        }
+        Ok(PyBackwardEuler { newton, max_iterations, tolerance })
+    }
+    fn __repr__(&self) -> String {
+        if self.newton {
+            format!("BackwardEuler(newton=True, max_iterations={}, tolerance={:e})", self.max_iterations, self.tolerance)
+        } else {
+            "BackwardEuler(newton=False)".into()
+        }
+    }
+    fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
+        other.cast::<PyBackwardEuler>().map(|o| {
+            let o = o.get();
+            o.newton == self.newton && (!self.newton || (o.max_iterations == self.max_iterations && o.tolerance == self.tolerance))
+        }).unwrap_or(false)
+    }
+}
+
+/// The core integrator an integrator object stands for.
+pub fn integrator_from_py(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Integrator> {
+    let Some(obj) = obj else { return Ok(Integrator::BackwardEulerLinear) };
+    if obj.is_none() {
+        return Ok(Integrator::BackwardEulerLinear);
+    }
+    if obj.cast::<PySemiImplicit>().is_ok() {
+        return Ok(Integrator::SemiImplicit);
+    }
+    if let Ok(be) = obj.cast::<PyBackwardEuler>() {
+        let be = be.get();
+        return Ok(if be.newton {
+            Integrator::BackwardEulerNewton { max_iterations: be.max_iterations, tolerance: be.tolerance }
+        } else {
+            Integrator::BackwardEulerLinear
+        });
+    }
+    let hint = if obj.cast::<pyo3::types::PyString>().is_ok() { " (integrators are objects, not strings)" } else { "" };
+    Err(PyTypeError::new_err(format!(
+        "integrator must be palpate.SemiImplicit() or palpate.BackwardEuler(...), got {}{hint}",
+        obj.repr().map(|r| r.to_string()).unwrap_or_else(|_| "?".into())
+    )))
+}
+
+/// A Python integrator object for a core integrator.
+pub fn integrator_to_py(py: Python<'_>, i: Integrator) -> PyResult<Py<PyAny>> {
+    Ok(match i {
+        Integrator::SemiImplicit => Py::new(py, PySemiImplicit)?.into_any(),
+        Integrator::BackwardEulerLinear => {
+            Py::new(py, PyBackwardEuler { newton: false, max_iterations: 20, tolerance: 1e-9 })?.into_any()
+        }
+        Integrator::BackwardEulerNewton { max_iterations, tolerance } => {
+            Py::new(py, PyBackwardEuler { newton: true, max_iterations, tolerance })?.into_any()
+        }
+    })
+}

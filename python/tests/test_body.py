@@ -1,0 +1,129 @@
+"""Bodies: stepping stays finite, energies, reset, static solve, the probe run, GIL release."""
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import palpate
+
+INTEGRATORS = [palpate.SemiImplicit(), palpate.BackwardEuler(), palpate.BackwardEuler(newton=True)]
+
+
+def bar(material, integrator=None):
+    """A 10 x 2 x 2 cm bar clamped at x = 0 (box_mesh: 240 tets)."""
+    mesh = palpate.box_mesh(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
+    fixed = np.flatnonzero(mesh.points[:, 0] == 0.0)
+    return palpate.Body(mesh, material, fixed=fixed, integrator=integrator)
+
+
+@pytest.mark.parametrize("integrator", INTEGRATORS, ids=repr)
+def test_stepping_under_gravity_is_finite(integrator):
+    mesh = palpate.box_mesh(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
+    fixed = np.flatnonzero(mesh.points[:, 0] == 0.0)
+    stiff = palpate.Material(young=1e6, poisson=0.3, density=1000.0)   # sags ~1 mm
+    body = palpate.Body(mesh, stiff, fixed=fixed, gravity=(0, 0, -9.81), integrator=integrator)
+    stats = body.step(200, dt=1e-3)
+    assert stats["steps"] == 200
+    assert body.time == pytest.approx(0.2)
+    x = body.positions
+    assert np.isfinite(x).all() and np.isfinite(body.velocities).all()
+    assert np.abs(x[fixed] - mesh.points[fixed]).max() == 0.0        # fixed nodes stay put
+    assert body.displacements[:, 2].min() < 0.0                        # it sags
+    assert np.abs(body.displacements).max() < 0.01
+    assert body.strain_energy() > 0.0 and body.kinetic_energy() >= 0.0
+
+
+def test_step_defaults_and_stats(material):
+    body = bar(material)
+    stats = body.step()
+    assert body.time == pytest.approx(1e-3)
+    assert set(stats) == {"steps", "solves", "unconverged_steps", "max_residual"}
+
+
+def test_reset(material):
+    body = bar(material)
+    f = np.zeros((body.n_nodes, 3))
+    f[-1, 2] = -0.01
+    body.set_forces(f)
+    body.step(50)
+    assert np.abs(body.displacements).max() > 0
+    body.reset()
+    assert body.time == 0.0
+    np.testing.assert_array_equal(body.positions, body.mesh.points)
+    assert not body.velocities.any() and not body.forces.any()
+    assert body.strain_energy() < 1e-20 and body.kinetic_energy() == 0.0
+
+
+def test_static_solve_matches_long_damped_run():
+    viscous = palpate.Material(young=1e6, poisson=0.3, density=1000.0, phi=5.0, psi=5.0)
+    body = bar(viscous, palpate.BackwardEuler())
+    tip = np.flatnonzero(body.mesh.points[:, 0] == 0.1)
+    f = np.zeros((body.n_nodes, 3))
+    f[tip, 2] = -1e-2 / len(tip)  # 10 mN down at the tip [N]
+    x = body.static_solve(f, tolerance=1e-8)
+    assert x.shape == (body.n_nodes, 3)
+    assert body.time == 0.0 and not body.displacements.any()          # state untouched
+    u = x - body.mesh.points
+    assert u[tip, 2].mean() < 0
+    body.set_forces(f)
+    body.step(3000, dt=1e-3)                                           # viscous: settles to rest
+    np.testing.assert_allclose(body.displacements, u, atol=1e-3 * np.abs(u).max())
+    np.testing.assert_allclose(body.static_solve(tolerance=1e-8), x)   # default: the current forces
+
+
+def test_bad_time_step_is_a_step_error(material):
+    body = bar(material)
+    with pytest.raises(palpate.StepError, match="dt = -0.001 s must be positive") as e:
+        body.step(3, dt=-1e-3)
+    assert isinstance(e.value, palpate.PalpateError)
+    assert body.time == 0.0
+
+
+def test_model_error_for_non_finite_gravity(unit_tet, material):
+    with pytest.raises(ValueError, match="gravity"):
+        palpate.Body(palpate.TetMesh(*unit_tet), material, gravity=(0, 0, float("inf")))
+
+
+def test_run_probe(material):
+    mesh = palpate.truncated_ellipsoid_wall()
+    body = palpate.Body(mesh, material, fixed=mesh.nodes_below(0.0))
+    loaded = [int(np.argmax(mesh.points[:, 2]))]                       # the apex
+    r = body.run_probe(loaded, (0.0, 0.0, -0.05), 0.1, 200, dt=1e-3)
+    assert r["steps"] == 200 and r["error"] is None and r["stable"]
+    assert r["wall_s"] > 0
+    assert r["mean_disp"].shape == (body.n_nodes, 3)
+    assert r["probe_disp"].shape == (200,)
+    assert 0 < r["probe_disp_avg_m"] <= r["max_disp_m"] < 0.02
+    np.testing.assert_allclose(body.forces[loaded[0]], [0, 0, -0.05])  # full load after the ramp
+    with pytest.raises(ValueError, match="at least one loaded node"):
+        body.run_probe([], (0, 0, 1), 0.1, 10)
+
+
+def test_step_releases_the_gil(material):
+    """A Python thread keeps running while body.step(2000) runs in another thread."""
+    mesh = palpate.truncated_ellipsoid_wall()
+    body = palpate.Body(mesh, material, fixed=mesh.nodes_below(0.0))
+    f = np.zeros((body.n_nodes, 3))
+    f[int(np.argmax(mesh.points[:, 2])), 2] = -0.05
+    body.set_forces(f)
+    started = threading.Event()
+    done = {}
+
+    def work():
+        started.set()
+        t0 = time.perf_counter()
+        body.step(2000, dt=1e-3)
+        done["wall"] = time.perf_counter() - t0
+
+    th = threading.Thread(target=work)
+    th.start()
+    started.wait()
+    count = 0
+    while th.is_alive():
+        count += 1   # pure Python work: needs the GIL
+    th.join()
+    assert body.time == pytest.approx(2.0)
+    # Holding the GIL for the whole call would leave this loop at a handful of iterations.
+    rate = count / done["wall"]
+    assert count > 1000 and rate > 1e4, (count, done["wall"])

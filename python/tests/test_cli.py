@@ -1,0 +1,117 @@
+"""The palpate command line: scenes, the benchmark protocol, error reporting."""
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+from palpate.io import read_pvd
+
+from conftest import REPO, SHARED, needs_shared
+
+
+def palpate_cli(*args, cwd=None, env_extra=None):
+    env = dict(os.environ)
+    if SHARED is not None:
+        env.setdefault("PALPATE_SHARED", str(SHARED))
+    env.update(env_extra or {})
+    return subprocess.run([sys.executable, "-m", "palpate", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd or REPO, env=env, timeout=600)
+
+
+def test_console_script_is_installed():
+    script = Path(sys.executable).parent / "palpate"
+    assert script.exists(), "the 'palpate' console script is missing from the environment"
+    r = subprocess.run([str(script), "--version"], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.startswith("palpate ")
+
+
+def test_run_ellipsoid_scene_writes_readable_series(tmp_path):
+    r = palpate_cli("run", REPO / "scenes" / "ellipsoid_probe.toml", "--out", tmp_path / "o", "--steps", 60)
+    assert r.returncode == 0, r.stderr
+    assert "steps/s" in r.stdout and "max |u|" in r.stdout and "energy" in r.stdout
+    frames = read_pvd(tmp_path / "o" / "frame.pvd")
+    assert len(frames) == 1 + 3 + 0          # step 0, then every 20 steps of 60
+    m = meshio.read(frames[-1][1])
+    assert m.cells_dict["tetra"].shape == (192, 4)
+    u = m.point_data["displacement"]
+    assert u.shape == (54, 3) and np.isfinite(u).all() and np.abs(u).max() > 0
+    assert m.point_data["velocity"].shape == (54, 3)
+
+
+@needs_shared
+def test_run_lv_scene(tmp_path):
+    scene = REPO / "scenes" / "lv_probe.toml"
+    r = palpate_cli("run", scene, "--out", tmp_path / "lv", "--steps", 20)
+    assert r.returncode == 0, r.stderr
+    frames = read_pvd(tmp_path / "lv" / "frame.pvd")
+    assert meshio.read(frames[-1][1]).points.shape == (436, 3)
+
+
+@pytest.mark.parametrize("body, key", [
+    ('[mesh]\ngenerator = "ellipsoid_wall"\n[material]\nyoung = -3e4\npoisson = 0.4\n', "material.young"),
+    ('[mesh]\ngenerator = "ellipsoid_wall"\n[material]\nyuong = 3e4\n', "material.yuong"),
+    ('[mesh]\ngenerator = "nope"\n[material]\nyoung = 3e4\npoisson = 0.4\n', "mesh.generator"),
+    ('[mesh]\nfile = "missing.msh"\n[material]\nyoung = 3e4\npoisson = 0.4\n', "mesh.file"),
+    ('[mesh]\ngenerator = "ellipsoid_wall"\n[material]\nyoung = 3e4\npoisson = 0.4\n'
+     '[[loads]]\npoint = [0, 0]\nradius = 0.01\nforce = [0, 0, 1]\n', "loads[0].point"),
+    ('[mesh]\ngenerator = "ellipsoid_wall"\n[material]\nyoung = 3e4\npoisson = 0.4\n[run]\ndt = -1\n', "run.dt"),
+    ('[mesh]\ngenerator = "ellipsoid_wall"\n[material]\nyoung = 3e4\npoisson = 0.4\n[integrator]\ntype = "rk4"\n',
+     "integrator.type"),
+    ('[mesh\n', "invalid TOML"),
+])
+def test_scene_errors_are_one_line_exit_2(tmp_path, body, key):
+    f = tmp_path / "bad.toml"
+    f.write_text(body)
+    r = palpate_cli("run", f, "--out", tmp_path / "o")
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    assert "bad.toml" in lines[0] and key in lines[0]
+
+
+def _check_bench_row(row):
+    keys = {"mesh", "tets", "nodes", "integrator", "steps", "wall_s", "steps_per_s", "stable", "max_disp_m",
+            "probe_disp_avg_m", "static_probe_disp_m", "rel_L2_vs_static"}
+    assert keys <= set(row)
+    assert row["steps"] == 50 and row["stable"] is True and row["steps_per_s"] > 0
+    assert 0 < row["max_disp_m"] < 0.02
+    assert row["static_probe_disp_m"] > 0 and row["rel_L2_vs_static"] >= 0
+
+
+@needs_shared
+@pytest.mark.parametrize("ext", [".msh", ".vtu", ".npz"])
+def test_bench_protocol_json(shared, ext):
+    r = palpate_cli("bench", "protocol", shared / "bench" / "meshes" / f"lv_190{ext}", "--steps", 50, "--json")
+    assert r.returncode == 0, r.stderr
+    row = json.loads(r.stdout)
+    _check_bench_row(row)
+    assert row["mesh"] == "lv_190" and row["tets"] == 190 and row["nodes"] == 75
+    assert row["loaded_nodes"] == 1 and row["fixed_nodes"] == 20   # PROTOCOL.md: 1 loaded, 20 base nodes
+
+
+def test_bench_protocol_generated_ellipsoid():
+    r = palpate_cli("bench", "protocol", "ellipsoid_192", "--steps", 50, "--json", "--integrator", "semi-implicit")
+    assert r.returncode == 0, r.stderr
+    row = json.loads(r.stdout)
+    _check_bench_row(row)
+    assert row["tets"] == 192 and row["integrator"] == "semi-implicit"
+
+
+def test_bench_protocol_errors(tmp_path):
+    r = palpate_cli("bench", "protocol")
+    assert r.returncode == 2 and "MESH" in r.stderr
+    bad = tmp_path / "x.msh"
+    bad.write_text("garbage\n")
+    r = palpate_cli("bench", "protocol", bad, "--steps", 5)
+    assert r.returncode == 2 and "x.msh" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_info(tmp_path):
+    r = palpate_cli("info", REPO / "python" / "tests" / "data" / "malformed" / "gmsh2_inverted_tet.msh")
+    assert r.returncode == 0 and "2 tets" in r.stdout
