@@ -67,6 +67,12 @@ pub enum ModelError {
     Gravity(f64, f64, f64),
     #[error("integrator: {0}")]
     Integrator(String),
+    #[error("particle {particle}: {reason}")]
+    Particle { particle: usize, reason: String },
+    #[error("{name} = {value}: {reason}")]
+    Parameter { name: &'static str, value: f64, reason: &'static str },
+    #[error("{0}")]
+    Empty(&'static str),
 }
 
 /// A linear or nonlinear solve that failed.
@@ -93,6 +99,8 @@ pub enum StepError {
     NonFinite { what: &'static str, node: usize, time: f64 },
     #[error("state does not fit the model ({nodes} nodes): x has {x} rows, v {v}, f_ext {f_ext}")]
     StateShape { nodes: usize, x: usize, v: usize, f_ext: usize },
+    #[error("active particle index {index} out of range ({n} particles)")]
+    ActiveOutOfRange { index: usize, n: usize },
     #[error("external force at node {node} is not finite")]
     NonFiniteForce { node: usize },
     #[error(transparent)]

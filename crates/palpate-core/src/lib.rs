@@ -25,6 +25,7 @@ pub mod linalg;
 pub mod material;
 pub mod math;
 pub mod mesh;
+pub mod meshfree;
 pub mod scene;
 
 pub use error::{MaterialError, MeshError, ModelError, SolveError, StepError};

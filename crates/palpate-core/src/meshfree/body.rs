@@ -1,0 +1,584 @@
+//! The compiled particle body, its state and the Verlet step (paper eq. 33). See the module
+//! docs of [`crate::meshfree`] for the formulation.
+
+use super::kernel::Kernel;
+use super::neighbors::neighbours_within;
+use crate::error::{ModelError, SolveError, StepError};
+use crate::material::{self, Material};
+use crate::math::{is_finite3, Mat3, Vec3};
+
+/// Default dimensionless hourglass-control stiffness `kappa` (see [`crate::meshfree`]).
+pub const DEFAULT_HOURGLASS: f64 = 0.5;
+/// Fraction of the critical time step used by the explicit sub-steps.
+pub const STABILITY_SAFETY: f64 = 0.9;
+/// Smallest accepted ratio of the moment matrix's eigenvalues (its conditioning).
+const MIN_MOMENT_CONDITION: f64 = 1e-4;
+
+/// Describes a particle body before compilation.
+#[derive(Debug, Clone)]
+pub struct ParticleModelBuilder {
+    positions: Vec<Vec3>,
+    masses: Vec<f64>,
+    material: Material,
+    support: f64,
+    kernel: Kernel,
+    fixed: Vec<usize>,
+    gravity: Vec3,
+    hourglass: f64,
+}
+
+impl ParticleModelBuilder {
+    /// Particles at rest positions `positions` \[m\] with masses `masses` \[kg\], of `material`,
+    /// interacting within the kernel support radius `support` \[m\] (typically 1.5 - 2 particle spacings).
+    pub fn new(positions: Vec<Vec3>, masses: Vec<f64>, material: Material, support: f64) -> Self {
+        ParticleModelBuilder { positions, masses, material, support, kernel: Kernel::default(), fixed: vec![], gravity: Vec3::zeros(), hourglass: DEFAULT_HOURGLASS }
+    }
+    /// Kernel (default Wendland C2).
+    pub fn kernel(mut self, k: Kernel) -> Self {
+        self.kernel = k;
+        self
+    }
+    /// Particles held at their rest position.
+    pub fn fixed_particles(mut self, fixed: Vec<usize>) -> Self {
+        self.fixed = fixed;
+        self
+    }
+    /// Gravity \[m/s^2\].
+    pub fn gravity(mut self, g: Vec3) -> Self {
+        self.gravity = g;
+        self
+    }
+    /// Hourglass-control stiffness `kappa` \[-\] (0 disables the safeguard).
+    pub fn hourglass(mut self, kappa: f64) -> Self {
+        self.hourglass = kappa;
+        self
+    }
+
+    /// Validate and precompute neighbours, volumes, MLS gradients, hourglass weights and the
+    /// stable explicit time step.
+    pub fn build(self) -> Result<ParticleModel, ModelError> {
+        let ParticleModelBuilder { positions: rest, masses, material, support: h, kernel, fixed, gravity, hourglass } = self;
+        let n = rest.len();
+        if n == 0 {
+            return Err(ModelError::Empty("no particles"));
+        }
+        if masses.len() != n {
+            return Err(ModelError::Particle { particle: masses.len().min(n), reason: format!("{} masses for {n} particles", masses.len()) });
+        }
+        if !(h > 0.0 && h.is_finite()) {
+            return Err(ModelError::Parameter { name: "support radius", value: h, reason: "must be positive and finite [m]" });
+        }
+        if !(hourglass >= 0.0 && hourglass.is_finite()) {
+            return Err(ModelError::Parameter { name: "hourglass kappa", value: hourglass, reason: "must be non-negative and finite" });
+        }
+        if !is_finite3(&gravity) {
+            return Err(ModelError::Gravity(gravity.x, gravity.y, gravity.z));
+        }
+        for (i, (p, &m)) in rest.iter().zip(&masses).enumerate() {
+            if !is_finite3(p) {
+                return Err(ModelError::Particle { particle: i, reason: format!("non-finite position ({}, {}, {})", p.x, p.y, p.z) });
+            }
+            if !(m > 0.0 && m.is_finite()) {
+                return Err(ModelError::Particle { particle: i, reason: format!("mass {m} kg must be positive and finite") });
+            }
+        }
+        let mut is_fixed = vec![false; n];
+        for &i in &fixed {
+            if i >= n {
+                return Err(ModelError::FixedOutOfRange { node: i, n_nodes: n });
+            }
+            is_fixed[i] = true;
+        }
+
+        let (ptr, nbr) = neighbours_within(&rest, h);
+        // Shepard-normalised kernel-sum density (eq. 25) and volumes.
+        let rho0 = material.density();
+        let mut density = vec![0.0; n];
+        let mut volume = vec![0.0; n];
+        for i in 0..n {
+            let w0 = kernel.w(0.0, h);
+            let (mut num, mut den) = (masses[i] * w0, masses[i] / rho0 * w0);
+            for &j in &nbr[ptr[i]..ptr[i + 1]] {
+                let w = kernel.w((rest[j] - rest[i]).norm(), h);
+                num += masses[j] * w;
+                den += masses[j] / rho0 * w;
+            }
+            density[i] = num / den;
+            volume[i] = masses[i] / density[i];
+        }
+        // MLS gradients and hourglass weights per pair.
+        let np = nbr.len();
+        let mut xr = vec![Vec3::zeros(); np];
+        let mut g = vec![Vec3::zeros(); np];
+        let mut hw = vec![0.0; np];
+        let mut gsum = vec![Vec3::zeros(); n];
+        for i in 0..n {
+            let (s, e) = (ptr[i], ptr[i + 1]);
+            let mut a = Mat3::zeros();
+            let mut second = 0.0;
+            for p in s..e {
+                let j = nbr[p];
+                let x = rest[j] - rest[i];
+                let w = volume[j] * kernel.w(x.norm(), h);
+                xr[p] = x;
+                hw[p] = w;
+                a += w * x * x.transpose();
+                second += w * x.norm_squared();
+            }
+            let eig = a.symmetric_eigenvalues();
+            let (lo, hi) = (eig.min(), eig.max());
+            if e - s < 3 || !(lo > MIN_MOMENT_CONDITION * hi) {
+                return Err(ModelError::Particle {
+                    particle: i,
+                    reason: format!(
+                        "its {} neighbours within the support radius {h} m do not span 3D (moment-matrix eigenvalue ratio {:.1e}); increase the support radius or the sampling density",
+                        e - s,
+                        if hi > 0.0 { lo / hi } else { 0.0 }
+                    ),
+                });
+            }
+            let a_inv = a.try_inverse().expect("checked positive definite");
+            let c = hourglass * material.mu() * volume[i] / second;
+            for p in s..e {
+                g[p] = hw[p] * (a_inv * xr[p]);
+                gsum[i] += g[p];
+                hw[p] *= c;
+            }
+        }
+        let mut model = ParticleModel {
+            rest,
+            mass: masses,
+            density,
+            volume,
+            ptr,
+            nbr,
+            xr,
+            g,
+            gsum,
+            hw,
+            fixed: is_fixed,
+            gravity,
+            material,
+            kernel,
+            support: h,
+            hourglass,
+            stable_dt: 0.0,
+            omega_max: 0.0,
+        };
+        model.compute_stable_dt();
+        Ok(model)
+    }
+}
+
+/// A compiled particle body (immutable).
+#[derive(Debug, Clone)]
+pub struct ParticleModel {
+    pub(crate) rest: Vec<Vec3>,
+    pub(crate) mass: Vec<f64>,
+    pub(crate) density: Vec<f64>,
+    pub(crate) volume: Vec<f64>,
+    /// Neighbours of `i`: `nbr[ptr[i]..ptr[i+1]]`; per pair: rest vector `X_ij`, MLS gradient
+    /// `g_ij`, hourglass weight `c_i w_ij`.
+    pub(crate) ptr: Vec<usize>,
+    pub(crate) nbr: Vec<usize>,
+    pub(crate) xr: Vec<Vec3>,
+    pub(crate) g: Vec<Vec3>,
+    pub(crate) gsum: Vec<Vec3>,
+    pub(crate) hw: Vec<f64>,
+    pub(crate) fixed: Vec<bool>,
+    pub(crate) gravity: Vec3,
+    pub(crate) material: Material,
+    pub(crate) kernel: Kernel,
+    pub(crate) support: f64,
+    pub(crate) hourglass: f64,
+    pub(crate) stable_dt: f64,
+    pub(crate) omega_max: f64,
+}
+
+impl ParticleModel {
+    /// Number of particles.
+    pub fn n_particles(&self) -> usize { self.rest.len() }
+    /// Rest positions \[m\].
+    pub fn rest_positions(&self) -> &[Vec3] { &self.rest }
+    /// Masses \[kg\].
+    pub fn masses(&self) -> &[f64] { &self.mass }
+    /// Kernel-sum densities \[kg/m^3\] (eq. 25, Shepard-normalised).
+    pub fn densities(&self) -> &[f64] { &self.density }
+    /// Volumes `m / rho` \[m^3\].
+    pub fn volumes(&self) -> &[f64] { &self.volume }
+    /// Neighbours of particle `i` at rest.
+    pub fn neighbours(&self, i: usize) -> &[usize] { &self.nbr[self.ptr[i]..self.ptr[i + 1]] }
+    /// Total number of (directed) neighbour pairs.
+    pub fn n_pairs(&self) -> usize { self.nbr.len() }
+    /// Fixed flags.
+    pub fn fixed(&self) -> &[bool] { &self.fixed }
+    /// The material.
+    pub fn material(&self) -> &Material { &self.material }
+    /// The kernel.
+    pub fn kernel(&self) -> Kernel { self.kernel }
+    /// Support radius \[m\].
+    pub fn support(&self) -> f64 { self.support }
+    /// Hourglass-control stiffness `kappa` \[-\].
+    pub fn hourglass(&self) -> f64 { self.hourglass }
+    /// Largest explicit (Verlet) time step that is stable for this body \[s\], with safety factor
+    /// [`STABILITY_SAFETY`] (from the largest eigenfrequency of the linearised system).
+    pub fn stable_dt(&self) -> f64 { self.stable_dt }
+    /// Largest angular eigenfrequency of the rest-linearised, undamped system \[rad/s\].
+    pub fn omega_max(&self) -> f64 { self.omega_max }
+    /// Sub-steps that [`ParticleModel::step`] takes for a caller step `dt` \[s\].
+    pub fn substeps(&self, dt: f64) -> usize { (dt / self.stable_dt).ceil().max(1.0) as usize }
+
+    /// Deformation gradient of particle `i` at positions `x` (the MLS fit).
+    pub fn deformation_gradient(&self, i: usize, x: &[Vec3]) -> Mat3 {
+        let ui = x[i] - self.rest[i];
+        let mut f = Mat3::identity();
+        for p in self.ptr[i]..self.ptr[i + 1] {
+            let j = self.nbr[p];
+            f += (x[j] - self.rest[j] - ui) * self.g[p].transpose();
+        }
+        f
+    }
+
+    /// Elastic energy \[J\]: `sum_i V_i psi(F_i)` plus the hourglass-control energy.
+    pub fn strain_energy(&self, x: &[Vec3]) -> f64 {
+        let (lam, mu) = (self.material.lambda(), self.material.mu());
+        let mut total = 0.0;
+        for i in 0..self.n_particles() {
+            let f = self.deformation_gradient(i, x);
+            let e = material::green_strain(&f);
+            total += self.volume[i] * (mu * e.norm_squared() + 0.5 * lam * e.trace() * e.trace());
+            let ui = x[i] - self.rest[i];
+            let hmat = f - Mat3::identity();
+            for p in self.ptr[i]..self.ptr[i + 1] {
+                let j = self.nbr[p];
+                let err = x[j] - self.rest[j] - ui - hmat * self.xr[p];
+                total += 0.5 * self.hw[p] * err.norm_squared();
+            }
+        }
+        total
+    }
+
+    /// Kinetic energy \[J\].
+    pub fn kinetic_energy(&self, v: &[Vec3]) -> f64 {
+        0.5 * v.iter().zip(&self.mass).map(|(v, m)| m * v.norm_squared()).sum::<f64>()
+    }
+
+    /// Linear momentum \[kg m/s\].
+    pub fn momentum(&self, v: &[Vec3]) -> Vec3 {
+        v.iter().zip(&self.mass).map(|(v, m)| v * *m).sum()
+    }
+
+    /// Internal forces \[N\] of all particles at positions `x` (and velocities `v` for the viscous
+    /// part) into `out` (overwritten).
+    pub fn internal_forces(&self, x: &[Vec3], v: Option<&[Vec3]>, out: &mut [Vec3]) {
+        out.iter_mut().for_each(|f| *f = Vec3::zeros());
+        for i in 0..self.n_particles() {
+            self.add_particle_forces(i, x, v, false, out);
+        }
+    }
+
+    /// Add the forces that particle `i`'s stress and hourglass control exert on `i` and its
+    /// neighbours. `linear`: small-strain stress with `F = I` (the rest-linearised operator).
+    #[inline]
+    fn add_particle_forces(&self, i: usize, x: &[Vec3], v: Option<&[Vec3]>, linear: bool, out: &mut [Vec3]) {
+        let (s, e) = (self.ptr[i], self.ptr[i + 1]);
+        let ui = x[i] - self.rest[i];
+        // H = grad u = sum_j u_ij g_ij^T
+        let mut hmat = Mat3::zeros();
+        for p in s..e {
+            let j = self.nbr[p];
+            hmat += (x[j] - self.rest[j] - ui) * self.g[p].transpose();
+        }
+        let m = &self.material;
+        let pk = if linear {
+            let eps = 0.5 * (hmat + hmat.transpose());
+            material::stress(m, &eps)
+        } else {
+            let f = Mat3::identity() + hmat;
+            let mut st = material::stress(m, &material::green_strain(&f));
+            if let Some(v) = v {
+                if !m.is_undamped() {
+                    let vi = v[i];
+                    let mut fdot = Mat3::zeros();
+                    for p in s..e {
+                        fdot += (v[self.nbr[p]] - vi) * self.g[p].transpose();
+                    }
+                    st += material::viscous_stress(m, &material::strain_rate(&f, &fdot));
+                }
+            }
+            f * st
+        };
+        let a = self.volume[i] * pk;
+        let mut fi = a * self.gsum[i];
+        for p in s..e {
+            let j = self.nbr[p];
+            let err = x[j] - self.rest[j] - ui - hmat * self.xr[p];
+            let hg = self.hw[p] * err;
+            out[j] -= a * self.g[p] + hg;
+            fi += hg;
+        }
+        out[i] += fi;
+    }
+
+    /// Forces \[N\] of the rest-linearised system (small-strain stress, `F = I`, plus hourglass
+    /// control) for displacements `u` \[m\] into `out` (overwritten): `out = -K0 u`.
+    pub fn linearised_forces(&self, u: &[Vec3], out: &mut [Vec3]) {
+        let x: Vec<Vec3> = self.rest.iter().zip(u).map(|(x0, u)| x0 + u).collect();
+        out.iter_mut().for_each(|f| *f = Vec3::zeros());
+        for i in 0..self.n_particles() {
+            self.add_particle_forces(i, &x, None, true, out);
+        }
+    }
+
+    /// Viscous forces of the rest-linearised system for velocities `v` (F = I).
+    fn add_linear_viscous(&self, i: usize, v: &[Vec3], out: &mut [Vec3]) {
+        let (s, e) = (self.ptr[i], self.ptr[i + 1]);
+        let mut l = Mat3::zeros();
+        for p in s..e {
+            l += (v[self.nbr[p]] - v[i]) * self.g[p].transpose();
+        }
+        let a = self.volume[i] * material::viscous_stress(&self.material, &(0.5 * (l + l.transpose())));
+        out[i] += a * self.gsum[i];
+        for p in s..e {
+            out[self.nbr[p]] -= a * self.g[p];
+        }
+    }
+
+    /// Largest eigenvalue of `M^-1 K` (or of `M^-1 D` with `viscous`) by power iteration with
+    /// the mass inner product, over the free particles.
+    fn max_eigenvalue(&self, viscous: bool) -> f64 {
+        let n = self.n_particles();
+        let mut u: Vec<Vec3> = (0..n)
+            .map(|i| if self.fixed[i] { Vec3::zeros() } else { Vec3::new(((i * 7919) % 13) as f64 - 6.0, ((i * 104729) % 11) as f64 - 5.0, ((i * 31) % 7) as f64 - 3.0) })
+            .collect();
+        let mut f = vec![Vec3::zeros(); n];
+        let mut x = vec![Vec3::zeros(); n];
+        let mut lambda = 0.0;
+        for _ in 0..200 {
+            let norm = u.iter().zip(&self.mass).map(|(u, m)| m * u.norm_squared()).sum::<f64>().sqrt();
+            if norm == 0.0 {
+                return 0.0;
+            }
+            u.iter_mut().for_each(|u| *u /= norm);
+            f.iter_mut().for_each(|f| *f = Vec3::zeros());
+            for i in 0..n {
+                if viscous {
+                    self.add_linear_viscous(i, &u, &mut f);
+                } else {
+                    x[i] = self.rest[i] + u[i];
+                }
+            }
+            if !viscous {
+                for i in 0..n {
+                    self.add_particle_forces(i, &x, None, true, &mut f);
+                }
+            }
+            // Rayleigh quotient u^T (-f) with |u|_M = 1, then u <- M^-1 (-f).
+            let next: f64 = (0..n).filter(|&i| !self.fixed[i]).map(|i| -f[i].dot(&u[i])).sum();
+            for i in 0..n {
+                u[i] = if self.fixed[i] { Vec3::zeros() } else { -f[i] / self.mass[i] };
+            }
+            if (next - lambda).abs() <= 1e-6 * next.abs() {
+                lambda = next;
+                break;
+            }
+            lambda = next;
+        }
+        lambda.max(0.0)
+    }
+
+    fn compute_stable_dt(&mut self) {
+        // Power iteration converges from below: keep a 2% margin on the eigenvalue.
+        let k_max = 1.02 * self.max_eigenvalue(false);
+        let d_max = if self.material.is_undamped() { 0.0 } else { 1.02 * self.max_eigenvalue(true) };
+        self.omega_max = k_max.sqrt();
+        // Central differences with damping: dt <= 2/omega (sqrt(1 + zeta^2) - zeta), zeta = d/(2 omega);
+        // with velocity-lagged damping alone, dt <= 2/d.
+        let dt = if self.omega_max > 0.0 {
+            let zeta = d_max / (2.0 * self.omega_max);
+            2.0 / self.omega_max * ((1.0 + zeta * zeta).sqrt() - zeta)
+        } else if d_max > 0.0 {
+            2.0 / d_max
+        } else {
+            f64::INFINITY
+        };
+        self.stable_dt = STABILITY_SAFETY * dt;
+    }
+
+    /// Static equilibrium of the rest-linearised body (small loads) under external forces `f_ext`
+    /// \[N\] `(n_particles)` and gravity: solves `K0 u = f` over the free particles by conjugate
+    /// gradients, matrix-free (each product is one linearised force evaluation), to a relative
+    /// residual `tolerance`. Returns the positions \[m\]. Fails if `K0` is not positive definite
+    /// on the free particles (e.g. nothing is fixed) or CG does not converge.
+    pub fn static_solve_linear(&self, f_ext: &[Vec3], tolerance: f64, max_iterations: usize) -> Result<Vec<Vec3>, SolveError> {
+        let n = self.n_particles();
+        if f_ext.len() != n {
+            return Err(SolveError::Invalid(format!("f_ext has {} rows, the body has {n} particles", f_ext.len())));
+        }
+        if let Some(i) = f_ext.iter().position(|f| !is_finite3(f)) {
+            return Err(SolveError::NonFinite { what: "external force", node: i });
+        }
+        let free = |i: usize| !self.fixed[i];
+        let b: Vec<Vec3> = (0..n).map(|i| if free(i) { f_ext[i] + self.mass[i] * self.gravity } else { Vec3::zeros() }).collect();
+        let dot = |a: &[Vec3], c: &[Vec3]| a.iter().zip(c).map(|(a, c)| a.dot(c)).sum::<f64>();
+        let bnorm = dot(&b, &b).sqrt();
+        let mut u = vec![Vec3::zeros(); n];
+        if bnorm == 0.0 {
+            return Ok(self.rest.clone());
+        }
+        let mut r = b.clone();
+        let mut p = r.clone();
+        let mut ap = vec![Vec3::zeros(); n];
+        let mut xp = vec![Vec3::zeros(); n];
+        let mut rr = dot(&r, &r);
+        for it in 0..max_iterations {
+            // ap = K0 p = -f_lin(p)
+            for i in 0..n {
+                xp[i] = self.rest[i] + p[i];
+                ap[i] = Vec3::zeros();
+            }
+            for i in 0..n {
+                self.add_particle_forces(i, &xp, None, true, &mut ap);
+            }
+            for i in 0..n {
+                ap[i] = if free(i) { -ap[i] } else { Vec3::zeros() };
+            }
+            let pap = dot(&p, &ap);
+            if !(pap > 0.0) {
+                return Err(SolveError::Invalid(format!(
+                    "the linearised stiffness is not positive definite on the free particles (CG iteration {it}); fix some particles"
+                )));
+            }
+            let alpha = rr / pap;
+            for i in 0..n {
+                u[i] += alpha * p[i];
+                r[i] -= alpha * ap[i];
+            }
+            let rr_new = dot(&r, &r);
+            if rr_new.sqrt() <= tolerance * bnorm {
+                return Ok((0..n).map(|i| self.rest[i] + u[i]).collect());
+            }
+            let beta = rr_new / rr;
+            rr = rr_new;
+            for i in 0..n {
+                p[i] = r[i] + beta * p[i];
+            }
+        }
+        Err(SolveError::NoConvergence { iterations: max_iterations, residual: rr.sqrt(), tolerance: tolerance * bnorm })
+    }
+
+    /// Advance by `dt` \[s\] with the position-Verlet scheme of eq. (33), in as many equal
+    /// sub-steps as stability needs ([`ParticleModel::substeps`]), only over the active particles.
+    ///
+    /// Eq. (33), `x+ = 2x - x- + dt^2 F/m`, is run in its velocity form (`v+1/2 = v-1/2 + dt F/m`,
+    /// `x+ = x + dt v+1/2`: algebraically the same sequence of positions), which lets the sub-step
+    /// size change between calls and gives the viscous stress a velocity. Inactive particles are
+    /// frozen: they shape their active neighbours' deformation gradients but do not move.
+    /// Errors leave the state unchanged.
+    pub fn step(&self, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64) -> Result<ParticleStepReport, StepError> {
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(StepError::BadTimeStep(dt));
+        }
+        self.step_with_substeps(state, ws, dt, self.substeps(dt))
+    }
+
+    /// [`ParticleModel::step`] with a caller-chosen number of sub-steps (for stability studies
+    /// and benchmarks; fewer than [`ParticleModel::substeps`] may be unstable).
+    pub fn step_with_substeps(&self, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize) -> Result<ParticleStepReport, StepError> {
+        if !(dt > 0.0 && dt.is_finite()) || substeps == 0 {
+            return Err(StepError::BadTimeStep(dt));
+        }
+        let n = self.n_particles();
+        if state.x.len() != n || state.v.len() != n || state.f_ext.len() != n {
+            return Err(StepError::StateShape { nodes: n, x: state.x.len(), v: state.v.len(), f_ext: state.f_ext.len() });
+        }
+        for &i in &state.active {
+            if i >= n {
+                return Err(StepError::ActiveOutOfRange { index: i, n });
+            }
+            if !is_finite3(&state.f_ext[i]) {
+                return Err(StepError::NonFiniteForce { node: i });
+            }
+        }
+        ws.save.clear();
+        ws.save.extend(state.active.iter().map(|&i| (state.x[i], state.v[i])));
+        let h = dt / substeps as f64;
+        for _ in 0..substeps {
+            // Zero the force on every particle the active ones touch, then accumulate.
+            for &i in &state.active {
+                ws.force[i] = Vec3::zeros();
+                for &j in self.neighbours(i) {
+                    ws.force[j] = Vec3::zeros();
+                }
+            }
+            for &i in &state.active {
+                self.add_particle_forces(i, &state.x, Some(&state.v), false, &mut ws.force);
+            }
+            for &i in &state.active {
+                if self.fixed[i] {
+                    state.v[i] = Vec3::zeros();
+                    continue;
+                }
+                let a = (ws.force[i] + state.f_ext[i]) / self.mass[i] + self.gravity;
+                state.v[i] += h * a;
+                state.x[i] += h * state.v[i];
+            }
+        }
+        let bad = state.active.iter().copied().find(|&i| !is_finite3(&state.x[i]) || !is_finite3(&state.v[i]));
+        if let Some(node) = bad {
+            for (k, &i) in state.active.iter().enumerate() {
+                (state.x[i], state.v[i]) = ws.save[k];
+            }
+            return Err(StepError::NonFinite { what: "particle position or velocity", node, time: state.t });
+        }
+        state.t += dt;
+        Ok(ParticleStepReport { substeps, substep_dt: h })
+    }
+}
+
+/// What a particle step did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParticleStepReport {
+    /// Verlet sub-steps taken.
+    pub substeps: usize,
+    /// Their length \[s\].
+    pub substep_dt: f64,
+}
+
+/// The mutable state of a particle body. Arrays are `(n_particles)`, SI, world frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParticleState {
+    /// Positions \[m\].
+    pub x: Vec<Vec3>,
+    /// Velocities \[m/s\] (at the half step, in the Verlet sense).
+    pub v: Vec<Vec3>,
+    /// Time \[s\].
+    pub t: f64,
+    /// External forces \[N\].
+    pub f_ext: Vec<Vec3>,
+    /// Indices of the active (simulated) particles; the others are frozen.
+    pub active: Vec<usize>,
+}
+
+impl ParticleState {
+    /// At rest, every particle active.
+    pub fn rest(model: &ParticleModel) -> ParticleState {
+        let n = model.n_particles();
+        ParticleState { x: model.rest.clone(), v: vec![Vec3::zeros(); n], t: 0.0, f_ext: vec![Vec3::zeros(); n], active: (0..n).collect() }
+    }
+}
+
+/// Scratch space of the particle step (sized once: stepping allocates nothing).
+#[derive(Debug, Clone)]
+pub struct ParticleWorkspace {
+    pub(crate) force: Vec<Vec3>,
+    pub(crate) save: Vec<(Vec3, Vec3)>,
+}
+
+impl ParticleWorkspace {
+    /// Scratch space for `model`.
+    pub fn new(model: &ParticleModel) -> ParticleWorkspace {
+        let n = model.n_particles();
+        ParticleWorkspace { force: vec![Vec3::zeros(); n], save: Vec::with_capacity(n) }
+    }
+}

@@ -1,0 +1,44 @@
+//! The meshfree (particle) solid of paper §3.2: particles carrying the same continuum law as the
+//! tetrahedra, usable alone (a particle body) and, in the hybrid issues, as the shell of the
+//! paper's model.
+//!
+//! ## Formulation (total Lagrangian, moving least squares)
+//! Particle `i` has rest position `X_i`, mass `m_i`, density `rho_i` and volume `V_i = m_i / rho_i`
+//! (eq. 25; the kernel sum is Shepard-normalised, `rho_i = sum_j m_j W_ij / sum_j (m_j/rho_0) W_ij`,
+//! so that a uniform body has `rho_i = rho_0` up to its boundary, where a plain kernel sum is
+//! deficient). Its neighbours `j` lie within the support radius `h` at rest, found once.
+//!
+//! The deformation gradient is the moving-least-squares fit of Mueller et al. 2004, which the
+//! paper follows: with weights `w_ij = V_j W(|X_ij|, h)`, `X_ij = X_j - X_i`, the moment matrix
+//! `A_i = sum_j w_ij X_ij X_ij^T` and the corrected gradients `g_ij = w_ij A_i^-1 X_ij`
+//! (precomputed at rest),
+//!
+//! ```text
+//! F_i = sum_j x_ij g_ij^T = I + sum_j u_ij g_ij^T,      Fdot_i = sum_j v_ij g_ij^T,
+//! ```
+//!
+//! which is exact for every affine motion (`sum_j X_ij g_ij^T = I`). Green strain, elastic and
+//! viscous stress are those of the FEM ([`crate::material`]).
+//!
+//! **Forces.** The elastic energy `U = sum_i V_i psi(F_i)` gives, exactly, `f = -dU/dx`:
+//! each particle `i` exerts on each neighbour `j` the force `-V_i P_i g_ij` and on itself the
+//! opposite, `P_i = F_i (S_i + S_v,i)`. This is eq. (29) (`sum_j sigma_j grad W_ij V_i V_j`) in a
+//! total-Lagrangian, pairwise antisymmetric form: every interaction is an equal and opposite pair,
+//! so linear momentum is conserved exactly (to round-off) and the forces of a rigid motion vanish.
+//!
+//! **Zero-energy modes.** Nodal integration of a particle gradient has modes with `F_i = I` at
+//! every particle but non-affine neighbourhoods (hourglass / checkerboard modes). palpate's
+//! safeguard is the hourglass control of Ganzenmueller 2015 (Comput. Methods Appl. Mech. Eng.
+//! 286), written as an energy: `U_hg = sum_i c_i/2 sum_j w_ij |x_ij - F_i X_ij|^2`, the residual
+//! of the very least-squares fit that defines `F_i`, with `c_i = kappa mu V_i / sum_j w_ij |X_ij|^2`.
+//! Because `F_i` minimises that residual, its force is simply `-c_i w_ij e_ij` on `j` and the
+//! opposite on `i` (`e_ij = x_ij - F_i X_ij`): energy-consistent, momentum-conserving, zero for
+//! affine motions, and it penalises exactly the motions the gradient cannot see. `kappa` (default
+//! [`DEFAULT_HOURGLASS`]) is dimensionless.
+
+mod body;
+pub mod kernel;
+pub mod neighbors;
+
+pub use body::{ParticleModel, ParticleModelBuilder, ParticleState, ParticleStepReport, ParticleWorkspace, DEFAULT_HOURGLASS, STABILITY_SAFETY};
+pub use kernel::Kernel;
