@@ -1,4 +1,4 @@
-"""palpate: real-time soft-tissue FEM for haptic interaction.
+"""palpate: real-time soft-tissue FEM (and meshfree particles) for haptic interaction.
 
 After M. G. Mero and A. Susin, "Deformable Hybrid Approach for Haptic Interaction". The physics
 runs in Rust (``palpate-core``); this package is a thin Python layer over it.
@@ -20,42 +20,59 @@ True
 from ._palpate import (
     BackwardEuler,
     Body,
+    Kernel,
     Material,
     MaterialError,
     MeshError,
     MeshWarning,
     ModelError,
     PalpateError,
+    ParticleBody,
     SemiImplicit,
     SolveError,
     StepError,
+    SurfaceError,
     TetMesh,
+    TriSurface,
     __version__,
     box_mesh,
+    ellipsoid_surface,
     ellipsoid_wall,
+    sample_between,
+    sample_inside,
     truncated_ellipsoid_wall,
 )
 from .io import UNITS, VtuSeries, load_mesh, read_mesh_arrays
+from .surfaces import load_surface, read_surface_arrays
 
 __all__ = [
     "BackwardEuler",
     "Body",
+    "Kernel",
     "Material",
     "MaterialError",
     "MeshError",
     "MeshWarning",
     "ModelError",
     "PalpateError",
+    "ParticleBody",
     "SemiImplicit",
     "SolveError",
     "StepError",
+    "SurfaceError",
     "TetMesh",
+    "TriSurface",
     "UNITS",
     "VtuSeries",
     "__version__",
     "box_mesh",
+    "ellipsoid_surface",
     "ellipsoid_wall",
     "load_mesh",
+    "load_surface",
     "read_mesh_arrays",
+    "read_surface_arrays",
+    "sample_between",
+    "sample_inside",
     "truncated_ellipsoid_wall",
 ]

@@ -3,6 +3,8 @@
     palpate run SCENE.toml [--out DIR] [--steps N]
     palpate bench protocol MESH [--steps N] [--json] [--integrator NAME]
     palpate bench protocol --all [--steps N] [--json] [--integrator NAME]
+    palpate bench particles N [--spacing S] [--kernel wendland|cubic|lj] [--ticks T] [--json]
+    palpate bench particles --all [...]
     palpate info MESH [--unit m|cm|mm]
 
 Exit codes: 0 success, 1 a simulation failed (e.g. a step diverged), 2 bad input (arguments,
@@ -109,6 +111,53 @@ def cmd_bench_protocol(a) -> int:
     return 0
 
 
+def cmd_bench_particles(a) -> int:
+    from . import bench_particles as bp
+
+    if a.all == (a.n is not None):
+        raise _Fail("palpate bench particles: give N or --all (not both)")
+    if a.spacing <= 0 or a.spacing != a.spacing:
+        raise _Fail(f"palpate bench particles: --spacing must be positive, got {a.spacing}")
+    if a.ticks <= 0:
+        raise _Fail("palpate bench particles: --ticks must be positive")
+    sizes = bp.ALL if a.all else [a.n]
+    if not a.json:
+        mhz = bp.cpu_mhz()
+        peak = "unknown" if mhz is None else f"{mhz * bp.FLOPS_PER_CYCLE / 1e3:.1f} GFlop/s"
+        print(f"palpate {__version__} bench particles: LV-shell cluster at {a.spacing * 1e3:g} mm, kernel {a.kernel}, "
+              f"E = {bp.E:g} Pa, nu = {bp.NU}, rho = {bp.RHO:g} kg/m^3, {bp.PROBE_FORCE:g} N on {bp.N_PROBE} particles, "
+              f"{a.ticks} ticks of {bp.DT * 1e3:g} ms, one thread")
+        print(f"  flops per pair per sub-step {bp.FLOPS_PER_PAIR}, per particle {bp.FLOPS_PER_PARTICLE}; peak {peak} "
+              f"(cpu MHz {mhz} x {bp.FLOPS_PER_CYCLE} flop/cycle: AVX2 FMA, 2 units x 4 doubles x 2)")
+        print(f"{'N':>7}{'nbrs':>7}{'fixed':>7}{'sub/tick':>9}{'sub dt us':>10}{'tick ms':>9}{'ticks/s':>9}"
+              f"{'GFlop/s':>9}{'%peak':>7}{'build s':>9}{'max|u| mm':>10}")
+    failed = False
+    for n in sizes:
+        try:
+            r = bp.run(n, a.spacing, a.kernel, a.ticks, a.max_wall)
+        except ValueError as e:
+            raise _Fail(f"palpate bench particles: {e}") from None
+        except _p_errors() as e:
+            raise _Fail(f"palpate bench particles: N = {n}: {type(e).__name__}: {e}", 1) from None
+        failed |= r["error"] is not None and "wall-clock cap" not in r["error"]
+        if a.json:
+            print(json.dumps(r), flush=True)
+            continue
+        f = lambda v, fmt: "-" if v is None else format(v, fmt)  # noqa: E731
+        print(f"{r['n']:>7}{r['mean_neighbours']:>7.1f}{r['fixed']:>7}{r['substeps']:>9}{r['substep_dt_s'] * 1e6:>10.1f}"
+              f"{f(r['tick_median_s'] and r['tick_median_s'] * 1e3, '.3f'):>9}{f(r['ticks_per_s'], '.1f'):>9}"
+              f"{f(r['gflops'], '.2f'):>9}{f(r['peak_fraction'] and 100 * r['peak_fraction'], '.1f'):>7}"
+              f"{r['build_s']:>9.2f}{_fmt_mm(r['max_disp_m']):>10}", flush=True)
+        if r["error"]:
+            print(f"  note: {r['error']} (median over {r['ticks']} ticks)")
+    return 1 if failed else 0
+
+
+def _p_errors():
+    from . import _palpate as _p
+    return (_p.PalpateError,)
+
+
 def cmd_info(a) -> int:
     from .io import MeshError, load_mesh
 
@@ -151,6 +200,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-wall", type=float, default=None, metavar="S",
                    help="stop a run after S seconds of stepping (default: no cap)")
     p.set_defaults(func=cmd_bench_protocol)
+
+    q = bsub.add_parser("particles", help="per-tick cost of a meshfree particle body (an LV-shell cluster of N particles)",
+                        description="Time 1 ms ticks of the N particles of the LV shell fill nearest the probe point "
+                                    "(see palpate/bench_particles.py), or --all: N = " + ", ".join(map(str, [200, 600, 2000, 28000])) + ".")
+    q.add_argument("n", nargs="?", type=int, metavar="N", help="number of (active) particles")
+    q.add_argument("--all", action="store_true", help="N = 200, 600, 2000, 28000")
+    q.add_argument("--spacing", type=float, default=9e-4, metavar="M", help="lattice spacing [m] (default 9e-4)")
+    q.add_argument("--kernel", default="wendland", choices=["wendland", "cubic", "lj"])
+    q.add_argument("--ticks", type=int, default=200, help="ticks of 1 ms to time (default 200)")
+    q.add_argument("--json", action="store_true", help="one JSON object per N (JSON lines)")
+    q.add_argument("--max-wall", type=float, default=None, metavar="S",
+                   help="stop a case after S seconds of ticks (default: no cap)")
+    q.set_defaults(func=cmd_bench_particles)
 
     i = sub.add_parser("info", help="load and validate a mesh file, print its size and quality")
     i.add_argument("mesh", metavar="MESH")

@@ -7,6 +7,7 @@
 //! | `mesh.rs` | `TetMesh`, `ellipsoid_wall`, `truncated_ellipsoid_wall`, `box_mesh` |
 //! | `material.rs` | `Material`, `SemiImplicit`, `BackwardEuler` |
 //! | `body.rs` | `Body` (model + state + workspace; stepping releases the GIL) |
+//! | `particles.rs` | `Kernel`, `ParticleBody`, `TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between`, `SurfaceError` |
 //!
 //! The Pythonic layer (file IO, CLI, benchmark) lives in `python/palpate/*.py`.
 
@@ -15,6 +16,7 @@ mod conv;
 mod errors;
 mod material;
 mod mesh;
+mod particles;
 
 use pyo3::prelude::*;
 
@@ -30,5 +32,6 @@ fn _palpate(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mesh::ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::truncated_ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::box_mesh, m)?)?;
+    particles::register(m)?;
     Ok(())
 }

@@ -6,7 +6,7 @@ import palpate
 import palpate._palpate as ext
 
 STUB = Path(palpate.__file__).with_name("_palpate.pyi")
-TYPED_DICTS = {"StepStats", "ProbeRun"}
+TYPED_DICTS = {"StepStats", "ProbeRun", "ParticleStepStats", "TimedRun"}
 
 
 def test_stub_matches_extension():

@@ -8,3 +8,8 @@ mod tet_mesh;
 
 pub use tet_mesh::{signed_volume, MeshWarning, TetMesh};
 
+pub mod sample;
+pub mod surface;
+
+pub use sample::{sample_between, sample_inside, ParticleSet};
+pub use surface::{ellipsoid_surface, SurfaceError, SurfaceWarning, TriSurface};
