@@ -8,7 +8,7 @@ mod protocol;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use palpate_core::mesh::generate::{ellipsoid_wall, EllipsoidWall};
-use palpate_core::{step, Integrator, ModelBuilder, State, Vec3, Workspace};
+use palpate_core::{step, Integrator, ModelBuilder, State, Workspace};
 
 fn ellipsoid_case() -> protocol::Case {
     // The paper's Ellipsoids Model (192 tets), in mesh units so that the protocol's load applies:
@@ -29,7 +29,11 @@ fn bench_steps(c: &mut Criterion) {
     let mut group = c.benchmark_group("step_1ms");
     group.sample_size(20);
     for (name, case) in &cases {
-        let mut integrators = vec![("semi_implicit", Integrator::SemiImplicit), ("backward_euler_linear", Integrator::BackwardEulerLinear)];
+        let mut integrators = vec![("backward_euler_linear", Integrator::BackwardEulerLinear)];
+        // The semi-implicit scheme is unstable at 1 ms on the 48k-tet mesh (BENCHMARKS.md).
+        if case.mesh.n_tets() < 20_000 {
+            integrators.push(("semi_implicit", Integrator::SemiImplicit));
+        }
         if case.mesh.n_tets() < 2000 {
             integrators.push(("backward_euler_newton", Integrator::newton()));
         }
@@ -48,7 +52,6 @@ fn bench_steps(c: &mut Criterion) {
             for _ in 0..50 {
                 step(&model, &mut state, &mut ws, protocol::DT).expect("stable");
             }
-            let _ = Vec3::zeros();
             group.bench_with_input(BenchmarkId::new(iname, name), &(), |b, _| {
                 b.iter(|| step(&model, &mut state, &mut ws, protocol::DT).expect("stable"))
             });
