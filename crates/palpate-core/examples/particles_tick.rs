@@ -7,6 +7,7 @@ use std::time::Instant;
 fn main() {
     let n: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(600);
     let support: f64 = std::env::args().nth(2).and_then(|s| s.parse().ok()).unwrap_or(1.8);
+    let kappa: f64 = std::env::args().nth(3).and_then(|s| s.parse().ok()).unwrap_or(palpate_core::meshfree::DEFAULT_HOURGLASS);
     let s = 0.9e-3;
     let side = (n as f64).cbrt().ceil() as usize;
     let mut pts = Vec::new();
@@ -24,7 +25,7 @@ fn main() {
     let mat = Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, Damping::NONE).unwrap();
     let t0 = Instant::now();
     let fixed: Vec<usize> = (0..side * side).collect();
-    let model = ParticleModelBuilder::new(pts, m, mat, support * s).fixed_particles(fixed).build().unwrap();
+    let model = ParticleModelBuilder::new(pts, m, mat, support * s).fixed_particles(fixed).hourglass(kappa).build().unwrap();
     let build = t0.elapsed().as_secs_f64();
     let mut st = ParticleState::rest(&model);
     let mut ws = ParticleWorkspace::new(&model);
