@@ -308,10 +308,18 @@ impl ParticleModel {
         let q = &self.q[s..e];
         let hw = &self.hw[s..e];
         let ui = u[i];
-        let mut k = Mat3::zeros();
+        // K = sum_j u_ij q_ij^T, written out by components (nalgebra's outer product builds a
+        // temporary matrix per pair, which the optimiser does not always remove).
+        let mut kk = [0.0f64; 9];
         for (&j, qp) in nbr.iter().zip(q) {
-            k += (u[j] - ui) * qp.transpose();
+            let d = [u[j].x - ui.x, u[j].y - ui.y, u[j].z - ui.z];
+            for a in 0..3 {
+                kk[3 * a] += d[a] * qp.x;
+                kk[3 * a + 1] += d[a] * qp.y;
+                kk[3 * a + 2] += d[a] * qp.z;
+            }
         }
+        let k = Mat3::from_row_slice(&kk);
         let r = &self.r_inv[i];
         let hmat = k * r;
         let m = &self.material;
@@ -333,13 +341,25 @@ impl ParticleModel {
             f * st
         };
         let mi = self.volume[i] * pk * r - self.hg_c[i] * hmat;
-        let mut fi = Vec3::zeros();
+        let mm = [mi[(0, 0)], mi[(0, 1)], mi[(0, 2)], mi[(1, 0)], mi[(1, 1)], mi[(1, 2)], mi[(2, 0)], mi[(2, 1)], mi[(2, 2)]];
+        let mut fi = [0.0f64; 3];
         for ((&j, qp), &c) in nbr.iter().zip(q).zip(hw) {
-            let t = mi * qp + c * (u[j] - ui);
-            out[j] -= t;
-            fi += t;
+            let uj = u[j];
+            let d = [uj.x - ui.x, uj.y - ui.y, uj.z - ui.z];
+            let t = [
+                mm[0] * qp.x + mm[1] * qp.y + mm[2] * qp.z + c * d[0],
+                mm[3] * qp.x + mm[4] * qp.y + mm[5] * qp.z + c * d[1],
+                mm[6] * qp.x + mm[7] * qp.y + mm[8] * qp.z + c * d[2],
+            ];
+            let o = &mut out[j];
+            o.x -= t[0];
+            o.y -= t[1];
+            o.z -= t[2];
+            fi[0] += t[0];
+            fi[1] += t[1];
+            fi[2] += t[2];
         }
-        out[i] += fi;
+        out[i] += Vec3::new(fi[0], fi[1], fi[2]);
     }
 
     /// Forces \[N\] of the rest-linearised system (small-strain stress, `F = I`, plus hourglass
@@ -510,21 +530,24 @@ impl ParticleModel {
         }
         ws.save.clear();
         ws.save.extend(state.active.iter().map(|&i| (state.x[i], state.v[i])));
-        // Displacements of the active particles and their (possibly frozen) neighbours.
+        // Displacements of the active particles and their (possibly frozen) neighbours, and the
+        // list of those particles (each once: `mark` holds a per-call stamp).
+        ws.stamp = ws.stamp.wrapping_add(1);
+        ws.touched.clear();
         for &i in &state.active {
-            ws.u[i] = state.x[i] - self.rest[i];
-            for &j in self.neighbours(i) {
-                ws.u[j] = state.x[j] - self.rest[j];
+            for &j in std::iter::once(&i).chain(self.neighbours(i)) {
+                if ws.mark[j] != ws.stamp {
+                    ws.mark[j] = ws.stamp;
+                    ws.touched.push(j);
+                    ws.u[j] = state.x[j] - self.rest[j];
+                }
             }
         }
         let h = dt / substeps as f64;
         for _ in 0..substeps {
             // Zero the force on every particle the active ones touch, then accumulate.
-            for &i in &state.active {
+            for &i in &ws.touched {
                 ws.force[i] = Vec3::zeros();
-                for &j in self.neighbours(i) {
-                    ws.force[j] = Vec3::zeros();
-                }
             }
             for &i in &state.active {
                 self.add_particle_forces(i, &ws.u, Some(&state.v), false, &mut ws.force);
@@ -590,12 +613,22 @@ pub struct ParticleWorkspace {
     pub(crate) force: Vec<Vec3>,
     pub(crate) u: Vec<Vec3>,
     pub(crate) save: Vec<(Vec3, Vec3)>,
+    pub(crate) touched: Vec<usize>,
+    pub(crate) mark: Vec<u64>,
+    pub(crate) stamp: u64,
 }
 
 impl ParticleWorkspace {
     /// Scratch space for `model`.
     pub fn new(model: &ParticleModel) -> ParticleWorkspace {
         let n = model.n_particles();
-        ParticleWorkspace { force: vec![Vec3::zeros(); n], u: vec![Vec3::zeros(); n], save: Vec::with_capacity(n) }
+        ParticleWorkspace {
+            force: vec![Vec3::zeros(); n],
+            u: vec![Vec3::zeros(); n],
+            save: Vec::with_capacity(n),
+            touched: Vec::with_capacity(n),
+            mark: vec![0; n],
+            stamp: 0,
+        }
     }
 }
