@@ -21,13 +21,12 @@ Flop count, read off ``add_particle_forces`` and ``step_with_substeps`` in
 ``crates/palpate-core/src/meshfree/body.rs`` (undamped path; adds, multiplies and divides count
 one each, as the code writes them, nalgebra evaluating full 3x3 products):
 
-* per directed neighbour pair and sub-step: :data:`FLOPS_PER_PAIR` = 75 — the gradient sum
-  ``H += (u_j - u_i) g^T`` (6 + 9 + 9 = 24) and the force loop (residual ``u_j - u_i - H X``: 24,
-  hourglass weight: 3, ``A g``: 15, accumulating into ``f_j`` and ``f_i``: 9, i.e. 51).
-  21 of the 75 are fusable multiply-add pairs (the outer product's 9, the two mat-vecs' 6 + 6).
-* per active particle and sub-step: :data:`FLOPS_PER_PARTICLE` = 190 — ``F = I + H`` (9), Green
-  strain (63), stress (22), ``P = F S`` (45), ``V P`` (9), ``A sum_j g`` (15), ``u_i`` and the
-  accumulation (6), the Verlet update (21).
+* per directed neighbour pair and sub-step: :data:`FLOPS_PER_PAIR` = 51 — the gather
+  ``K += (u_j - u_i) q^T`` (3 + 9 + 9 = 21) and the scatter ``t = M q + c (u_j - u_i)``
+  (3 + 21), ``f_j -= t``, ``f_i += t`` (6), i.e. 30. 21 of the 51 are fusable multiply-add pairs.
+* per active particle and sub-step: :data:`FLOPS_PER_PARTICLE` = 277 — ``H = K A^-1`` (45),
+  ``F = I + H`` (9), Green strain (63), stress (22), ``P = F S`` (45), ``V P`` (9),
+  ``M = V P A^-1 - c H`` (45 + 18), the Verlet update (21).
 
 The peak is one core's: ``cpu MHz`` from ``/proc/cpuinfo`` x 16 double-precision flops per cycle
 (AVX2 FMA: 2 FMA units x 4 lanes x 2 flops; a Zen 4 runs AVX-512 as two 256-bit halves, so 16
@@ -58,8 +57,8 @@ FIXED_FRACTION = 0.10
 DT = 1e-3                      # one haptic tick [s]
 ALL = [200, 600, 2000, 28000]
 
-FLOPS_PER_PAIR = 75
-FLOPS_PER_PARTICLE = 190
+FLOPS_PER_PAIR = 51
+FLOPS_PER_PARTICLE = 277
 FLOPS_PER_CYCLE = 16
 
 KERNELS = {
