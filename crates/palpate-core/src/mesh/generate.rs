@@ -276,7 +276,7 @@ fn ellipsoid_wall_arrays(p: &EllipsoidWall) -> (Vec<Vec3>, Vec<[usize; 4]>) {
 
 /// Unit sphere triangulated from the octahedron by `subdivisions` 1-to-4 splits: unit vertices and
 /// outward-oriented triangles.
-fn geodesic_sphere(subdivisions: usize) -> (Vec<Vec3>, Vec<[usize; 3]>) {
+pub(crate) fn geodesic_sphere(subdivisions: usize) -> (Vec<Vec3>, Vec<[usize; 3]>) {
     let mut verts = vec![Vec3::x(), -Vec3::x(), Vec3::y(), -Vec3::y(), Vec3::z(), -Vec3::z()];
     // Face (±x, ±y, ±z) is outward when det of its vertices is positive, i.e. an even number of
     // minus signs; otherwise swap two vertices.

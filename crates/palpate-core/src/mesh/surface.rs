@@ -463,29 +463,7 @@ impl ColumnGrid {
 pub fn ellipsoid_surface(semi_axes: [f64; 3], subdivisions: usize) -> TriSurface {
     assert!(semi_axes.iter().all(|a| a.is_finite() && *a > 0.0), "ellipsoid semi-axes must be finite and positive, got {semi_axes:?}");
     assert!(subdivisions <= 10, "subdivisions = {subdivisions} is too many (at most 10)");
-    let mut verts = vec![Vec3::x(), -Vec3::x(), Vec3::y(), -Vec3::y(), Vec3::z(), -Vec3::z()];
-    // Face (±x, ±y, ±z) is outward when det of its vertices is positive: an even number of minus
-    // signs; otherwise swap two vertices.
-    let mut tris: Vec<[usize; 3]> = Vec::with_capacity(8);
-    for (sx, sy, sz) in [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, 0, 1), (0, 1, 1), (1, 1, 1)] {
-        let (x, y, z) = (sx, 2 + sy, 4 + sz);
-        tris.push(if (sx + sy + sz) % 2 == 0 { [x, y, z] } else { [y, x, z] });
-    }
-    for _ in 0..subdivisions {
-        let mut midpoint: HashMap<(usize, usize), usize> = HashMap::with_capacity(tris.len() * 3 / 2);
-        let mut mid = |a: usize, b: usize, verts: &mut Vec<Vec3>| {
-            *midpoint.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                verts.push((verts[a] + verts[b]).normalize());
-                verts.len() - 1
-            })
-        };
-        let mut next = Vec::with_capacity(4 * tris.len());
-        for [a, b, c] in tris {
-            let (ab, bc, ca) = (mid(a, b, &mut verts), mid(b, c, &mut verts), mid(c, a, &mut verts));
-            next.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
-        }
-        tris = next;
-    }
+    let (verts, tris) = super::generate::geodesic_sphere(subdivisions);
     let points: Vec<[f64; 3]> = verts.iter().map(|d| [semi_axes[0] * d.x, semi_axes[1] * d.y, semi_axes[2] * d.z]).collect();
     let triangles: Vec<[i64; 3]> = tris.iter().map(|t| t.map(|i| i as i64)).collect();
     let (s, warnings) = TriSurface::from_arrays(&points, &triangles).expect("generated ellipsoid surface is valid");
