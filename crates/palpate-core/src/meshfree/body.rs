@@ -162,7 +162,7 @@ impl ParticleModelBuilder {
             g,
             gsum,
             hw,
-            q,
+            q4: to_p4(&q),
             r_inv,
             hg_c,
             fixed: is_fixed,
@@ -196,7 +196,7 @@ pub struct ParticleModel {
     pub(crate) hw: Vec<f64>,
     /// Per pair `q_ij = w_ij X_ij`, so that `g_ij = A_i^-1 q_ij`; per particle `A_i^-1` and the
     /// hourglass coefficient `c_i` (see `add_particle_forces`).
-    pub(crate) q: Vec<Vec3>,
+    pub(crate) q4: Vec<P4>,
     pub(crate) r_inv: Vec<Mat3>,
     pub(crate) hg_c: Vec<f64>,
     pub(crate) fixed: Vec<bool>,
@@ -285,10 +285,14 @@ impl ParticleModel {
     /// Internal forces \[N\] of all particles at positions `x` (and velocities `v` for the viscous
     /// part) into `out` (overwritten).
     pub fn internal_forces(&self, x: &[Vec3], v: Option<&[Vec3]>, out: &mut [Vec3]) {
-        let u: Vec<Vec3> = x.iter().zip(&self.rest).map(|(x, x0)| x - x0).collect();
-        out.iter_mut().for_each(|f| *f = Vec3::zeros());
+        let u: Vec<P4> = x.iter().zip(&self.rest).map(|(x, x0)| p4(&(x - x0))).collect();
+        let v4 = v.map(to_p4);
+        let mut f = vec![[0.0; 4]; self.n_particles()];
         for i in 0..self.n_particles() {
-            self.add_particle_forces(i, &u, v, false, out);
+            self.add_particle_forces(i, &u, v4.as_deref(), false, &mut f);
+        }
+        for (o, f) in out.iter_mut().zip(&f) {
+            *o = v3(f);
         }
     }
 
@@ -302,24 +306,12 @@ impl ParticleModel {
     /// `t_ij = M_i q_ij + (c_i w_ij) u_ij` with `M_i = V_i P_i A_i^-1 - c_i H`. Per pair that is
     /// two 3x3 products (gather and scatter) instead of four.
     #[inline]
-    fn add_particle_forces(&self, i: usize, u: &[Vec3], v: Option<&[Vec3]>, linear: bool, out: &mut [Vec3]) {
+    fn add_particle_forces(&self, i: usize, u: &[P4], v: Option<&[P4]>, linear: bool, out: &mut [P4]) {
         let (s, e) = (self.ptr[i], self.ptr[i + 1]);
         let nbr = &self.nbr[s..e];
-        let q = &self.q[s..e];
+        let q = &self.q4[s..e];
         let hw = &self.hw[s..e];
-        let ui = u[i];
-        // K = sum_j u_ij q_ij^T, written out by components (nalgebra's outer product builds a
-        // temporary matrix per pair, which the optimiser does not always remove).
-        let mut kk = [0.0f64; 9];
-        for (&j, qp) in nbr.iter().zip(q) {
-            let d = [u[j].x - ui.x, u[j].y - ui.y, u[j].z - ui.z];
-            for a in 0..3 {
-                kk[3 * a] += d[a] * qp.x;
-                kk[3 * a + 1] += d[a] * qp.y;
-                kk[3 * a + 2] += d[a] * qp.z;
-            }
-        }
-        let k = Mat3::from_row_slice(&kk);
+        let k = gather(nbr, q, u, u[i]);
         let r = &self.r_inv[i];
         let hmat = k * r;
         let m = &self.material;
@@ -330,44 +322,44 @@ impl ParticleModel {
             let mut st = material::stress(m, &material::green_strain(&f));
             if let Some(v) = v {
                 if !m.is_undamped() {
-                    let vi = v[i];
-                    let mut kv = Mat3::zeros();
-                    for (&j, qp) in nbr.iter().zip(q) {
-                        kv += (v[j] - vi) * qp.transpose();
-                    }
+                    let kv = gather(nbr, q, v, v[i]);
                     st += material::viscous_stress(m, &material::strain_rate(&f, &(kv * r)));
                 }
             }
             f * st
         };
         let mi = self.volume[i] * pk * r - self.hg_c[i] * hmat;
-        let mm = [mi[(0, 0)], mi[(0, 1)], mi[(0, 2)], mi[(1, 0)], mi[(1, 1)], mi[(1, 2)], mi[(2, 0)], mi[(2, 1)], mi[(2, 2)]];
-        let mut fi = [0.0f64; 3];
+        let cols = [
+            [mi[(0, 0)], mi[(1, 0)], mi[(2, 0)], 0.0],
+            [mi[(0, 1)], mi[(1, 1)], mi[(2, 1)], 0.0],
+            [mi[(0, 2)], mi[(1, 2)], mi[(2, 2)], 0.0],
+        ];
+        let ui = u[i];
+        let mut fi = [0.0f64; 4];
         for ((&j, qp), &c) in nbr.iter().zip(q).zip(hw) {
             let uj = u[j];
-            let d = [uj.x - ui.x, uj.y - ui.y, uj.z - ui.z];
-            let t = [
-                mm[0] * qp.x + mm[1] * qp.y + mm[2] * qp.z + c * d[0],
-                mm[3] * qp.x + mm[4] * qp.y + mm[5] * qp.z + c * d[1],
-                mm[6] * qp.x + mm[7] * qp.y + mm[8] * qp.z + c * d[2],
-            ];
             let o = &mut out[j];
-            o.x -= t[0];
-            o.y -= t[1];
-            o.z -= t[2];
-            fi[0] += t[0];
-            fi[1] += t[1];
-            fi[2] += t[2];
+            for l in 0..4 {
+                let t = cols[0][l] * qp[0] + cols[1][l] * qp[1] + cols[2][l] * qp[2] + c * (uj[l] - ui[l]);
+                o[l] -= t;
+                fi[l] += t;
+            }
         }
-        out[i] += Vec3::new(fi[0], fi[1], fi[2]);
+        for l in 0..4 {
+            out[i][l] += fi[l];
+        }
     }
 
     /// Forces \[N\] of the rest-linearised system (small-strain stress, `F = I`, plus hourglass
     /// control) for displacements `u` \[m\] into `out` (overwritten): `out = -K0 u`.
     pub fn linearised_forces(&self, u: &[Vec3], out: &mut [Vec3]) {
-        out.iter_mut().for_each(|f| *f = Vec3::zeros());
+        let u4 = to_p4(u);
+        let mut f = vec![[0.0; 4]; self.n_particles()];
         for i in 0..self.n_particles() {
-            self.add_particle_forces(i, u, None, true, out);
+            self.add_particle_forces(i, &u4, None, true, &mut f);
+        }
+        for (o, f) in out.iter_mut().zip(&f) {
+            *o = v3(f);
         }
     }
 
@@ -400,13 +392,13 @@ impl ParticleModel {
                 return 0.0;
             }
             u.iter_mut().for_each(|u| *u /= norm);
-            f.iter_mut().for_each(|f| *f = Vec3::zeros());
-            for i in 0..n {
-                if viscous {
+            if viscous {
+                f.iter_mut().for_each(|f| *f = Vec3::zeros());
+                for i in 0..n {
                     self.add_linear_viscous(i, &u, &mut f);
-                } else {
-                    self.add_particle_forces(i, &u, None, true, &mut f);
                 }
+            } else {
+                self.linearised_forces(&u, &mut f);
             }
             // Rayleigh quotient u^T (-f) with |u|_M = 1, then u <- M^-1 (-f).
             let next: f64 = (0..n).filter(|&i| !self.fixed[i]).map(|i| -f[i].dot(&u[i])).sum();
@@ -539,7 +531,8 @@ impl ParticleModel {
                 if ws.mark[j] != ws.stamp {
                     ws.mark[j] = ws.stamp;
                     ws.touched.push(j);
-                    ws.u[j] = state.x[j] - self.rest[j];
+                    ws.u[j] = p4(&(state.x[j] - self.rest[j]));
+                    ws.v[j] = p4(&state.v[j]);
                 }
             }
         }
@@ -547,20 +540,22 @@ impl ParticleModel {
         for _ in 0..substeps {
             // Zero the force on every particle the active ones touch, then accumulate.
             for &i in &ws.touched {
-                ws.force[i] = Vec3::zeros();
+                ws.force[i] = [0.0; 4];
             }
             for &i in &state.active {
-                self.add_particle_forces(i, &ws.u, Some(&state.v), false, &mut ws.force);
+                self.add_particle_forces(i, &ws.u, Some(&ws.v), false, &mut ws.force);
             }
             for &i in &state.active {
                 if self.fixed[i] {
                     state.v[i] = Vec3::zeros();
+                    ws.v[i] = [0.0; 4];
                     continue;
                 }
-                let a = (ws.force[i] + state.f_ext[i]) / self.mass[i] + self.gravity;
+                let a = (v3(&ws.force[i]) + state.f_ext[i]) / self.mass[i] + self.gravity;
                 state.v[i] += h * a;
                 state.x[i] += h * state.v[i];
-                ws.u[i] += h * state.v[i];
+                ws.u[i] = p4(&(v3(&ws.u[i]) + h * state.v[i]));
+                ws.v[i] = p4(&state.v[i]);
             }
         }
         let bad = state.active.iter().copied().find(|&i| !is_finite3(&state.x[i]) || !is_finite3(&state.v[i]));
@@ -610,8 +605,9 @@ impl ParticleState {
 /// Scratch space of the particle step (sized once: stepping allocates nothing).
 #[derive(Debug, Clone)]
 pub struct ParticleWorkspace {
-    pub(crate) force: Vec<Vec3>,
-    pub(crate) u: Vec<Vec3>,
+    pub(crate) force: Vec<P4>,
+    pub(crate) u: Vec<P4>,
+    pub(crate) v: Vec<P4>,
     pub(crate) save: Vec<(Vec3, Vec3)>,
     pub(crate) touched: Vec<usize>,
     pub(crate) mark: Vec<u64>,
@@ -623,12 +619,48 @@ impl ParticleWorkspace {
     pub fn new(model: &ParticleModel) -> ParticleWorkspace {
         let n = model.n_particles();
         ParticleWorkspace {
-            force: vec![Vec3::zeros(); n],
-            u: vec![Vec3::zeros(); n],
+            force: vec![[0.0; 4]; n],
+            u: vec![[0.0; 4]; n],
+            v: vec![[0.0; 4]; n],
             save: Vec::with_capacity(n),
             touched: Vec::with_capacity(n),
             mark: vec![0; n],
             stamp: 0,
         }
     }
+}
+
+/// A 3-vector padded to 4 lanes (the 4th is always 0), so that the per-pair arithmetic of the
+/// hot loop is 4-wide straight-line code the compiler maps onto SIMD registers.
+pub(crate) type P4 = [f64; 4];
+
+#[inline(always)]
+fn p4(v: &Vec3) -> P4 {
+    [v.x, v.y, v.z, 0.0]
+}
+
+#[inline(always)]
+fn v3(p: &P4) -> Vec3 {
+    Vec3::new(p[0], p[1], p[2])
+}
+
+fn to_p4(v: &[Vec3]) -> Vec<P4> {
+    v.iter().map(p4).collect()
+}
+
+/// `K = sum_j (w_j - w_i) q_ij^T` over one particle's pairs, for a field `w` (displacements or
+/// velocities): row `a` of K accumulates `d_a q_ij` as one 4-lane multiply-add.
+#[inline(always)]
+fn gather(nbr: &[usize], q: &[P4], w: &[P4], wi: P4) -> Mat3 {
+    let mut rows = [[0.0f64; 4]; 3];
+    for (&j, qp) in nbr.iter().zip(q) {
+        let wj = w[j];
+        let d = [wj[0] - wi[0], wj[1] - wi[1], wj[2] - wi[2]];
+        for a in 0..3 {
+            for l in 0..4 {
+                rows[a][l] += d[a] * qp[l];
+            }
+        }
+    }
+    Mat3::new(rows[0][0], rows[0][1], rows[0][2], rows[1][0], rows[1][1], rows[1][2], rows[2][0], rows[2][1], rows[2][2])
 }
