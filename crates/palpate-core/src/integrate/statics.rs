@@ -11,12 +11,13 @@ use crate::scene::{Model, Workspace};
 /// Options of [`static_solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StaticOptions {
-    /// Newton iteration cap over all load increments.
+    /// Newton iteration cap per load increment.
     pub max_iterations: usize,
     /// Convergence: `max_i |r_i| <= tolerance * max_i |f_ext,i + m_i g|` over free nodes, or the
     /// round-off level of the internal forces (see `round_off_floor`), whichever is larger.
     pub tolerance: f64,
-    /// The load is applied in this many equal increments (1 for small loads).
+    /// The load is applied in this many equal increments (1 for small loads); if Newton fails
+    /// (indefinite tangent or no convergence), the solve restarts with 4x as many, up to 256.
     pub load_steps: usize,
 }
 
@@ -81,20 +82,34 @@ pub fn static_solve(model: &Model, f_ext: &[Vec3], opts: &StaticOptions) -> Resu
     }
     let applied: Vec<Vec3> = (0..n).map(|i| f_ext[i] + model.mass[i] * model.gravity).collect();
     let scale = model.free_nodes.iter().map(|&i| applied[i].norm()).fold(0.0, f64::max);
-    let mut x = model.mesh.points().to_vec();
     if scale == 0.0 || model.free_nodes.is_empty() {
-        return Ok(StaticSolution { x, iterations: 0, residual: 0.0 });
+        return Ok(StaticSolution { x: model.mesh.points().to_vec(), iterations: 0, residual: 0.0 });
     }
+    // A load too large for one Newton solve from rest (the tangent turns indefinite on the way,
+    // or Newton stalls) is retried in more increments: 4x more each time, up to 256.
+    let mut steps = opts.load_steps.max(1);
+    loop {
+        match solve_in_increments(model, &applied, scale, opts, steps) {
+            Err(SolveError::NotPositiveDefinite { .. } | SolveError::NoConvergence { .. }) if steps < 256 => steps *= 4,
+            other => return other,
+        }
+    }
+}
+
+/// Newton from rest, the load applied in `steps` equal increments.
+fn solve_in_increments(model: &Model, applied: &[Vec3], scale: f64, opts: &StaticOptions, steps: usize) -> Result<StaticSolution, SolveError> {
+    let n = model.n_nodes();
+    let mut x = model.mesh.points().to_vec();
     let tol = opts.tolerance * scale;
     let mut ws = Workspace::new(model);
     let mut trial = x.clone();
     let mut magnitudes = vec![0.0; n];
     let mut iterations = 0;
     let mut r = 0.0;
-    let steps = opts.load_steps.max(1);
     for s in 1..=steps {
         let lam = s as f64 / steps as f64;
-        r = residual(model, &x, &applied, lam, &mut ws);
+        r = residual(model, &x, applied, lam, &mut ws);
+        let first = iterations;
         loop {
             // Converged at the requested tolerance, or at the round-off level of the forces
             // (a tolerance below it could never be met).
@@ -102,7 +117,7 @@ pub fn static_solve(model: &Model, f_ext: &[Vec3], opts: &StaticOptions) -> Resu
             if r <= tol.max(floor) {
                 break;
             }
-            if iterations >= opts.max_iterations {
+            if iterations - first >= opts.max_iterations {
                 return Err(SolveError::NoConvergence { iterations, residual: r, tolerance: tol.max(floor) });
             }
             iterations += 1;
@@ -118,7 +133,7 @@ pub fn static_solve(model: &Model, f_ext: &[Vec3], opts: &StaticOptions) -> Resu
                 for (fi, &node) in model.free_nodes.iter().enumerate() {
                     trial[node] = x[node] + alpha * ws.rhs[model.node_pos[fi]];
                 }
-                let rt = residual(model, &trial, &applied, lam, &mut ws);
+                let rt = residual(model, &trial, applied, lam, &mut ws);
                 if rt < r || alpha < 1e-4 {
                     r = rt;
                     break;
