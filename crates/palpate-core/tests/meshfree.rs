@@ -271,23 +271,6 @@ fn stable_dt_is_tight() {
     assert!(!run(1.1 * dt_crit), "stable well above the computed limit: the bound is not tight");
 }
 
-/// Dense rest stiffness `K0` (3n x 3n) of a particle body, column by column.
-fn dense_stiffness(model: &ParticleModel) -> nalgebra::DMatrix<f64> {
-    let n = model.n_particles();
-    let mut k = nalgebra::DMatrix::zeros(3 * n, 3 * n);
-    let mut u = vec![Vec3::zeros(); n];
-    let mut f = vec![Vec3::zeros(); n];
-    for col in 0..3 * n {
-        u[col / 3][col % 3] = 1e-9;
-        model.linearised_forces(&u, &mut f);
-        u[col / 3][col % 3] = 0.0;
-        for row in 0..3 * n {
-            k[(row, col)] = -f[row / 3][row % 3] / 1e-9;
-        }
-    }
-    k
-}
-
 /// The checkerboard (hourglass) mode of a lattice, `u_i = (-1)^(i+j+k) e_x` on the interior
 /// particles, is invisible to the MLS gradient of every particle whose neighbourhood it covers
 /// (face neighbours cancel in pairs, edge neighbours move with the particle): without control
