@@ -10,8 +10,8 @@ fn material(damped: bool) -> Material {
     Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, d).unwrap()
 }
 
-/// A cubic lattice block of `n` particles per side, spacing 1 mm, support 1.8 spacings.
-fn block(n: [usize; 3], damped: bool) -> ParticleModel {
+/// Cubic lattice points of spacing 1 mm, `n` per side (x fastest) and their masses.
+fn lattice(n: [usize; 3]) -> (Vec<Vec3>, Vec<f64>) {
     let mut pts = Vec::new();
     for k in 0..n[2] {
         for j in 0..n[1] {
@@ -21,6 +21,12 @@ fn block(n: [usize; 3], damped: bool) -> ParticleModel {
         }
     }
     let m = vec![1000.0 * SPACING.powi(3); pts.len()];
+    (pts, m)
+}
+
+/// A cubic lattice block of `n` particles per side, spacing 1 mm, support 1.8 spacings.
+fn block(n: [usize; 3], damped: bool) -> ParticleModel {
+    let (pts, m) = lattice(n);
     ParticleModelBuilder::new(pts, m, material(damped), 1.8 * SPACING).build().unwrap()
 }
 
@@ -202,15 +208,7 @@ fn damped_energy_decays() {
 fn hourglass_control_keeps_particles_from_clumping_or_crossing() {
     let n = [6, 6, 6];
     let build = |kappa: f64| {
-        let mut pts = Vec::new();
-        for k in 0..n[2] {
-            for j in 0..n[1] {
-                for i in 0..n[0] {
-                    pts.push(Vec3::new(i as f64, j as f64, k as f64) * SPACING);
-                }
-            }
-        }
-        let m = vec![1000.0 * SPACING.powi(3); pts.len()];
+        let (pts, m) = lattice(n);
         let fixed: Vec<usize> = (0..n[0] * n[1]).collect();
         ParticleModelBuilder::new(pts, m, material(true), 1.8 * SPACING).fixed_particles(fixed).hourglass(kappa).build().unwrap()
     };
