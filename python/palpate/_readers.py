@@ -302,6 +302,21 @@ def _tetgen_rows(f: _Lines, what: str):
             yield line.split()
 
 
+
+def _tetgen_header(path, what: str, usage: str):
+    """Open a TetGen file: its line reader, the row iterator past the header, and the header's
+    integers (at least two)."""
+    f = _Lines(path, read_text(path))
+    rows = _tetgen_rows(f, what)
+    head = next(rows, None)
+    if head is None:
+        raise MeshError(f"{f.name}: no header line")
+    ext = ".node" if what == "node" else ".ele"
+    h = f.ints(" ".join(head), f"the {ext} header")
+    if len(h) < 2:
+        raise f.error(f"expected {usage}")
+    return f, rows, h
+
 def read_tetgen(path: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:
     """Read a TetGen mesh given as ``NAME.node`` or ``NAME.ele`` (the other file must sit beside it)."""
     stem, ext = os.path.splitext(path)
@@ -312,14 +327,7 @@ def read_tetgen(path: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:
             raise MeshError(f"{given}: the TetGen {kind} file {os.path.basename(p)!r} is missing "
                             f"(a TetGen mesh needs both NAME.node and NAME.ele)")
     # --- nodes
-    f = _Lines(node_path, read_text(node_path))
-    rows = _tetgen_rows(f, "node")
-    head = next(rows, None)
-    if head is None:
-        raise MeshError(f"{f.name}: no header line")
-    h = f.ints(" ".join(head), "the .node header")
-    if len(h) < 2:
-        raise f.error("expected '<#points> <dimension> [<#attributes> <#boundary markers>]'")
+    f, rows, h = _tetgen_header(node_path, "node", "'<#points> <dimension> [<#attributes> <#boundary markers>]'")
     n, dim = h[0], h[1]
     n_attr = h[2] if len(h) > 2 else 0
     n_mark = h[3] if len(h) > 3 else 0
@@ -348,14 +356,7 @@ def read_tetgen(path: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:
         raise f.error(f"more point lines than the {n} the header announces")
     points = np.array(coords, dtype=np.float64)
     # --- tets
-    g = _Lines(ele_path, read_text(ele_path))
-    rows = _tetgen_rows(g, "tet")
-    head = next(rows, None)
-    if head is None:
-        raise MeshError(f"{g.name}: no header line")
-    h = g.ints(" ".join(head), "the .ele header")
-    if len(h) < 2:
-        raise g.error("expected '<#tetrahedra> <nodes per tet> [<#attributes>]'")
+    g, rows, h = _tetgen_header(ele_path, "tet", "'<#tetrahedra> <nodes per tet> [<#attributes>]'")
     m, npt = h[0], h[1]
     n_attr = h[2] if len(h) > 2 else 0
     if npt == 10:

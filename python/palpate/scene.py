@@ -116,14 +116,20 @@ class _Ctx:
     def err(self, key: str, msg: str) -> SceneError:
         return SceneError(f"{self.path.name}: {key}: {msg}")
 
-    def number(self, table: Dict, section: str, key: str, default=None, positive=False, nonneg=False,
-               integer=False, required=False):
+    def _lookup(self, table: Dict, section: str, key: str, required: bool):
+        """(label, present, value) of ``key``; a missing required key is an error."""
         label = f"{section}.{key}" if section else key
         if key not in table:
             if required:
                 raise self.err(label, "missing (required)")
+            return label, False, None
+        return label, True, table[key]
+
+    def number(self, table: Dict, section: str, key: str, default=None, positive=False, nonneg=False,
+               integer=False, required=False):
+        label, present, v = self._lookup(table, section, key, required)
+        if not present:
             return default
-        v = table[key]
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             raise self.err(label, f"must be a {'whole ' if integer else ''}number, got {v!r}")
         if integer and not isinstance(v, int):
@@ -137,12 +143,9 @@ class _Ctx:
         return v
 
     def vec3(self, table: Dict, section: str, key: str, default=None, required=False):
-        label = f"{section}.{key}" if section else key
-        if key not in table:
-            if required:
-                raise self.err(label, "missing (required)")
+        label, present, v = self._lookup(table, section, key, required)
+        if not present:
             return default
-        v = table[key]
         if (not isinstance(v, list) or len(v) != 3
                 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
             raise self.err(label, f"must be a list of 3 finite numbers [x, y, z], got {v!r}")
