@@ -17,16 +17,16 @@ Timing. ``ParticleBody.run_timed`` times each tick (one ``step`` of dt = 1 ms, i
 ``substeps`` explicit sub-steps at the stable step) in Rust with ``Instant``; the report gives
 the median (and minimum) over the ticks and ``ticks_per_s = 1 / median``.
 
-Flop count, read off ``add_particle_forces`` and ``step_with_substeps`` in
-``crates/palpate-core/src/meshfree/body.rs`` (undamped path; adds, multiplies and divides count
-one each, as the code writes them, nalgebra evaluating full 3x3 products):
+Flop count, read off ``crates/palpate-core/src/meshfree/pair_loop.rs`` (undamped path; adds,
+multiplies and divides count one each, padding lanes not counted, 3x3 products as 45):
 
-* per directed neighbour pair and sub-step: :data:`FLOPS_PER_PAIR` = 51 — the gather
-  ``K += (u_j - u_i) q^T`` (3 + 9 + 9 = 21) and the scatter ``t = M q + c (u_j - u_i)``
-  (3 + 21), ``f_j -= t``, ``f_i += t`` (6), i.e. 30. 21 of the 51 are fusable multiply-add pairs.
-* per active particle and sub-step: :data:`FLOPS_PER_PARTICLE` = 277 — ``H = K A^-1`` (45),
-  ``F = I + H`` (9), Green strain (63), stress (22), ``P = F S`` (45), ``V P`` (9),
-  ``M = V P A^-1 - c H`` (45 + 18), the Verlet update (21).
+* per directed neighbour pair and sub-step: :data:`FLOPS_PER_PAIR` = 50 — pass 1 gathers
+  ``K += (u_j - u_i) q^T`` (3 + 18 = 21); pass 2 gathers ``B_j q`` (18) and the hourglass term
+  ``(gamma_i + gamma_j) w (u_j - u_i)`` (2 + 3 + 6 = 11), i.e. 29.
+* per active particle and sub-step: :data:`FLOPS_PER_PARTICLE` = 285 — ``H = K R`` (45),
+  ``F = I + H`` (3), ``F^T F`` and its symmetric part (63), Green strain (12), stress (24),
+  ``P = F S`` (45), ``P - gamma K`` (18), ``B = (P - gamma K) R`` (45), ``B_i Q_i`` and the
+  volume factor (18), the Verlet update (12).
 
 The peak is one core's: ``cpu MHz`` from ``/proc/cpuinfo`` x 16 double-precision flops per cycle
 (AVX2 FMA: 2 FMA units x 4 lanes x 2 flops; a Zen 4 runs AVX-512 as two 256-bit halves, so 16
@@ -57,8 +57,8 @@ FIXED_FRACTION = 0.10
 DT = 1e-3                      # one haptic tick [s]
 ALL = [200, 600, 2000, 28000]
 
-FLOPS_PER_PAIR = 51
-FLOPS_PER_PARTICLE = 277
+FLOPS_PER_PAIR = 50
+FLOPS_PER_PARTICLE = 285
 FLOPS_PER_CYCLE = 16
 
 KERNELS = {
@@ -152,7 +152,7 @@ def prune(pos: np.ndarray, spacing: float, radius: float, kernel: str, min_ratio
         keep = keep[ok]
 
 
-def cluster(n: int, spacing: float, kernel: str = "wendland"):
+def cluster(n: int, spacing: float, kernel: str = "wendland", support: float = SUPPORT_FACTOR):
     """The benchmark cluster (see the module docs): positions, masses, fixed, probe indices, fill size.
 
     The ``n`` particles nearest the probe point that survive :func:`prune`: the candidate count
@@ -167,7 +167,7 @@ def cluster(n: int, spacing: float, kernel: str = "wendland"):
     p, _ = probe_point()
     d = np.linalg.norm(pos - p, axis=1)
     rank = np.argsort(d, kind="stable")
-    radius = SUPPORT_FACTOR * spacing
+    radius = support * spacing
     k, sel = n, None
     for _ in range(100):
         cand = rank[:k]
@@ -190,12 +190,12 @@ def cluster(n: int, spacing: float, kernel: str = "wendland"):
 
 
 def run(n: int, spacing: float = SPACING, kernel: str = "wendland", ticks: int = 200,
-        max_wall_s: Optional[float] = None) -> dict:
+        max_wall_s: Optional[float] = None, support: float = SUPPORT_FACTOR) -> dict:
     """Build the cluster of ``n`` particles and time ``ticks`` ticks of 1 ms; a JSON-able dict."""
-    pos, m, fixed, probe, n_fill = cluster(n, spacing, kernel)
+    pos, m, fixed, probe, n_fill = cluster(n, spacing, kernel, support)
     material = _p.Material(young=E, poisson=NU, density=RHO)
     t0 = time.perf_counter()
-    body = _p.ParticleBody(pos, m, material, SUPPORT_FACTOR * spacing, kernel=KERNELS[kernel], fixed=fixed)
+    body = _p.ParticleBody(pos, m, material, support * spacing, kernel=KERNELS[kernel], fixed=fixed)
     build_s = time.perf_counter() - t0
     _, normal = probe_point()
     f = np.zeros((n, 3))
@@ -217,6 +217,7 @@ def run(n: int, spacing: float = SPACING, kernel: str = "wendland", ticks: int =
         "spacing_m": spacing,
         "support_radius_m": body.support_radius,
         "kernel": kernel,
+        "hot_loop": _p.simd_path(),
         "mean_neighbours": pairs / n,
         "pairs": pairs,
         "fixed": len(fixed),

@@ -120,21 +120,25 @@ def cmd_bench_particles(a) -> int:
         raise _Fail(f"palpate bench particles: --spacing must be positive, got {a.spacing}")
     if a.ticks <= 0:
         raise _Fail("palpate bench particles: --ticks must be positive")
+    if not (1.0 < a.support < 4.0):
+        raise _Fail(f"palpate bench particles: --support must lie between 1 and 4 spacings, got {a.support}")
     sizes = bp.ALL if a.all else [a.n]
     if not a.json:
         mhz = bp.cpu_mhz()
         peak = "unknown" if mhz is None else f"{mhz * bp.FLOPS_PER_CYCLE / 1e3:.1f} GFlop/s"
         print(f"palpate {__version__} bench particles: LV-shell cluster at {a.spacing * 1e3:g} mm, kernel {a.kernel}, "
+              f"support {a.support:g} spacings, "
               f"E = {bp.E:g} Pa, nu = {bp.NU}, rho = {bp.RHO:g} kg/m^3, {bp.PROBE_FORCE:g} N on {bp.N_PROBE} particles, "
               f"{a.ticks} ticks of {bp.DT * 1e3:g} ms, one thread")
         print(f"  flops per pair per sub-step {bp.FLOPS_PER_PAIR}, per particle {bp.FLOPS_PER_PARTICLE}; peak {peak} "
-              f"(cpu MHz {mhz} x {bp.FLOPS_PER_CYCLE} flop/cycle: AVX2 FMA, 2 units x 4 doubles x 2)")
+              f"(cpu MHz {mhz} x {bp.FLOPS_PER_CYCLE} flop/cycle: AVX2 FMA, 2 units x 4 doubles x 2); "
+              f"hot loop: {bp._p.simd_path()}")
         print(f"{'N':>7}{'nbrs':>7}{'fixed':>7}{'sub/tick':>9}{'sub dt us':>10}{'tick ms':>9}{'ticks/s':>9}"
               f"{'GFlop/s':>9}{'%peak':>7}{'build s':>9}{'max|u| mm':>10}")
     failed = False
     for n in sizes:
         try:
-            r = bp.run(n, a.spacing, a.kernel, a.ticks, a.max_wall)
+            r = bp.run(n, a.spacing, a.kernel, a.ticks, a.max_wall, a.support)
         except ValueError as e:
             raise _Fail(f"palpate bench particles: {e}") from None
         except _p_errors() as e:
@@ -208,6 +212,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--all", action="store_true", help="N = 200, 600, 2000, 28000")
     q.add_argument("--spacing", type=float, default=9e-4, metavar="M", help="lattice spacing [m] (default 9e-4)")
     q.add_argument("--kernel", default="wendland", choices=["wendland", "cubic", "lj"])
+    q.add_argument("--support", type=float, default=1.8, metavar="F",
+                   help="kernel support radius in lattice spacings (default 1.8)")
     q.add_argument("--ticks", type=int, default=200, help="ticks of 1 ms to time (default 200)")
     q.add_argument("--json", action="store_true", help="one JSON object per N (JSON lines)")
     q.add_argument("--max-wall", type=float, default=None, metavar="S",

@@ -45,7 +45,22 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(ellipsoid_surface, m)?)?;
     m.add_function(wrap_pyfunction!(sample_inside, m)?)?;
     m.add_function(wrap_pyfunction!(sample_between, m)?)?;
+    m.add_function(wrap_pyfunction!(simd_path, m)?)?;
+    m.add_function(wrap_pyfunction!(set_simd_enabled, m)?)?;
     Ok(())
+}
+
+/// The copy of the particle hot loop that runs on this CPU: ``"avx2+fma"`` or ``"baseline"``.
+#[pyfunction]
+fn simd_path() -> &'static str {
+    palpate_core::meshfree::simd_path()
+}
+
+/// Allow (default) or forbid the AVX2 + FMA copy of the particle hot loop, process-wide (for
+/// comparing the two copies; results agree to round-off).
+#[pyfunction]
+fn set_simd_enabled(enabled: bool) {
+    palpate_core::meshfree::set_simd_enabled(enabled)
 }
 
 fn surface_location(e: &CoreSurfaceError) -> (Option<usize>, Option<usize>) {

@@ -253,7 +253,7 @@ def test_cli_bench_particles_json():
     assert 15 <= row["mean_neighbours"] <= 30
     assert row["substeps"] >= 1 and row["substep_dt_s"] * row["substeps"] == pytest.approx(1e-3)
     assert row["tick_median_s"] > 0 and row["ticks_per_s"] == pytest.approx(1 / row["tick_median_s"])
-    assert row["flops_per_tick"] == row["substeps"] * (51 * row["pairs"] + 277 * 200)
+    assert row["flops_per_tick"] == row["substeps"] * (50 * row["pairs"] + 285 * 200)
     assert row["fixed"] == 20 and row["kernel"] == "wendland"
 
 

@@ -44,13 +44,14 @@ fn main() {
     let med = times[ticks / 2];
     let pairs = model.n_pairs();
     println!(
-        "N {} | mean neighbours {:.1} | build {:.3} s | stable dt {:.2e} s -> {} sub-steps per 1 ms | tick median {:.1} us | {:.1} ns per pair-substep",
+        "N {} | mean neighbours {:.1} | build {:.3} s | stable dt {:.2e} s -> {} sub-steps per 1 ms | tick median {:.1} us (min {:.1}) | {:.1} ns per pair-substep",
         model.n_particles(),
         pairs as f64 / model.n_particles() as f64,
         build,
         model.stable_dt(),
         sub,
         med * 1e6,
+        times[0] * 1e6,
         med * 1e9 / (pairs * sub) as f64
     );
 }

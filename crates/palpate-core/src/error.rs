@@ -99,6 +99,8 @@ pub enum StepError {
     NonFinite { what: &'static str, node: usize, time: f64 },
     #[error("state does not fit the model ({nodes} nodes): x has {x} rows, v {v}, f_ext {f_ext}")]
     StateShape { nodes: usize, x: usize, v: usize, f_ext: usize },
+    #[error("workspace was made for {workspace} nodes, the model has {nodes}: make it with the model it steps")]
+    WorkspaceShape { nodes: usize, workspace: usize },
     #[error("active particle index {index} out of range ({n} particles)")]
     ActiveOutOfRange { index: usize, n: usize },
     #[error("external force at node {node} is not finite")]

@@ -3,6 +3,7 @@
 
 use super::kernel::Kernel;
 use super::neighbors::neighbours_within;
+use super::pair_loop::{self, p4, v3, Cols, P4};
 use crate::error::{ModelError, SolveError, StepError};
 use crate::material::{self, Material};
 use crate::math::{is_finite3, Mat3, Vec3};
@@ -113,6 +114,7 @@ impl ParticleModelBuilder {
         let mut hw = vec![0.0; np];
         let mut gsum = vec![Vec3::zeros(); n];
         let mut q = vec![Vec3::zeros(); np];
+        let mut qsum = vec![Vec3::zeros(); n];
         let mut r_inv = vec![Mat3::zeros(); n];
         let mut hg_c = vec![0.0; n];
         for i in 0..n {
@@ -148,11 +150,14 @@ impl ParticleModelBuilder {
                 q[p] = hw[p] * xr[p];
                 g[p] = a_inv * q[p];
                 gsum[i] += g[p];
-                hw[p] *= c;
+                qsum[i] += q[p];
             }
         }
+        let gamma = (0..n).map(|i| hg_c[i] / volume[i]).collect();
+        let nbr32 = nbr.iter().map(|&j| j as u32).collect();
         let mut model = ParticleModel {
             rest,
+            inv_mass: masses.iter().map(|m| 1.0 / m).collect(),
             mass: masses,
             density,
             volume,
@@ -161,10 +166,14 @@ impl ParticleModelBuilder {
             xr,
             g,
             gsum,
-            hw,
+            w: hw,
+            nbr32,
             q4: to_p4(&q),
-            r_inv,
+            qsum4: to_p4(&qsum),
+            r_rows: r_inv.iter().map(|r| [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]]).collect(),
+            r4: r_inv.iter().map(|r| [p4(&r.column(0).into()), p4(&r.column(1).into()), p4(&r.column(2).into())]).collect(),
             hg_c,
+            gamma,
             fixed: is_fixed,
             gravity,
             material,
@@ -184,21 +193,26 @@ impl ParticleModelBuilder {
 pub struct ParticleModel {
     pub(crate) rest: Vec<Vec3>,
     pub(crate) mass: Vec<f64>,
+    pub(crate) inv_mass: Vec<f64>,
     pub(crate) density: Vec<f64>,
     pub(crate) volume: Vec<f64>,
-    /// Neighbours of `i`: `nbr[ptr[i]..ptr[i+1]]`; per pair: rest vector `X_ij`, MLS gradient
-    /// `g_ij`, hourglass weight `c_i w_ij`.
+    /// Neighbours of `i`: `nbr[ptr[i]..ptr[i+1]]` (and as `u32`, for the hot loop); per pair:
+    /// rest vector `X_ij`, MLS gradient `g_ij`, weight `w_ij = V_j W_ij`.
     pub(crate) ptr: Vec<usize>,
     pub(crate) nbr: Vec<usize>,
+    pub(crate) nbr32: Vec<u32>,
     pub(crate) xr: Vec<Vec3>,
     pub(crate) g: Vec<Vec3>,
     pub(crate) gsum: Vec<Vec3>,
-    pub(crate) hw: Vec<f64>,
-    /// Per pair `q_ij = w_ij X_ij`, so that `g_ij = A_i^-1 q_ij`; per particle `A_i^-1` and the
-    /// hourglass coefficient `c_i` (see `add_particle_forces`).
+    pub(crate) w: Vec<f64>,
+    /// Per pair `q_ij = w_ij X_ij`, so that `g_ij = A_i^-1 q_ij`; per particle `Q_i = sum_j q_ij`,
+    /// `A_i^-1`, the hourglass coefficient `c_i` and `gamma_i = c_i / V_i` (see [`pair_loop`]).
     pub(crate) q4: Vec<P4>,
-    pub(crate) r_inv: Vec<Mat3>,
+    pub(crate) qsum4: Vec<P4>,
+    pub(crate) r_rows: Vec<[[f64; 3]; 3]>,
+    pub(crate) r4: Vec<Cols>,
     pub(crate) hg_c: Vec<f64>,
+    pub(crate) gamma: Vec<f64>,
     pub(crate) fixed: Vec<bool>,
     pub(crate) gravity: Vec3,
     pub(crate) material: Material,
@@ -255,19 +269,24 @@ impl ParticleModel {
 
     /// Elastic energy \[J\]: `sum_i V_i psi(F_i)` plus the hourglass-control energy.
     pub fn strain_energy(&self, x: &[Vec3]) -> f64 {
+        (0..self.n_particles()).map(|i| self.particle_energy(i, x)).sum()
+    }
+
+    /// The part of [`ParticleModel::strain_energy`] that particle `i` carries \[J\]:
+    /// `V_i psi(F_i)` plus its hourglass-control energy `c_i/2 sum_j w_ij |x_ij - F_i X_ij|^2`.
+    /// The force on a particle is minus the gradient of the sum of these over the *active*
+    /// particles (frozen ones carry no stress).
+    pub fn particle_energy(&self, i: usize, x: &[Vec3]) -> f64 {
         let (lam, mu) = (self.material.lambda(), self.material.mu());
-        let mut total = 0.0;
-        for i in 0..self.n_particles() {
-            let f = self.deformation_gradient(i, x);
-            let e = material::green_strain(&f);
-            total += self.volume[i] * (mu * e.norm_squared() + 0.5 * lam * e.trace() * e.trace());
-            let ui = x[i] - self.rest[i];
-            let hmat = f - Mat3::identity();
-            for p in self.ptr[i]..self.ptr[i + 1] {
-                let j = self.nbr[p];
-                let err = x[j] - self.rest[j] - ui - hmat * self.xr[p];
-                total += 0.5 * self.hw[p] * err.norm_squared();
-            }
+        let f = self.deformation_gradient(i, x);
+        let e = material::green_strain(&f);
+        let mut total = self.volume[i] * (mu * e.norm_squared() + 0.5 * lam * e.trace() * e.trace());
+        let ui = x[i] - self.rest[i];
+        let hmat = f - Mat3::identity();
+        for p in self.ptr[i]..self.ptr[i + 1] {
+            let j = self.nbr[p];
+            let err = x[j] - self.rest[j] - ui - hmat * self.xr[p];
+            total += 0.5 * self.hg_c[i] * self.w[p] * err.norm_squared();
         }
         total
     }
@@ -287,77 +306,21 @@ impl ParticleModel {
     pub fn internal_forces(&self, x: &[Vec3], v: Option<&[Vec3]>, out: &mut [Vec3]) {
         let u: Vec<P4> = x.iter().zip(&self.rest).map(|(x, x0)| p4(&(x - x0))).collect();
         let v4 = v.map(to_p4);
-        let mut f = vec![[0.0; 4]; self.n_particles()];
-        for i in 0..self.n_particles() {
-            self.add_particle_forces(i, &u, v4.as_deref(), false, &mut f);
-        }
-        for (o, f) in out.iter_mut().zip(&f) {
-            *o = v3(f);
-        }
-    }
-
-    /// Add the forces that particle `i`'s stress and hourglass control exert on `i` and its
-    /// neighbours, for displacements `u` (and velocities `v`). `linear`: small-strain stress with
-    /// `F = I` (the rest-linearised operator).
-    ///
-    /// This is the hot loop. With `q_ij = w_ij X_ij`, `g_ij = A_i^-1 q_ij` and `K = sum_j u_ij q_ij^T`,
-    /// the displacement gradient is `H = K A_i^-1`, and the force on neighbour `j`,
-    /// `t_ij = V_i P_i g_ij + c_i w_ij (u_ij - H X_ij)`, folds into one matrix per particle:
-    /// `t_ij = M_i q_ij + (c_i w_ij) u_ij` with `M_i = V_i P_i A_i^-1 - c_i H`. Per pair that is
-    /// two 3x3 products (gather and scatter) instead of four.
-    #[inline]
-    fn add_particle_forces(&self, i: usize, u: &[P4], v: Option<&[P4]>, linear: bool, out: &mut [P4]) {
-        let (s, e) = (self.ptr[i], self.ptr[i + 1]);
-        let nbr = &self.nbr[s..e];
-        let q = &self.q4[s..e];
-        let hw = &self.hw[s..e];
-        let k = gather(nbr, q, u, u[i]);
-        let r = &self.r_inv[i];
-        let hmat = k * r;
-        let m = &self.material;
-        let pk = if linear {
-            material::stress(m, &(0.5 * (hmat + hmat.transpose())))
-        } else {
-            let f = Mat3::identity() + hmat;
-            let mut st = material::stress(m, &material::green_strain(&f));
-            if let Some(v) = v {
-                if !m.is_undamped() {
-                    let kv = gather(nbr, q, v, v[i]);
-                    st += material::viscous_stress(m, &material::strain_rate(&f, &(kv * r)));
-                }
-            }
-            f * st
-        };
-        let mi = self.volume[i] * pk * r - self.hg_c[i] * hmat;
-        let cols = [
-            [mi[(0, 0)], mi[(1, 0)], mi[(2, 0)], 0.0],
-            [mi[(0, 1)], mi[(1, 1)], mi[(2, 1)], 0.0],
-            [mi[(0, 2)], mi[(1, 2)], mi[(2, 2)], 0.0],
-        ];
-        let ui = u[i];
-        let mut fi = [0.0f64; 4];
-        for ((&j, qp), &c) in nbr.iter().zip(q).zip(hw) {
-            let uj = u[j];
-            let o = &mut out[j];
-            for l in 0..4 {
-                let t = cols[0][l] * qp[0] + cols[1][l] * qp[1] + cols[2][l] * qp[2] + c * (uj[l] - ui[l]);
-                o[l] -= t;
-                fi[l] += t;
-            }
-        }
-        for l in 0..4 {
-            out[i][l] += fi[l];
-        }
+        self.forces_of(&u, v4.as_deref(), false, out);
     }
 
     /// Forces \[N\] of the rest-linearised system (small-strain stress, `F = I`, plus hourglass
     /// control) for displacements `u` \[m\] into `out` (overwritten): `out = -K0 u`.
     pub fn linearised_forces(&self, u: &[Vec3], out: &mut [Vec3]) {
-        let u4 = to_p4(u);
-        let mut f = vec![[0.0; 4]; self.n_particles()];
-        for i in 0..self.n_particles() {
-            self.add_particle_forces(i, &u4, None, true, &mut f);
-        }
+        self.forces_of(&to_p4(u), None, true, out);
+    }
+
+    fn forces_of(&self, u: &[P4], v: Option<&[P4]>, linear: bool, out: &mut [Vec3]) {
+        let n = self.n_particles();
+        let mut b: Vec<Cols> = vec![[[0.0; 4]; 3]; n];
+        let mut gamma = vec![0.0; n];
+        let mut f = vec![[0.0; 4]; n];
+        pair_loop::all_forces(self, u, v, linear, &mut b, &mut gamma, &mut f);
         for (o, f) in out.iter_mut().zip(&f) {
             *o = v3(f);
         }
@@ -512,6 +475,9 @@ impl ParticleModel {
         if state.x.len() != n || state.v.len() != n || state.f_ext.len() != n {
             return Err(StepError::StateShape { nodes: n, x: state.x.len(), v: state.v.len(), f_ext: state.f_ext.len() });
         }
+        if ws.len() != n {
+            return Err(StepError::WorkspaceShape { nodes: n, workspace: ws.len() });
+        }
         for &i in &state.active {
             if i >= n {
                 return Err(StepError::ActiveOutOfRange { index: i, n });
@@ -537,27 +503,7 @@ impl ParticleModel {
             }
         }
         let h = dt / substeps as f64;
-        for _ in 0..substeps {
-            // Zero the force on every particle the active ones touch, then accumulate.
-            for &i in &ws.touched {
-                ws.force[i] = [0.0; 4];
-            }
-            for &i in &state.active {
-                self.add_particle_forces(i, &ws.u, Some(&ws.v), false, &mut ws.force);
-            }
-            for &i in &state.active {
-                if self.fixed[i] {
-                    state.v[i] = Vec3::zeros();
-                    ws.v[i] = [0.0; 4];
-                    continue;
-                }
-                let a = (v3(&ws.force[i]) + state.f_ext[i]) / self.mass[i] + self.gravity;
-                state.v[i] += h * a;
-                state.x[i] += h * state.v[i];
-                ws.u[i] = p4(&(v3(&ws.u[i]) + h * state.v[i]));
-                ws.v[i] = p4(&state.v[i]);
-            }
-        }
+        pair_loop::run_substeps(self, state, ws, h, substeps);
         let bad = state.active.iter().copied().find(|&i| !is_finite3(&state.x[i]) || !is_finite3(&state.v[i]));
         if let Some(node) = bad {
             for (k, &i) in state.active.iter().enumerate() {
@@ -606,6 +552,10 @@ impl ParticleState {
 #[derive(Debug, Clone)]
 pub struct ParticleWorkspace {
     pub(crate) force: Vec<P4>,
+    pub(crate) b: Vec<Cols>,
+    pub(crate) gamma: Vec<f64>,
+    pub(crate) acc_ext: Vec<P4>,
+    pub(crate) free: Vec<usize>,
     pub(crate) u: Vec<P4>,
     pub(crate) v: Vec<P4>,
     pub(crate) save: Vec<(Vec3, Vec3)>,
@@ -615,11 +565,25 @@ pub struct ParticleWorkspace {
 }
 
 impl ParticleWorkspace {
+    /// Number of particles it was made for (every per-particle array has this length).
+    fn len(&self) -> usize {
+        let n = self.u.len();
+        if [self.force.len(), self.v.len(), self.b.len(), self.gamma.len(), self.acc_ext.len(), self.mark.len()].iter().all(|&l| l == n) {
+            n
+        } else {
+            usize::MAX
+        }
+    }
+
     /// Scratch space for `model`.
     pub fn new(model: &ParticleModel) -> ParticleWorkspace {
         let n = model.n_particles();
         ParticleWorkspace {
             force: vec![[0.0; 4]; n],
+            b: vec![[[0.0; 4]; 3]; n],
+            gamma: vec![0.0; n],
+            acc_ext: vec![[0.0; 4]; n],
+            free: Vec::with_capacity(n),
             u: vec![[0.0; 4]; n],
             v: vec![[0.0; 4]; n],
             save: Vec::with_capacity(n),
@@ -630,37 +594,6 @@ impl ParticleWorkspace {
     }
 }
 
-/// A 3-vector padded to 4 lanes (the 4th is always 0), so that the per-pair arithmetic of the
-/// hot loop is 4-wide straight-line code the compiler maps onto SIMD registers.
-pub(crate) type P4 = [f64; 4];
-
-#[inline(always)]
-fn p4(v: &Vec3) -> P4 {
-    [v.x, v.y, v.z, 0.0]
-}
-
-#[inline(always)]
-fn v3(p: &P4) -> Vec3 {
-    Vec3::new(p[0], p[1], p[2])
-}
-
 fn to_p4(v: &[Vec3]) -> Vec<P4> {
     v.iter().map(p4).collect()
-}
-
-/// `K = sum_j (w_j - w_i) q_ij^T` over one particle's pairs, for a field `w` (displacements or
-/// velocities): row `a` of K accumulates `d_a q_ij` as one 4-lane multiply-add.
-#[inline(always)]
-fn gather(nbr: &[usize], q: &[P4], w: &[P4], wi: P4) -> Mat3 {
-    let mut rows = [[0.0f64; 4]; 3];
-    for (&j, qp) in nbr.iter().zip(q) {
-        let wj = w[j];
-        let d = [wj[0] - wi[0], wj[1] - wi[1], wj[2] - wi[2]];
-        for a in 0..3 {
-            for l in 0..4 {
-                rows[a][l] += d[a] * qp[l];
-            }
-        }
-    }
-    Mat3::new(rows[0][0], rows[0][1], rows[0][2], rows[1][0], rows[1][1], rows[1][2], rows[2][0], rows[2][1], rows[2][2])
 }

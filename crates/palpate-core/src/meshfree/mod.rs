@@ -37,8 +37,10 @@
 //! [`DEFAULT_HOURGLASS`]) is dimensionless.
 
 mod body;
+mod pair_loop;
 pub mod kernel;
 pub mod neighbors;
 
 pub use body::{ParticleModel, ParticleModelBuilder, ParticleState, ParticleStepReport, ParticleWorkspace, DEFAULT_HOURGLASS, STABILITY_SAFETY};
 pub use kernel::Kernel;
+pub use pair_loop::{set_simd_enabled, simd_path};
