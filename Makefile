@@ -23,6 +23,9 @@ export MPLBACKEND ?= Agg
 all: setup
 
 setup: $(VENV)/.built
+# The Rodero et al. left ventricle (python -m palpate.data): fetched once, after the extension is
+# built (palpate must import); offline, set-up goes on and the tests that need it skip.
+setup: $(VENV)/.data
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -35,6 +38,10 @@ $(VENV)/.deps: $(BIN)/python Makefile
 $(VENV)/.built: $(VENV)/.deps $(RUST_INPUTS)
 	cd python && VIRTUAL_ENV=$(CURDIR)/$(VENV) ../$(BIN)/maturin develop --release -q
 	touch $@
+
+$(VENV)/.data: python/palpate/data.py | $(VENV)/.built
+	@if $(BIN)/python -m palpate.data; then touch $@; \
+	else echo "palpate: could not fetch the Rodero LV data set (see above); tests that need it will skip" >&2; fi
 
 demo: setup
 	$(BIN)/python -m palpate.demo

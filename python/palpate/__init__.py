@@ -43,7 +43,8 @@ from ._palpate import (
     truncated_ellipsoid_wall,
 )
 from .io import UNITS, VtuSeries, load_mesh, read_mesh_arrays
-from .surfaces import load_surface, read_surface_arrays
+from .surfaces import load_surface, orient_consistently, read_surface_arrays, read_tagged_surface
+from .vtp import read_vtp
 
 __all__ = [
     "BackwardEuler",
@@ -70,8 +71,11 @@ __all__ = [
     "ellipsoid_wall",
     "load_mesh",
     "load_surface",
+    "orient_consistently",
     "read_mesh_arrays",
     "read_surface_arrays",
+    "read_tagged_surface",
+    "read_vtp",
     "sample_between",
     "sample_inside",
     "truncated_ellipsoid_wall",
