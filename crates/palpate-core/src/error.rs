@@ -108,3 +108,39 @@ pub enum StepError {
     #[error(transparent)]
     Solve(#[from] SolveError),
 }
+
+/// A hybrid model that cannot be built from the given surfaces and options.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum HybridError {
+    #[error(transparent)]
+    Surface(#[from] crate::mesh::SurfaceError),
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    #[error("{name} = {value}: {reason}")]
+    Parameter { name: &'static str, value: f64, reason: &'static str },
+    #[error("surface parts: {0}")]
+    Parts(String),
+    #[error("FEM core: {0}")]
+    Core(String),
+    #[error("particles: {0}")]
+    Particles(String),
+}
+
+/// A compiled-model file that cannot be read.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum ModelFileError {
+    #[error("{path}: {reason}")]
+    Io { path: String, reason: String },
+    #[error("{path}: not a palpate model file (its first bytes are not the palpate magic number)")]
+    NotAModel { path: String },
+    #[error("{path}: model file format version {found}, this palpate reads version {supported}; rebuild the model with `palpate build`")]
+    Version { path: String, found: u32, supported: u32 },
+    #[error("{path}: truncated: {field} needs {need} bytes at offset {offset}, the file has {have}")]
+    Truncated { path: String, field: &'static str, offset: usize, need: usize, have: usize },
+    #[error("{path}: corrupted: checksum {computed:016x} does not match the stored {stored:016x}")]
+    Checksum { path: String, stored: u64, computed: u64 },
+    #[error("{path}: corrupted: {reason}")]
+    Corrupt { path: String, reason: String },
+}

@@ -23,6 +23,7 @@
 
 pub mod error;
 pub mod fem;
+pub mod hybrid;
 pub mod integrate;
 pub mod linalg;
 pub mod material;
@@ -31,7 +32,7 @@ pub mod mesh;
 pub mod meshfree;
 pub mod scene;
 
-pub use error::{MaterialError, MeshError, ModelError, SolveError, StepError};
+pub use error::{HybridError, MaterialError, MeshError, ModelError, ModelFileError, SolveError, StepError};
 pub use integrate::{step, Integrator, StepReport};
 pub use material::Material;
 pub use math::{Mat3, Real, Vec3};

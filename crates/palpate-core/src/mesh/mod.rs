@@ -9,6 +9,7 @@ mod tet_mesh;
 pub use tet_mesh::{signed_volume, MeshWarning, TetMesh};
 
 pub mod sample;
+pub mod simplify;
 pub mod surface;
 
 pub use sample::{sample_between, sample_inside, ParticleSet};

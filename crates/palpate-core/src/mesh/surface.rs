@@ -432,18 +432,13 @@ impl ColumnGrid {
     fn candidates(&self, x: f64, y: f64) -> &[u32] {
         let fi = ((x - self.x0) * self.inv_cell).floor();
         let fj = ((y - self.y0) * self.inv_cell).floor();
-        if !(fi >= 0.0 && fj >= 0.0) {
-            // Left of / below the box (or NaN): only possible within the slack cell.
-            if fi >= -1.0 && fj >= -1.0 {
-                return self.cell(0.0f64.max(fi) as usize, 0.0f64.max(fj) as usize);
-            }
+        // Outside the box (beyond the one slack cell on each side), or NaN: no triangle.
+        if !(fi >= -1.0 && fj >= -1.0 && fi <= self.nx as f64 && fj <= self.ny as f64) {
             return &[];
         }
-        let (i, j) = (fi as usize, fj as usize);
-        if i > self.nx || j > self.ny {
-            return &[];
-        }
-        self.cell(i.min(self.nx - 1), j.min(self.ny - 1))
+        let i = (fi.max(0.0) as usize).min(self.nx - 1);
+        let j = (fj.max(0.0) as usize).min(self.ny - 1);
+        self.cell(i, j)
     }
 
     #[inline]

@@ -1,0 +1,1 @@
+//! Saving and loading a compiled [`HybridModel`]: one versioned binary file with a checksum.

@@ -1,0 +1,206 @@
+//! Spatial queries the hybrid builder needs: closest points on triangles, a bucket grid of
+//! triangles for nearest-triangle queries, and a bucket grid of tetrahedra for point location.
+
+use crate::math::Vec3;
+use crate::mesh::signed_volume;
+
+/// Closest point to `p` on triangle `(a, b, c)` and its barycentric coordinates (Ericson,
+/// *Real-Time Collision Detection*, 5.1.5): all in `[0, 1]`, summing to 1.
+pub fn closest_on_triangle(p: &Vec3, a: &Vec3, b: &Vec3, c: &Vec3) -> (Vec3, [f64; 3]) {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(&ap), ac.dot(&ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (*a, [1.0, 0.0, 0.0]);
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(&bp), ac.dot(&bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return (*b, [0.0, 1.0, 0.0]);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (a + v * ab, [1.0 - v, v, 0.0]);
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(&cp), ac.dot(&cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return (*c, [0.0, 0.0, 1.0]);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (a + w * ac, [1.0 - w, 0.0, w]);
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (b + w * (c - b), [0.0, 1.0 - w, w]);
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let (v, w) = (vb * denom, vc * denom);
+    (a + ab * v + ac * w, [1.0 - v - w, v, w])
+}
+
+/// A uniform bucket grid over a set of triangles (each bucketed by its bounding box).
+#[derive(Debug, Clone)]
+pub struct TriangleGrid {
+    lo: Vec3,
+    h: f64,
+    n: [usize; 3],
+    ptr: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl TriangleGrid {
+    /// Bucket `tris` (indices into `points`) with cells of about `cell` \[m\].
+    pub fn new(points: &[Vec3], tris: &[[usize; 3]], cell: f64) -> TriangleGrid {
+        let mut lo = Vec3::repeat(f64::INFINITY);
+        let mut hi = Vec3::repeat(f64::NEG_INFINITY);
+        for t in tris {
+            for &v in t {
+                lo = lo.inf(&points[v]);
+                hi = hi.sup(&points[v]);
+            }
+        }
+        if tris.is_empty() {
+            lo = Vec3::zeros();
+            hi = Vec3::zeros();
+        }
+        let ext = hi - lo;
+        let mut h = cell.max(1e-12);
+        // Keep the grid at most ~2 million cells.
+        while (ext.x / h + 1.0) * (ext.y / h + 1.0) * (ext.z / h + 1.0) > 2e6 {
+            h *= 1.5;
+        }
+        let n = [(ext.x / h) as usize + 1, (ext.y / h) as usize + 1, (ext.z / h) as usize + 1];
+        let cell_of = |p: &Vec3| -> [usize; 3] {
+            let mut c = [0; 3];
+            for a in 0..3 {
+                c[a] = (((p[a] - lo[a]) / h) as isize).clamp(0, n[a] as isize - 1) as usize;
+            }
+            c
+        };
+        let mut count = vec![0u32; n[0] * n[1] * n[2] + 1];
+        let ranges: Vec<([usize; 3], [usize; 3])> = tris
+            .iter()
+            .map(|t| {
+                let (a, b, c) = (points[t[0]], points[t[1]], points[t[2]]);
+                (cell_of(&a.inf(&b).inf(&c)), cell_of(&a.sup(&b).sup(&c)))
+            })
+            .collect();
+        let idx = |i: usize, j: usize, k: usize| i + n[0] * (j + n[1] * k);
+        for (c0, c1) in &ranges {
+            for k in c0[2]..=c1[2] {
+                for j in c0[1]..=c1[1] {
+                    for i in c0[0]..=c1[0] {
+                        count[idx(i, j, k) + 1] += 1;
+                    }
+                }
+            }
+        }
+        for c in 1..count.len() {
+            count[c] += count[c - 1];
+        }
+        let mut fill = count.clone();
+        let mut items = vec![0u32; *count.last().unwrap() as usize];
+        for (t, (c0, c1)) in ranges.iter().enumerate() {
+            for k in c0[2]..=c1[2] {
+                for j in c0[1]..=c1[1] {
+                    for i in c0[0]..=c1[0] {
+                        let c = idx(i, j, k);
+                        items[fill[c] as usize] = t as u32;
+                        fill[c] += 1;
+                    }
+                }
+            }
+        }
+        TriangleGrid { lo, h, n, ptr: count, items }
+    }
+
+    /// The triangle (of those bucketed, passing `keep`) nearest to `p`: `(triangle, closest
+    /// point, barycentric coordinates, distance)`.
+    pub fn nearest(&self, points: &[Vec3], tris: &[[usize; 3]], p: &Vec3, keep: impl Fn(usize) -> bool) -> Option<(usize, Vec3, [f64; 3], f64)> {
+        let n = self.n;
+        let mut c = [0isize; 3];
+        for a in 0..3 {
+            c[a] = (((p[a] - self.lo[a]) / self.h).floor() as isize).clamp(-1, n[a] as isize);
+        }
+        // Distance from p to the grid box, so that shells start where cells are.
+        let mut best: Option<(usize, Vec3, [f64; 3], f64)> = None;
+        let max_r = n[0].max(n[1]).max(n[2]) as isize + 1;
+        for r in 0..=max_r {
+            // Everything within r-1 cells has been seen; the next shell is at least (r-1) h away.
+            if let Some(b) = &best {
+                if b.3 < (r as f64 - 1.0) * self.h {
+                    break;
+                }
+            }
+            for k in c[2] - r..=c[2] + r {
+                for j in c[1] - r..=c[1] + r {
+                    for i in c[0] - r..=c[0] + r {
+                        let on_shell = (i - c[0]).abs() == r || (j - c[1]).abs() == r || (k - c[2]).abs() == r;
+                        if !on_shell || i < 0 || j < 0 || k < 0 || i >= n[0] as isize || j >= n[1] as isize || k >= n[2] as isize {
+                            continue;
+                        }
+                        let cell = i as usize + n[0] * (j as usize + n[1] * k as usize);
+                        for &t in &self.items[self.ptr[cell] as usize..self.ptr[cell + 1] as usize] {
+                            let t = t as usize;
+                            if !keep(t) {
+                                continue;
+                            }
+                            let tri = tris[t];
+                            let (q, bary) = closest_on_triangle(p, &points[tri[0]], &points[tri[1]], &points[tri[2]]);
+                            let d = (q - p).norm();
+                            if best.as_ref().is_none_or(|b| d < b.3 || (d == b.3 && t < b.0)) {
+                                best = Some((t, q, bary, d));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        best
+    }
+}
+
+/// A uniform bucket grid over tetrahedra, for point location.
+#[derive(Debug, Clone)]
+pub struct TetGrid {
+    grid: TriangleGrid,
+    tets: Vec<[usize; 4]>,
+}
+
+impl TetGrid {
+    /// Bucket `tets` with cells of about `cell` \[m\].
+    pub fn new(points: &[Vec3], tets: &[[usize; 4]], cell: f64) -> TetGrid {
+        // Bucket each tet by two triangles spanning its four vertices' bounding box.
+        let faces: Vec<[usize; 3]> = tets.iter().flat_map(|t| [[t[0], t[1], t[2]], [t[1], t[2], t[3]]]).collect();
+        TetGrid { grid: TriangleGrid::new(points, &faces, cell), tets: tets.to_vec() }
+    }
+
+    /// A tetrahedron containing `p` (boundary included, with a relative tolerance), if any.
+    pub fn locate(&self, points: &[Vec3], p: &Vec3) -> Option<usize> {
+        let g = &self.grid;
+        let mut c = [0usize; 3];
+        for a in 0..3 {
+            let x = ((p[a] - g.lo[a]) / g.h).floor();
+            if x < 0.0 || x >= g.n[a] as f64 {
+                return None;
+            }
+            c[a] = x as usize;
+        }
+        let cell = c[0] + g.n[0] * (c[1] + g.n[1] * c[2]);
+        for &f in &g.items[g.ptr[cell] as usize..g.ptr[cell + 1] as usize] {
+            let t = self.tets[f as usize / 2];
+            let (a, b, cc, d) = (&points[t[0]], &points[t[1]], &points[t[2]], &points[t[3]]);
+            let v = signed_volume(a, b, cc, d);
+            let tol = -1e-12 * v.abs();
+            let w = [signed_volume(p, b, cc, d), signed_volume(a, p, cc, d), signed_volume(a, b, p, d), signed_volume(a, b, cc, p)];
+            if w.iter().all(|&x| x * v.signum() >= tol) {
+                return Some(f as usize / 2);
+            }
+        }
+        None
+    }
+}
