@@ -744,43 +744,26 @@ impl HybridModel {
                 }
             }
         }
-        // Gradient: towards the nearest interior voxel (or, if none, the nearest inside one),
-        // by a breadth-first sweep (26-neighbour) that carries the source.
+        // Gradient: the unit vector to the nearest interior voxel (or, if the region has none,
+        // the nearest boundary voxel), by exact Euclidean search over the box (a few hundred
+        // voxels).
         let target = if label.contains(&VoxelLabel::Inside) { VoxelLabel::Inside } else { VoxelLabel::Boundary };
-        let mut src = vec![usize::MAX; n];
-        let mut queue = std::collections::VecDeque::new();
-        for (v, l) in label.iter().enumerate() {
-            if *l == target {
-                src[v] = v;
-                queue.push_back(v);
-            }
-        }
-        let ijk = |v: usize| [v % dims[0], (v / dims[0]) % dims[1], v / (dims[0] * dims[1])];
-        while let Some(v) = queue.pop_front() {
-            let c = ijk(v);
-            for dk in -1isize..=1 {
-                for dj in -1isize..=1 {
-                    for di in -1isize..=1 {
-                        let (i, j, k) = (c[0] as isize + di, c[1] as isize + dj, c[2] as isize + dk);
-                        if i < 0 || j < 0 || k < 0 || i >= dims[0] as isize || j >= dims[1] as isize || k >= dims[2] as isize {
-                            continue;
-                        }
-                        let w = local(i as usize, j as usize, k as usize);
-                        if src[w] == usize::MAX {
-                            src[w] = src[v];
-                            queue.push_back(w);
-                        }
-                    }
-                }
-            }
-        }
+        let ijk = |v: usize| [(v % dims[0]) as f64, ((v / dims[0]) % dims[1]) as f64, (v / (dims[0] * dims[1])) as f64];
+        let targets: Vec<[f64; 3]> = (0..n).filter(|&v| label[v] == target).map(ijk).collect();
         let gradient = (0..n)
             .map(|v| {
-                if label[v] == VoxelLabel::Inside && target == VoxelLabel::Inside || src[v] == usize::MAX || src[v] == v {
+                if label[v] == target || targets.is_empty() {
                     return [0.0f32; 3];
                 }
-                let (a, c) = (ijk(v), ijk(src[v]));
-                let d = Vec3::new(c[0] as f64 - a[0] as f64, c[1] as f64 - a[1] as f64, c[2] as f64 - a[2] as f64).normalize();
+                let p = ijk(v);
+                let mut best = (f64::INFINITY, [0.0; 3]);
+                for t in &targets {
+                    let d2 = (t[0] - p[0]).powi(2) + (t[1] - p[1]).powi(2) + (t[2] - p[2]).powi(2);
+                    if d2 < best.0 {
+                        best = (d2, *t);
+                    }
+                }
+                let d = Vec3::new(best.1[0] - p[0], best.1[1] - p[1], best.1[2] - p[2]).normalize();
                 [d.x as f32, d.y as f32, d.z as f32]
             })
             .collect();
