@@ -40,10 +40,13 @@ from ._palpate import (
     ellipsoid_wall,
     sample_between,
     sample_inside,
+    set_simd_enabled,
+    simd_path,
     truncated_ellipsoid_wall,
 )
 from .io import UNITS, VtuSeries, load_mesh, read_mesh_arrays
-from .surfaces import load_surface, orient_consistently, read_surface_arrays, read_tagged_surface
+from .surfaces import (load_surface, orient_consistently, read_surface_arrays, read_tagged_surface,
+                       repair_surface)
 from .vtp import read_vtp
 
 __all__ = [
@@ -76,7 +79,10 @@ __all__ = [
     "read_surface_arrays",
     "read_tagged_surface",
     "read_vtp",
+    "repair_surface",
     "sample_between",
     "sample_inside",
+    "set_simd_enabled",
+    "simd_path",
     "truncated_ellipsoid_wall",
 ]

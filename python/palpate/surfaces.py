@@ -14,7 +14,7 @@ from typing import Dict, Iterable, Optional, Tuple, Union
 
 import numpy as np
 
-from ._palpate import SurfaceError, TriSurface
+from ._palpate import MeshWarning, SurfaceError, TriSurface
 from .io import unit_scale
 from .vtp import read_vtp
 
@@ -28,16 +28,29 @@ SURFACE_FORMATS = {".obj": "obj", ".stl": "stl", ".ply": "ply", ".off": "off", "
 _LOWER_DIM = {"vertex", "line", "line3", "polyline"}
 
 
-def read_surface_arrays(path: PathLike, unit: str = "m") -> Tuple[np.ndarray, np.ndarray]:
+def read_surface_arrays(path: PathLike, unit: str = "m", repair: bool = False) -> Tuple[np.ndarray, np.ndarray]:
     """Read a triangle surface file without validating it in the core.
 
     Returns ``(points, triangles)``: points ``(n, 3)`` float64 in metres, triangles ``(m, 3)``
     int64 0-based. Vertex and line cells are ignored; any other non-triangle cell (quads,
     polygons, tetrahedra ...) is an error naming the file and the cell type (for ``.vtp``, the
-    polygon index).
+    polygon index). ``repair=True`` passes them through :func:`repair_surface` (one
+    :class:`palpate.MeshWarning` naming the file says what changed, if anything did).
     """
     points, triangles, _ = _read_surface(path, unit)
+    if repair:
+        points, triangles, _ = _repair_file(path, points, triangles, None)
     return points, triangles
+
+
+def _repair_file(path: PathLike, points, triangles, part, stacklevel: int = 2):
+    """:func:`repair_surface` on a file's arrays, with one MeshWarning naming the file if it changed anything."""
+    points, triangles, part, report = repair_surface(points, triangles, part)
+    summary = repair_summary(report)
+    if summary is not None:
+        warnings.warn(f"{os.path.basename(os.fspath(path))}: repaired the surface: {summary}", MeshWarning,
+                      stacklevel=stacklevel + 1)
+    return points, triangles, part
 
 
 def _read_surface(path: PathLike, unit: str) -> Tuple[np.ndarray, np.ndarray, Dict[str, np.ndarray]]:
@@ -99,7 +112,7 @@ def _read_surface(path: PathLike, unit: str) -> Tuple[np.ndarray, np.ndarray, Di
     return points * scale, np.concatenate(tris, axis=0), cell_data
 
 
-def load_surface(path: PathLike, unit: str = "m") -> TriSurface:
+def load_surface(path: PathLike, unit: str = "m", repair: bool = False) -> TriSurface:
     """Load and validate a closed triangle surface.
 
     Parameters
@@ -110,6 +123,10 @@ def load_surface(path: PathLike, unit: str = "m") -> TriSurface:
         line cells are ignored).
     unit:
         Length unit of the file's coordinates: ``"m"``, ``"cm"`` or ``"mm"``.
+    repair:
+        Pass the triangles through :func:`repair_surface` first (duplicate / zero-area triangles
+        removed, orientation made consistent, non-manifold edges and vertices split), with one
+        :class:`palpate.MeshWarning` naming the file if anything changed.
 
     Returns
     -------
@@ -125,7 +142,9 @@ def load_surface(path: PathLike, unit: str = "m") -> TriSurface:
         ``unit`` is not one of the above.
     """
     path = os.fspath(path)
-    points, triangles = read_surface_arrays(path, unit)
+    points, triangles, _ = _read_surface(path, unit)
+    if repair:
+        points, triangles, _ = _repair_file(path, points, triangles, None)
     return TriSurface(points, triangles, source=os.path.basename(path))
 
 
@@ -217,7 +236,7 @@ def _as_tags(v: _Tags, what: str):
 
 def read_tagged_surface(path: PathLike, unit: str = "m", tag_array: Optional[str] = None, inner: _Tags = None,
                         outer: _Tags = None, base: _Tags = None,
-                        part_definition: Union[PathLike, bool, None] = None,
+                        part_definition: Union[PathLike, bool, None] = None, repair: bool = True,
                         ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Read one surface whose triangles are tagged inner / outer / base (a truncated ventricle).
 
@@ -233,6 +252,13 @@ def read_tagged_surface(path: PathLike, unit: str = "m", tag_array: Optional[str
     - ``inner`` / ``outer`` / ``base`` (a value or a list of values) override either.
 
     ``tag_array`` defaults to ``"surface-id"``.
+
+    With ``repair`` (the default) the surface goes through :func:`repair_surface`: duplicate and
+    zero-area triangles removed, triangles oriented consistently and outward, non-manifold edges
+    and vertices split (new vertices appended), the parts following their triangles; one
+    :class:`palpate.MeshWarning` naming the file says what changed, if anything did. The Rodero
+    et al. left ventricle needs it (7,040 triangles re-oriented, two edges shared by four
+    triangles split). ``repair=False`` returns the file's triangles as stored.
 
     Returns
     -------
@@ -321,7 +347,77 @@ def read_tagged_surface(path: PathLike, unit: str = "m", tag_array: Optional[str
             raise SurfaceError(f"{name}: no {PART_NAMES[p]} triangles: none carries the {PART_NAMES[p]} tag "
                                f"value(s) {sorted(sets[p]) or '(none)'} of '{tag_array}' given by {source} "
                                f"(values present: {present})")
+    if repair:
+        points, triangles, part = _repair_file(path, points, triangles, part)
     return points, triangles, part
+
+
+def _edge_keys(triangles: np.ndarray, n: int):
+    """Half-edges of ``(m, 3)`` triangles: row ``3 t + k`` runs ``tri[t, k] -> tri[t, (k + 1) % 3]``.
+
+    Returns ``(start, end, order, run_start, run_count)``: half-edges sorted by undirected edge
+    (``order``), and per undirected edge the first position in ``order`` and the number of
+    half-edges (triangles) on it.
+    """
+    start = triangles.ravel()
+    end = triangles[:, [1, 2, 0]].ravel()
+    key = np.minimum(start, end) * np.int64(max(n, 1)) + np.maximum(start, end)
+    order = np.argsort(key, kind="stable")
+    sk = key[order]
+    run_start = np.flatnonzero(np.r_[True, sk[1:] != sk[:-1]]) if len(sk) else np.zeros(0, np.int64)
+    run_count = np.diff(np.r_[run_start, len(sk)])
+    return start, end, order, run_start, run_count
+
+
+def _components(n: int, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Connected components of the graph with ``n`` nodes and edges ``(u[i], v[i])``: each node's
+    label is the smallest node of its component (hook the larger root to the smaller, compress)."""
+    lab = np.arange(n, dtype=np.int64)
+    u = np.asarray(u, dtype=np.int64)
+    v = np.asarray(v, dtype=np.int64)
+    while len(u):
+        lu, lv = lab[u], lab[v]
+        live = lu != lv
+        if not live.any():
+            break
+        u, v, lu, lv = u[live], v[live], lu[live], lv[live]
+        np.minimum.at(lab, np.maximum(lu, lv), np.minimum(lu, lv))
+        while True:
+            nxt = lab[lab]
+            if np.array_equal(nxt, lab):
+                break
+            lab = nxt
+    return lab
+
+
+def _orient(points: np.ndarray, tris: np.ndarray):
+    """Consistent, outward orientation of each piece linked by edges shared by two triangles.
+
+    Returns ``(triangles, flipped mask, piece label per triangle)``; the piece label is the
+    smallest triangle index of the piece. Within a piece the smallest triangle keeps its
+    orientation, then whole pieces with negative enclosed volume are reversed.
+    """
+    m = len(tris)
+    start, end, order, rs, rc = _edge_keys(tris, len(points))
+    s2 = rs[rc == 2]
+    h1, h2 = order[s2], order[s2 + 1]
+    t1, t2 = h1 // 3, h2 // 3
+    same = start[h1] == start[h2]                # traversed the same way: one of the two must flip
+    # double cover: node t = triangle t as stored, node m + t = triangle t reversed
+    u = np.concatenate([t1, t1 + m])
+    v = np.concatenate([np.where(same, t2 + m, t2), np.where(same, t2, t2 + m)])
+    lab = _components(2 * m, u, v)
+    l0, l1 = lab[:m], lab[m:]
+    flip = l1 < l0                                # the reversed copy lies in the piece's first sheet
+    piece = np.minimum(l0, l1)
+    out = tris.copy()
+    out[flip] = out[flip][:, ::-1]
+    p0, p1, p2 = points[out[:, 0]], points[out[:, 1]], points[out[:, 2]]
+    vol = np.einsum("ij,ij->i", p0, np.cross(p1, p2))
+    piece_vol = np.bincount(piece, weights=vol, minlength=m)
+    inward = piece_vol[piece] < 0
+    out[inward] = out[inward][:, ::-1]
+    return out, flip ^ inward, piece
 
 
 def orient_consistently(points, triangles) -> Tuple[np.ndarray, int]:
@@ -331,54 +427,151 @@ def orient_consistently(points, triangles) -> Tuple[np.ndarray, int]:
     For surfaces whose triangles are stored in arbitrary orientations (the Rodero et al. left
     ventricle is one). Edges shared by more than two triangles do not link pieces. Returns the
     new ``(m, 3)`` int64 triangles and the number of triangles flipped; topology defects (open or
-    non-manifold edges) are left for :class:`palpate.TriSurface` to report.
+    non-manifold edges) are left for :class:`palpate.TriSurface` to report (or
+    :func:`repair_surface` to split).
     """
-    from collections import deque
-
     pts = np.asarray(points, dtype=np.float64)
     tris = np.array(triangles, dtype=np.int64, copy=True)
-    m = len(tris)
-    if m == 0:
+    if len(tris) == 0:
         return tris, 0
-    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    owner = np.tile(np.arange(m), 3)
-    key = np.sort(e, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    inv = inv.ravel()
-    order = np.argsort(inv, kind="stable")
-    si = inv[order]
-    pair = np.flatnonzero((si[:-1] == si[1:]) & (cnt[si[:-1]] == 2))
-    a, b = order[pair], order[pair + 1]          # half-edge rows sharing an edge
-    ta, tb = owner[a], owner[b]
-    same = (e[a, 0] == e[b, 0])                  # traversed the same way: one of the two must flip
-    nbrs = [[] for _ in range(m)]
-    for x, y, s in zip(ta.tolist(), tb.tolist(), same.tolist()):
-        nbrs[x].append((y, s))
-        nbrs[y].append((x, s))
-    flip = np.zeros(m, dtype=bool)
-    seen = np.zeros(m, dtype=bool)
-    comp = np.full(m, -1, dtype=np.int64)
-    n_comp = 0
-    for start in range(m):
-        if seen[start]:
-            continue
-        seen[start] = True
-        comp[start] = n_comp
-        q = deque([start])
-        while q:
-            t = q.popleft()
-            for u, s in nbrs[t]:
-                if not seen[u]:
-                    seen[u] = True
-                    comp[u] = n_comp
-                    flip[u] = flip[t] ^ s
-                    q.append(u)
-        n_comp += 1
-    tris[flip] = tris[flip][:, ::-1]
-    p0, p1, p2 = pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]]
-    vol = np.einsum("ij,ij->i", p0, np.cross(p1, p2))
-    comp_vol = np.bincount(comp, weights=vol, minlength=n_comp)
-    inward = comp_vol[comp] < 0
-    tris[inward] = tris[inward][:, ::-1]
-    flipped = int((flip ^ inward).sum())
-    return tris, flipped
+    out, flipped, _ = _orient(pts, tris)
+    return out, int(flipped.sum())
+
+
+def repair_surface(points, triangles, part=None):
+    """Repair a closed triangle surface so that :class:`palpate.TriSurface` can accept it.
+
+    In order:
+
+    1. removes exact duplicate triangles (same three vertices, in any order; the first is kept)
+       and zero-area triangles (a repeated vertex or collinear corners), if any;
+    2. orients every connected piece (triangles linked through edges shared by two triangles)
+       consistently and outward, positive enclosed volume (as :func:`orient_consistently`);
+    3. splits non-manifold edges and vertices: around every vertex, its triangles are grouped
+       into fans linked through manifold edges only (shared by exactly two triangles traversed in
+       opposite directions); every fan beyond the first (the one holding the vertex's lowest
+       triangle corner) gets its own copy of the vertex, same coordinates, appended after the
+       existing points. An edge shared by four triangles (two sheets touching) becomes two
+       coincident manifold edges.
+
+    Parameters
+    ----------
+    points: ``(n, 3)`` float array; triangles: ``(m, 3)`` integer array, 0-based;
+    part: optional per-triangle array (e.g. the part codes of :func:`read_tagged_surface`),
+    filtered alongside the triangles.
+
+    Returns
+    -------
+    ``(points, triangles, part, report)``: points ``(n + k, 3)`` float64 (the input ones first,
+    unchanged); triangles ``(m', 3)`` int64 in the input order (less any removed); part aligned
+    with them (None if not given); report a dict with
+
+    - ``"flipped"``: triangles reversed,
+    - ``"components"``: connected pieces,
+    - ``"split_vertices"``: input vertices that were split, ``"added_vertices"``: copies added,
+    - ``"nonmanifold_edges"``: ``[(a, b, count), ...]``, the edges (input vertex indices, a < b)
+      not shared by exactly two opposite triangles nor open, with their number of triangles,
+    - ``"removed_triangles"``: duplicates plus zero-area triangles removed, also given apart as
+      ``"duplicate_triangles"`` and ``"zero_area_triangles"``.
+
+    Open edges are left alone (:class:`palpate.TriSurface` reports them); a removed zero-area
+    sliver leaves its edges open.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    tris = np.array(triangles, dtype=np.int64, copy=True)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points must have shape (n, 3), got {pts.shape}")
+    if tris.ndim != 2 or tris.shape[1] != 3:
+        raise ValueError(f"triangles must have shape (m, 3), got {tris.shape}")
+    n, m = len(pts), len(tris)
+    if m and (tris.min() < 0 or tris.max() >= n):
+        raise ValueError(f"triangle vertex indices must lie in [0, {n}), got [{tris.min()}, {tris.max()}]")
+    if part is not None:
+        part = np.asarray(part)
+        if len(part) != m:
+            raise ValueError(f"part has {len(part)} entries, expected one per triangle ({m})")
+    report = {"flipped": 0, "components": 0, "split_vertices": 0, "added_vertices": 0,
+              "nonmanifold_edges": [], "removed_triangles": 0, "duplicate_triangles": 0,
+              "zero_area_triangles": 0}
+    if m == 0:
+        return pts.copy(), tris, part, report
+
+    # 1. duplicates and zero-area triangles
+    s = np.sort(tris, axis=1)
+    cr = np.cross(pts[tris[:, 1]] - pts[tris[:, 0]], pts[tris[:, 2]] - pts[tris[:, 0]])
+    zero = (s[:, 0] == s[:, 1]) | (s[:, 1] == s[:, 2]) | ~(cr != 0).any(axis=1)
+    o = np.lexsort((s[:, 2], s[:, 1], s[:, 0]))
+    dup = np.zeros(m, dtype=bool)
+    dup[o[1:][(s[o[1:]] == s[o[:-1]]).all(axis=1)]] = True
+    dup &= ~zero
+    drop = zero | dup
+    if drop.any():
+        keep = ~drop
+        tris = tris[keep]
+        if part is not None:
+            part = part[keep]
+        m = len(tris)
+        report.update(removed_triangles=int(drop.sum()), duplicate_triangles=int(dup.sum()),
+                      zero_area_triangles=int(zero.sum()))
+        if m == 0:
+            return pts.copy(), tris, part, report
+
+    # 2. orientation
+    tris, flipped, piece = _orient(pts, tris)
+    report["flipped"] = int(flipped.sum())
+    report["components"] = int(np.count_nonzero(np.bincount(piece, minlength=m)))
+
+    # 3. fans: triangle corners (row 3 t + k = vertex tri[t, k]) linked across manifold edges
+    start, end, order, rs, rc = _edge_keys(tris, n)
+    s2 = rs[rc == 2]
+    h1, h2 = order[s2], order[s2 + 1]
+    opposite = start[h1] == end[h2]
+    bad = np.ones(len(rs), dtype=bool)
+    bad[rc == 1] = False
+    bad[np.flatnonzero(rc == 2)[opposite]] = False
+    if bad.any():
+        hb = order[rs[bad]]
+        a, b = np.minimum(start[hb], end[hb]), np.maximum(start[hb], end[hb])
+        report["nonmanifold_edges"] = [(int(x), int(y), int(c)) for x, y, c in zip(a, b, rc[bad])]
+    # (a vertex can be non-manifold with all its edges manifold: two pieces touching at a point)
+    h1, h2 = h1[opposite], h2[opposite]
+    nxt1 = h1 - h1 % 3 + (h1 % 3 + 1) % 3          # corner at the end of half-edge h1
+    nxt2 = h2 - h2 % 3 + (h2 % 3 + 1) % 3
+    fan = _components(3 * m, np.concatenate([h1, nxt1]), np.concatenate([nxt2, h2]))
+    cv = tris.ravel()
+    roots = np.flatnonzero(fan == np.arange(3 * m))   # a fan's label: its lowest corner
+    first = np.full(n, -1, dtype=np.int64)
+    used, first_corner = np.unique(cv, return_index=True)
+    first[used] = first_corner
+    extra = roots[roots != first[cv[roots]]]
+    if len(extra):
+        extra = extra[np.argsort(cv[extra], kind="stable")]
+        new_id = np.full(3 * m, -1, dtype=np.int64)
+        new_id[extra] = n + np.arange(len(extra))
+        corner = new_id[fan]
+        tris = np.where(corner >= 0, corner, cv).reshape(m, 3)
+        pts = np.concatenate([pts, pts[cv[extra]]])
+        report["split_vertices"] = int(len(np.unique(cv[extra])))
+        report["added_vertices"] = int(len(extra))
+    return (pts if pts is not points else pts.copy()), tris, part, report
+
+
+def repair_summary(report: dict, limit: int = 3) -> Optional[str]:
+    """One sentence on what :func:`repair_surface` changed, or None if nothing."""
+    bits = []
+    if report["removed_triangles"]:
+        bits.append(f"removed {report['duplicate_triangles']} duplicate and {report['zero_area_triangles']} "
+                    "zero-area triangle(s)")
+    if report["flipped"]:
+        bits.append(f"re-oriented {report['flipped']} triangle(s) ({report['components']} piece(s), "
+                    "consistent and outward)")
+    if report["added_vertices"] and not report["nonmanifold_edges"]:
+        bits.append(f"split {report['split_vertices']} non-manifold vertex(es) (pieces touching at a point) "
+                    f"into {report['added_vertices']} new one(s)")
+    elif report["added_vertices"]:
+        edges = report["nonmanifold_edges"]
+        shown = ", ".join(f"({a}, {b}) shared by {c} triangles" for a, b, c in edges[:limit])
+        more = f" and {len(edges) - limit} more" if len(edges) > limit else ""
+        bits.append(f"split {len(edges)} non-manifold edge(s) [{shown}{more}] by duplicating "
+                    f"{report['split_vertices']} vertex(es) into {report['added_vertices']} new one(s)")
+    return "; ".join(bits) if bits else None

@@ -22,7 +22,8 @@ def lv_path():
 
 @pytest.fixture(scope="module")
 def lv(lv_path):
-    return palpate.read_tagged_surface(lv_path, unit="mm")
+    """As stored in the file (repair=False): the numbers below are the file's."""
+    return palpate.read_tagged_surface(lv_path, unit="mm", repair=False)
 
 
 def _areas(p, t):
@@ -83,16 +84,14 @@ def test_enclosed_volume(lv):
 
 
 def test_trisurface_accepts_whole_surface(lv):
-    """Whether the Rust core accepts the closed surface as it comes (in metres). It does not
-    (yet): the stored orientation is inconsistent, and after re-orientation two edges are shared by
-    four triangles. Reported as an expected failure with the core's message."""
-    p, t, _ = lv
-    try:
-        s = palpate.TriSurface(p, t, source="rodero_01_leftventricle_surface.vtp")
-    except palpate.SurfaceError as e:
-        try:
-            palpate.TriSurface(p, palpate.orient_consistently(p, t)[0])
-        except palpate.SurfaceError as e2:
-            pytest.xfail(f"TriSurface rejects the Rodero LV: {e}; after orient_consistently: {e2}")
-        pytest.xfail(f"TriSurface rejects the Rodero LV as stored ({e}) but accepts it re-oriented")
+    """The Rust core rejects the closed surface as stored (inconsistent orientation) and after
+    orient_consistently alone (two edges shared by four triangles); palpate.repair_surface (the
+    default of read_tagged_surface) makes it acceptable, see test_repair.py."""
+    p, t, part = lv
+    with pytest.raises(palpate.SurfaceError):
+        palpate.TriSurface(p, t, source="rodero_01_leftventricle_surface.vtp")
+    with pytest.raises(palpate.SurfaceError, match=r"non-manifold: edge \((157, 1366|1116, 1118)\) is shared by 4"):
+        palpate.TriSurface(p, palpate.orient_consistently(p, t)[0])
+    q, u, _, _ = palpate.repair_surface(p, t, part)
+    s = palpate.TriSurface(q, u, source="rodero_01_leftventricle_surface.vtp")
     assert s.volume * 1e6 == pytest.approx(163.31, rel=1e-3)
