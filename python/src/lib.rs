@@ -14,6 +14,7 @@
 mod body;
 mod conv;
 mod errors;
+mod hybrid;
 mod material;
 mod mesh;
 mod particles;
@@ -33,5 +34,6 @@ fn _palpate(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mesh::truncated_ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::box_mesh, m)?)?;
     particles::register(m)?;
+    hybrid::register(m)?;
     Ok(())
 }

@@ -80,7 +80,7 @@ fn surface_location(e: &CoreSurfaceError) -> (Option<usize>, Option<usize>) {
 
 /// A core surface error as a Python exception: bad sampling arguments are `ValueError`, the rest
 /// `SurfaceError` with `.triangle` / `.vertex`.
-fn surface_error(e: CoreSurfaceError) -> PyErr {
+pub fn surface_error(e: CoreSurfaceError) -> PyErr {
     if matches!(e, CoreSurfaceError::Parameter { .. } | CoreSurfaceError::TooLarge { .. }) {
         return PyValueError::new_err(e.to_string());
     }
@@ -143,7 +143,7 @@ fn reals_1d(obj: &Bound<'_, PyAny>, what: &str, n: usize) -> PyResult<Vec<f64>> 
 }
 
 /// Triangles `(m, 3)` as signed indices (any integer dtype).
-fn triangles_arg(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<[i64; 3]>> {
+pub fn triangles_arg(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<[i64; 3]>> {
     let a = asarray(obj, what)?;
     let s = a.shape();
     if !(s.len() == 2 && s[1] == 3) && !(s.len() == 1 && s[0] == 0) {
@@ -199,7 +199,7 @@ fn particle_indices(obj: &Bound<'_, PyAny>, what: &str, n: usize, unique: bool) 
     Ok(idx)
 }
 
-fn warn(py: Python<'_>, msg: String) -> PyResult<()> {
+pub fn warn(py: Python<'_>, msg: String) -> PyResult<()> {
     let msg = CString::new(msg).unwrap_or_else(|_| CString::new("surface warning").unwrap());
     PyErr::warn(py, &py.get_type::<MeshWarning>(), &msg, 1)
 }

@@ -7,11 +7,13 @@ fn main() {
     let which = std::env::args().nth(1).unwrap_or_else(|| "ellipsoids".into());
     let radial = std::env::args().any(|a| a == "radial");
     let wall = match which.as_str() {
+        "rodero" => load_raw("/tmp/rodero.bin"),
         "ventricle" => shapes::truncated_ventricle(&TruncatedEllipsoidWall { circumferential: 96, longitudinal: 24, ..Default::default() }).unwrap(),
         _ => shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap(),
     };
     if std::env::args().any(|a| a == "debug") { debug_field(&wall); debug_core(&wall); return; }
     let mut o = HybridOptions::default();
+    o.core_triangles = 0;
     if radial {
         o.projection = Projection::Radial;
     }
@@ -20,7 +22,7 @@ fn main() {
         if let Some(v) = a.strip_prefix("frac=") { o.core_fraction = v.parse().unwrap(); }
         if let Some(v) = a.strip_prefix("layers=") { o.core_layers = v.parse().unwrap(); }
     }
-    let m = build(&wall, &o).unwrap();
+    let m = match build(&wall, &o) { Ok(m) => m, Err(e) => { println!("ERR {e}"); return; } };
     if std::env::args().any(|a| a == "diag") { diagnose(&m, &wall); levels(&m); }
     let s = &m.stats;
     println!("{which}: {} wall triangles, wall volume {:.2} mL", wall.surface.n_triangles(), m.wall_volume * 1e6);
@@ -94,4 +96,19 @@ pub fn debug_core(wall: &palpate_core::hybrid::Wall) {
         let (a, b, d) = (c.points[t[0]], c.points[t[1]], c.points[t[2]]);
         println!("tri {i} {:?} area {:e} z {:.4} {:.4} {:.4}", t, (b - a).cross(&(d - a)).norm() / 2.0, a.z, b.z, d.z);
     }
+}
+
+#[allow(dead_code)]
+pub fn load_raw(path: &str) -> palpate_core::hybrid::Wall {
+    let b = std::fs::read(path).unwrap();
+    let rd = |o: usize| i64::from_le_bytes(b[o..o + 8].try_into().unwrap());
+    let (np, nt) = (rd(0) as usize, rd(8) as usize);
+    let mut off = 16;
+    let pts: Vec<[f64; 3]> = (0..np).map(|i| { let o = off + 24 * i; [0, 1, 2].map(|k| f64::from_le_bytes(b[o + 8 * k..o + 8 * k + 8].try_into().unwrap())) }).collect();
+    off += 24 * np;
+    let tris: Vec<[i64; 3]> = (0..nt).map(|i| { let o = off + 24 * i; [0, 1, 2].map(|k| rd(o + 8 * k)) }).collect();
+    off += 24 * nt;
+    let parts = (0..nt).map(|i| match b[off + i] { 0 => palpate_core::hybrid::WallPart::Inner, 1 => palpate_core::hybrid::WallPart::Outer, _ => palpate_core::hybrid::WallPart::Base }).collect();
+    let (s, _) = palpate_core::mesh::TriSurface::from_arrays(&pts, &tris).unwrap();
+    palpate_core::hybrid::Wall::tagged(s, parts).unwrap()
 }

@@ -39,7 +39,10 @@ pub struct HybridOptions {
     /// Fraction of the wall thickness (in the transmural coordinate) that the FEM core takes,
     /// from the inner surface \[-\], in (0, 1).
     pub core_fraction: f64,
-    /// Triangles of the simplified inner surface (each becomes `3 * core_layers` tets).
+    /// Triangles of the simplified inner surface (each becomes `3 * core_layers` tets); 0:
+    /// automatic, [`AUTO_CORE_TRIANGLES_CLOSED`] for a closed wall and
+    /// [`AUTO_CORE_TRIANGLES_BASE`] for one with a base, raised by half (up to twice) while the
+    /// core cannot be built without twisted prisms.
     pub core_triangles: usize,
     /// Prism layers of the core.
     pub core_layers: usize,
@@ -54,15 +57,20 @@ pub struct HybridOptions {
     pub field_voxels: usize,
 }
 
+/// Automatic core resolution of a closed wall (the paper's ellipsoids: 192 tets).
+pub const AUTO_CORE_TRIANGLES_CLOSED: usize = 64;
+/// Automatic core resolution of a wall with a base (valve rings and cut planes need more).
+pub const AUTO_CORE_TRIANGLES_BASE: usize = 300;
+
 /// Rings nv(p_s) may grow to.
-pub const MAX_RINGS: usize = 4;
+pub const MAX_RINGS: usize = 8;
 
 impl Default for HybridOptions {
     fn default() -> Self {
         HybridOptions {
             projection: Projection::Transmural,
             core_fraction: 0.5,
-            core_triangles: 64,
+            core_triangles: 0,
             core_layers: 1,
             spacing: Spacing::Count(28_000),
             density: 1000.0,
@@ -166,6 +174,62 @@ pub const VOXEL_CORE: u32 = u32::MAX - 1;
 pub struct Wall {
     pub surface: TriSurface,
     pub parts: Vec<WallPart>,
+    /// Tiny closed pieces dropped from a tagged surface.
+    pub dropped_pieces: usize,
+}
+
+/// Smallest volume of a closed piece of a tagged wall surface, relative to the largest piece.
+pub const MIN_PIECE_VOLUME: f64 = 1e-3;
+
+/// Split a closed surface into edge-connected pieces and keep those enclosing at least
+/// [`MIN_PIECE_VOLUME`] of the largest.
+fn drop_specks(surface: TriSurface, parts: Vec<WallPart>) -> Result<(TriSurface, Vec<WallPart>, usize), HybridError> {
+    let tris = surface.triangles();
+    let n = surface.n_vertices();
+    // Union-find over vertices through triangles.
+    let mut up: Vec<usize> = (0..n).collect();
+    fn find(up: &mut [usize], mut x: usize) -> usize {
+        while up[x] != x {
+            up[x] = up[up[x]];
+            x = up[x];
+        }
+        x
+    }
+    for t in tris {
+        let a = find(&mut up, t[0]);
+        for &v in &t[1..] {
+            let b = find(&mut up, v);
+            up[b] = a;
+        }
+    }
+    let pts = surface.points();
+    let mut vol: HashMap<usize, f64> = HashMap::new();
+    for t in tris {
+        let r = find(&mut up, t[0]);
+        *vol.entry(r).or_insert(0.0) += pts[t[0]].dot(&pts[t[1]].cross(&pts[t[2]])) / 6.0;
+    }
+    if vol.len() == 1 {
+        return Ok((surface, parts, 0));
+    }
+    let largest = vol.values().copied().fold(0.0, f64::max);
+    let keep: Vec<bool> = tris.iter().map(|t| vol[&find(&mut up, t[0])] >= MIN_PIECE_VOLUME * largest).collect();
+    let dropped = vol.values().filter(|&&v| v < MIN_PIECE_VOLUME * largest).count();
+    let arr: Vec<[f64; 3]> = pts.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let mut used = vec![false; n];
+    let kept: Vec<usize> = (0..tris.len()).filter(|&t| keep[t]).collect();
+    kept.iter().for_each(|&t| tris[t].iter().for_each(|&v| used[v] = true));
+    let mut map = vec![0i64; n];
+    let mut new_pts = Vec::new();
+    for v in 0..n {
+        if used[v] {
+            map[v] = new_pts.len() as i64;
+            new_pts.push(arr[v]);
+        }
+    }
+    let new_tris: Vec<[i64; 3]> = kept.iter().map(|&t| [map[tris[t][0]], map[tris[t][1]], map[tris[t][2]]]).collect();
+    let new_parts: Vec<WallPart> = kept.iter().map(|&t| parts[t]).collect();
+    let (s, _) = TriSurface::from_arrays(&new_pts, &new_tris)?;
+    Ok((s, new_parts, dropped))
 }
 
 impl Wall {
@@ -188,20 +252,23 @@ impl Wall {
         let mut parts = vec![WallPart::Outer; outer.n_triangles()];
         parts.extend(std::iter::repeat_n(WallPart::Inner, inner.n_triangles()));
         let (surface, _) = TriSurface::from_arrays(&pts, &tris)?;
-        Ok(Wall { surface, parts })
+        Ok(Wall { surface, parts, dropped_pieces: 0 })
     }
 
     /// One closed surface with a part per triangle (a truncated ventricle: inner, outer, base).
+    /// Closed pieces enclosing less than [`MIN_PIECE_VOLUME`] of the largest (specks left by a
+    /// surface repair) are dropped; [`Wall::dropped_pieces`] counts them.
     pub fn tagged(surface: TriSurface, parts: Vec<WallPart>) -> Result<Wall, HybridError> {
         if parts.len() != surface.n_triangles() {
             return Err(HybridError::Parts(format!("{} part tags for {} triangles", parts.len(), surface.n_triangles())));
         }
+        let (surface, parts, dropped) = drop_specks(surface, parts)?;
         for need in [WallPart::Inner, WallPart::Outer] {
             if !parts.contains(&need) {
                 return Err(HybridError::Parts(format!("no {need:?} triangles")));
             }
         }
-        Ok(Wall { surface, parts })
+        Ok(Wall { surface, parts, dropped_pieces: dropped })
     }
 
     /// The triangles of one part as a surface of its own: `(points, triangles, original vertex
@@ -232,7 +299,7 @@ fn check_options(o: &HybridOptions) -> Result<(), HybridError> {
     if !(o.core_fraction > 0.0 && o.core_fraction < 1.0) {
         return bad("core fraction", o.core_fraction, "must lie strictly between 0 and 1");
     }
-    if o.core_triangles < 4 {
+    if o.core_triangles != 0 && o.core_triangles < 4 {
         return bad("core triangles", o.core_triangles as f64, "must be at least 4");
     }
     if o.core_layers == 0 || o.core_layers > 16 {
@@ -265,79 +332,28 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     // --- transmural field ---
     let h = (wall_volume / o.field_voxels as f64).cbrt();
     let mean_edge = (surf.area() / surf.n_triangles() as f64 * 2.3).sqrt();
-    let wall_grid = TriangleGrid::new(surf.points(), surf.triangles(), 2.0 * mean_edge.max(h));
+    let wall_grid = TriangleGrid::new(surf.points(), surf.triangles(), mean_edge.max(0.5 * h));
     let field = transmural::solve(surf, &wall.parts, h, &wall_grid);
     stats.field_iterations = field.iterations;
     stats.field_s = t_start.elapsed().as_secs_f64();
 
     // --- FEM core ---
     let t0 = Instant::now();
-    let (ipts, itris, _) = wall.part(WallPart::Inner);
-    let mut coarse = simplify(&ipts, &itris, o.core_triangles);
-    balance_on_surface(&mut coarse, surf, &wall.parts, &wall_grid, &field);
-    if coarse.triangles.len() < 4 {
-        return Err(HybridError::Core(format!("the inner surface simplified to {} triangles", coarse.triangles.len())));
-    }
-    let nv = coarse.points.len();
-    let layers = o.core_layers;
-    let mut core_points = Vec::with_capacity(nv * (layers + 1));
-    core_points.extend(coarse.points.iter().copied());
-    // Layer l of vertex v sits at phi_b + l/L (f - phi_b), phi_b the level of the (lifted)
-    // inner vertex; at least a quarter of the core fraction above it, so that no prism is flat.
-    let phi_b: Vec<f64> = coarse.points.iter().map(|p| field.phi_at(p)).collect();
-    for l in 1..=layers {
-        for (v, p) in coarse.points.iter().enumerate() {
-            let span = (o.core_fraction - phi_b[v]).max(0.25 * o.core_fraction);
-            let level = (phi_b[v] + span * l as f64 / layers as f64).min(0.95);
-            let q = field
-                .march_to_level(p, level, true, o.projection)
-                .or_else(|| field.march_to_level(p, level, true, Projection::Transmural))
-                .ok_or_else(|| HybridError::Core(format!("coarse inner vertex {v} at ({:.4}, {:.4}, {:.4}) m: no path into the wall to transmural level {level}", p.x, p.y, p.z)))?;
-            core_points.push(q);
-        }
-    }
-    let mut core_tets = Vec::with_capacity(3 * layers * coarse.triangles.len());
-    for l in 0..layers {
-        for tri in &coarse.triangles {
-            let bottom = [tri[0] + l * nv, tri[1] + l * nv, tri[2] + l * nv];
-            for tet in split_prism(bottom, nv) {
-                let [a, b, c, d] = tet;
-                let v = signed_volume(&core_points[a], &core_points[b], &core_points[c], &core_points[d]);
-                core_tets.push(if v < 0.0 { [a, c, b, d] } else { tet });
-            }
-        }
-    }
-    let core_faces: Vec<[usize; 3]> = coarse
-        .triangles
-        .iter()
-        .map(|t| {
-            // The inner triangles face the cavity; the top faces face the shell.
-            let o = layers * nv;
-            [t[0] + o, t[2] + o, t[1] + o]
-        })
-        .collect();
-    let pts_arr: Vec<[f64; 3]> = core_points.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let tets_arr: Vec<[i64; 4]> = core_tets.iter().map(|t| [t[0] as i64, t[1] as i64, t[2] as i64, t[3] as i64]).collect();
-    let (mesh, warnings) = TetMesh::from_arrays(&pts_arr, &tets_arr).map_err(HybridError::Mesh)?;
-    if let Some(w) = warnings.first() {
-        return Err(HybridError::Core(format!("{w:?} (try fewer core triangles, more layers or a larger core fraction)")));
-    }
-    let vols: Vec<f64> = core_tets.iter().map(|t| signed_volume(&core_points[t[0]], &core_points[t[1]], &core_points[t[2]], &core_points[t[3]])).collect();
-    let core_quality = CoreQuality {
-        min_dihedral_deg: mesh.min_dihedral_deg(),
-        min_volume: vols.iter().copied().fold(f64::INFINITY, f64::min),
-        max_volume: vols.iter().copied().fold(0.0, f64::max),
+    let closed = !wall.parts.contains(&WallPart::Base);
+    let (mut n_tri, mut tries) = match o.core_triangles {
+        0 => (if closed { AUTO_CORE_TRIANGLES_CLOSED } else { AUTO_CORE_TRIANGLES_BASE }, 3),
+        n => (n, 1),
     };
-    let core_volume: f64 = vols.iter().sum();
-    let mut core_base_nodes: Vec<usize> = Vec::new();
-    for (v, &b) in coarse.boundary.iter().enumerate() {
-        if b {
-            for l in 0..=layers {
-                core_base_nodes.push(v + l * nv);
+    let (core_points, core_tets, core_faces, core_base_nodes, core_quality, core_volume) = loop {
+        match build_core(wall, &field, &wall_grid, o, n_tri) {
+            Ok(c) => break c,
+            Err(HybridError::Core(msg)) if tries > 1 && msg.contains("twisted") => {
+                tries -= 1;
+                n_tri += n_tri / 2;
             }
+            Err(e) => return Err(e),
         }
-    }
-    core_base_nodes.sort_unstable();
+    };
     stats.core_s = t0.elapsed().as_secs_f64();
 
     // --- particles ---
@@ -362,7 +378,7 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
         let a: f64 = outer_tris.iter().map(|t| (outer_points[t[1]] - outer_points[t[0]]).cross(&(outer_points[t[2]] - outer_points[t[0]])).norm() * 0.5).sum();
         (a / outer_tris.len() as f64 * 2.3).sqrt()
     };
-    let outer_grid = TriangleGrid::new(&outer_points, &outer_tris, 2.0 * outer_edge.max(h));
+    let outer_grid = TriangleGrid::new(&outer_points, &outer_tris, outer_edge.max(0.5 * h));
     let core_face_grid = TriangleGrid::new(&core_points, &core_faces, 2.0 * h.max(spacing));
     let top = 1.0 - 1e-6;
     let outer_of = |p: &Vec3, fallbacks: &mut usize| -> u32 {
@@ -387,12 +403,41 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
         let (f, x, b, _) = core_face_grid.nearest(&core_points, &core_faces, &q, |_| true).expect("the core has faces");
         (f as u32, x, b)
     };
+    // --- shared voxels: the outer triangle above each wall voxel ---
+    // Wall voxels in order of decreasing phi: a voxel takes the owner of the wall voxel one step
+    // along the field from its centre when that one has an owner already (one field line each),
+    // and marches to the outer surface itself otherwise (the outermost layer, and where field
+    // lines leave through a base).
+    let grid = field.grid;
+    let mut voxel_owner = vec![VOXEL_OUTSIDE; grid.len()];
+    let mut order: Vec<usize> = (0..grid.len()).filter(|&v| field.wall[v]).collect();
+    order.sort_by(|&a, &b| field.phi[b].total_cmp(&field.phi[a]));
+    let mut fv = 0;
+    for &v in &order {
+        let c = grid.centre(v);
+        if tet_grid.locate(&core_points, &c).is_some() {
+            voxel_owner[v] = VOXEL_CORE;
+            continue;
+        }
+        let ahead = c + grid.h * field.dir_at(&c, o.projection);
+        let inherited = grid.voxel_of(&ahead).map(|a| voxel_owner[grid.index(a[0], a[1], a[2])]).filter(|&w| w < VOXEL_CORE);
+        voxel_owner[v] = match inherited {
+            Some(w) => w,
+            None => outer_of(&c, &mut fv),
+        };
+    }
+    // Particles take their voxel's owner (so that RV(p_s) and the inside voxels of B(p_s) agree),
+    // or march when their voxel is not a wall voxel.
     let mut fo = 0;
     let mut fc = 0;
     let mut keyed: Vec<(u32, u32, Vec3)> = particles
         .iter()
         .map(|p| {
-            let t = outer_of(p, &mut fo);
+            let from_voxel = grid.voxel_of(p).map(|a| voxel_owner[grid.index(a[0], a[1], a[2])]).filter(|&w| w < VOXEL_CORE);
+            let t = match from_voxel {
+                Some(w) => w,
+                None => outer_of(p, &mut fo),
+            };
             let (f, _, _) = core_of(p, &mut fc);
             (t, f, *p)
         })
@@ -426,18 +471,6 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
         skin_offset.push(p - x);
     }
     stats.fallback_skin = fs;
-
-    // --- shared voxels ---
-    let grid = field.grid;
-    let mut voxel_owner = vec![VOXEL_OUTSIDE; grid.len()];
-    let mut dummy = 0;
-    for v in 0..grid.len() {
-        if !field.wall[v] {
-            continue;
-        }
-        let c = grid.centre(v);
-        voxel_owner[v] = if tet_grid.locate(&core_points, &c).is_some() { VOXEL_CORE } else { outer_of(&c, &mut dummy) };
-    }
 
     // --- activation regions ---
     let (region_tri_ptr, region_tris, region_rim_ptr, region_rim) = regions(&outer_points, &outer_tris, &tri_particle_ptr, o.min_region_particles);
@@ -513,6 +546,161 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     })
 }
 
+type Core = (Vec<Vec3>, Vec<[usize; 4]>, Vec<[usize; 3]>, Vec<usize>, CoreQuality, f64);
+
+/// The FEM core: the inner surface simplified to `n_tri` triangles, lifted into the wall,
+/// offset in layers along the field and split into tets.
+fn build_core(wall: &Wall, field: &Transmural, wall_grid: &TriangleGrid, o: &HybridOptions, n_tri: usize) -> Result<Core, HybridError> {
+    let surf = &wall.surface;
+    let field = field;
+    let wall_grid = wall_grid;
+    let (ipts, itris, _) = wall.part(WallPart::Inner);
+    let mut coarse = simplify(&ipts, &itris, n_tri);
+    balance_on_surface(&mut coarse, surf, &wall.parts, wall_grid, field, 0.95 * o.core_fraction);
+    if coarse.triangles.len() < 4 {
+        return Err(HybridError::Core(format!("the inner surface simplified to {} triangles", coarse.triangles.len())));
+    }
+    let nv = coarse.points.len();
+    let layers = o.core_layers;
+    let mut core_points = Vec::with_capacity(nv * (layers + 1));
+    core_points.extend(coarse.points.iter().copied());
+    // Layer l of vertex v sits at phi_b + l/L (f - phi_b), phi_b the level of the (lifted)
+    // inner vertex; at least a quarter of the core fraction above it, so that no prism is flat.
+    // Vertices on a boundary loop (a base or valve ring) go straight towards the nearest point of
+    // the outer surface instead, across the ring: the field is degenerate along the rim.
+    let phi_b: Vec<f64> = coarse.points.iter().map(|p| field.phi_at(p)).collect();
+    let outer_dir: Vec<Vec3> = coarse
+        .points
+        .iter()
+        .map(|p| match wall_grid.nearest(surf.points(), surf.triangles(), p, |t| wall.parts[t] == WallPart::Outer) {
+            Some((_, q, _, _)) => q - p,
+            None => Vec3::zeros(),
+        })
+        .collect();
+    for l in 1..=layers {
+        let frac = l as f64 / layers as f64;
+        for (v, p) in coarse.points.iter().enumerate() {
+            let straight = p + o.core_fraction * frac * outer_dir[v];
+            if coarse.boundary[v] || phi_b[v] >= 0.95 {
+                core_points.push(straight);
+                continue;
+            }
+            let span = (o.core_fraction - phi_b[v]).max(0.25 * o.core_fraction);
+            let level = (phi_b[v] + span * frac).min(0.95);
+            let q = field.march_to_level(p, level, true, o.projection).or_else(|| field.march_to_level(p, level, true, Projection::Transmural)).unwrap_or(straight);
+            core_points.push(q);
+        }
+    }
+    // Prisms: the inner triangles face the cavity and the layers rise into the wall, so every
+    // tet of a sound prism has negative signed volume as split. A twisted prism (offsets of
+    // neighbouring vertices pointing apart, e.g. along a valve ring) shows a tet of the other
+    // sign; the offsets of its vertices are then smoothed towards their neighbours' until none
+    // is left.
+    let prisms: Vec<[usize; 4]> = (0..layers)
+        .flat_map(|l| coarse.triangles.iter().flat_map(move |tri| split_prism([tri[0] + l * nv, tri[1] + l * nv, tri[2] + l * nv], nv)))
+        .collect();
+    let tet_vol = |pts: &[Vec3], t: &[usize; 4]| signed_volume(&pts[t[0]], &pts[t[1]], &pts[t[2]], &pts[t[3]]);
+    let mut vnbrs: Vec<Vec<usize>> = vec![vec![]; nv];
+    for tri in &coarse.triangles {
+        for k in 0..3 {
+            vnbrs[tri[k]].push(tri[(k + 1) % 3]);
+            vnbrs[tri[k]].push(tri[(k + 2) % 3]);
+        }
+    }
+    vnbrs.iter_mut().for_each(|v| {
+        v.sort_unstable();
+        v.dedup();
+    });
+    let mut untangle_rounds = 0;
+    loop {
+        let scale = core_points.iter().take(nv).zip(core_points.iter().skip(layers * nv)).map(|(a, b)| (b - a).norm()).fold(0.0, f64::max).max(1e-9);
+        let bad: Vec<usize> = prisms.iter().filter(|t| tet_vol(&core_points, t) > -1e-6 * scale.powi(3)).flat_map(|t| t.iter().map(|&n| n % nv)).collect();
+        if bad.is_empty() || untangle_rounds >= 200 {
+            break;
+        }
+        untangle_rounds += 1;
+        let mut mark = vec![false; nv];
+        for &v in &bad {
+            mark[v] = true;
+            for &w in &vnbrs[v] {
+                mark[w] = true;
+            }
+        }
+        for l in 1..=layers {
+            let off: Vec<Vec3> = (0..nv).map(|v| core_points[v + l * nv] - core_points[v]).collect();
+            for v in 0..nv {
+                if mark[v] && !vnbrs[v].is_empty() {
+                    let mean: Vec3 = vnbrs[v].iter().map(|&w| off[w]).sum::<Vec3>() / vnbrs[v].len() as f64;
+                    core_points[v + l * nv] = core_points[v] + 0.5 * (off[v] + mean);
+                }
+            }
+        }
+    }
+    let mut core_tets = Vec::with_capacity(prisms.len());
+    for (t, tet) in prisms.iter().enumerate() {
+        let v = tet_vol(&core_points, tet);
+        if !(v < 0.0) {
+            let hint = if o.projection == Projection::Radial {
+                "; the radial projection cannot serve this wall (it is not star-shaped about its mass centre): use the transmural projection"
+            } else {
+                ""
+            };
+            return Err(HybridError::Core(format!(
+                "prism {} (coarse inner triangle {}) stays twisted after smoothing its offsets; try more core triangles or a smaller core fraction{hint}",
+                t / 3,
+                (t / 3) % coarse.triangles.len()
+            )));
+        }
+        core_tets.push([tet[0], tet[2], tet[1], tet[3]]);
+    }
+    if std::env::var_os("PALPATE_DEBUG").is_some() {
+        eprintln!("core: {untangle_rounds} untangling rounds");
+    }
+    let core_faces: Vec<[usize; 3]> = coarse
+        .triangles
+        .iter()
+        .map(|t| {
+            // The inner triangles face the cavity; the top faces face the shell.
+            let o = layers * nv;
+            [t[0] + o, t[2] + o, t[1] + o]
+        })
+        .collect();
+    if std::env::var_os("PALPATE_DEBUG").is_some() {
+        for (t, tet) in core_tets.iter().enumerate() {
+            let v = signed_volume(&core_points[tet[0]], &core_points[tet[1]], &core_points[tet[2]], &core_points[tet[3]]);
+            if v.abs() < 1e-12 {
+                eprintln!("tet {t} {tet:?} vol {v:e}");
+                for &n in tet {
+                    eprintln!("   node {n} {:?} phi {:.3} boundary {}", core_points[n].as_slice(), field.phi_at(&core_points[n]), coarse.boundary[n % nv]);
+                }
+            }
+        }
+    }
+    let pts_arr: Vec<[f64; 3]> = core_points.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let tets_arr: Vec<[i64; 4]> = core_tets.iter().map(|t| [t[0] as i64, t[1] as i64, t[2] as i64, t[3] as i64]).collect();
+    let (mesh, warnings) = TetMesh::from_arrays(&pts_arr, &tets_arr).map_err(HybridError::Mesh)?;
+    if let Some(w) = warnings.first() {
+        return Err(HybridError::Core(format!("{w:?} (try fewer core triangles, more layers or a larger core fraction)")));
+    }
+    let vols: Vec<f64> = core_tets.iter().map(|t| signed_volume(&core_points[t[0]], &core_points[t[1]], &core_points[t[2]], &core_points[t[3]])).collect();
+    let core_quality = CoreQuality {
+        min_dihedral_deg: mesh.min_dihedral_deg(),
+        min_volume: vols.iter().copied().fold(f64::INFINITY, f64::min),
+        max_volume: vols.iter().copied().fold(0.0, f64::max),
+    };
+    let core_volume: f64 = vols.iter().sum();
+    let mut core_base_nodes: Vec<usize> = Vec::new();
+    for (v, &b) in coarse.boundary.iter().enumerate() {
+        if b {
+            for l in 0..=layers {
+                core_base_nodes.push(v + l * nv);
+            }
+        }
+    }
+    core_base_nodes.sort_unstable();
+    Ok((core_points, core_tets, core_faces, core_base_nodes, core_quality, core_volume))
+}
+
 /// Move the vertices of the coarse inner surface along the transmural direction until the
 /// coarse surface lies in the wall: chords of a curved surface cut into the cavity, and the core
 /// would otherwise take cavity volume (the wall region this leaves between the coarse and the
@@ -520,7 +708,7 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
 /// distance to the nearest inner triangle, negative on the cavity side; each vertex rises by the
 /// deepest cavity-side depth among the samples of its triangles it weighs most in. Boundary
 /// (base) vertices stay.
-fn balance_on_surface(coarse: &mut crate::mesh::simplify::Simplified, surf: &TriSurface, parts: &[WallPart], grid: &TriangleGrid, field: &Transmural) {
+fn balance_on_surface(coarse: &mut crate::mesh::simplify::Simplified, surf: &TriSurface, parts: &[WallPart], grid: &TriangleGrid, field: &Transmural, max_level: f64) {
     let (pts, tris) = (surf.points(), surf.triangles());
     const K: usize = 6;
     for _ in 0..4 {
@@ -543,14 +731,28 @@ fn balance_on_surface(coarse: &mut crate::mesh::simplify::Simplified, surf: &Tri
                 }
             }
         }
+        if std::env::var_os("PALPATE_DEBUG").is_some() {
+            eprintln!("balance: max lift {:e} m, vertices to lift {}", lift.iter().copied().fold(0.0, f64::max), lift.iter().filter(|&&l| l > 0.0).count());
+        }
         let mut moved = false;
         for v in 0..coarse.points.len() {
             if coarse.boundary[v] || lift[v] == 0.0 {
                 continue;
             }
-            let d = field.dir_at(&coarse.points[v], Projection::Transmural);
-            coarse.points[v] += lift[v] * d;
-            moved = true;
+            // In small steps, and never past 0.95 of the core fraction in phi (a sample
+            // far from the inner surface, e.g. across a valve opening, must not push the vertex
+            // through the wall).
+            let steps = (lift[v] / (0.25 * field.grid.h)).ceil().max(1.0) as usize;
+            let dl = lift[v] / steps as f64;
+            for _ in 0..steps {
+                let p = coarse.points[v];
+                let q = p + dl * field.dir_at(&p, Projection::Transmural);
+                if field.phi_at(&q) > max_level {
+                    break;
+                }
+                coarse.points[v] = q;
+                moved = true;
+            }
         }
         if !moved {
             break;
@@ -585,9 +787,28 @@ fn regions(points: &[Vec3], tris: &[[usize; 3]], tri_particle_ptr: &[u32], min_p
         }
     }
     let count = |t: u32| (tri_particle_ptr[t as usize + 1] - tri_particle_ptr[t as usize]) as usize;
+    // The triangle across each edge (u32::MAX on an open boundary), found once.
+    let mut across = vec![[u32::MAX; 3]; tris.len()];
+    {
+        let mut keyed: Vec<(usize, usize, u32, u8)> = Vec::with_capacity(3 * tris.len());
+        for (t, tri) in tris.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                keyed.push((a.min(b), a.max(b), t as u32, k as u8));
+            }
+        }
+        keyed.sort_unstable();
+        for w in keyed.windows(2) {
+            if (w[0].0, w[0].1) == (w[1].0, w[1].1) {
+                across[w[0].2 as usize][w[0].3 as usize] = w[1].2;
+                across[w[1].2 as usize][w[1].3 as usize] = w[0].2;
+            }
+        }
+    }
     let (mut tri_ptr, mut out_tris, mut rim_ptr, mut rim) = (vec![0u32], vec![], vec![0u32], vec![]);
     let mut in_patch = vec![false; tris.len()];
     let mut patch: Vec<u32> = Vec::new();
+    let mut next: Vec<(u32, u32)> = Vec::new();
     for s in 0..nv {
         patch.clear();
         for &t in &vtris[s] {
@@ -597,7 +818,7 @@ fn regions(points: &[Vec3], tris: &[[usize; 3]], tri_particle_ptr: &[u32], min_p
         let mut rings = 1;
         loop {
             let n: usize = patch.iter().map(|&t| count(t)).sum();
-            if (n >= min_particles && rings >= 1) || (rings >= MAX_RINGS && n > 0) || rings >= 4 * MAX_RINGS {
+            if n >= min_particles || (rings >= MAX_RINGS && n > 0) || rings >= 2 * MAX_RINGS {
                 break;
             }
             // Grow: every triangle sharing a vertex with the patch.
@@ -613,41 +834,34 @@ fn regions(points: &[Vec3], tris: &[[usize; 3]], tri_particle_ptr: &[u32], min_p
             rings += 1;
         }
         patch.sort_unstable();
-        // Rim: vertices on an edge that only one patch triangle has (a boundary edge of the
-        // patch), in the order the directed boundary edges chain.
-        let mut next: HashMap<usize, usize> = HashMap::new();
-        let mut edges: HashMap<(usize, usize), u8> = HashMap::new();
+        // Rim: vertices on an edge whose other triangle is not in the patch (a boundary edge of
+        // the patch), in the order the directed boundary edges chain.
+        next.clear();
         for &t in &patch {
             let tri = tris[t as usize];
             for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                *edges.entry((a.min(b), a.max(b))).or_insert(0) += 1;
-            }
-        }
-        for &t in &patch {
-            let tri = tris[t as usize];
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                if edges[&(a.min(b), a.max(b))] == 1 {
-                    next.insert(a, b);
+                let o = across[t as usize][k];
+                if o == u32::MAX || !in_patch[o as usize] {
+                    next.push((tri[k] as u32, tri[(k + 1) % 3] as u32));
                 }
             }
         }
-        let mut loop_v = Vec::new();
-        if let Some(&start) = next.keys().min() {
+        next.sort_unstable();
+        let mut loop_v: Vec<u32> = Vec::new();
+        if let Some(&(start, _)) = next.first() {
             let mut v = start;
             for _ in 0..next.len() {
-                loop_v.push(v as u32);
-                match next.get(&v) {
-                    Some(&w) if w != start => v = w,
+                loop_v.push(v);
+                match next.binary_search_by_key(&v, |e| e.0) {
+                    Ok(k) if next[k].1 != start => v = next[k].1,
                     _ => break,
                 }
             }
             // Vertices of other loops (a patch touching an open boundary), unordered.
-            let mut seen: Vec<u32> = loop_v.clone();
+            let mut seen = loop_v.clone();
             seen.sort_unstable();
-            let mut rest: Vec<u32> = next.keys().map(|&v| v as u32).filter(|v| seen.binary_search(v).is_err()).collect();
-            rest.sort_unstable();
+            let mut rest: Vec<u32> = next.iter().map(|e| e.0).filter(|v| seen.binary_search(v).is_err()).collect();
+            rest.dedup();
             loop_v.extend(rest);
         }
         rim.extend_from_slice(&loop_v);

@@ -126,16 +126,9 @@ impl TriangleGrid {
         for a in 0..3 {
             c[a] = (((p[a] - self.lo[a]) / self.h).floor() as isize).clamp(-1, n[a] as isize);
         }
-        // Distance from p to the grid box, so that shells start where cells are.
         let mut best: Option<(usize, Vec3, [f64; 3], f64)> = None;
         let max_r = n[0].max(n[1]).max(n[2]) as isize + 1;
         for r in 0..=max_r {
-            // Everything within r-1 cells has been seen; the next shell is at least (r-1) h away.
-            if let Some(b) = &best {
-                if b.3 < (r as f64 - 1.0) * self.h {
-                    break;
-                }
-            }
             for k in c[2] - r..=c[2] + r {
                 for j in c[1] - r..=c[1] + r {
                     for i in c[0] - r..=c[0] + r {
@@ -157,6 +150,19 @@ impl TriangleGrid {
                             }
                         }
                     }
+                }
+            }
+            // Everything in the cube of cells [c - r, c + r] has been seen; anything else is at
+            // least as far as the nearest face of that cube.
+            if let Some(b) = &best {
+                let mut reach = f64::INFINITY;
+                for a in 0..3 {
+                    let lo_face = self.lo[a] + (c[a] - r) as f64 * self.h;
+                    let hi_face = self.lo[a] + (c[a] + r + 1) as f64 * self.h;
+                    reach = reach.min(p[a] - lo_face).min(hi_face - p[a]);
+                }
+                if b.3 <= reach {
+                    break;
                 }
             }
         }
@@ -202,5 +208,27 @@ impl TetGrid {
             }
         }
         None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::ellipsoid_surface;
+
+    #[test]
+    fn nearest_matches_brute_force() {
+        let s = ellipsoid_surface([0.02, 0.03, 0.04], 4);
+        let (p, t) = (s.points(), s.triangles());
+        for cell in [0.001, 0.004, 0.02] {
+            let g = TriangleGrid::new(p, t, cell);
+            for k in 0..300 {
+                let q = Vec3::new(((k * 37) % 101) as f64 / 1000.0 - 0.05, ((k * 53) % 89) as f64 / 1000.0 - 0.045, ((k * 17) % 97) as f64 / 1000.0 - 0.05);
+                let keep = |i: usize| i % 3 != 0;
+                let (bt, _, _, bd) = g.nearest(p, t, &q, keep).unwrap();
+                let brute = (0..t.len()).filter(|&i| keep(i)).map(|i| (closest_on_triangle(&q, &p[t[i][0]], &p[t[i][1]], &p[t[i][2]]).0 - q).norm()).fold(f64::INFINITY, f64::min);
+                assert!((bd - brute).abs() < 1e-15, "cell {cell} point {k}: grid {bd} (tri {bt}) vs brute {brute}");
+            }
+        }
     }
 }

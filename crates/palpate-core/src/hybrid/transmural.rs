@@ -203,12 +203,27 @@ pub fn solve(surface: &TriSurface, parts: &[WallPart], h: f64, tri_grid: &Triang
             diag[r] = 1.0;
         }
     }
+    // Wall neighbours of each unknown, as unknown indices (u32::MAX: none).
+    let links: Vec<[u32; 6]> = cells
+        .iter()
+        .map(|&v| {
+            let mut l = [u32::MAX; 6];
+            for (k, w) in nbr6(v).into_iter().enumerate() {
+                if let Some(w) = w {
+                    if wall[w] {
+                        l[k] = id[w];
+                    }
+                }
+            }
+            l
+        })
+        .collect();
     let apply = |x: &[f64], y: &mut [f64]| {
-        for (r, &v) in cells.iter().enumerate() {
+        for r in 0..m {
             let mut s = diag[r] * x[r];
-            for w in nbr6(v).into_iter().flatten() {
-                if wall[w] {
-                    s -= x[id[w] as usize];
+            for &w in &links[r] {
+                if w != u32::MAX {
+                    s -= x[w as usize];
                 }
             }
             y[r] = s;
@@ -373,7 +388,7 @@ impl Transmural {
     /// `phi` reaches `level` (crossing it from the start side). Returns the end point, or `None`
     /// if the path leaves the grid, stalls or turns back (the mode cannot serve there).
     pub fn march_to_level(&self, p: &Vec3, level: f64, outward: bool, mode: Projection) -> Option<Vec3> {
-        let step = 0.5 * self.grid.h;
+        let step = 0.75 * self.grid.h;
         let sign = if outward { 1.0 } else { -1.0 };
         let mut x = *p;
         let mut f = self.phi_at(&x);

@@ -293,18 +293,13 @@ pub fn simplify(points: &[Vec3], triangles: &[[usize; 3]], target: usize) -> Sim
         if origin[a] == a && on_boundary[b] && !on_boundary[a] {
             origin[a] = origin[b];
         }
+        // Only the edges at `a` changed cost (their quadric sum and end point); the others
+        // keep their heap entries (link and fold checks are redone when they are popped).
         stamp[a] += 1;
         stamp[b] += 1;
-        let nbrs = neighbours(&vtris, &tris, a);
-        for &w in &nbrs {
-            stamp[w] += 1;
-        }
-        for &w in &nbrs {
-            // Refresh every edge around w (its stamp changed).
-            for x in neighbours(&vtris, &tris, w) {
-                let (cost, _) = best(&quad, &pos, w, x);
-                heap.push(Candidate { cost, a: w, b: x, stamp: (stamp[w], stamp[x]) });
-            }
+        for x in neighbours(&vtris, &tris, a) {
+            let (cost, _) = best(&quad, &pos, a, x);
+            heap.push(Candidate { cost, a, b: x, stamp: (stamp[a], stamp[x]) });
         }
     }
     if std::env::var_os("PALPATE_DEBUG").is_some() {

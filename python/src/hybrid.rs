@@ -1,0 +1,347 @@
+//! `palpate.HybridModel`: the compiled hybrid model (FEM core, particle shell, skin, activation
+//! regions) built from the surfaces of an organ wall, saved and loaded as one file.
+
+use crate::conv;
+use crate::errors::{self, PalpateError};
+use crate::particles::{surface_error, PyTriSurface};
+use numpy::{PyArray1, PyArray2, PyArrayMethods};
+use palpate_core::hybrid::{self, HybridModel, HybridOptions, Projection, Spacing, VoxelLabel, Wall, WallPart};
+use palpate_core::mesh::TriSurface;
+use palpate_core::{HybridError, ModelFileError as CoreFileError};
+use pyo3::create_exception;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+create_exception!(
+    palpate,
+    ModelFileError,
+    PalpateError,
+    "A compiled-model file that cannot be read: not a palpate model, another format version, truncated or corrupted. The message names the file and the reason."
+);
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("ModelFileError", m.py().get_type::<ModelFileError>())?;
+    m.add_class::<PyProjection>()?;
+    m.add_class::<PyHybridModel>()?;
+    Ok(())
+}
+
+fn hybrid_error(e: HybridError) -> PyErr {
+    match e {
+        HybridError::Surface(s) => surface_error(s),
+        HybridError::Mesh(m) => errors::mesh_error(m),
+        HybridError::Parameter { .. } => PyValueError::new_err(e.to_string()),
+        other => errors::ModelError::new_err(other.to_string()),
+    }
+}
+
+fn file_error(e: CoreFileError) -> PyErr {
+    match e {
+        CoreFileError::Io { .. } => pyo3::exceptions::PyOSError::new_err(e.to_string()),
+        other => ModelFileError::new_err(other.to_string()),
+    }
+}
+
+/// How the builder projects between the outer surface and the core.
+#[pyclass(name = "Projection", module = "palpate", eq, eq_int, hash, frozen, from_py_object)]
+#[derive(Clone, Copy, PartialEq, Hash)]
+pub enum PyProjection {
+    /// Along the streamlines of the transmural harmonic field (any wall shape; default).
+    TRANSMURAL,
+    /// The paper's: along straight lines through the wall's mass centre (star-shaped walls).
+    RADIAL,
+}
+
+impl From<PyProjection> for Projection {
+    fn from(p: PyProjection) -> Self {
+        match p {
+            PyProjection::TRANSMURAL => Projection::Transmural,
+            PyProjection::RADIAL => Projection::Radial,
+        }
+    }
+}
+
+/// A compiled hybrid model. Build it with :meth:`HybridModel.build_nested` (two nested closed
+/// surfaces) or :meth:`HybridModel.build_tagged` (one closed surface, a part per triangle), or
+/// :meth:`HybridModel.load` a saved one. Everything is in SI units (m, kg), world frame of the
+/// input surfaces; arrays are copies.
+#[pyclass(name = "HybridModel", module = "palpate", frozen)]
+pub struct PyHybridModel {
+    pub model: HybridModel,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn options(projection: PyProjection, core_fraction: f64, core_triangles: usize, core_layers: usize, spacing: Option<f64>, particles: usize, density: f64, min_region_particles: usize, field_voxels: usize) -> HybridOptions {
+    HybridOptions {
+        projection: projection.into(),
+        core_fraction,
+        core_triangles,
+        core_layers,
+        spacing: match spacing {
+            Some(s) => Spacing::Length(s),
+            None => Spacing::Count(particles),
+        },
+        density,
+        min_region_particles,
+        field_voxels,
+    }
+}
+
+fn build_wall(py: Python<'_>, wall: Wall, o: HybridOptions) -> PyResult<PyHybridModel> {
+    let model = py.detach(|| hybrid::build(&wall, &o)).map_err(hybrid_error)?;
+    Ok(PyHybridModel { model })
+}
+
+fn u32s_to_py<'py>(py: Python<'py>, v: &[u32]) -> Bound<'py, PyArray1<i64>> {
+    PyArray1::from_vec(py, v.iter().map(|&x| x as i64).collect())
+}
+
+#[pymethods]
+impl PyHybridModel {
+    /// Build from two nested closed surfaces (the wall lies inside ``outer``, outside ``inner``).
+    ///
+    /// ``core_fraction``: the fraction of the wall (transmural coordinate, from the inner
+    /// surface) the FEM core takes; ``core_triangles``: triangles of the simplified inner
+    /// surface (3 tets each per layer; 0: automatic, 64 for a closed wall, 300 for one with a
+    /// base, raised while prisms would twist); ``spacing`` [m] or, if None, about ``particles``
+    /// particles in the shell; ``density`` [kg/m^3]; ``min_region_particles``: activation
+    /// regions grow by rings of outer triangles until they hold this many; ``field_voxels``:
+    /// wall voxels of the transmural solve.
+    #[staticmethod]
+    #[pyo3(signature = (inner, outer, *, projection = PyProjection::TRANSMURAL, core_fraction = 0.5, core_triangles = 0, core_layers = 1, spacing = None, particles = 28000, density = 1000.0, min_region_particles = 50, field_voxels = 120000))]
+    #[allow(clippy::too_many_arguments)]
+    fn build_nested(
+        py: Python<'_>,
+        inner: &PyTriSurface,
+        outer: &PyTriSurface,
+        projection: PyProjection,
+        core_fraction: f64,
+        core_triangles: usize,
+        core_layers: usize,
+        spacing: Option<f64>,
+        particles: usize,
+        density: f64,
+        min_region_particles: usize,
+        field_voxels: usize,
+    ) -> PyResult<PyHybridModel> {
+        let wall = Wall::nested(&inner.inner, &outer.inner).map_err(hybrid_error)?;
+        build_wall(py, wall, options(projection, core_fraction, core_triangles, core_layers, spacing, particles, density, min_region_particles, field_voxels))
+    }
+
+    /// Build from one closed surface ``points`` (n, 3) [m], ``triangles`` (m, 3) with a part per
+    /// triangle, ``parts`` (m,) int: 0 inner, 1 outer, 2 base (a truncated ventricle). Same
+    /// options as :meth:`build_nested`.
+    #[staticmethod]
+    #[pyo3(signature = (points, triangles, parts, *, projection = PyProjection::TRANSMURAL, core_fraction = 0.5, core_triangles = 0, core_layers = 1, spacing = None, particles = 28000, density = 1000.0, min_region_particles = 50, field_voxels = 120000))]
+    #[allow(clippy::too_many_arguments)]
+    fn build_tagged(
+        py: Python<'_>,
+        points: &Bound<'_, PyAny>,
+        triangles: &Bound<'_, PyAny>,
+        parts: &Bound<'_, PyAny>,
+        projection: PyProjection,
+        core_fraction: f64,
+        core_triangles: usize,
+        core_layers: usize,
+        spacing: Option<f64>,
+        particles: usize,
+        density: f64,
+        min_region_particles: usize,
+        field_voxels: usize,
+    ) -> PyResult<PyHybridModel> {
+        let pts = conv::points(points, "points")?;
+        let tris = crate::particles::triangles_arg(triangles, "triangles")?;
+        let parts_arr = numpy::PyArrayLike1::<i64, numpy::AllowTypeChange>::extract(parts.as_borrowed())
+            .map_err(|_| PyValueError::new_err("parts: expected a 1-D integer array (0 inner, 1 outer, 2 base)"))?;
+        let raw: Vec<i64> = parts_arr.as_array().iter().copied().collect();
+        if raw.len() != tris.len() {
+            return Err(PyValueError::new_err(format!("parts: {} entries for {} triangles", raw.len(), tris.len())));
+        }
+        let mut tags = Vec::with_capacity(raw.len());
+        for (t, &p) in raw.iter().enumerate() {
+            tags.push(match p {
+                0 => WallPart::Inner,
+                1 => WallPart::Outer,
+                2 => WallPart::Base,
+                _ => return Err(PyValueError::new_err(format!("parts: triangle {t} has part {p}; expected 0 (inner), 1 (outer) or 2 (base)"))),
+            });
+        }
+        let (surface, _) = TriSurface::from_arrays(&pts, &tris).map_err(surface_error)?;
+        let wall = Wall::tagged(surface, tags).map_err(hybrid_error)?;
+        if wall.dropped_pieces > 0 {
+            crate::particles::warn(py, format!("dropped {} closed piece(s) of the surface enclosing less than {} of the largest (specks, e.g. left by a surface repair)", wall.dropped_pieces, palpate_core::hybrid::build::MIN_PIECE_VOLUME))?;
+        }
+        build_wall(py, wall, options(projection, core_fraction, core_triangles, core_layers, spacing, particles, density, min_region_particles, field_voxels))
+    }
+
+    /// Save to ``path`` (one versioned binary file with a checksum).
+    fn save(&self, py: Python<'_>, path: std::path::PathBuf) -> PyResult<()> {
+        py.detach(|| self.model.save(&path)).map_err(file_error)
+    }
+
+    /// Load a model saved with :meth:`save`. Raises :class:`ModelFileError` naming the file for
+    /// a foreign, truncated, corrupted or other-version file.
+    #[staticmethod]
+    fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<PyHybridModel> {
+        let model = py.detach(|| HybridModel::load(&path)).map_err(file_error)?;
+        Ok(PyHybridModel { model })
+    }
+
+    /// The model file's bytes (what :meth:`save` writes).
+    fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, pyo3::types::PyBytes> {
+        pyo3::types::PyBytes::new(py, &hybrid::file::to_bytes(&self.model))
+    }
+
+    /// FEM core node positions [m], (n, 3).
+    #[getter]
+    fn core_points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> { conv::vec3s_to_py(py, &self.model.core_points) }
+    /// FEM core tets, (m, 4) int64 (positive volume).
+    #[getter]
+    fn core_tets<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> { conv::index_rows_to_py(py, &self.model.core_tets) }
+    /// Outer boundary faces of the core (towards the shell), (f, 3) int64, oriented outward.
+    #[getter]
+    fn core_faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> { conv::index_rows_to_py(py, &self.model.core_faces) }
+    /// Core nodes on a base (held fixed), int64 (k,); empty for a closed wall.
+    #[getter]
+    fn core_base_nodes<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { conv::usizes_to_py(py, &self.model.core_base_nodes) }
+    /// Particle rest positions [m], (p, 3), sorted by the outer triangle above them.
+    #[getter]
+    fn particles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> { conv::vec3s_to_py(py, &self.model.particles) }
+    /// Particle masses [kg], (p,).
+    #[getter]
+    fn particle_masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> { conv::f64s_to_py(py, &self.model.particle_mass) }
+    /// Outer triangle above each particle, int64 (p,).
+    #[getter]
+    fn particle_outer_triangle<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { u32s_to_py(py, &self.model.particle_outer_tri) }
+    /// Core face below each particle, int64 (p,).
+    #[getter]
+    fn particle_core_face<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { u32s_to_py(py, &self.model.particle_core_face) }
+    /// Outer surface vertices [m], (s, 3): one activation region and one skin link each.
+    #[getter]
+    fn outer_points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> { conv::vec3s_to_py(py, &self.model.outer_points) }
+    /// Outer surface triangles, (t, 3) int64.
+    #[getter]
+    fn outer_triangles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> { conv::index_rows_to_py(py, &self.model.outer_tris) }
+    /// Skin: the core face each outer vertex is tied to, int64 (s,).
+    #[getter]
+    fn skin_faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { u32s_to_py(py, &self.model.skin_face) }
+    /// Skin: barycentric coordinates on that face, (s, 3), each in [0, 1], rows summing to 1.
+    #[getter]
+    fn skin_barycentric<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let flat: Vec<f64> = self.model.skin_bary.iter().flatten().copied().collect();
+        PyArray1::from_vec(py, flat).reshape([self.model.skin_bary.len(), 3]).expect("shape")
+    }
+    /// Skin: rest offset from the anchor point on the face to the vertex [m], (s, 3).
+    #[getter]
+    fn skin_offsets<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> { conv::vec3s_to_py(py, &self.model.skin_offset) }
+    /// Number of activation regions (outer vertices).
+    #[getter]
+    fn n_regions(&self) -> usize { self.model.n_regions() }
+    /// Particle lattice spacing [m].
+    #[getter]
+    fn spacing(&self) -> f64 { self.model.spacing }
+    /// Volume enclosed by the wall's boundary [m^3].
+    #[getter]
+    fn wall_volume(&self) -> f64 { self.model.wall_volume }
+    /// Volume of the FEM core [m^3].
+    #[getter]
+    fn core_volume(&self) -> f64 { self.model.core_volume() }
+    /// Volume the particles represent (lattice cells) [m^3].
+    #[getter]
+    fn shell_volume(&self) -> f64 { self.model.shell_volume() }
+
+    /// RV(p_s): indices of the particles of region ``s``, int64.
+    fn region_particles<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        self.check_region(s)?;
+        let v: Vec<i64> = self.model.region_particle_ranges(s).flat_map(|r| r.map(|i| i as i64)).collect();
+        Ok(PyArray1::from_vec(py, v))
+    }
+    /// nv(p_s): the outer triangles of region ``s``, int64.
+    fn region_triangles<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        self.check_region(s)?;
+        Ok(u32s_to_py(py, self.model.region_triangles(s)))
+    }
+    /// The core faces under RV(p_s), int64.
+    fn region_core_faces<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        self.check_region(s)?;
+        Ok(u32s_to_py(py, self.model.region_core_faces(s)))
+    }
+    /// C(p_s): the projections on the core of nv(p_s)'s boundary vertices [m], (k, 3).
+    fn region_curve<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        self.check_region(s)?;
+        Ok(conv::vec3s_to_py(py, &self.model.region_curve(s)))
+    }
+    /// B(p_s): ``{"origin": (3,) [m], "h": voxel edge [m], "label": (nz, ny, nx) uint8 (0
+    /// outside, 1 inside, 2 boundary), "gradient": (nz, ny, nx, 3) float32 unit vectors to the
+    /// nearest interior voxel (zero inside)}``.
+    fn region_field<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyDict>> {
+        self.check_region(s)?;
+        let f = self.model.region_field(s);
+        let [nx, ny, nz] = f.dims;
+        let d = PyDict::new(py);
+        d.set_item("origin", PyArray1::from_vec(py, vec![f.origin.x, f.origin.y, f.origin.z]))?;
+        d.set_item("h", f.h)?;
+        let labels: Vec<u8> = f.label.iter().map(|l| match l { VoxelLabel::Outside => 0, VoxelLabel::Inside => 1, VoxelLabel::Boundary => 2 }).collect();
+        d.set_item("label", PyArray1::from_vec(py, labels).reshape([nz, ny, nx])?)?;
+        let g: Vec<f32> = f.gradient.iter().flatten().copied().collect();
+        d.set_item("gradient", PyArray1::from_vec(py, g).reshape([nz, ny, nx, 3])?)?;
+        Ok(d)
+    }
+
+    /// Counts, core quality, build statistics and memory, as a dict.
+    fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let m = &self.model;
+        let d = PyDict::new(py);
+        let sizes: Vec<usize> = (0..m.n_regions()).map(|s| m.region_len(s)).collect();
+        let mut sorted = sizes.clone();
+        sorted.sort_unstable();
+        d.set_item("projection", match m.options.projection { Projection::Transmural => "transmural", Projection::Radial => "radial" })?;
+        d.set_item("core_fraction", m.options.core_fraction)?;
+        d.set_item("core_tets", m.core_tets.len())?;
+        d.set_item("core_nodes", m.core_points.len())?;
+        d.set_item("core_faces", m.core_faces.len())?;
+        d.set_item("core_base_nodes", m.core_base_nodes.len())?;
+        d.set_item("core_min_dihedral_deg", m.core_quality.min_dihedral_deg)?;
+        d.set_item("core_volume_ratio", m.core_quality.min_volume / m.core_quality.max_volume)?;
+        d.set_item("particles", m.particles.len())?;
+        d.set_item("spacing_m", m.spacing)?;
+        d.set_item("wall_volume_m3", m.wall_volume)?;
+        d.set_item("core_volume_m3", m.core_volume())?;
+        d.set_item("shell_volume_m3", m.shell_volume())?;
+        d.set_item("outer_vertices", m.outer_points.len())?;
+        d.set_item("outer_triangles", m.outer_tris.len())?;
+        d.set_item("regions", m.n_regions())?;
+        d.set_item("region_particles_min", sorted.first().copied().unwrap_or(0))?;
+        d.set_item("region_particles_median", sorted.get(sorted.len() / 2).copied().unwrap_or(0))?;
+        d.set_item("region_particles_max", sorted.last().copied().unwrap_or(0))?;
+        d.set_item("voxels", m.grid.dims.iter().product::<usize>())?;
+        d.set_item("voxel_m", m.grid.h)?;
+        d.set_item("file_bytes", hybrid::file::to_bytes(m).len())?;
+        let s = &m.stats;
+        d.set_item("build_s", s.total_s)?;
+        d.set_item("build_field_s", s.field_s)?;
+        d.set_item("build_core_s", s.core_s)?;
+        d.set_item("build_particles_s", s.particles_s)?;
+        d.set_item("build_regions_s", s.regions_s)?;
+        d.set_item("field_cg_iterations", s.field_iterations)?;
+        d.set_item("fallback_particle_outer", s.fallback_particle_outer)?;
+        d.set_item("fallback_particle_core", s.fallback_particle_core)?;
+        d.set_item("fallback_skin", s.fallback_skin)?;
+        Ok(d)
+    }
+
+    fn __repr__(&self) -> String {
+        let m = &self.model;
+        format!("HybridModel({} core tets, {} particles at {:.3} mm, {} regions)", m.core_tets.len(), m.particles.len(), m.spacing * 1e3, m.n_regions())
+    }
+}
+
+impl PyHybridModel {
+    fn check_region(&self, s: usize) -> PyResult<()> {
+        if s >= self.model.n_regions() {
+            return Err(pyo3::exceptions::PyIndexError::new_err(format!("region {s} out of range ({} regions)", self.model.n_regions())));
+        }
+        Ok(())
+    }
+}
