@@ -815,22 +815,24 @@ fn regions(points: &[Vec3], tris: &[[usize; 3]], tri_particle_ptr: &[u32], min_p
             in_patch[t as usize] = true;
             patch.push(t);
         }
+        let mut n: usize = patch.iter().map(|&t| count(t)).sum();
+        let mut ring_start = 0;
         let mut rings = 1;
-        loop {
-            let n: usize = patch.iter().map(|&t| count(t)).sum();
-            if n >= min_particles || (rings >= MAX_RINGS && n > 0) || rings >= 2 * MAX_RINGS {
-                break;
-            }
-            // Grow: every triangle sharing a vertex with the patch.
-            let verts: Vec<usize> = patch.iter().flat_map(|&t| tris[t as usize]).collect();
-            for v in verts {
-                for &t in &vtris[v] {
-                    if !in_patch[t as usize] {
-                        in_patch[t as usize] = true;
-                        patch.push(t);
+        while !(n >= min_particles || (rings >= MAX_RINGS && n > 0) || rings >= 2 * MAX_RINGS) {
+            // Grow by one ring: every triangle sharing a vertex with the last ring added.
+            let ring_end = patch.len();
+            for r in ring_start..ring_end {
+                for &v in &tris[patch[r] as usize] {
+                    for &t in &vtris[v] {
+                        if !in_patch[t as usize] {
+                            in_patch[t as usize] = true;
+                            patch.push(t);
+                            n += count(t);
+                        }
                     }
                 }
             }
+            ring_start = ring_end;
             rings += 1;
         }
         patch.sort_unstable();
