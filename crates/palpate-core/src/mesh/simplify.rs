@@ -347,10 +347,11 @@ mod tests {
         for &(a, b) in dir.keys() {
             assert!(dir.contains_key(&(b, a)));
         }
-        // Vertices near the ellipsoid.
+        // Vertices near the ellipsoid: a coarse vertex's quadric optimum sits off a curved
+        // surface by about the sagitta of its edges (here edges of ~15 mm on radii of 20-35 mm).
         for p in &out.points {
-            let l = (p.x / 0.02).powi(2) + (p.y / 0.02).powi(2) + (p.z / 0.035).powi(2);
-            assert!((l.sqrt() - 1.0).abs() < 0.05, "{l}");
+            let l = ((p.x / 0.02).powi(2) + (p.y / 0.02).powi(2) + (p.z / 0.035).powi(2)).sqrt();
+            assert!((l - 1.0).abs() < 0.08, "normalised radius {l}");
         }
     }
 }
