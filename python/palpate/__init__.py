@@ -47,6 +47,7 @@ from ._palpate import (
     simd_path,
     truncated_ellipsoid_wall,
 )
+from .hybrid import build_from_files, build_shape, build_tagged_file
 from .io import UNITS, VtuSeries, load_mesh, read_mesh_arrays
 from .surfaces import (load_surface, orient_consistently, read_surface_arrays, read_tagged_surface,
                        repair_surface)
@@ -76,6 +77,9 @@ __all__ = [
     "VtuSeries",
     "__version__",
     "box_mesh",
+    "build_from_files",
+    "build_shape",
+    "build_tagged_file",
     "ellipsoid_surface",
     "ellipsoid_wall",
     "load_mesh",

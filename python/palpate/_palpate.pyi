@@ -1,5 +1,6 @@
 # Type stubs of the Rust extension palpate._palpate (python/src/*.rs). Hand-kept: update with the binding.
 # Units are SI: m, m/s, N, s, Pa, kg/m^3, Pa s. Per-node arrays are float64 (n, 3).
+import os
 from typing import Optional, Sequence, Tuple, TypedDict, Union, overload
 
 import numpy as np
@@ -31,6 +32,8 @@ class SurfaceError(MeshError):
     node: Optional[int]  # inherited from MeshError; always None here
     triangle: Optional[int]
     vertex: Optional[int]
+
+class ModelFileError(PalpateError): ...
 
 class MeshWarning(UserWarning): ...
 
@@ -303,6 +306,128 @@ def ellipsoid_surface(
     semi_axes: Tuple[float, float, float] = (0.026, 0.026, 0.042),
     subdivisions: int = 4,
 ) -> TriSurface: ...
+class Projection:
+    TRANSMURAL: Projection
+    RADIAL: Projection
+
+class RegionField(TypedDict):
+    origin: _FloatArray
+    h: float
+    label: npt.NDArray[np.uint8]
+    gradient: npt.NDArray[np.float32]
+
+class HybridInfo(TypedDict):
+    projection: str
+    core_fraction: float
+    core_tets: int
+    core_nodes: int
+    core_faces: int
+    core_base_nodes: int
+    core_min_dihedral_deg: float
+    core_volume_ratio: float
+    particles: int
+    spacing_m: float
+    wall_volume_m3: float
+    core_volume_m3: float
+    shell_volume_m3: float
+    outer_vertices: int
+    outer_triangles: int
+    regions: int
+    region_particles_min: int
+    region_particles_median: int
+    region_particles_max: int
+    voxels: int
+    voxel_m: float
+    file_bytes: int
+    build_s: float
+    build_field_s: float
+    build_core_s: float
+    build_particles_s: float
+    build_regions_s: float
+    field_cg_iterations: int
+    fallback_particle_outer: int
+    fallback_particle_core: int
+    fallback_skin: int
+
+class HybridModel:
+    @staticmethod
+    def build_nested(
+        inner: TriSurface,
+        outer: TriSurface,
+        *,
+        projection: Projection = ...,
+        core_fraction: float = 0.5,
+        core_triangles: int = 0,
+        core_layers: int = 1,
+        spacing: Optional[float] = None,
+        particles: int = 28000,
+        density: float = 1000.0,
+        min_region_particles: int = 50,
+        field_voxels: int = 120000,
+    ) -> HybridModel: ...
+    @staticmethod
+    def build_tagged(
+        points: npt.ArrayLike,
+        triangles: npt.ArrayLike,
+        parts: npt.ArrayLike,
+        *,
+        projection: Projection = ...,
+        core_fraction: float = 0.5,
+        core_triangles: int = 0,
+        core_layers: int = 1,
+        spacing: Optional[float] = None,
+        particles: int = 28000,
+        density: float = 1000.0,
+        min_region_particles: int = 50,
+        field_voxels: int = 120000,
+    ) -> HybridModel: ...
+    def save(self, path: Union[str, os.PathLike[str]]) -> None: ...
+    @staticmethod
+    def load(path: Union[str, os.PathLike[str]]) -> HybridModel: ...
+    def to_bytes(self) -> bytes: ...
+    @property
+    def core_points(self) -> _FloatArray: ...
+    @property
+    def core_tets(self) -> _IntArray: ...
+    @property
+    def core_faces(self) -> _IntArray: ...
+    @property
+    def core_base_nodes(self) -> _IntArray: ...
+    @property
+    def particles(self) -> _FloatArray: ...
+    @property
+    def particle_masses(self) -> _FloatArray: ...
+    @property
+    def particle_outer_triangle(self) -> _IntArray: ...
+    @property
+    def particle_core_face(self) -> _IntArray: ...
+    @property
+    def outer_points(self) -> _FloatArray: ...
+    @property
+    def outer_triangles(self) -> _IntArray: ...
+    @property
+    def skin_faces(self) -> _IntArray: ...
+    @property
+    def skin_barycentric(self) -> _FloatArray: ...
+    @property
+    def skin_offsets(self) -> _FloatArray: ...
+    @property
+    def n_regions(self) -> int: ...
+    @property
+    def spacing(self) -> float: ...
+    @property
+    def wall_volume(self) -> float: ...
+    @property
+    def core_volume(self) -> float: ...
+    @property
+    def shell_volume(self) -> float: ...
+    def region_particles(self, s: int) -> _IntArray: ...
+    def region_triangles(self, s: int) -> _IntArray: ...
+    def region_core_faces(self, s: int) -> _IntArray: ...
+    def region_curve(self, s: int) -> _FloatArray: ...
+    def region_field(self, s: int) -> RegionField: ...
+    def info(self) -> HybridInfo: ...
+
 def sample_inside(surface: TriSurface, spacing: float, density: float) -> Tuple[_FloatArray, _FloatArray]: ...
 def sample_between(inner: TriSurface, outer: TriSurface, spacing: float, density: float) -> Tuple[_FloatArray, _FloatArray]: ...
 def simd_path() -> str: ...

@@ -5,10 +5,19 @@
     palpate bench protocol --all [--steps N] [--json] [--integrator NAME]
     palpate bench particles N [--spacing S] [--kernel wendland|cubic|lj] [--ticks T] [--json]
     palpate bench particles --all [...]
-    palpate info MESH [--unit m|cm|mm]
+    palpate build INNER OUTER -o MODEL [--unit m|cm|mm] [build options]
+    palpate build --tagged SURFACE -o MODEL [--unit m|cm|mm] [--tag-array NAME] [--inner 1,2] [--outer 3]
+                  [--base 4,5] [build options]
+    palpate build --shape ellipsoids|ventricle|rodero -o MODEL [build options]
+        build options: [--projection transmural|radial] [--core-fraction F] [--core-triangles N]
+                       [--core-layers N] [--spacing M | --particles N] [--density RHO]
+                       [--min-region-particles N] [--field-voxels N]
+    palpate info MODEL                  (a palpate model file, written by palpate build)
+    palpate info MESH [--unit m|cm|mm]  (a tet mesh file)
 
-Exit codes: 0 success, 1 a simulation failed (e.g. a step diverged), 2 bad input (arguments,
-scene file, mesh file), with one line on stderr and no traceback.
+Exit codes: 0 success, 1 a simulation failed (e.g. a step diverged), a hybrid build failed on
+valid surfaces or an output could not be written, 2 bad input (arguments, scene file, mesh,
+surface or model file), with one line on stderr and no traceback.
 """
 from __future__ import annotations
 
@@ -162,7 +171,164 @@ def _p_errors():
     return (_p.PalpateError,)
 
 
+def _int_list(text: Optional[str], flag: str):
+    if text is None:
+        return None
+    try:
+        vals = [int(v) for v in text.split(",") if v.strip() != ""]
+    except ValueError:
+        raise _Fail(f"palpate build: {flag} takes comma-separated integer tag values, got {text!r}") from None
+    if not vals:
+        raise _Fail(f"palpate build: {flag} takes comma-separated integer tag values, got {text!r}")
+    return vals
+
+
+def _mb(nbytes: int) -> str:
+    return f"{nbytes / 1e6:.2f} MB"
+
+
+def _ml(m3: float) -> str:
+    return f"{m3 * 1e6:.3f} mL"
+
+
+def _model_lines(info: dict) -> List[str]:
+    """The description of a hybrid model's info() dict, shared by build and info."""
+    i = info
+    closure = (i["core_volume_m3"] + i["shell_volume_m3"]) / i["wall_volume_m3"] if i["wall_volume_m3"] > 0 else math.nan
+    lines = [
+        f"  core: {i['core_tets']} tets, {i['core_nodes']} nodes, {i['core_faces']} faces towards the shell, "
+        f"{i['core_base_nodes']} base nodes; min dihedral {i['core_min_dihedral_deg']:.2f} deg, "
+        f"tet volume ratio min/max {i['core_volume_ratio']:.3g}",
+        f"  shell: {i['particles']} particles at {i['spacing_m'] * 1e3:.3f} mm spacing",
+        f"  regions: {i['regions']} (one per outer vertex; {i['outer_triangles']} outer triangles), "
+        f"particles per region min {i['region_particles_min']}, median {i['region_particles_median']}, "
+        f"max {i['region_particles_max']}",
+        f"  volumes: wall {_ml(i['wall_volume_m3'])}, core {_ml(i['core_volume_m3'])}, "
+        f"shell {_ml(i['shell_volume_m3'])} (core + shell = {100 * closure:.2f} % of the wall)",
+        f"  transmural field: {i['voxels']} voxels of {i['voxel_m'] * 1e3:.3f} mm, {i['field_cg_iterations']} CG iterations",
+        f"  build time: {i['build_s']:.3f} s (field {i['build_field_s']:.3f}, core {i['build_core_s']:.3f}, "
+        f"particles {i['build_particles_s']:.3f}, regions {i['build_regions_s']:.3f})",
+    ]
+    fb = {k: i[k] for k in ("fallback_particle_outer", "fallback_particle_core", "fallback_skin") if i.get(k)}
+    if fb:
+        lines.append("  fallbacks: " + ", ".join(f"{k[len('fallback_'):]} {v}" for k, v in fb.items()))
+    return lines
+
+
+def cmd_build(a) -> int:
+    import os
+    import time
+    import warnings
+
+    from . import _palpate as _p
+    from . import hybrid
+    from .data import DataError
+
+    files = a.files or []
+    modes = [bool(files), a.tagged is not None, a.shape is not None]
+    if sum(modes) != 1:
+        raise _Fail("palpate build: give INNER OUTER (two nested surfaces), --tagged SURFACE or --shape NAME "
+                    "(exactly one)")
+    if files and len(files) != 2:
+        raise _Fail(f"palpate build: give two surface files INNER OUTER, got {len(files)}")
+    if a.tagged is None and any(v is not None for v in (a.tag_array, a.inner, a.outer, a.base)):
+        raise _Fail("palpate build: --tag-array, --inner, --outer and --base go with --tagged SURFACE")
+    if a.shape is not None and a.unit is not None:
+        raise _Fail("palpate build: --unit is for surface files, not --shape (the shapes are in metres)")
+    unit = a.unit or "m"
+    opts = {"projection": _p.Projection.RADIAL if a.projection == "radial" else _p.Projection.TRANSMURAL,
+            "core_fraction": a.core_fraction, "core_triangles": a.core_triangles, "core_layers": a.core_layers,
+            "spacing": a.spacing, "particles": a.particles, "density": a.density,
+            "min_region_particles": a.min_region_particles, "field_voxels": a.field_voxels}
+    for flag, v in (("--core-triangles", a.core_triangles), ("--core-layers", a.core_layers),
+                    ("--particles", a.particles), ("--min-region-particles", a.min_region_particles),
+                    ("--field-voxels", a.field_voxels)):
+        if v < 0:
+            raise _Fail(f"palpate build: {flag} must not be negative, got {v}")
+    for flag, v in (("--spacing", a.spacing), ("--density", a.density)):
+        if v is not None and not (v > 0 and math.isfinite(v)):
+            raise _Fail(f"palpate build: {flag} must be positive, got {v}")
+    if files:
+        what = f"inner {files[0]}, outer {files[1]}"
+        build = lambda: hybrid.build_from_files(files[0], files[1], unit=unit, **opts)  # noqa: E731
+    elif a.tagged is not None:
+        what = f"{a.tagged} (tagged)"
+        tags = dict(tag_array=a.tag_array, inner=_int_list(a.inner, "--inner"), outer=_int_list(a.outer, "--outer"),
+                    base=_int_list(a.base, "--base"))
+        build = lambda: hybrid.build_tagged_file(a.tagged, unit=unit, **tags, **opts)  # noqa: E731
+    else:
+        what = f"shape {a.shape}"
+        build = lambda: hybrid.build_shape(a.shape, **opts)  # noqa: E731
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            model = build()
+    except (_p.SurfaceError, _p.MeshError, ValueError, DataError) as e:
+        msg = str(e)
+        if not any(os.path.basename(f) in msg for f in files + [a.tagged or ""] if f):
+            msg = f"{what}: {msg}"
+        raise _Fail(f"palpate build: {msg}") from None
+    except OSError as e:
+        raise _Fail(f"palpate build: cannot read the input: {e}") from None
+    except _p.PalpateError as e:
+        raise _Fail(f"palpate build: {what}: the build failed: {e}", 1) from None
+    wall = time.perf_counter() - t0
+    info = model.info()
+    print(f"palpate build: {what}: {info['projection']} projection, core fraction {info['core_fraction']:g}; "
+          f"{wall:.2f} s including reading the input")
+    for w in caught:
+        print(f"  note: {w.message}")
+    for line in _model_lines(info):
+        print(line)
+    try:
+        model.save(a.output)
+    except (OSError, _p.ModelFileError) as e:
+        raise _Fail(f"palpate build: cannot write the model: {e}", 1) from None
+    print(f"  wrote {a.output} ({_mb(info['file_bytes'])})")
+    return 0
+
+
+def _looks_like_model(path: str) -> bool:
+    """A palpate model file (or a damaged one): the magic number, a prefix of it, or the .palpate extension."""
+    from .hybrid import MODEL_MAGIC
+
+    if path.lower().endswith(".palpate"):
+        return True
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(len(MODEL_MAGIC))
+    except OSError:
+        return False
+    return len(head) >= 8 and MODEL_MAGIC.startswith(head)
+
+
+def cmd_info_model(a) -> int:
+    import os
+    import time
+
+    from . import _palpate as _p
+
+    t0 = time.perf_counter()
+    try:
+        model = _p.HybridModel.load(a.mesh)
+    except _p.ModelFileError as e:
+        raise _Fail(str(e)) from None
+    except OSError as e:
+        raise _Fail(str(e)) from None
+    load_s = time.perf_counter() - t0
+    i = model.info()
+    size = os.path.getsize(a.mesh)
+    print(f"{a.mesh}: palpate hybrid model, file {_mb(size)} (loaded and checked in {load_s:.3f} s); "
+          f"{i['projection']} projection, core fraction {i['core_fraction']:g}")
+    for line in _model_lines(i):
+        print(line)
+    return 0
+
+
 def cmd_info(a) -> int:
+    if _looks_like_model(a.mesh):
+        return cmd_info_model(a)
     from .io import MeshError, load_mesh
 
     try:
@@ -220,9 +386,47 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stop a case after S seconds of ticks (default: no cap)")
     q.set_defaults(func=cmd_bench_particles)
 
-    i = sub.add_parser("info", help="load and validate a mesh file, print its size and quality")
-    i.add_argument("mesh", metavar="MESH")
-    i.add_argument("--unit", default="m", choices=["m", "cm", "mm"], help="length unit of the file (default m)")
+    h = sub.add_parser("build", help="build a hybrid model (FEM core, particle shell, skin) from wall surfaces",
+                       description="Build a palpate hybrid model from two nested closed surfaces INNER OUTER, one "
+                                   "tagged surface (--tagged) or a shipped geometry (--shape), print a summary and "
+                                   "write MODEL (load it with palpate.HybridModel.load).")
+    h.add_argument("files", nargs="*", metavar="INNER OUTER", help="two nested closed surface files (.obj, .stl, .ply, "
+                   ".off, .vtk, .vtu, .vtp)")
+    h.add_argument("--tagged", metavar="SURFACE", help="one closed surface with an inner / outer / base tag per "
+                   "triangle (a truncated ventricle)")
+    h.add_argument("--shape", choices=["ellipsoids", "ventricle", "rodero"],
+                   help="ellipsoids: the paper's concentric ellipsoids; ventricle: the benchmark's truncated "
+                        "ventricle; rodero: the real left ventricle of Rodero et al. (fetched on first use)")
+    h.add_argument("-o", "--output", required=True, metavar="MODEL", help="model file to write")
+    h.add_argument("--unit", choices=["m", "cm", "mm"], help="length unit of the surface files (default m)")
+    h.add_argument("--tag-array", metavar="NAME", help="integer cell array holding the tags (default surface-id)")
+    h.add_argument("--inner", metavar="T[,T...]", help="tag values of the inner surface")
+    h.add_argument("--outer", metavar="T[,T...]", help="tag values of the outer surface")
+    h.add_argument("--base", metavar="T[,T...]", help="tag values of the base (valve planes, cut)")
+    h.add_argument("--projection", choices=["transmural", "radial"], default="transmural",
+                   help="transmural: along the transmural field's streamlines (any wall, default); radial: the "
+                        "paper's, through the mass centre (star-shaped walls)")
+    h.add_argument("--core-fraction", type=float, default=0.5, metavar="F",
+                   help="fraction of the wall (from the inner surface) in the FEM core (default 0.5)")
+    h.add_argument("--core-triangles", type=int, default=0, metavar="N",
+                   help="triangles of the simplified inner surface, 3 tets each per layer (default 0: automatic)")
+    h.add_argument("--core-layers", type=int, default=1, metavar="N", help="tet layers of the core (default 1)")
+    g = h.add_mutually_exclusive_group()
+    g.add_argument("--spacing", type=float, metavar="M", help="particle lattice spacing [m]")
+    g.add_argument("--particles", type=int, default=28000, metavar="N",
+                   help="about N particles in the shell (default 28000; ignored with --spacing)")
+    h.add_argument("--density", type=float, default=1000.0, metavar="RHO", help="density [kg/m^3] (default 1000)")
+    h.add_argument("--min-region-particles", type=int, default=50, metavar="N",
+                   help="particles an activation region grows to at least (default 50)")
+    h.add_argument("--field-voxels", type=int, default=120000, metavar="N",
+                   help="wall voxels of the transmural field solve (default 120000)")
+    h.set_defaults(func=cmd_build)
+
+    i = sub.add_parser("info", help="load and validate a model or mesh file, print its size and quality",
+                       description="MODEL: a palpate model file (palpate build): counts, core quality, volumes, "
+                                   "size, build times. MESH: a tet mesh file: size and quality.")
+    i.add_argument("mesh", metavar="MODEL|MESH")
+    i.add_argument("--unit", default="m", choices=["m", "cm", "mm"], help="length unit of a mesh file (default m)")
     i.set_defaults(func=cmd_info)
     return ap
 

@@ -6,7 +6,7 @@ import palpate
 import palpate._palpate as ext
 
 STUB = Path(palpate.__file__).with_name("_palpate.pyi")
-TYPED_DICTS = {"StepStats", "ProbeRun", "ParticleStepStats", "TimedRun"}
+TYPED_DICTS = {"StepStats", "ProbeRun", "ParticleStepStats", "TimedRun", "RegionField", "HybridInfo"}
 
 
 def test_stub_matches_extension():

@@ -1,0 +1,144 @@
+"""Building :class:`palpate.HybridModel` from files and from the shipped geometries.
+
+The compiled hybrid model (FEM core, particle shell, skin, activation regions) is built in the
+Rust core from the surfaces of an organ wall; these helpers read the surfaces first:
+
+- :func:`build_from_files`: two nested closed surfaces (inner, outer), any format
+  :func:`palpate.load_surface` reads;
+- :func:`build_tagged_file`: one closed surface with a part per triangle (inner / outer / base,
+  a truncated ventricle), read by :func:`palpate.read_tagged_surface`;
+- :func:`build_shape`: ``"ellipsoids"`` (the paper's concentric ellipsoids), ``"ventricle"``
+  (the synthetic truncated ventricle of the benchmark protocol) or ``"rodero"`` (the real left
+  ventricle of Rodero et al., :func:`palpate.data.rodero_lv_path`).
+
+Keyword options (``**opts``) are those of :meth:`palpate.HybridModel.build_nested`:
+``projection``, ``core_fraction``, ``core_triangles``, ``core_layers``, ``spacing`` [m] or
+``particles``, ``density`` [kg/m^3], ``min_region_particles``, ``field_voxels``.
+
+>>> import palpate
+>>> m = palpate.build_shape("ellipsoids", particles=2000)
+>>> m.info()["core_tets"]
+192
+"""
+from __future__ import annotations
+
+import os
+from typing import Any, Optional, Tuple, Union
+
+import numpy as np
+
+from ._palpate import HybridModel, truncated_ellipsoid_wall
+from .surfaces import load_surface, read_tagged_surface
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+#: The first 16 bytes of a palpate model file (what :meth:`HybridModel.save` writes).
+MODEL_MAGIC = b"PALPATE\0HYBRID\0\0"
+
+#: The geometries :func:`build_shape` knows.
+SHAPES = ("ellipsoids", "ventricle", "rodero")
+
+#: The paper's "Ellipsoids Model": semi-axes [m] of the inner and outer ellipsoid, and the
+#: refinement of each (an octahedron refined 5 times: 8192 triangles, 4098 vertices).
+ELLIPSOIDS_INNER = (0.020, 0.020, 0.035)
+ELLIPSOIDS_OUTER = (0.026, 0.026, 0.042)
+ELLIPSOIDS_SUBDIVISIONS = 5
+
+#: The synthetic truncated ventricle (shared/bench/PROTOCOL.md): the wall between the
+#: ellipsoids above, cut at z = 0, at this surface resolution (points per ring x rings).
+VENTRICLE_Z_CUT = 0.0
+VENTRICLE_CIRCUMFERENTIAL = 96
+VENTRICLE_LONGITUDINAL = 24
+
+_Tags = Any
+
+
+def is_model_file(path: PathLike) -> bool:
+    """True if ``path`` is a readable file starting with :data:`MODEL_MAGIC` (it may still be
+    truncated or corrupted: :meth:`HybridModel.load` checks the rest)."""
+    try:
+        with open(os.fspath(path), "rb") as fh:
+            return fh.read(len(MODEL_MAGIC)) == MODEL_MAGIC
+    except OSError:
+        return False
+
+
+def build_from_files(inner: PathLike, outer: PathLike, unit: str = "m", repair: bool = False,
+                     **opts) -> HybridModel:
+    """Build from two nested closed surface files (the wall lies inside ``outer``, outside
+    ``inner``), read by :func:`palpate.load_surface` in length unit ``unit``.
+
+    Raises :class:`palpate.SurfaceError` naming the file for an unreadable or invalid surface
+    and for a pair that is not nested; ``ValueError`` for a bad option.
+    """
+    si = load_surface(inner, unit=unit, repair=repair)
+    so = load_surface(outer, unit=unit, repair=repair)
+    return HybridModel.build_nested(si, so, **opts)
+
+
+def build_tagged_file(path: PathLike, unit: str = "m", *, tag_array: Optional[str] = None, inner: _Tags = None,
+                      outer: _Tags = None, base: _Tags = None, repair: bool = True, **opts) -> HybridModel:
+    """Build from one closed surface file whose triangles are tagged inner / outer / base
+    (:func:`palpate.read_tagged_surface` with ``tag_array``, ``inner``, ``outer``, ``base``,
+    ``repair``; the surface is repaired by default)."""
+    points, triangles, part = read_tagged_surface(path, unit=unit, tag_array=tag_array, inner=inner, outer=outer,
+                                                  base=base, repair=repair)
+    return HybridModel.build_tagged(points, triangles, part, **opts)
+
+
+def ventricle_surface(circumferential: int = VENTRICLE_CIRCUMFERENTIAL, longitudinal: int = VENTRICLE_LONGITUDINAL,
+                      ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The synthetic truncated ventricle as one tagged closed surface.
+
+    The outward boundary of :func:`palpate.truncated_ellipsoid_wall` (one layer), each triangle
+    tagged by geometry: base (2) if all its vertices lie on the cut plane, else inner (0) or
+    outer (1) by which ellipsoid its centroid lies nearer to (in the ellipsoid's level-set
+    value), as ``palpate-core``'s ``hybrid::shapes::truncated_ventricle`` does.
+
+    Returns ``(points [m], triangles, part)`` as :func:`palpate.read_tagged_surface` does.
+    """
+    mesh = truncated_ellipsoid_wall(ELLIPSOIDS_INNER, ELLIPSOIDS_OUTER, z_cut=VENTRICLE_Z_CUT,
+                                    circumferential=circumferential, longitudinal=longitudinal, layers=1)
+    points = mesh.points
+    tris = mesh.boundary_faces()
+    scale = ELLIPSOIDS_OUTER[2]
+    on_cut = (np.abs(points[tris, 2] - VENTRICLE_Z_CUT) <= 1e-9 * scale).all(axis=1)
+    c = points[tris].mean(axis=1)
+
+    def level(axes):
+        return np.sqrt(((c / np.asarray(axes)) ** 2).sum(axis=1))
+
+    inner = np.abs(level(ELLIPSOIDS_INNER) - 1.0) < np.abs(level(ELLIPSOIDS_OUTER) - 1.0)
+    part = np.where(on_cut, 2, np.where(inner, 0, 1)).astype(np.int8)
+    return points, tris, part
+
+
+def build_shape(name: str, **opts) -> HybridModel:
+    """Build one of the shipped geometries (:data:`SHAPES`):
+
+    - ``"ellipsoids"``: the paper's concentric ellipsoids, semi-axes (20, 20, 35) mm and
+      (26, 26, 42) mm, ``ellipsoid_surface(..., 5)`` each (:meth:`HybridModel.build_nested`);
+    - ``"ventricle"``: :func:`ventricle_surface` (:meth:`HybridModel.build_tagged`);
+    - ``"rodero"``: the Rodero et al. left ventricle (millimetres, parts from its part
+      definition, repaired), fetched on first use (:class:`palpate.data.DataError` if that fails).
+    """
+    if name == "ellipsoids":
+        from ._palpate import ellipsoid_surface
+
+        return HybridModel.build_nested(ellipsoid_surface(ELLIPSOIDS_INNER, ELLIPSOIDS_SUBDIVISIONS),
+                                        ellipsoid_surface(ELLIPSOIDS_OUTER, ELLIPSOIDS_SUBDIVISIONS), **opts)
+    if name == "ventricle":
+        return HybridModel.build_tagged(*ventricle_surface(), **opts)
+    if name == "rodero":
+        import warnings
+
+        from ._palpate import MeshWarning
+        from .data import rodero_lv_path
+
+        path = rodero_lv_path()
+        with warnings.catch_warnings():
+            # the known repair of the shipped file (re-orientation, two non-manifold edges split)
+            warnings.simplefilter("ignore", MeshWarning)
+            points, triangles, part = read_tagged_surface(path, unit="mm")
+        return HybridModel.build_tagged(points, triangles, part, **opts)
+    raise ValueError(f"unknown shape {name!r}; expected one of {', '.join(SHAPES)}")
