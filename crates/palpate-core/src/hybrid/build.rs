@@ -63,7 +63,7 @@ pub const AUTO_CORE_TRIANGLES_CLOSED: usize = 64;
 pub const AUTO_CORE_TRIANGLES_BASE: usize = 300;
 
 /// Rings nv(p_s) may grow to.
-pub const MAX_RINGS: usize = 8;
+pub const MAX_RINGS: usize = 12;
 
 impl Default for HybridOptions {
     fn default() -> Self {
