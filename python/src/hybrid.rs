@@ -254,18 +254,18 @@ impl PyHybridModel {
     /// RV(p_s): indices of the particles of region ``s``, int64.
     fn region_particles<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
         self.check_region(s)?;
-        let v: Vec<i64> = self.model.region_particle_ranges(s).flat_map(|r| r.map(|i| i as i64)).collect();
+        let v: Vec<i64> = self.model.region_particle_ranges(s).into_iter().flat_map(|r| r.map(|i| i as i64)).collect();
         Ok(PyArray1::from_vec(py, v))
     }
     /// nv(p_s): the outer triangles of region ``s``, int64.
     fn region_triangles<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
         self.check_region(s)?;
-        Ok(u32s_to_py(py, self.model.region_triangles(s)))
+        Ok(u32s_to_py(py, &self.model.region_triangles(s)))
     }
     /// The core faces under RV(p_s), int64.
     fn region_core_faces<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
         self.check_region(s)?;
-        Ok(u32s_to_py(py, self.model.region_core_faces(s)))
+        Ok(u32s_to_py(py, &self.model.region_core_faces(s)))
     }
     /// C(p_s): the projections on the core of nv(p_s)'s boundary vertices [m], (k, 3).
     fn region_curve<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {

@@ -137,17 +137,13 @@ pub struct HybridModel {
     // --- outer surface ---
     pub outer_points: Vec<Vec3>,
     pub outer_tris: Vec<[usize; 3]>,
-    // --- activation regions, one per outer vertex (CSR) ---
-    /// nv(p_s) as outer triangles.
-    pub region_tri_ptr: Vec<u32>,
-    pub region_tris: Vec<u32>,
-    /// Boundary vertices of nv(p_s), in loop order when the patch is a disc; their skin anchors
-    /// (projections on the core) are the vertices of C(p_s).
-    pub region_rim_ptr: Vec<u32>,
-    pub region_rim: Vec<u32>,
-    /// Core faces under RV(p_s).
-    pub region_face_ptr: Vec<u32>,
-    pub region_faces: Vec<u32>,
+    // --- activation regions, one per outer vertex ---
+    /// nv(p_s) is the outer triangles within `region_rings[s]` rings of vertex `s` (1: the
+    /// triangles around it). RV(p_s), C(p_s) and the core faces under RV follow from it (see
+    /// [`HybridModel::region_triangles`]): one byte per region is stored.
+    pub region_rings: Vec<u8>,
+    /// Outer-surface adjacency (derived from `outer_tris`, not stored in the file).
+    pub outer_adjacency: OuterAdjacency,
     /// B(p_s): voxel index box `[i0, j0, k0, i1, j1, k1)` in the shared voxel grid.
     pub region_box: Vec<[u32; 6]>,
     // --- skin ---
@@ -472,18 +468,23 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     }
     stats.fallback_skin = fs;
 
-    // --- activation regions ---
-    let (region_tri_ptr, region_tris, region_rim_ptr, region_rim) = regions(&outer_points, &outer_tris, &tri_particle_ptr, o.min_region_particles);
-    let mut region_face_ptr = vec![0u32];
-    let mut region_faces = Vec::new();
+    // --- activation regions: nv(p_s) grows by rings of triangles until RV(p_s) holds
+    // `min_region_particles` (at most MAX_RINGS rings, further only while empty) ---
+    let outer_adjacency = OuterAdjacency::new(outer_points.len(), &outer_tris);
+    let count = |t: u32| (tri_particle_ptr[t as usize + 1] - tri_particle_ptr[t as usize]) as usize;
+    let mut in_patch = vec![false; outer_tris.len()];
+    let mut region_rings = Vec::with_capacity(outer_points.len());
     let mut region_box = Vec::with_capacity(outer_points.len());
-    let mut faces_tmp: Vec<u32> = Vec::new();
     for s in 0..outer_points.len() {
-        faces_tmp.clear();
+        let mut n = 0;
+        let (patch, rings) = outer_adjacency.patch(&outer_tris, s, None, &mut in_patch, |r, added| {
+            n += added.iter().map(|&t| count(t)).sum::<usize>();
+            !(n >= o.min_region_particles || (r >= MAX_RINGS && n > 0) || r >= 2 * MAX_RINGS)
+        });
+        region_rings.push(rings.min(255) as u8);
         let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
-        for &t in &region_tris[region_tri_ptr[s] as usize..region_tri_ptr[s + 1] as usize] {
+        for &t in &patch {
             for q in tri_particle_ptr[t as usize] as usize..tri_particle_ptr[t as usize + 1] as usize {
-                faces_tmp.push(particle_core_face[q]);
                 if let Some(c) = grid.voxel_of(&particles[q]) {
                     for a in 0..3 {
                         lo[a] = lo[a].min(c[a] as u32);
@@ -492,13 +493,6 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
                 }
             }
         }
-        if faces_tmp.is_empty() {
-            faces_tmp.push(skin_face[s]);
-        }
-        faces_tmp.sort_unstable();
-        faces_tmp.dedup();
-        region_faces.extend_from_slice(&faces_tmp);
-        region_face_ptr.push(region_faces.len() as u32);
         if lo[0] == u32::MAX {
             let c = grid.voxel_of(&outer_points[s]).unwrap_or([0, 0, 0]);
             lo = [c[0] as u32, c[1] as u32, c[2] as u32];
@@ -530,12 +524,8 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
         tri_particle_ptr,
         outer_points,
         outer_tris,
-        region_tri_ptr,
-        region_tris,
-        region_rim_ptr,
-        region_rim,
-        region_face_ptr,
-        region_faces,
+        region_rings,
+        outer_adjacency,
         region_box,
         skin_face,
         skin_bary,
@@ -775,21 +765,36 @@ fn split_prism(bottom: [usize; 3], nv: usize) -> [[usize; 4]; 3] {
     }
 }
 
-/// nv(p_s) for every outer vertex: its triangles, grown by rings until the particles under
-/// them reach `min_particles` (at most [`MAX_RINGS`] rings, then further only while empty), and
-/// the patch's boundary vertices. Returns `(tri_ptr, tris, rim_ptr, rim)`.
-fn regions(points: &[Vec3], tris: &[[usize; 3]], tri_particle_ptr: &[u32], min_particles: usize) -> (Vec<u32>, Vec<u32>, Vec<u32>, Vec<u32>) {
-    let nv = points.len();
-    let mut vtris: Vec<Vec<u32>> = vec![vec![]; nv];
-    for (t, tri) in tris.iter().enumerate() {
-        for &v in tri {
-            vtris[v].push(t as u32);
+/// Adjacency of the outer surface: the triangles around each vertex (CSR) and the triangle
+/// across each edge (`u32::MAX` on an open boundary).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct OuterAdjacency {
+    pub vtri_ptr: Vec<u32>,
+    pub vtris: Vec<u32>,
+    pub across: Vec<[u32; 3]>,
+}
+
+impl OuterAdjacency {
+    /// Of `tris` over `nv` vertices.
+    pub fn new(nv: usize, tris: &[[usize; 3]]) -> OuterAdjacency {
+        let mut vtri_ptr = vec![0u32; nv + 1];
+        for tri in tris {
+            for &v in tri {
+                vtri_ptr[v + 1] += 1;
+            }
         }
-    }
-    let count = |t: u32| (tri_particle_ptr[t as usize + 1] - tri_particle_ptr[t as usize]) as usize;
-    // The triangle across each edge (u32::MAX on an open boundary), found once.
-    let mut across = vec![[u32::MAX; 3]; tris.len()];
-    {
+        for v in 0..nv {
+            vtri_ptr[v + 1] += vtri_ptr[v];
+        }
+        let mut fill = vtri_ptr.clone();
+        let mut vtris = vec![0u32; 3 * tris.len()];
+        for (t, tri) in tris.iter().enumerate() {
+            for &v in tri {
+                vtris[fill[v] as usize] = t as u32;
+                fill[v] += 1;
+            }
+        }
+        let mut across = vec![[u32::MAX; 3]; tris.len()];
         let mut keyed: Vec<(usize, usize, u32, u8)> = Vec::with_capacity(3 * tris.len());
         for (t, tri) in tris.iter().enumerate() {
             for k in 0..3 {
@@ -804,46 +809,65 @@ fn regions(points: &[Vec3], tris: &[[usize; 3]], tri_particle_ptr: &[u32], min_p
                 across[w[1].2 as usize][w[1].3 as usize] = w[0].2;
             }
         }
+        OuterAdjacency { vtri_ptr, vtris, across }
     }
-    let (mut tri_ptr, mut out_tris, mut rim_ptr, mut rim) = (vec![0u32], vec![], vec![0u32], vec![]);
-    let mut in_patch = vec![false; tris.len()];
-    let mut patch: Vec<u32> = Vec::new();
-    let mut next: Vec<(u32, u32)> = Vec::new();
-    for s in 0..nv {
-        patch.clear();
-        for &t in &vtris[s] {
+
+    fn around(&self, v: usize) -> &[u32] { &self.vtris[self.vtri_ptr[v] as usize..self.vtri_ptr[v + 1] as usize] }
+
+    /// The triangles within `rings` rings of vertex `s` (sorted), growing one ring at a time
+    /// while `more(rings so far, triangles added)` says so when `rings` is `None`. Returns the
+    /// patch and the rings used. `in_patch` is scratch of one flag per triangle, all false on
+    /// entry and on exit.
+    fn patch(&self, tris: &[[usize; 3]], s: usize, rings: Option<usize>, in_patch: &mut [bool], mut more: impl FnMut(usize, &[u32]) -> bool) -> (Vec<u32>, usize) {
+        let mut patch: Vec<u32> = Vec::new();
+        for &t in self.around(s) {
             in_patch[t as usize] = true;
             patch.push(t);
         }
-        let mut n: usize = patch.iter().map(|&t| count(t)).sum();
         let mut ring_start = 0;
-        let mut rings = 1;
-        while !(n >= min_particles || (rings >= MAX_RINGS && n > 0) || rings >= 2 * MAX_RINGS) {
-            // Grow by one ring: every triangle sharing a vertex with the last ring added.
+        let mut r = 1;
+        loop {
+            let go_on = match rings {
+                Some(n) => r < n,
+                None => more(r, &patch[ring_start..]),
+            };
+            if !go_on {
+                break;
+            }
             let ring_end = patch.len();
-            for r in ring_start..ring_end {
-                for &v in &tris[patch[r] as usize] {
-                    for &t in &vtris[v] {
+            for i in ring_start..ring_end {
+                for &v in &tris[patch[i] as usize] {
+                    for &t in self.around(v) {
                         if !in_patch[t as usize] {
                             in_patch[t as usize] = true;
                             patch.push(t);
-                            n += count(t);
                         }
                     }
                 }
             }
+            if patch.len() == ring_end {
+                break; // the whole surface
+            }
             ring_start = ring_end;
-            rings += 1;
+            r += 1;
+        }
+        for &t in &patch {
+            in_patch[t as usize] = false;
         }
         patch.sort_unstable();
-        // Rim: vertices on an edge whose other triangle is not in the patch (a boundary edge of
-        // the patch), in the order the directed boundary edges chain.
-        next.clear();
-        for &t in &patch {
+        (patch, r)
+    }
+
+    /// Boundary vertices of a patch (sorted triangles), in the order its directed boundary
+    /// edges chain (other loops' vertices, if any, appended unordered).
+    fn rim(&self, tris: &[[usize; 3]], patch: &[u32]) -> Vec<u32> {
+        let inside = |t: u32| patch.binary_search(&t).is_ok();
+        let mut next: Vec<(u32, u32)> = Vec::new();
+        for &t in patch {
             let tri = tris[t as usize];
             for k in 0..3 {
-                let o = across[t as usize][k];
-                if o == u32::MAX || !in_patch[o as usize] {
+                let o = self.across[t as usize][k];
+                if o == u32::MAX || !inside(o) {
                     next.push((tri[k] as u32, tri[(k + 1) % 3] as u32));
                 }
             }
@@ -859,46 +883,53 @@ fn regions(points: &[Vec3], tris: &[[usize; 3]], tri_particle_ptr: &[u32], min_p
                     _ => break,
                 }
             }
-            // Vertices of other loops (a patch touching an open boundary), unordered.
             let mut seen = loop_v.clone();
             seen.sort_unstable();
             let mut rest: Vec<u32> = next.iter().map(|e| e.0).filter(|v| seen.binary_search(v).is_err()).collect();
             rest.dedup();
             loop_v.extend(rest);
         }
-        rim.extend_from_slice(&loop_v);
-        rim_ptr.push(rim.len() as u32);
-        for &t in &patch {
-            in_patch[t as usize] = false;
-        }
-        out_tris.extend_from_slice(&patch);
-        tri_ptr.push(out_tris.len() as u32);
+        loop_v
     }
-    (tri_ptr, out_tris, rim_ptr, rim)
 }
 
 impl HybridModel {
     /// Number of activation regions (one per outer-surface vertex).
     pub fn n_regions(&self) -> usize { self.region_box.len() }
 
-    /// nv(p_s) of region `s` (outer triangles).
-    pub fn region_triangles(&self, s: usize) -> &[u32] { &self.region_tris[self.region_tri_ptr[s] as usize..self.region_tri_ptr[s + 1] as usize] }
+    /// nv(p_s) of region `s`: its outer triangles, sorted (grown from the stored ring count in
+    /// microseconds).
+    pub fn region_triangles(&self, s: usize) -> Vec<u32> {
+        let mut scratch = vec![false; self.outer_tris.len()];
+        self.outer_adjacency.patch(&self.outer_tris, s, Some(self.region_rings[s] as usize), &mut scratch, |_, _| false).0
+    }
 
-    /// RV(p_s): the particles of region `s`, as ranges into [`HybridModel::particles`].
-    pub fn region_particle_ranges(&self, s: usize) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
-        self.region_triangles(s).iter().map(move |&t| self.tri_particle_ptr[t as usize] as usize..self.tri_particle_ptr[t as usize + 1] as usize)
+    /// RV(p_s): the particles of region `s`, as ranges into [`HybridModel::particles`] (one per
+    /// triangle of nv(p_s): particles are sorted by the outer triangle above them).
+    pub fn region_particle_ranges(&self, s: usize) -> Vec<std::ops::Range<usize>> {
+        self.region_triangles(s).iter().map(|&t| self.tri_particle_ptr[t as usize] as usize..self.tri_particle_ptr[t as usize + 1] as usize).collect()
     }
 
     /// Number of particles in RV(p_s).
-    pub fn region_len(&self, s: usize) -> usize { self.region_particle_ranges(s).map(|r| r.len()).sum() }
+    pub fn region_len(&self, s: usize) -> usize { self.region_particle_ranges(s).iter().map(|r| r.len()).sum() }
 
-    /// Core faces under RV(p_s).
-    pub fn region_core_faces(&self, s: usize) -> &[u32] { &self.region_faces[self.region_face_ptr[s] as usize..self.region_face_ptr[s + 1] as usize] }
+    /// Core faces under RV(p_s) (the faces below its particles; the skin face of `s` if it has
+    /// none), sorted.
+    pub fn region_core_faces(&self, s: usize) -> Vec<u32> {
+        let mut f: Vec<u32> = self.region_particle_ranges(s).into_iter().flatten().map(|q| self.particle_core_face[q]).collect();
+        if f.is_empty() {
+            f.push(self.skin_face[s]);
+        }
+        f.sort_unstable();
+        f.dedup();
+        f
+    }
+
+    /// The boundary vertices of nv(p_s) (outer vertex indices), in loop order.
+    pub fn region_rim(&self, s: usize) -> Vec<u32> { self.outer_adjacency.rim(&self.outer_tris, &self.region_triangles(s)) }
 
     /// C(p_s): the projections on the core of nv(p_s)'s boundary vertices \[m\].
-    pub fn region_curve(&self, s: usize) -> Vec<Vec3> {
-        self.region_rim[self.region_rim_ptr[s] as usize..self.region_rim_ptr[s + 1] as usize].iter().map(|&v| self.skin_anchor(v as usize)).collect()
-    }
+    pub fn region_curve(&self, s: usize) -> Vec<Vec3> { self.region_rim(s).iter().map(|&v| self.skin_anchor(v as usize)).collect() }
 
     /// Rest anchor point of outer vertex `v` on its core face \[m\].
     pub fn skin_anchor(&self, v: usize) -> Vec3 {
@@ -922,6 +953,7 @@ impl HybridModel {
         let dims = [(b[3] - b[0]) as usize, (b[4] - b[1]) as usize, (b[5] - b[2]) as usize];
         let n = dims[0] * dims[1] * dims[2];
         let tris = self.region_triangles(s);
+        let tris = &tris[..];
         let global = |i: usize, j: usize, k: usize| self.grid.index(b[0] as usize + i, b[1] as usize + j, b[2] as usize + k);
         let local = |i: usize, j: usize, k: usize| i + dims[0] * (j + dims[1] * k);
         let mut label = vec![VoxelLabel::Outside; n];

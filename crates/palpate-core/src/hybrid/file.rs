@@ -16,7 +16,7 @@
 //! offset table monotone), so that a loaded model is as valid as a built one. Saving then
 //! loading gives a model equal to the original, field by field and bit by bit.
 
-use super::build::{BuildStats, CoreQuality, HybridModel, HybridOptions, Spacing};
+use super::build::{BuildStats, CoreQuality, HybridModel, HybridOptions, OuterAdjacency, Spacing};
 use super::transmural::{Projection, VoxelGrid};
 use crate::error::ModelFileError;
 use crate::math::Vec3;
@@ -172,12 +172,8 @@ pub fn to_bytes(m: &HybridModel) -> Vec<u8> {
     w.u32s(&m.tri_particle_ptr);
     w.vec3s(&m.outer_points);
     w.idx(&m.outer_tris);
-    w.u32s(&m.region_tri_ptr);
-    w.u32s(&m.region_tris);
-    w.u32s(&m.region_rim_ptr);
-    w.u32s(&m.region_rim);
-    w.u32s(&m.region_face_ptr);
-    w.u32s(&m.region_faces);
+    w.u64(m.region_rings.len() as u64);
+    m.region_rings.iter().for_each(|&r| w.u8(r));
     w.u64(m.region_box.len() as u64);
     m.region_box.iter().flatten().for_each(|&x| w.u32(x));
     w.u32s(&m.skin_face);
@@ -270,12 +266,8 @@ pub fn from_bytes(bytes: &[u8], path: &str) -> Result<HybridModel, ModelFileErro
     let tri_particle_ptr = r.u32s("particles per outer triangle")?;
     let outer_points = r.vec3s("outer points")?;
     let outer_tris = r.idx::<3>("outer triangles")?;
-    let region_tri_ptr = r.u32s("region triangle offsets")?;
-    let region_tris = r.u32s("region triangles")?;
-    let region_rim_ptr = r.u32s("region rim offsets")?;
-    let region_rim = r.u32s("region rims")?;
-    let region_face_ptr = r.u32s("region face offsets")?;
-    let region_faces = r.u32s("region faces")?;
+    let nr = r.count(1, "region rings")?;
+    let region_rings: Vec<u8> = (0..nr).map(|_| r.u8("region rings")).collect::<Res<_>>()?;
     let nb = r.count(24, "region boxes")?;
     let mut region_box = Vec::with_capacity(nb);
     for _ in 0..nb {
@@ -323,12 +315,8 @@ pub fn from_bytes(bytes: &[u8], path: &str) -> Result<HybridModel, ModelFileErro
         tri_particle_ptr,
         outer_points,
         outer_tris,
-        region_tri_ptr,
-        region_tris,
-        region_rim_ptr,
-        region_rim,
-        region_face_ptr,
-        region_faces,
+        region_rings,
+        outer_adjacency: Default::default(),
         region_box,
         skin_face,
         skin_bary,
@@ -348,6 +336,8 @@ pub fn from_bytes(bytes: &[u8], path: &str) -> Result<HybridModel, ModelFileErro
         },
     };
     check_structure(&m).map_err(|reason| ModelFileError::Corrupt { path: path.into(), reason })?;
+    let mut m = m;
+    m.outer_adjacency = OuterAdjacency::new(m.outer_points.len(), &m.outer_tris);
     Ok(m)
 }
 
@@ -379,13 +369,10 @@ fn check_structure(m: &HybridModel) -> Result<(), String> {
         Ok(())
     };
     offsets("particles per outer triangle", &m.tri_particle_ptr, nt, np)?;
-    offsets("region triangles", &m.region_tri_ptr, no, m.region_tris.len())?;
-    offsets("region rims", &m.region_rim_ptr, no, m.region_rim.len())?;
-    offsets("region faces", &m.region_face_ptr, no, m.region_faces.len())?;
-    in_range("region triangles", &mut m.region_tris.iter().map(|&x| x as usize), nt)?;
-    in_range("region rims", &mut m.region_rim.iter().map(|&x| x as usize), no)?;
-    in_range("region faces", &mut m.region_faces.iter().map(|&x| x as usize), nf)?;
-    if m.region_box.len() != no || m.skin_face.len() != no || m.skin_bary.len() != no || m.skin_offset.len() != no {
+    if let Some(s) = m.region_rings.iter().position(|&r| r == 0) {
+        return Err(format!("region {s}: zero rings"));
+    }
+    if m.region_rings.len() != no || m.region_box.len() != no || m.skin_face.len() != no || m.skin_bary.len() != no || m.skin_offset.len() != no {
         return Err("per-outer-vertex arrays of different lengths".into());
     }
     in_range("skin faces", &mut m.skin_face.iter().map(|&x| x as usize), nf)?;
