@@ -227,3 +227,40 @@ fn model_builder_rejects_bad_input() {
     assert!(b().fixed_nodes(vec![0, 0, 1]).build().is_ok());
     assert!(b().integrator(Integrator::newton()).build().is_ok());
 }
+
+/// The particle step allocates nothing after the first call either: full body, a partial active
+/// set, damping and gravity, the SIMD and the portable copies.
+#[test]
+fn particle_step_allocates_nothing_after_the_first_step() {
+    use palpate_core::material::{Damping, Elasticity};
+    use palpate_core::meshfree::{set_simd_enabled, ParticleModelBuilder, ParticleState, ParticleWorkspace};
+    let s = 1e-3;
+    let mut pts = vec![];
+    for k in 0..6 {
+        for j in 0..5 {
+            for i in 0..5 {
+                pts.push(Vec3::new(i as f64, j as f64, k as f64) * s);
+            }
+        }
+    }
+    let m = vec![1000.0 * s * s * s; pts.len()];
+    let mat = palpate_core::Material::new(Elasticity::YoungPoisson { young: 3e4, poisson: 0.4 }, 1000.0, Damping { phi: 0.5, psi: 0.5 }).unwrap();
+    let model = ParticleModelBuilder::new(pts, m, mat, 1.8 * s).fixed_particles((0..25).collect()).gravity(Vec3::new(0.0, 0.0, -9.81)).build().unwrap();
+    for simd in [true, false] {
+        set_simd_enabled(simd);
+        let mut st = ParticleState::rest(&model);
+        let mut ws = ParticleWorkspace::new(&model);
+        model.step(&mut st, &mut ws, 1e-3).unwrap(); // warm-up
+        let before = allocations();
+        for k in 0..50 {
+            st.f_ext[149] = Vec3::new(0.0, 1e-4 * (k as f64).sin(), -1e-4);
+            if k == 25 {
+                st.active.retain(|&i| i % 2 == 0 || i >= 100);
+            }
+            model.step(&mut st, &mut ws, 1e-3).unwrap();
+        }
+        let n = allocations() - before;
+        assert_eq!(n, 0, "simd {simd}: the particle step allocated {n} times in 50 steps");
+    }
+    set_simd_enabled(true);
+}

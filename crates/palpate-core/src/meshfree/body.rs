@@ -555,6 +555,7 @@ pub struct ParticleWorkspace {
     pub(crate) b: Vec<Cols>,
     pub(crate) gamma: Vec<f64>,
     pub(crate) acc_ext: Vec<P4>,
+    pub(crate) u_next: Vec<P4>,
     pub(crate) free: Vec<usize>,
     pub(crate) u: Vec<P4>,
     pub(crate) v: Vec<P4>,
@@ -568,7 +569,7 @@ impl ParticleWorkspace {
     /// Number of particles it was made for (every per-particle array has this length).
     fn len(&self) -> usize {
         let n = self.u.len();
-        if [self.force.len(), self.v.len(), self.b.len(), self.gamma.len(), self.acc_ext.len(), self.mark.len()].iter().all(|&l| l == n) {
+        if [self.force.len(), self.v.len(), self.b.len(), self.gamma.len(), self.acc_ext.len(), self.u_next.len(), self.mark.len()].iter().all(|&l| l == n) {
             n
         } else {
             usize::MAX
@@ -583,6 +584,7 @@ impl ParticleWorkspace {
             b: vec![[[0.0; 4]; 3]; n],
             gamma: vec![0.0; n],
             acc_ext: vec![[0.0; 4]; n],
+            u_next: vec![[0.0; 4]; n],
             free: Vec::with_capacity(n),
             u: vec![[0.0; 4]; n],
             v: vec![[0.0; 4]; n],

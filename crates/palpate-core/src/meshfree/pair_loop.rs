@@ -340,6 +340,7 @@ fn substeps_impl<const FMA: bool>(m: &ParticleModel, state: &mut ParticleState, 
     for &i in &ws.touched {
         ws.b[i] = [[0.0; 4]; 3];
         ws.gamma[i] = 0.0;
+        ws.u_next[i] = ws.u[i];
     }
     for &i in &state.active {
         ws.gamma[i] = m.gamma[i];
@@ -359,18 +360,20 @@ fn substeps_impl<const FMA: bool>(m: &ParticleModel, state: &mut ParticleState, 
     let damped = !m.material.is_undamped();
     for _ in 0..substeps {
         stress_pass::<FMA>(m, &state.active, &ws.u, if damped { Some(&ws.v) } else { None }, false, &mut ws.b);
+        // Forces and, in the same sweep, Verlet in velocity form (v += h a, u += h v) into the
+        // other displacement buffer: this sweep still reads the current displacements of the
+        // neighbours. (Velocities are read again only by the next sub-step's pass 1.)
         for &i in &ws.free {
-            ws.force[i] = particle_force::<FMA>(m, i, &ws.u, &ws.b, &ws.gamma);
-        }
-        // Verlet in velocity form: v += h a, u += h v.
-        for &i in &ws.free {
-            let (f, ae, im) = (&ws.force[i], &ws.acc_ext[i], m.inv_mass[i]);
-            let (v, u) = (&mut ws.v[i], &mut ws.u[i]);
+            let f = particle_force::<FMA>(m, i, &ws.u, &ws.b, &ws.gamma);
+            let (ae, im) = (&ws.acc_ext[i], m.inv_mass[i]);
+            let (v, u, un) = (&mut ws.v[i], &ws.u[i], &mut ws.u_next[i]);
             for l in 0..3 {
                 v[l] = madd::<FMA>(h, madd::<FMA>(f[l], im, ae[l]), v[l]);
-                u[l] = madd::<FMA>(h, v[l], u[l]);
+                un[l] = madd::<FMA>(h, v[l], u[l]);
             }
         }
+        std::mem::swap(&mut ws.u, &mut ws.u_next);
+        // Frozen and fixed particles keep their displacement in both buffers.
     }
     for &i in &ws.free {
         state.v[i] = v3(&ws.v[i]);
@@ -424,7 +427,7 @@ pub(crate) fn run_substeps(m: &ParticleModel, state: &mut ParticleState, ws: &mu
     let n = m.n_particles();
     // The unchecked neighbour indexing of the SIMD copy relies on these (the caller has
     // already returned an error for a mismatched workspace or an out-of-range active index).
-    assert!(ws.u.len() == n && ws.v.len() == n && ws.b.len() == n && ws.gamma.len() == n);
+    assert!(ws.u.len() == n && ws.u_next.len() == n && ws.v.len() == n && ws.b.len() == n && ws.gamma.len() == n);
     assert!(state.active.iter().all(|&i| i < n));
     #[cfg(target_arch = "x86_64")]
     if has_avx2_fma() {
