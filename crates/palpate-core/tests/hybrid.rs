@@ -224,3 +224,44 @@ fn bad_walls_and_options_are_refused() {
         assert!(matches!(build(&wall, &o), Err(HybridError::Parameter { .. })), "{o:?}");
     }
 }
+
+/// Damaged model files whose checksum was recomputed (so that the structure checks, not the
+/// checksum, must catch them) never make the reader or the region accessors panic.
+#[test]
+fn mutated_model_files_never_panic() {
+    use palpate_core::hybrid::file::checksum;
+    let bytes = to_bytes(&ventricle().1);
+    let mut seed: u64 = 0x9e37_79b9_7f4a_7c15;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    };
+    let (mut ok, mut refused) = (0, 0);
+    for _ in 0..400 {
+        let mut b = bytes.clone();
+        // Mutate 1-4 bytes of the payload's first 64 KiB (counts, options, indices live there)
+        // or anywhere.
+        for _ in 0..1 + next() % 4 {
+            let span = if next() % 2 == 0 { 65_536.min(b.len() - 40) } else { b.len() - 40 };
+            let at = 40 + (next() as usize) % span;
+            b[at] = next() as u8;
+        }
+        let sum = checksum(&b[40..]);
+        b[32..40].copy_from_slice(&sum.to_le_bytes());
+        match from_bytes(&b, "fuzz.palpate") {
+            Ok(m) => {
+                ok += 1;
+                for s in [0, m.n_regions() / 2, m.n_regions() - 1] {
+                    let _ = (m.region_len(s), m.region_core_faces(s), m.region_curve(s), m.region_field(s));
+                }
+            }
+            Err(e) => {
+                assert!(e.to_string().contains("fuzz.palpate"), "{e}");
+                refused += 1;
+            }
+        }
+    }
+    assert!(ok > 0 && refused > 0, "ok {ok}, refused {refused}");
+}
