@@ -643,9 +643,6 @@ fn build_core(wall: &Wall, field: &Transmural, wall_grid: &TriangleGrid, o: &Hyb
         }
         core_tets.push([tet[0], tet[2], tet[1], tet[3]]);
     }
-    if std::env::var_os("PALPATE_DEBUG").is_some() {
-        eprintln!("core: {untangle_rounds} untangling rounds");
-    }
     let core_faces: Vec<[usize; 3]> = coarse
         .triangles
         .iter()
@@ -655,17 +652,6 @@ fn build_core(wall: &Wall, field: &Transmural, wall_grid: &TriangleGrid, o: &Hyb
             [t[0] + o, t[2] + o, t[1] + o]
         })
         .collect();
-    if std::env::var_os("PALPATE_DEBUG").is_some() {
-        for (t, tet) in core_tets.iter().enumerate() {
-            let v = signed_volume(&core_points[tet[0]], &core_points[tet[1]], &core_points[tet[2]], &core_points[tet[3]]);
-            if v.abs() < 1e-12 {
-                eprintln!("tet {t} {tet:?} vol {v:e}");
-                for &n in tet {
-                    eprintln!("   node {n} {:?} phi {:.3} boundary {}", core_points[n].as_slice(), field.phi_at(&core_points[n]), coarse.boundary[n % nv]);
-                }
-            }
-        }
-    }
     let pts_arr: Vec<[f64; 3]> = core_points.iter().map(|p| [p.x, p.y, p.z]).collect();
     let tets_arr: Vec<[i64; 4]> = core_tets.iter().map(|t| [t[0] as i64, t[1] as i64, t[2] as i64, t[3] as i64]).collect();
     let (mesh, warnings) = TetMesh::from_arrays(&pts_arr, &tets_arr).map_err(HybridError::Mesh)?;
@@ -720,9 +706,6 @@ fn balance_on_surface(coarse: &mut crate::mesh::simplify::Simplified, surf: &Tri
                     lift[tri[k]] = lift[tri[k]].max(d);
                 }
             }
-        }
-        if std::env::var_os("PALPATE_DEBUG").is_some() {
-            eprintln!("balance: max lift {:e} m, vertices to lift {}", lift.iter().copied().fold(0.0, f64::max), lift.iter().filter(|&&l| l > 0.0).count());
         }
         let mut moved = false;
         for v in 0..coarse.points.len() {
