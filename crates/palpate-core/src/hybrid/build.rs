@@ -1026,8 +1026,3 @@ pub struct RegionField {
     pub label: Vec<VoxelLabel>,
     pub gradient: Vec<[f32; 3]>,
 }
-
-impl Transmural {
-    /// (Re-exported for the file reader's consistency checks.)
-    pub fn voxel_count(&self) -> usize { self.grid.len() }
-}
