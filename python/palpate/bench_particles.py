@@ -11,7 +11,10 @@ have neighbours in one plane only (which the core refuses): such particles are p
 next nearest taken instead, until exactly ``N`` remain (:func:`cluster`). All ``N`` are active; the farthest 10 % from ``P`` (the rim of the patch) are
 fixed; the 5 particles nearest ``P`` share a constant 0.01 N along the inward normal. E = 30 kPa,
 nu = 0.4, rho = 1000 kg/m^3, undamped, no gravity, support radius 1.8 spacings (26 neighbours
-inside the lattice; the mean over the patch, fewer at its surface, is reported).
+inside the lattice; the mean over the patch, fewer at its surface, is reported as ``in h``). The
+body pairs only the neighbours whose kernel weight is at least 1e-3 of its peak (the core's
+default, ``DEFAULT_MIN_WEIGHT``): the 8 corner neighbours at sqrt(3) spacings, W/W(0) = 1e-5,
+are not paired, which leaves 18 inside the lattice (``nbrs``, the pairs actually computed).
 
 Timing. ``ParticleBody.run_timed`` times each tick (one ``step`` of dt = 1 ms, i.e.
 ``substeps`` explicit sub-steps at the stable step) in Rust with ``Instant``; the report gives
@@ -219,6 +222,7 @@ def run(n: int, spacing: float = SPACING, kernel: str = "wendland", ticks: int =
         "kernel": kernel,
         "hot_loop": _p.simd_path(),
         "mean_neighbours": pairs / n,
+        "mean_neighbours_in_support": float((lattice_neighbours(pos, spacing, support * spacing)[0] >= 0).sum()) / n,
         "pairs": pairs,
         "fixed": len(fixed),
         "probe_particles": len(probe),

@@ -296,7 +296,7 @@ struct TimedRun {
 #[pymethods]
 impl PyParticleBody {
     #[new]
-    #[pyo3(signature = (positions, masses, material, support_radius, kernel = PyKernel::WendlandC2, fixed = None, gravity = None, hourglass = DEFAULT_HOURGLASS))]
+    #[pyo3(signature = (positions, masses, material, support_radius, kernel = PyKernel::WendlandC2, fixed = None, gravity = None, hourglass = DEFAULT_HOURGLASS, min_relative_weight = palpate_core::meshfree::DEFAULT_MIN_WEIGHT))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -308,6 +308,7 @@ impl PyParticleBody {
         fixed: Option<&Bound<'_, PyAny>>,
         gravity: Option<&Bound<'_, PyAny>>,
         hourglass: f64,
+        min_relative_weight: f64,
     ) -> PyResult<Self> {
         let p = conv::points(positions, "positions")?;
         let n = p.len();
@@ -324,7 +325,8 @@ impl PyParticleBody {
             .kernel(kernel.into())
             .fixed_particles(fixed)
             .gravity(gravity)
-            .hourglass(hourglass);
+            .hourglass(hourglass)
+            .min_relative_weight(min_relative_weight);
         let model = py.detach(|| builder.build()).map_err(|e: CoreModelError| errors::model_error(e))?;
         let state = ParticleState::rest(&model);
         let ws = ParticleWorkspace::new(&model);

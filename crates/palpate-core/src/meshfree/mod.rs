@@ -41,6 +41,6 @@ mod pair_loop;
 pub mod kernel;
 pub mod neighbors;
 
-pub use body::{ParticleModel, ParticleModelBuilder, ParticleState, ParticleStepReport, ParticleWorkspace, DEFAULT_HOURGLASS, STABILITY_SAFETY};
+pub use body::{ParticleModel, ParticleModelBuilder, ParticleState, ParticleStepReport, ParticleWorkspace, DEFAULT_HOURGLASS, DEFAULT_MIN_WEIGHT, STABILITY_SAFETY};
 pub use kernel::Kernel;
 pub use pair_loop::{set_simd_enabled, simd_path};
