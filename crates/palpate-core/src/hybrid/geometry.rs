@@ -50,6 +50,8 @@ pub struct TriangleGrid {
     n: [usize; 3],
     ptr: Vec<u32>,
     items: Vec<u32>,
+    /// Per triangle: its bounding box (a cheap lower bound on the distance to it).
+    boxes: Vec<(Vec3, Vec3)>,
 }
 
 impl TriangleGrid {
@@ -115,7 +117,14 @@ impl TriangleGrid {
                 }
             }
         }
-        TriangleGrid { lo, h, n, ptr: count, items }
+        let boxes = tris
+            .iter()
+            .map(|t| {
+                let (a, b, c) = (points[t[0]], points[t[1]], points[t[2]]);
+                (a.inf(&b).inf(&c), a.sup(&b).sup(&c))
+            })
+            .collect();
+        TriangleGrid { lo, h, n, ptr: count, items, boxes }
     }
 
     /// The triangle (of those bucketed, passing `keep`) nearest to `p`: `(triangle, closest
@@ -139,6 +148,14 @@ impl TriangleGrid {
                         let cell = i as usize + n[0] * (j as usize + n[1] * k as usize);
                         for &t in &self.items[self.ptr[cell] as usize..self.ptr[cell + 1] as usize] {
                             let t = t as usize;
+                            if let Some(b) = &best {
+                                // Skip a triangle whose box is farther than the best so far.
+                                let (lo, hi) = &self.boxes[t];
+                                let d = (lo - p).sup(&Vec3::zeros()) + (p - hi).sup(&Vec3::zeros());
+                                if d.norm_squared() > b.3 * b.3 {
+                                    continue;
+                                }
+                            }
                             if !keep(t) {
                                 continue;
                             }
