@@ -203,7 +203,6 @@ impl ParticleModelBuilder {
             nbr32,
             q4: to_p4(&q),
             qsum4: to_p4(&qsum),
-            r_rows: r_inv.iter().map(|r| [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]]).collect(),
             r4: r_inv.iter().map(|r| [p4(&r.column(0).into()), p4(&r.column(1).into()), p4(&r.column(2).into())]).collect(),
             hg_c,
             gamma,
@@ -242,7 +241,6 @@ pub struct ParticleModel {
     /// `A_i^-1`, the hourglass coefficient `c_i` and `gamma_i = c_i / V_i` (see [`pair_loop`]).
     pub(crate) q4: Vec<P4>,
     pub(crate) qsum4: Vec<P4>,
-    pub(crate) r_rows: Vec<[[f64; 3]; 3]>,
     pub(crate) r4: Vec<Cols>,
     pub(crate) hg_c: Vec<f64>,
     pub(crate) gamma: Vec<f64>,

@@ -250,7 +250,10 @@ fn particle_stress<const FMA: bool>(m: &ParticleModel, i: usize, u: &[P4], v: Op
         (Some(v), Some(_)) if !linear => Some(gather_rows::<FMA>(nbr, q, v, &v[i])),
         _ => None,
     };
-    let b = b_matrix(&k, kv.as_ref(), &m.r_rows[i], m.gamma[i], law, linear);
+    // A^-1 is stored once, as padded columns (for the SIMD copy): row a is (c0[a], c1[a], c2[a]).
+    let rc = &m.r4[i];
+    let r = [[rc[0][0], rc[1][0], rc[2][0]], [rc[0][1], rc[1][1], rc[2][1]], [rc[0][2], rc[1][2], rc[2][2]]];
+    let b = b_matrix(&k, kv.as_ref(), &r, m.gamma[i], law, linear);
     [[b[0][0], b[1][0], b[2][0], 0.0], [b[0][1], b[1][1], b[2][1], 0.0], [b[0][2], b[1][2], b[2][2], 0.0]]
 }
 
