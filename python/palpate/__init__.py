@@ -46,6 +46,7 @@ from ._palpate import (
     set_simd_enabled,
     simd_path,
     truncated_ellipsoid_wall,
+    ventricle_surface,
 )
 from .hybrid import build_from_files, build_shape, build_tagged_file
 from .io import UNITS, VtuSeries, load_mesh, read_mesh_arrays
@@ -95,4 +96,5 @@ __all__ = [
     "set_simd_enabled",
     "simd_path",
     "truncated_ellipsoid_wall",
+    "ventricle_surface",
 ]

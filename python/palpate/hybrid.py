@@ -27,7 +27,8 @@ from typing import Any, Optional, Tuple, Union
 
 import numpy as np
 
-from ._palpate import HybridModel, truncated_ellipsoid_wall
+from ._palpate import HybridModel
+from ._palpate import ventricle_surface as _ventricle_surface
 from .surfaces import load_surface, read_tagged_surface
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -86,31 +87,11 @@ def build_tagged_file(path: PathLike, unit: str = "m", *, tag_array: Optional[st
     return HybridModel.build_tagged(points, triangles, part, **opts)
 
 
-def ventricle_surface(circumferential: int = VENTRICLE_CIRCUMFERENTIAL, longitudinal: int = VENTRICLE_LONGITUDINAL,
-                      ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The synthetic truncated ventricle as one tagged closed surface.
-
-    The outward boundary of :func:`palpate.truncated_ellipsoid_wall` (one layer), each triangle
-    tagged by geometry: base (2) if all its vertices lie on the cut plane, else inner (0) or
-    outer (1) by which ellipsoid its centroid lies nearer to (in the ellipsoid's level-set
-    value), as ``palpate-core``'s ``hybrid::shapes::truncated_ventricle`` does.
-
-    Returns ``(points [m], triangles, part)`` as :func:`palpate.read_tagged_surface` does.
-    """
-    mesh = truncated_ellipsoid_wall(ELLIPSOIDS_INNER, ELLIPSOIDS_OUTER, z_cut=VENTRICLE_Z_CUT,
-                                    circumferential=circumferential, longitudinal=longitudinal, layers=1)
-    points = mesh.points
-    tris = mesh.boundary_faces()
-    scale = ELLIPSOIDS_OUTER[2]
-    on_cut = (np.abs(points[tris, 2] - VENTRICLE_Z_CUT) <= 1e-9 * scale).all(axis=1)
-    c = points[tris].mean(axis=1)
-
-    def level(axes):
-        return np.sqrt(((c / np.asarray(axes)) ** 2).sum(axis=1))
-
-    inner = np.abs(level(ELLIPSOIDS_INNER) - 1.0) < np.abs(level(ELLIPSOIDS_OUTER) - 1.0)
-    part = np.where(on_cut, 2, np.where(inner, 0, 1)).astype(np.int8)
-    return points, tris, part
+#: The synthetic truncated ventricle as one tagged closed surface: ``palpate-core``'s
+#: ``hybrid::shapes::truncated_ventricle`` (the surface the Rust tests and examples build), see
+#: :func:`palpate.ventricle_surface`; ``(points [m], triangles, part)`` as
+#: :func:`palpate.read_tagged_surface` returns.
+ventricle_surface = _ventricle_surface
 
 
 def build_shape(name: str, **opts) -> HybridModel:

@@ -24,7 +24,25 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ModelFileError", m.py().get_type::<ModelFileError>())?;
     m.add_class::<PyProjection>()?;
     m.add_class::<PyHybridModel>()?;
+    m.add_function(wrap_pyfunction!(ventricle_surface, m)?)?;
     Ok(())
+}
+
+/// The synthetic truncated ventricle of the benchmark protocol as one closed surface tagged
+/// inner / outer / base (``palpate_core::hybrid::shapes::truncated_ventricle``): the wall between
+/// the ellipsoids of semi-axes (20, 20, 35) mm and (26, 26, 42) mm above z = 0, with
+/// ``circumferential`` x ``longitudinal`` points per surface. Returns ``(points (n, 3) [m],
+/// triangles (m, 3) int64, part (m,) int8: 0 inner, 1 outer, 2 base)``.
+#[pyfunction]
+#[pyo3(signature = (circumferential = 96, longitudinal = 24))]
+fn ventricle_surface<'py>(py: Python<'py>, circumferential: usize, longitudinal: usize) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<i64>>, Bound<'py, PyArray1<i8>>)> {
+    if !(3..=4096).contains(&circumferential) || !(1..=4096).contains(&longitudinal) {
+        return Err(PyValueError::new_err(format!("circumferential must be 3 to 4096 and longitudinal 1 to 4096, got {circumferential} and {longitudinal}")));
+    }
+    let p = palpate_core::mesh::generate::TruncatedEllipsoidWall { circumferential, longitudinal, ..Default::default() };
+    let wall = py.detach(|| hybrid::shapes::truncated_ventricle(&p)).map_err(hybrid_error)?;
+    let parts: Vec<i8> = wall.parts.iter().map(|&w| w as u8 as i8).collect();
+    Ok((conv::vec3s_to_py(py, wall.surface.points()), conv::index_rows_to_py(py, wall.surface.triangles()), PyArray1::from_vec(py, parts)))
 }
 
 fn hybrid_error(e: HybridError) -> PyErr {
