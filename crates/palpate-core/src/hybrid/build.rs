@@ -477,7 +477,7 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     let mut region_box = Vec::with_capacity(outer_points.len());
     for s in 0..outer_points.len() {
         let mut n = 0;
-        let (patch, rings) = outer_adjacency.patch(&outer_tris, s, None, &mut in_patch, |r, added| {
+        let (patch, rings) = outer_adjacency.patch(&outer_tris, s, None, Marks::Flags(&mut in_patch), |r, added| {
             n += added.iter().map(|&t| count(t)).sum::<usize>();
             !(n >= o.min_region_particles || (r >= MAX_RINGS && n > 0) || r >= 2 * MAX_RINGS)
         });
@@ -748,6 +748,36 @@ fn split_prism(bottom: [usize; 3], nv: usize) -> [[usize; 4]; 3] {
     }
 }
 
+/// The triangles already in a patch: one flag per triangle (the builder's sweep over every
+/// vertex; all false on entry and on exit), or a sorted list (one region on demand, a few hundred
+/// triangles, without touching a flag per surface triangle).
+enum Marks<'a> {
+    Flags(&'a mut [bool]),
+    Sorted(Vec<u32>),
+}
+
+impl Marks<'_> {
+    /// Mark `t`; false if it was marked already.
+    fn insert(&mut self, t: u32) -> bool {
+        match self {
+            Marks::Flags(f) => !std::mem::replace(&mut f[t as usize], true),
+            Marks::Sorted(v) => match v.binary_search(&t) {
+                Ok(_) => false,
+                Err(k) => {
+                    v.insert(k, t);
+                    true
+                }
+            },
+        }
+    }
+
+    fn reset(&mut self, patch: &[u32]) {
+        if let Marks::Flags(f) = self {
+            patch.iter().for_each(|&t| f[t as usize] = false);
+        }
+    }
+}
+
 /// Adjacency of the outer surface: the triangles around each vertex (CSR) and the triangle
 /// across each edge (`u32::MAX` on an open boundary).
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -799,12 +829,11 @@ impl OuterAdjacency {
 
     /// The triangles within `rings` rings of vertex `s` (sorted), growing one ring at a time
     /// while `more(rings so far, triangles added)` says so when `rings` is `None`. Returns the
-    /// patch and the rings used. `in_patch` is scratch of one flag per triangle, all false on
-    /// entry and on exit.
-    fn patch(&self, tris: &[[usize; 3]], s: usize, rings: Option<usize>, in_patch: &mut [bool], mut more: impl FnMut(usize, &[u32]) -> bool) -> (Vec<u32>, usize) {
+    /// patch and the rings used.
+    fn patch(&self, tris: &[[usize; 3]], s: usize, rings: Option<usize>, mut in_patch: Marks<'_>, mut more: impl FnMut(usize, &[u32]) -> bool) -> (Vec<u32>, usize) {
         let mut patch: Vec<u32> = Vec::new();
         for &t in self.around(s) {
-            in_patch[t as usize] = true;
+            in_patch.insert(t);
             patch.push(t);
         }
         let mut ring_start = 0;
@@ -821,8 +850,7 @@ impl OuterAdjacency {
             for i in ring_start..ring_end {
                 for &v in &tris[patch[i] as usize] {
                     for &t in self.around(v) {
-                        if !in_patch[t as usize] {
-                            in_patch[t as usize] = true;
+                        if in_patch.insert(t) {
                             patch.push(t);
                         }
                     }
@@ -834,9 +862,7 @@ impl OuterAdjacency {
             ring_start = ring_end;
             r += 1;
         }
-        for &t in &patch {
-            in_patch[t as usize] = false;
-        }
+        in_patch.reset(&patch);
         patch.sort_unstable();
         (patch, r)
     }
@@ -883,8 +909,7 @@ impl HybridModel {
     /// nv(p_s) of region `s`: its outer triangles, sorted (grown from the stored ring count in
     /// microseconds).
     pub fn region_triangles(&self, s: usize) -> Vec<u32> {
-        let mut scratch = vec![false; self.outer_tris.len()];
-        self.outer_adjacency.patch(&self.outer_tris, s, Some(self.region_rings[s] as usize), &mut scratch, |_, _| false).0
+        self.outer_adjacency.patch(&self.outer_tris, s, Some(self.region_rings[s] as usize), Marks::Sorted(Vec::new()), |_, _| false).0
     }
 
     /// RV(p_s): the particles of region `s`, as ranges into [`HybridModel::particles`] (one per
