@@ -12,7 +12,8 @@ use pyo3::types::PyDict;
 
 use crate::conv;
 use crate::errors;
-use crate::material::{integrator_from_py, integrator_to_py, PyMaterial};
+use crate::integrator::{integrator_from_py, integrator_to_py};
+use crate::material::PyMaterial;
 use crate::mesh::PyTetMesh;
 
 /// A deformable body: mesh + material + fixed nodes + gravity + integrator, and its state.

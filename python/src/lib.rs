@@ -5,7 +5,8 @@
 //! | `errors.rs` | core error enums -> `palpate.PalpateError` and its subclasses |
 //! | `conv.rs` | numpy <-> core arrays (dtype / shape checks) |
 //! | `mesh.rs` | `TetMesh`, `ellipsoid_wall`, `truncated_ellipsoid_wall`, `box_mesh` |
-//! | `material.rs` | `Material`, `SemiImplicit`, `BackwardEuler` |
+//! | `material.rs` | `Material` |
+//! | `integrator.rs` | `SemiImplicit`, `BackwardEuler` |
 //! | `body.rs` | `Body` (model + state + workspace; stepping releases the GIL) |
 //! | `particles.rs` | `Kernel`, `ParticleBody`, `TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between`, `SurfaceError` |
 //!
@@ -15,6 +16,7 @@ mod body;
 mod conv;
 mod errors;
 mod hybrid;
+mod integrator;
 mod material;
 mod mesh;
 mod particles;
@@ -27,8 +29,8 @@ fn _palpate(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     m.add_class::<mesh::PyTetMesh>()?;
     m.add_class::<material::PyMaterial>()?;
-    m.add_class::<material::PySemiImplicit>()?;
-    m.add_class::<material::PyBackwardEuler>()?;
+    m.add_class::<integrator::PySemiImplicit>()?;
+    m.add_class::<integrator::PyBackwardEuler>()?;
     m.add_class::<body::PyBody>()?;
     m.add_function(wrap_pyfunction!(mesh::ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::truncated_ellipsoid_wall, m)?)?;
