@@ -83,6 +83,21 @@ pub fn forces(x: &[Vec3; 4], v: Option<&[Vec3; 4]>, rest: &TetRest, m: &Material
     [-(h1 + h2 + h3), h1, h2, h3]
 }
 
+/// Elastic energy \[J\], elastic nodal forces \[N\] and `det F` of positions `x` \[m\], in one pass
+/// (the incremental-potential integrator evaluates all three at every trial point; `det F <= 0`
+/// marks an inverted element).
+#[inline]
+pub fn elastic_energy_forces(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> (f64, [Vec3; 4], f64) {
+    let f = deformation_gradient(x, rest);
+    let e = material::green_strain(&f);
+    let tr = e.trace();
+    let energy = rest.volume * (m.mu() * e.norm_squared() + 0.5 * m.lambda() * tr * tr);
+    let s = material::stress(m, &e);
+    let h = -rest.volume * (f * s) * rest.dm_inv.transpose();
+    let (h1, h2, h3) = (h.column(0).into_owned(), h.column(1).into_owned(), h.column(2).into_owned());
+    (energy, [-(h1 + h2 + h3), h1, h2, h3], f.determinant())
+}
+
 /// Force Jacobian blocks `K_ab = d f_a / d x_b` (3x3 each) of the elastic force at positions `x`,
 /// and, if the material is damped, `D_ab = d f_a / d v_b` of the viscous force (its dependence on
 /// `x` through `F` is not included).
