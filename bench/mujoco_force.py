@@ -11,6 +11,8 @@ Same model and loop as shared/bench/peers/mujoco_peer.py (its `build` is re-used
 
 Single thread: the peer's XML sets <compiler usethread="false"/>; OMP/BLAS threads are set to 1 below.
 Only mj_step is timed (time.perf_counter); the run stops early if max |u| > 1 m or the timed wall > --max-wall.
+MuJoCo's warnings go to stderr (not to a MUJOCO_LOG.TXT in the working directory); their counts during the
+run are in the JSON line as `warnings` (e.g. mjWARN_INERTIA when the M+K solve under-converges).
 
 Needs any Python venv with numpy==2.4.6 and mujoco==4.0.0 (not palpate dependencies), e.g.
     python3 -m venv /work/peers-venv && /work/peers-venv/bin/pip install numpy==2.4.6 mujoco==4.0.0
@@ -29,6 +31,7 @@ SHARED_BENCH = os.path.join(os.environ.get("PALPATE_SHARED") or os.path.join(REP
 sys.path.insert(0, SHARED_BENCH)
 import common as C  # noqa: E402  (the same module object that mujoco_peer imports)
 import mujoco  # noqa: E402
+mujoco.set_mju_user_warning(lambda msg: print("MuJoCo warning:", msg, file=sys.stderr, flush=True))
 
 _spec = importlib.util.spec_from_file_location("mujoco_peer", os.path.join(SHARED_BENCH, "peers", "mujoco_peer.py"))
 peer = importlib.util.module_from_spec(_spec)
@@ -75,6 +78,8 @@ def main():
              step_us_p50=round(float(np.percentile(us, 50)), 1), step_us_p99=round(float(np.percentile(us, 99)), 1),
              step_us_max=round(float(us.max()), 1),
              stable=bool(finite and np.isfinite(max_disp) and max_disp < 0.06),
+             warnings={k: int(d.warning[int(w)].number) for k, w in mujoco.mjtWarning.__members__.items()
+                       if k != "mjNWARNING" and d.warning[int(w)].number},
              mujoco=mujoco.__version__)
     if a.save_mean:
         mean = tr.usum / tr.cnt if tr.cnt else np.full((len(p), 3), np.nan)

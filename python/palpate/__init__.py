@@ -20,6 +20,7 @@ True
 from ._palpate import (
     BackwardEuler,
     Body,
+    Filter,
     HybridModel,
     Kernel,
     Material,
@@ -32,6 +33,7 @@ from ._palpate import (
     ParticleBody,
     Projection,
     SemiImplicit,
+    Solver,
     SolveError,
     StepError,
     SurfaceError,
@@ -57,6 +59,7 @@ from .vtp import read_vtp
 __all__ = [
     "BackwardEuler",
     "Body",
+    "Filter",
     "HybridModel",
     "Kernel",
     "Material",
@@ -69,6 +72,7 @@ __all__ = [
     "ParticleBody",
     "Projection",
     "SemiImplicit",
+    "Solver",
     "SolveError",
     "StepError",
     "SurfaceError",

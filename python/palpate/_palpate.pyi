@@ -87,23 +87,49 @@ class Material:
     @property
     def wave_speed(self) -> float: ...
 
+class Filter:
+    PAPER: Filter
+    STABLE: Filter
+
+class Solver:
+    QUASI_NEWTON: Solver
+    NEWTON: Solver
+    LINEARISED: Solver
+
 class SemiImplicit:
-    def __init__(self) -> None: ...
+    def __init__(self, filter: Filter = ...) -> None: ...
+    @property
+    def filter(self) -> Filter: ...
 
 class BackwardEuler:
-    def __init__(self, newton: bool = False, max_iterations: int = 20, tolerance: float = 1e-9) -> None: ...
+    def __init__(
+        self,
+        solver: Solver = ...,
+        *,
+        max_iterations: Optional[int] = None,
+        tolerance: Optional[float] = None,
+        history: Optional[int] = None,
+    ) -> None: ...
     @property
-    def newton(self) -> bool: ...
+    def solver(self) -> Solver: ...
     @property
-    def max_iterations(self) -> int: ...
+    def max_iterations(self) -> Optional[int]: ...
     @property
-    def tolerance(self) -> float: ...
+    def tolerance(self) -> Optional[float]: ...
+    @property
+    def history(self) -> Optional[int]: ...
 
 class StepStats(TypedDict):
     steps: int
+    iterations: int
+    iterations_max: int
+    evaluations: int
     solves: int
     unconverged_steps: int
     max_residual: float
+    inverted_max: int
+    inverted: int
+    potential_change: float
 
 class ProbeRun(TypedDict):
     steps: int
@@ -113,6 +139,12 @@ class ProbeRun(TypedDict):
     probe_disp_avg_m: float
     mean_disp: _FloatArray
     probe_disp: _FloatArray
+    step_us: _FloatArray
+    iterations_mean: float
+    iterations_max: int
+    evaluations: int
+    inverted_max: int
+    unconverged_steps: int
     error: Optional[str]
 
 class Body:

@@ -1,8 +1,8 @@
 """The ``palpate`` command line (also ``python -m palpate``).
 
     palpate run SCENE.toml [--out DIR] [--steps N]
-    palpate bench protocol MESH [--steps N] [--json] [--integrator NAME]
-    palpate bench protocol --all [--steps N] [--json] [--integrator NAME]
+    palpate bench protocol MESH [--force F] [--steps N] [--json] [--integrator NAME] [--newton auto|on|off]
+    palpate bench protocol --all [--force F] [--steps N] [--json] [--integrator NAME]
     palpate bench particles N [--spacing S] [--kernel wendland|cubic|lj] [--ticks T] [--json]
     palpate bench particles --all [...]
     palpate build INNER OUTER -o MODEL [--unit m|cm|mm] [build options]
@@ -76,19 +76,19 @@ def _bench_cases(a):
             raise _Fail("palpate bench protocol --all: shared bench meshes not found "
                         "(set PALPATE_SHARED to the folder holding bench/meshes)")
         paths = [shared / "bench" / "meshes" / f"lv_{m}.msh" for m in bench.MESHES]
-        yield bench.generated_case
+        yield (lambda: bench.generated_case(a.force))
         for p in paths:
-            yield (lambda p=p: bench.load_case(str(p)))
+            yield (lambda p=p: bench.load_case(str(p), a.force))
         return
     if not a.mesh:
         raise _Fail("palpate bench protocol: give a MESH file (.msh, .vtu, .npz) or --all")
     if a.mesh == bench.GENERATED:
-        yield bench.generated_case
+        yield (lambda: bench.generated_case(a.force))
         return
 
     def one():
         try:
-            return bench.load_case(a.mesh)
+            return bench.load_case(a.mesh, a.force)
         except MeshError as e:
             raise _Fail(f"palpate bench protocol: {e}") from None
     yield one
@@ -97,24 +97,33 @@ def _bench_cases(a):
 def cmd_bench_protocol(a) -> int:
     from . import bench
 
+    if not (math.isfinite(a.force) and a.force > 0):
+        raise _Fail(f"palpate bench protocol: --force must be a positive number of newtons, got {a.force}")
+    if a.steps < 1:
+        raise _Fail("palpate bench protocol: --steps must be at least 1")
+    newton = {"auto": None, "on": True, "off": False}[a.newton]
     rows = []
     if not a.json:
-        print(f"palpate {__version__} bench protocol: {a.steps} steps of {bench.DT * 1e3:g} ms, "
+        print(f"palpate {__version__} bench protocol: {a.force:g} N, {a.steps} steps of {bench.DT * 1e3:g} ms, "
               f"integrator {a.integrator}, single thread (shared/bench/PROTOCOL.md)")
-        print(f"{'mesh':<16}{'tets':>7}{'nodes':>7}{'steps/s':>10}{'stable':>8}{'max|u| mm':>11}"
-              f"{'probe mm':>10}{'static mm':>11}{'relL2':>8}")
+        print(f"{'mesh':<16}{'tets':>7}{'steps/s':>10}{'stable':>8}{'max|u| mm':>11}{'probe mm':>10}"
+              f"{'iter':>6}{'inv':>5}{'p50 us':>8}{'p99 us':>8}{'max us':>8}{'vsStatic':>10}{'vsNewton':>10}")
     for make in _bench_cases(a):
         case = make()
-        r = bench.run(case, a.integrator, steps=a.steps, max_wall_s=a.max_wall)
+        r = bench.run(case, a.integrator, steps=a.steps, max_wall_s=a.max_wall, newton=newton)
         rows.append(r)
         if a.json:
             print(json.dumps(r), flush=True)
         else:
-            rel = "-" if r["rel_L2_vs_static"] is None else f"{r['rel_L2_vs_static']:.1e}"
+            def rel(k):
+                return "-" if r[k] is None else f"{100 * r[k]:.3f}%"
             sps = "-" if r["steps_per_s"] is None else f"{r['steps_per_s']:.1f}"
-            print(f"{r['mesh']:<16}{r['tets']:>7}{r['nodes']:>7}{sps:>10}{str(r['stable']):>8}"
-                  f"{_fmt_mm(r['max_disp_m']):>11}{_fmt_mm(r['probe_disp_avg_m']):>10}"
-                  f"{_fmt_mm(r['static_probe_disp_m']):>11}{rel:>8}", flush=True)
+            us = lambda k: "-" if r[k] is None else f"{r[k]:.0f}"  # noqa: E731
+            it = "-" if r["iterations_mean"] is None else f"{r['iterations_mean']:.2f}"
+            print(f"{r['mesh']:<16}{r['tets']:>7}{sps:>10}{str(r['stable']):>8}"
+                  f"{_fmt_mm(r['max_disp_m']):>11}{_fmt_mm(r['probe_disp_avg_m']):>10}{it:>6}"
+                  f"{r['inverted_max']:>5}{us('step_us_p50'):>8}{us('step_us_p99'):>8}{us('step_us_max'):>8}"
+                  f"{rel('rel_L2_vs_static'):>10}{rel('rel_L2_vs_newton'):>10}", flush=True)
             if r.get("error"):
                 print(f"  note: {r['error']}")
     return 0
@@ -366,7 +375,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "(same probe; its nodes with z <= 0, the lower half-shell, are fixed)")
     p.add_argument("--steps", type=int, default=1000, help="steps of 1 ms (default 1000)")
     p.add_argument("--json", action="store_true", help="one JSON object per mesh (JSON lines)")
-    p.add_argument("--integrator", default="backward-euler", choices=["semi-implicit", "backward-euler", "newton"])
+    p.add_argument("--integrator", default="backward-euler", choices=list(__import__("palpate.bench").bench.INTEGRATORS),
+                   help="backward-euler (the default: quasi-Newton), newton, linearised, semi-implicit, "
+                        "semi-implicit-stable")
+    p.add_argument("--force", type=float, default=0.2, metavar="F",
+                   help="total probe force [N] (default 0.2, the protocol's; same loaded nodes)")
+    p.add_argument("--newton", choices=["auto", "on", "off"], default="auto",
+                   help="also run converged Newton for rel_L2_vs_newton (auto: meshes up to 10k tets)")
     p.add_argument("--max-wall", type=float, default=None, metavar="S",
                    help="stop a run after S seconds of stepping (default: no cap)")
     p.set_defaults(func=cmd_bench_protocol)

@@ -28,8 +28,9 @@ from . import bench
 PAPER = {"ellipsoid": (188, 980.0), "ventricle": (1352, 35.0)}
 INTEGRATORS = [
     ("semi-implicit", _p.SemiImplicit),
-    ("backward Euler (rest-linearised)", lambda: _p.BackwardEuler(newton=False)),
-    ("backward Euler (Newton)", lambda: _p.BackwardEuler(newton=True)),
+    ("backward Euler (quasi-Newton, default)", lambda: _p.BackwardEuler()),
+    ("backward Euler (rest-linearised)", lambda: _p.BackwardEuler(_p.Solver.LINEARISED)),
+    ("backward Euler (Newton)", lambda: _p.BackwardEuler(_p.Solver.NEWTON)),
 ]
 
 

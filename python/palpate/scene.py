@@ -35,9 +35,12 @@ file, and environment variables in it are expanded: ``$VAR``, ``${VAR}``, and ``
     ramp = 0.1                         # linear ramp from 0 over this time [s] (0: at once)
 
     [integrator]
-    type = "backward_euler"            # "semi_implicit", "backward_euler" or "newton"
-    # max_iterations = 20              # newton only
-    # tolerance = 1e-9                 # newton only
+    type = "backward_euler"            # "semi_implicit", "backward_euler" (default) or "newton"
+    # solver = "quasi_newton"          # backward_euler: "quasi_newton" (default), "newton", "linearised"
+    # max_iterations = 25              # quasi_newton / newton: iteration cap per step
+    # tolerance = 1e-2                 # quasi_newton / newton: relative gradient tolerance
+    # history = 5                      # quasi_newton: L-BFGS pairs
+    # filter = "paper"                 # semi_implicit: "paper" (default) or "stable"
 
     [run]
     dt = 1e-3                          # [s]
@@ -85,7 +88,7 @@ _SECTION_KEYS = {
     "material": {"young", "poisson", "lame_lambda", "lame_mu", "density", "phi", "psi", "preset"},
     "fixed": {"z_below", "nodes"},
     "load": {"point", "radius", "force", "ramp", "surface"},
-    "integrator": {"type", "max_iterations", "tolerance"},
+    "integrator": {"type", "solver", "filter", "max_iterations", "tolerance", "history"},
     "run": {"dt", "steps", "output_every", "output"},
 }
 
@@ -290,20 +293,39 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
     kind = it.get("type", "backward_euler")
     if kind not in ("semi_implicit", "backward_euler", "newton"):
         raise c.err("integrator.type", f"must be 'semi_implicit', 'backward_euler' or 'newton', got {kind!r}")
-    if kind != "newton":
-        for k in ("max_iterations", "tolerance"):
-            if k in it:
-                raise c.err(f"integrator.{k}", "only used with type = 'newton'")
     if kind == "semi_implicit":
-        integrator = _p.SemiImplicit()
-    elif kind == "backward_euler":
-        integrator = _p.BackwardEuler()
+        for k in ("solver", "max_iterations", "tolerance", "history"):
+            if k in it:
+                raise c.err(f"integrator.{k}", "not used with type = 'semi_implicit'")
+        filters = {"paper": _p.Filter.PAPER, "stable": _p.Filter.STABLE}
+        f = it.get("filter", "paper")
+        if f not in filters:
+            raise c.err("integrator.filter", f"must be 'paper' or 'stable', got {f!r}")
+        integrator = _p.SemiImplicit(filter=filters[f])
     else:
-        mi = c.number(it, "integrator", "max_iterations", 20, positive=True, integer=True)
-        tol = c.number(it, "integrator", "tolerance", 1e-9, positive=True)
-        if not tol < 1:
-            raise c.err("integrator.tolerance", f"must lie in (0, 1), got {tol!r}")
-        integrator = _p.BackwardEuler(newton=True, max_iterations=mi, tolerance=float(tol))
+        if "filter" in it:
+            raise c.err("integrator.filter", "only used with type = 'semi_implicit'")
+        solvers = {"quasi_newton": _p.Solver.QUASI_NEWTON, "newton": _p.Solver.NEWTON,
+                   "linearised": _p.Solver.LINEARISED}
+        name = it.get("solver", "newton" if kind == "newton" else "quasi_newton")
+        if name not in solvers:
+            raise c.err("integrator.solver", f"must be 'quasi_newton', 'newton' or 'linearised', got {name!r}")
+        if kind == "newton" and name != "newton":
+            raise c.err("integrator.solver", "type = 'newton' is backward Euler with solver = 'newton'")
+        kw = {}
+        if "max_iterations" in it:
+            kw["max_iterations"] = c.number(it, "integrator", "max_iterations", 1, positive=True, integer=True)
+        if "tolerance" in it:
+            tol = c.number(it, "integrator", "tolerance", 1e-2, positive=True)
+            if not tol < 1:
+                raise c.err("integrator.tolerance", f"must lie in (0, 1), got {tol!r}")
+            kw["tolerance"] = float(tol)
+        if "history" in it:
+            kw["history"] = c.number(it, "integrator", "history", 5, nonneg=True, integer=True)
+        try:
+            integrator = _p.BackwardEuler(solvers[name], **kw)
+        except ValueError as e:
+            raise c.err("integrator", str(e)) from None
 
     try:
         body = _p.Body(mesh, material, fixed=sorted(fixed), gravity=gravity, integrator=integrator)

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use numpy::{PyArray1, PyArray2};
 use palpate_core::integrate::{static_solve, StaticOptions};
-use palpate_core::{step, Model, ModelBuilder, State, Vec3, Workspace};
+use palpate_core::{step, Model, ModelBuilder, State, StepReport, Vec3, Workspace};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -30,7 +30,9 @@ use crate::mesh::PyTetMesh;
 /// gravity : (3,) float
 ///     Gravitational acceleration [m/s^2], world frame.
 /// integrator : SemiImplicit | BackwardEuler, optional
-///     Default ``BackwardEuler(newton=False)`` (rest-linearised, factorised once per dt).
+///     Default ``BackwardEuler()``: quasi-Newton minimisation of the incremental potential,
+///     stable at any press, one iteration (one solve with the rest matrix, factorised once per
+///     dt) at small deformation.
 ///
 /// All per-node arrays are (n, 3) float64 in SI units, world frame; getters return copies.
 #[pyclass(module = "palpate", name = "Body")]
@@ -43,24 +45,39 @@ pub struct PyBody {
 }
 
 /// Per-call summary of `step`.
+#[derive(Default)]
 struct StepTotals {
     steps: usize,
+    iterations: usize,
+    max_iterations: usize,
+    evaluations: usize,
     solves: usize,
     unconverged: usize,
     max_residual: f64,
+    max_inverted: usize,
+    last: StepReport,
+}
+
+impl StepTotals {
+    fn add(&mut self, r: &StepReport) {
+        self.steps += 1;
+        self.iterations += r.iterations;
+        self.max_iterations = self.max_iterations.max(r.iterations);
+        self.evaluations += r.evaluations;
+        self.solves += r.solves;
+        self.unconverged += !r.converged as usize;
+        self.max_residual = self.max_residual.max(r.residual);
+        self.max_inverted = self.max_inverted.max(r.inverted);
+        self.last = *r;
+    }
 }
 
 impl PyBody {
     fn run_steps(&mut self, n: usize, dt: f64) -> Result<StepTotals, (usize, palpate_core::StepError)> {
-        let mut tot = StepTotals { steps: 0, solves: 0, unconverged: 0, max_residual: 0.0 };
+        let mut tot = StepTotals::default();
         for k in 0..n {
             let r = step(&self.model, &mut self.state, &mut self.ws, dt).map_err(|e| (k, e))?;
-            tot.steps += 1;
-            tot.solves += r.solves;
-            if !r.converged {
-                tot.unconverged += 1;
-            }
-            tot.max_residual = tot.max_residual.max(r.residual);
+            tot.add(&r);
         }
         Ok(tot)
     }
@@ -75,6 +92,8 @@ struct ProbeRun {
     probe_disp_avg: f64,
     mean_u: Vec<Vec3>,
     probe_hist: Vec<f64>,
+    step_us: Vec<f64>,
+    totals: StepTotals,
     error: Option<String>,
 }
 
@@ -112,8 +131,13 @@ impl PyBody {
 
     /// Advance ``n`` steps of ``dt`` [s] with the current external forces (GIL released).
     ///
-    /// Returns a dict: ``steps``, ``solves`` (linear solves), ``unconverged_steps`` (Newton steps
-    /// that hit ``max_iterations``), ``max_residual`` (relative Newton residual).
+    /// Returns a dict: ``steps``; ``iterations`` (summed over the steps) and ``iterations_max``;
+    /// ``evaluations`` (force evaluations, line-search trials included); ``solves`` (solves with
+    /// the factorised matrix); ``unconverged_steps`` (steps that hit ``max_iterations``);
+    /// ``max_residual`` (relative gradient of the incremental potential); ``inverted_max``
+    /// (elements with det F <= 0 after a step, the most over the steps); ``inverted`` and
+    /// ``potential_change`` [J] of the last step (the change of the incremental potential, <= 0
+    /// for the minimising solvers).
     ///
     /// Raises ``StepError`` if a step fails (bad dt, non-finite force or result); the steps
     /// before it are kept and the body is left as it was before the failing step.
@@ -128,9 +152,15 @@ impl PyBody {
             .map_err(|(k, e)| errors::step_error(e, &format!("in step {} of {n}", k + 1)))?;
         let d = PyDict::new(py);
         d.set_item("steps", tot.steps)?;
+        d.set_item("iterations", tot.iterations)?;
+        d.set_item("iterations_max", tot.max_iterations)?;
+        d.set_item("evaluations", tot.evaluations)?;
         d.set_item("solves", tot.solves)?;
         d.set_item("unconverged_steps", tot.unconverged)?;
         d.set_item("max_residual", tot.max_residual)?;
+        d.set_item("inverted_max", tot.max_inverted)?;
+        d.set_item("inverted", tot.last.inverted)?;
+        d.set_item("potential_change", tot.last.potential_change)?;
         Ok(d)
     }
 
@@ -281,7 +311,10 @@ impl PyBody {
     ///   steps of |u|; ``probe_disp_avg_m`` mean over the second half of the steps of the loaded
     ///   nodes' mean |u|; ``mean_disp`` (n, 3) the displacement field averaged over steps
     ///   k >= steps // 2 [m]; ``probe_disp`` (steps,) the loaded nodes' mean |u| after each step
-    ///   [m]; ``error`` (why the run stopped early, else None).
+    ///   [m]; ``step_us`` (steps,) the time of each step call [us]; ``iterations_mean``,
+    ///   ``iterations_max`` (nonlinear iterations per step), ``evaluations`` (force evaluations in
+    ///   all), ``inverted_max`` (most elements with det F <= 0 after a step), ``unconverged_steps``;
+    ///   ``error`` (why the run stopped early, else None).
     /// The run stops early if a step fails, max |u| exceeds 1 m, or the timed wall-clock exceeds
     /// ``max_wall_s`` [s] (then ``stable`` covers the steps that ran).
     #[pyo3(signature = (nodes, total_force, ramp_time, steps, dt = 1e-3, stable_limit = 0.02, max_wall_s = None))]
@@ -322,6 +355,8 @@ impl PyBody {
                 probe_disp_avg: 0.0,
                 mean_u: vec![Vec3::zeros(); n],
                 probe_hist: Vec::with_capacity(steps),
+                step_us: Vec::with_capacity(steps),
+                totals: StepTotals::default(),
                 error: None,
             };
             let mut n_mean = 0usize;
@@ -335,12 +370,18 @@ impl PyBody {
                 }
                 let t0 = Instant::now();
                 let r = step(&this.model, &mut this.state, &mut this.ws, dt);
-                out.wall_s += t0.elapsed().as_secs_f64();
-                if let Err(e) = r {
-                    out.error = Some(format!("step {} of {steps}: {e}", k + 1));
-                    out.stable = false;
-                    break;
-                }
+                let elapsed = t0.elapsed().as_secs_f64();
+                out.wall_s += elapsed;
+                let r = match r {
+                    Ok(r) => r,
+                    Err(e) => {
+                        out.error = Some(format!("step {} of {steps}: {e}", k + 1));
+                        out.stable = false;
+                        break;
+                    }
+                };
+                out.step_us.push(elapsed * 1e6);
+                out.totals.add(&r);
                 out.steps += 1;
                 // Bookkeeping (not timed).
                 let mut umax: f64 = 0.0;
@@ -390,6 +431,13 @@ impl PyBody {
         d.set_item("probe_disp_avg_m", run.probe_disp_avg)?;
         d.set_item("mean_disp", conv::vec3s_to_py(py, &run.mean_u))?;
         d.set_item("probe_disp", conv::f64s_to_py(py, &run.probe_hist))?;
+        d.set_item("step_us", conv::f64s_to_py(py, &run.step_us))?;
+        let t = &run.totals;
+        d.set_item("iterations_mean", if t.steps > 0 { t.iterations as f64 / t.steps as f64 } else { f64::NAN })?;
+        d.set_item("iterations_max", t.max_iterations)?;
+        d.set_item("evaluations", t.evaluations)?;
+        d.set_item("inverted_max", t.max_inverted)?;
+        d.set_item("unconverged_steps", t.unconverged)?;
         d.set_item("error", run.error)?;
         Ok(d)
     }

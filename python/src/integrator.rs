@@ -1,97 +1,196 @@
-//! Integrator objects: `SemiImplicit`, `BackwardEuler` (`crates/palpate-core/src/integrate`).
+//! Integrator objects: `SemiImplicit`, `BackwardEuler`, and their enums `Filter`, `Solver`
+//! (`crates/palpate-core/src/integrate`). Defaults come from the core (`Integrator::*` constants),
+//! so that Rust, Python, the CLI and the stubs cannot disagree.
 
+use palpate_core::integrate::Filter;
 use palpate_core::Integrator;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
+/// The filter of the paper's semi-implicit scheme (eq. 34).
+///
+/// ``PAPER``: each node's block ``(I - dt^2/m J_F)^-1``, the paper's; stable only while the node
+/// blocks dominate their coupling (not on every mesh at 1 ms). ``STABLE``: the blocks scaled by
+/// ``alpha = lambda_max(blockdiag(K)^-1 K) / 2``, computed when the body is compiled: the
+/// linearised scheme is stable at any dt (more numerical damping; large deformation can still
+/// stiffen St. Venant-Kirchhoff past the rest bound).
+#[pyclass(module = "palpate", name = "Filter", eq, eq_int, hash, frozen, from_py_object)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
+pub enum PyFilter {
+    #[pyo3(name = "PAPER")]
+    Paper,
+    #[pyo3(name = "STABLE")]
+    Stable,
+}
+
+/// How backward Euler's implicit equation is solved.
+///
+/// ``QUASI_NEWTON`` (default): minimisation of the incremental potential by L-BFGS with the
+/// factorised rest matrix as initial Hessian and a line search: stable at any press, one iteration
+/// at small deformation. ``NEWTON``: the same minimisation by Newton's method (tangent solves by
+/// conjugate gradients preconditioned by the rest factor): the accurate reference.
+/// ``LINEARISED``: one solve with the rest matrix: fastest, but blows up under a firm press.
+#[pyclass(module = "palpate", name = "Solver", eq, eq_int, hash, frozen, from_py_object)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
+pub enum PySolver {
+    #[pyo3(name = "QUASI_NEWTON")]
+    QuasiNewton,
+    #[pyo3(name = "NEWTON")]
+    Newton,
+    #[pyo3(name = "LINEARISED")]
+    Linearised,
+}
+
 /// The paper's semi-implicit scheme (eq. 34): explicit elastic forces, each node's velocity
-/// filtered by its own 3x3 block ``(I - dt^2/m J_F)^-1`` precomputed at rest. Cheapest per step.
+/// filtered by its own 3x3 block ``(I - alpha dt^2/m J_F)^-1`` precomputed at rest. Cheapest
+/// per step; not momentum-conserving; over-damped on fine meshes.
+///
+/// ``SemiImplicit(filter=Filter.PAPER)``
 #[pyclass(module = "palpate", name = "SemiImplicit", frozen)]
 #[derive(Clone)]
-pub struct PySemiImplicit;
+pub struct PySemiImplicit {
+    #[pyo3(get)]
+    filter: PyFilter,
+}
 
 #[pymethods]
 impl PySemiImplicit {
     #[new]
-    fn new() -> Self {
-        PySemiImplicit
+    #[pyo3(signature = (filter = PyFilter::Paper))]
+    fn new(filter: PyFilter) -> Self {
+        PySemiImplicit { filter }
     }
-    fn __repr__(&self) -> &'static str {
-        "SemiImplicit()"
+    fn __repr__(&self) -> String {
+        match self.filter {
+            PyFilter::Paper => "SemiImplicit()".into(),
+            PyFilter::Stable => "SemiImplicit(filter=Filter.STABLE)".into(),
+        }
     }
     fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
-        other.cast::<PySemiImplicit>().is_ok()
+        other.cast::<PySemiImplicit>().map(|o| o.get().filter == self.filter).unwrap_or(false)
     }
 }
 
 /// Backward Euler.
 ///
-/// ``BackwardEuler(newton=False)``: linearised at rest; the system ``M - dt D0 - dt^2 K0`` is
-/// factorised once per time step size and each step is one sparse solve.
+/// ``BackwardEuler(solver=Solver.QUASI_NEWTON, *, max_iterations=None, tolerance=None, history=None)``
 ///
-/// ``BackwardEuler(newton=True, max_iterations=20, tolerance=1e-9)``: Newton's method with the
-/// current tangent, refactorised each iteration, until the residual has dropped by
-/// ``tolerance`` (relative) or after ``max_iterations`` (the step is then accepted and reported
-/// unconverged).
+/// ``max_iterations`` caps the iterations of a step (quasi-Newton default 25, Newton 30; a capped
+/// step still lowers the incremental potential, so it stays stable); the iterations stop when the
+/// gradient of the incremental potential falls under ``tolerance`` times the force scale (the
+/// applied forces and the momenta over dt; quasi-Newton default 1e-2, Newton 1e-8); ``history``
+/// is the number of L-BFGS pairs (quasi-Newton only, default 5). ``None`` takes the default.
+/// The rest-linearised solver takes none of them.
 #[pyclass(module = "palpate", name = "BackwardEuler", frozen)]
 #[derive(Clone)]
 pub struct PyBackwardEuler {
     #[pyo3(get)]
-    newton: bool,
+    solver: PySolver,
+    /// Iteration cap per step (None for the linearised solver).
     #[pyo3(get)]
-    max_iterations: usize,
+    max_iterations: Option<usize>,
+    /// Relative gradient tolerance (None for the linearised solver).
     #[pyo3(get)]
-    tolerance: f64,
+    tolerance: Option<f64>,
+    /// L-BFGS pairs (quasi-Newton only, else None).
+    #[pyo3(get)]
+    history: Option<usize>,
+}
+
+impl PyBackwardEuler {
+    fn integrator(&self) -> Integrator {
+        match self.solver {
+            PySolver::Linearised => Integrator::BackwardEulerLinear,
+            PySolver::Newton => Integrator::BackwardEulerNewton {
+                max_iterations: self.max_iterations.unwrap_or(Integrator::NEWTON_MAX_ITERATIONS),
+                tolerance: self.tolerance.unwrap_or(Integrator::NEWTON_TOLERANCE),
+            },
+            PySolver::QuasiNewton => Integrator::BackwardEulerQuasiNewton {
+                max_iterations: self.max_iterations.unwrap_or(Integrator::QUASI_NEWTON_MAX_ITERATIONS),
+                tolerance: self.tolerance.unwrap_or(Integrator::QUASI_NEWTON_TOLERANCE),
+                history: self.history.unwrap_or(Integrator::QUASI_NEWTON_HISTORY),
+            },
+        }
+    }
+
+    fn from_core(i: Integrator) -> Option<PyBackwardEuler> {
+        Some(match i {
+            Integrator::BackwardEulerLinear => {
+                PyBackwardEuler { solver: PySolver::Linearised, max_iterations: None, tolerance: None, history: None }
+            }
+            Integrator::BackwardEulerNewton { max_iterations, tolerance } => PyBackwardEuler {
+                solver: PySolver::Newton,
+                max_iterations: Some(max_iterations),
+                tolerance: Some(tolerance),
+                history: None,
+            },
+            Integrator::BackwardEulerQuasiNewton { max_iterations, tolerance, history } => PyBackwardEuler {
+                solver: PySolver::QuasiNewton,
+                max_iterations: Some(max_iterations),
+                tolerance: Some(tolerance),
+                history: Some(history),
+            },
+            Integrator::SemiImplicit { .. } => return None,
+        })
+    }
 }
 
 #[pymethods]
 impl PyBackwardEuler {
     #[new]
-    #[pyo3(signature = (newton = false, max_iterations = 20, tolerance = 1e-9))]
-    fn new(newton: bool, max_iterations: usize, tolerance: f64) -> PyResult<Self> {
-        if max_iterations == 0 {
-            return Err(PyValueError::new_err("max_iterations must be at least 1"));
+    #[pyo3(signature = (solver = PySolver::QuasiNewton, *, max_iterations = None, tolerance = None, history = None))]
+    fn new(solver: PySolver, max_iterations: Option<usize>, tolerance: Option<f64>, history: Option<usize>) -> PyResult<Self> {
+        if solver == PySolver::Linearised && (max_iterations.is_some() || tolerance.is_some() || history.is_some()) {
+            return Err(PyValueError::new_err("the LINEARISED solver takes no max_iterations, tolerance or history"));
         }
-        if !(tolerance > 0.0 && tolerance < 1.0) {
-            return Err(PyValueError::new_err(format!("tolerance = {tolerance} must lie in (0, 1) (a relative residual reduction)")));
+        if solver != PySolver::QuasiNewton && history.is_some() {
+            return Err(PyValueError::new_err("history is an option of the QUASI_NEWTON solver only"));
         }
-        Ok(PyBackwardEuler { newton, max_iterations, tolerance })
+        let draft = PyBackwardEuler { solver, max_iterations, tolerance, history };
+        let core = draft.integrator();
+        core.check().map_err(PyValueError::new_err)?;
+        Ok(PyBackwardEuler::from_core(core).expect("a backward Euler integrator"))
     }
     fn __repr__(&self) -> String {
-        if self.newton {
-            format!("BackwardEuler(newton=True, max_iterations={}, tolerance={:e})", self.max_iterations, self.tolerance)
-        } else {
-            "BackwardEuler(newton=False)".into()
+        match self.solver {
+            PySolver::Linearised => "BackwardEuler(Solver.LINEARISED)".into(),
+            PySolver::Newton => format!(
+                "BackwardEuler(Solver.NEWTON, max_iterations={}, tolerance={:e})",
+                self.max_iterations.unwrap_or(0),
+                self.tolerance.unwrap_or(0.0)
+            ),
+            PySolver::QuasiNewton => format!(
+                "BackwardEuler(Solver.QUASI_NEWTON, max_iterations={}, tolerance={:e}, history={})",
+                self.max_iterations.unwrap_or(0),
+                self.tolerance.unwrap_or(0.0),
+                self.history.unwrap_or(0)
+            ),
         }
     }
     fn __eq__(&self, other: &Bound<'_, PyAny>) -> bool {
-        other.cast::<PyBackwardEuler>().map(|o| {
-            let o = o.get();
-            o.newton == self.newton && (!self.newton || (o.max_iterations == self.max_iterations && o.tolerance == self.tolerance))
-        }).unwrap_or(false)
+        other.cast::<PyBackwardEuler>().map(|o| o.get().integrator() == self.integrator()).unwrap_or(false)
     }
 }
 
-/// The core integrator an integrator object stands for.
+/// The core integrator an integrator object stands for (None: the default).
 pub fn integrator_from_py(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Integrator> {
-    let Some(obj) = obj else { return Ok(Integrator::BackwardEulerLinear) };
+    let Some(obj) = obj else { return Ok(Integrator::default()) };
     if obj.is_none() {
-        return Ok(Integrator::BackwardEulerLinear);
+        return Ok(Integrator::default());
     }
-    if obj.cast::<PySemiImplicit>().is_ok() {
-        return Ok(Integrator::SemiImplicit);
+    if let Ok(si) = obj.cast::<PySemiImplicit>() {
+        let filter = match si.get().filter {
+            PyFilter::Paper => Filter::Paper,
+            PyFilter::Stable => Filter::Stable,
+        };
+        return Ok(Integrator::SemiImplicit { filter });
     }
     if let Ok(be) = obj.cast::<PyBackwardEuler>() {
-        let be = be.get();
-        return Ok(if be.newton {
-            Integrator::BackwardEulerNewton { max_iterations: be.max_iterations, tolerance: be.tolerance }
-        } else {
-            Integrator::BackwardEulerLinear
-        });
+        return Ok(be.get().integrator());
     }
     let hint = if obj.cast::<pyo3::types::PyString>().is_ok() { " (integrators are objects, not strings)" } else { "" };
     Err(PyTypeError::new_err(format!(
-        "integrator must be palpate.SemiImplicit() or palpate.BackwardEuler(...), got {}{hint}",
+        "integrator must be palpate.SemiImplicit(...) or palpate.BackwardEuler(...), got {}{hint}",
         obj.repr().map(|r| r.to_string()).unwrap_or_else(|_| "?".into())
     )))
 }
@@ -99,12 +198,13 @@ pub fn integrator_from_py(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Integrator
 /// A Python integrator object for a core integrator.
 pub fn integrator_to_py(py: Python<'_>, i: Integrator) -> PyResult<Py<PyAny>> {
     Ok(match i {
-        Integrator::SemiImplicit => Py::new(py, PySemiImplicit)?.into_any(),
-        Integrator::BackwardEulerLinear => {
-            Py::new(py, PyBackwardEuler { newton: false, max_iterations: 20, tolerance: 1e-9 })?.into_any()
+        Integrator::SemiImplicit { filter } => {
+            let filter = match filter {
+                Filter::Paper => PyFilter::Paper,
+                Filter::Stable => PyFilter::Stable,
+            };
+            Py::new(py, PySemiImplicit { filter })?.into_any()
         }
-        Integrator::BackwardEulerNewton { max_iterations, tolerance } => {
-            Py::new(py, PyBackwardEuler { newton: true, max_iterations, tolerance })?.into_any()
-        }
+        other => Py::new(py, PyBackwardEuler::from_core(other).expect("a backward Euler integrator"))?.into_any(),
     })
 }

@@ -6,7 +6,7 @@
 //! | `conv.rs` | numpy <-> core arrays (dtype / shape checks) |
 //! | `mesh.rs` | `TetMesh`, `ellipsoid_wall`, `truncated_ellipsoid_wall`, `box_mesh` |
 //! | `material.rs` | `Material` |
-//! | `integrator.rs` | `SemiImplicit`, `BackwardEuler` |
+//! | `integrator.rs` | `SemiImplicit`, `BackwardEuler`, `Filter`, `Solver` |
 //! | `body.rs` | `Body` (model + state + workspace; stepping releases the GIL) |
 //! | `particles.rs` | `Kernel`, `ParticleBody`, `TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between`, `SurfaceError` |
 //!
@@ -31,6 +31,8 @@ fn _palpate(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<material::PyMaterial>()?;
     m.add_class::<integrator::PySemiImplicit>()?;
     m.add_class::<integrator::PyBackwardEuler>()?;
+    m.add_class::<integrator::PyFilter>()?;
+    m.add_class::<integrator::PySolver>()?;
     m.add_class::<body::PyBody>()?;
     m.add_function(wrap_pyfunction!(mesh::ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::truncated_ellipsoid_wall, m)?)?;

@@ -7,7 +7,8 @@ import pytest
 
 import palpate
 
-INTEGRATORS = [palpate.SemiImplicit(), palpate.BackwardEuler(), palpate.BackwardEuler(newton=True)]
+INTEGRATORS = [palpate.SemiImplicit(), palpate.SemiImplicit(filter=palpate.Filter.STABLE), palpate.BackwardEuler(),
+               palpate.BackwardEuler(palpate.Solver.NEWTON), palpate.BackwardEuler(palpate.Solver.LINEARISED)]
 
 
 def bar(material, integrator=None):
@@ -38,7 +39,9 @@ def test_step_defaults_and_stats(material):
     body = bar(material)
     stats = body.step()
     assert body.time == pytest.approx(1e-3)
-    assert set(stats) == {"steps", "solves", "unconverged_steps", "max_residual"}
+    assert set(stats) == {"steps", "iterations", "iterations_max", "evaluations", "solves", "unconverged_steps",
+                          "max_residual", "inverted_max", "inverted", "potential_change"}
+    assert stats["iterations"] >= 1 and stats["solves"] >= 1 and stats["potential_change"] <= 0.0
 
 
 def test_reset(material):

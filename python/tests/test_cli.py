@@ -76,12 +76,31 @@ def test_scene_errors_are_one_line_exit_2(tmp_path, body, key):
 
 
 def _check_bench_row(row):
-    keys = {"mesh", "tets", "nodes", "integrator", "steps", "wall_s", "steps_per_s", "stable", "max_disp_m",
-            "probe_disp_avg_m", "static_probe_disp_m", "rel_L2_vs_static"}
+    keys = {"mesh", "tets", "nodes", "integrator", "force_N", "steps", "wall_s", "steps_per_s", "stable", "max_disp_m",
+            "probe_disp_avg_m", "static_probe_disp_m", "rel_L2_vs_static", "rel_L2_vs_newton", "iterations_mean",
+            "iterations_max", "inverted_max", "step_us_p50", "step_us_p99", "step_us_max"}
     assert keys <= set(row)
     assert row["steps"] == 50 and row["stable"] is True and row["steps_per_s"] > 0
     assert 0 < row["max_disp_m"] < 0.02
     assert row["static_probe_disp_m"] > 0 and row["rel_L2_vs_static"] >= 0
+    assert 0 < row["step_us_p50"] <= row["step_us_p99"] <= row["step_us_max"]
+    assert row["iterations_max"] >= 1 and row["iterations_mean"] >= 1
+
+
+@needs_shared
+def test_bench_protocol_firm_press_default_integrator(shared):
+    """A 2 N press with the default integrator: finite, bounded by 6 cm, and its mean field within
+    a few percent of converged Newton's (a short run: the ramp and the first hold)."""
+    r = palpate_cli("bench", "protocol", shared / "bench" / "meshes" / "lv_190.msh", "--steps", 200, "--json",
+                    "--force", 2)
+    assert r.returncode == 0, r.stderr
+    row = json.loads(r.stdout)
+    assert row["force_N"] == pytest.approx(2.0) and row["stable_limit_m"] == 0.06
+    assert row["stable"] is True and row["integrator"] == "backward-euler"
+    assert row["rel_L2_vs_newton"] is not None and row["rel_L2_vs_newton"] < 0.05
+    assert row["iterations_mean"] >= 1
+    r = palpate_cli("bench", "protocol", shared / "bench" / "meshes" / "lv_190.msh", "--force", -1)
+    assert r.returncode == 2 and "--force" in r.stderr
 
 
 @needs_shared

@@ -58,16 +58,30 @@ def test_error_hierarchy():
 
 def test_integrators():
     assert repr(palpate.SemiImplicit()) == "SemiImplicit()"
+    assert palpate.SemiImplicit().filter == palpate.Filter.PAPER
+    assert palpate.SemiImplicit(filter=palpate.Filter.STABLE) != palpate.SemiImplicit()
     be = palpate.BackwardEuler()
-    assert not be.newton
-    nt = palpate.BackwardEuler(newton=True)
-    assert nt.newton and nt.max_iterations == 20 and nt.tolerance == 1e-9
-    assert palpate.BackwardEuler(newton=True, max_iterations=5, tolerance=1e-6).max_iterations == 5
+    # The defaults are the core's (one definition: Integrator::QUASI_NEWTON_* / NEWTON_*).
+    assert be.solver == palpate.Solver.QUASI_NEWTON
+    assert (be.max_iterations, be.tolerance, be.history) == (25, 1e-2, 5)
+    nt = palpate.BackwardEuler(palpate.Solver.NEWTON)
+    assert nt.solver == palpate.Solver.NEWTON and nt.max_iterations == 30 and nt.tolerance == 1e-8
+    assert nt.history is None
+    lin = palpate.BackwardEuler(palpate.Solver.LINEARISED)
+    assert lin.max_iterations is None and lin.tolerance is None
+    assert palpate.BackwardEuler(palpate.Solver.NEWTON, max_iterations=5, tolerance=1e-6).max_iterations == 5
     assert palpate.BackwardEuler() == palpate.BackwardEuler()
-    with pytest.raises(ValueError, match="max_iterations"):
-        palpate.BackwardEuler(newton=True, max_iterations=0)
-    with pytest.raises(ValueError, match="tolerance"):
-        palpate.BackwardEuler(newton=True, tolerance=2.0)
+    assert palpate.BackwardEuler() != nt
+    for bad, match in [(dict(max_iterations=0), "max_iterations"), (dict(tolerance=2.0), "tolerance"),
+                       (dict(history=100), "history")]:
+        with pytest.raises(ValueError, match=match):
+            palpate.BackwardEuler(**bad)
+    with pytest.raises(ValueError, match="LINEARISED"):
+        palpate.BackwardEuler(palpate.Solver.LINEARISED, tolerance=1e-3)
+    with pytest.raises(ValueError, match="history"):
+        palpate.BackwardEuler(palpate.Solver.NEWTON, history=3)
+    with pytest.raises(TypeError):
+        palpate.BackwardEuler("newton")
 
 
 def test_integrator_must_be_an_object(unit_tet, material):
@@ -75,7 +89,8 @@ def test_integrator_must_be_an_object(unit_tet, material):
     with pytest.raises(TypeError, match="not strings"):
         palpate.Body(mesh, material, integrator="semi-implicit")
     for integ, expect in [(palpate.SemiImplicit(), palpate.SemiImplicit), (None, palpate.BackwardEuler),
-                          (palpate.BackwardEuler(newton=True, max_iterations=7), palpate.BackwardEuler)]:
+                          (palpate.BackwardEuler(palpate.Solver.NEWTON, max_iterations=7), palpate.BackwardEuler)]:
         b = palpate.Body(mesh, material, fixed=[0, 1, 2], integrator=integ)
         assert isinstance(b.integrator, expect)
-    assert palpate.Body(mesh, material, integrator=palpate.BackwardEuler(newton=True, max_iterations=7)).integrator.max_iterations == 7
+    assert palpate.Body(mesh, material, integrator=palpate.BackwardEuler(palpate.Solver.NEWTON, max_iterations=7)).integrator.max_iterations == 7
+    assert palpate.Body(mesh, material).integrator == palpate.BackwardEuler()

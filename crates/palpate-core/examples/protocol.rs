@@ -10,7 +10,7 @@ fn main() {
     let name = std::env::args().nth(1).unwrap_or_else(|| "190".into());
     let steps: usize = std::env::args().nth(2).and_then(|s| s.parse().ok()).unwrap_or(1000);
     let case = protocol::load_case(&name).expect("shared meshes");
-    let mut integrators = vec![Integrator::SemiImplicit, Integrator::BackwardEulerLinear];
+    let mut integrators = vec![Integrator::semi_implicit(), Integrator::BackwardEulerLinear];
     if case.mesh.n_tets() < 2000 {
         integrators.push(Integrator::newton());
     }

@@ -79,7 +79,7 @@ fn backward_euler_linear_matches_static_on_protocol_meshes() {
 /// printed and bounded loosely (10%) to catch a gross change.
 #[test]
 fn semi_implicit_is_stable_on_lv_190() {
-    let Some((umax, rel)) = run("190", Integrator::SemiImplicit) else { return };
+    let Some((umax, rel)) = run("190", Integrator::semi_implicit()) else { return };
     assert!(umax.is_finite() && umax < 0.02, "lv_190 semi-implicit: max |u| = {umax:e} m");
     assert!(rel <= 0.10, "lv_190 semi-implicit: second-half mean lags static by {rel:e}");
 }

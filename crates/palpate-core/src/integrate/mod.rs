@@ -2,68 +2,165 @@
 //!
 //! | integrator | per step | use |
 //! |---|---|---|
-//! | [`Integrator::SemiImplicit`] | explicit forces, then each node's velocity filtered by its own 3x3 block `(I - dt^2/m J_F)^-1` precomputed at rest (eq. 34) | the paper's scheme: cheapest, stable, but over-damped on fine meshes |
-//! | [`Integrator::BackwardEulerLinear`] | one sparse solve with `M - dt D0 - dt^2 K0`, the Jacobians at rest, factorised once per `dt` | accurate and fast for small and moderate deformation |
-//! | [`Integrator::BackwardEulerNewton`] | Newton iterations of backward Euler with the tangent at the current state, refactorised each iteration | large deformation |
+//! | [`Integrator::BackwardEulerQuasiNewton`] (default) | backward Euler as the minimisation of the incremental potential, by L-BFGS with the factorised rest matrix as initial Hessian and an Armijo line search: one force evaluation and one pair of triangular solves per iteration, one iteration at small deformation | any press: the potential decreases in every step, so it cannot blow up |
+//! | [`Integrator::BackwardEulerNewton`] | the same minimisation by Newton's method: tangent solves by conjugate gradients preconditioned by the rest factor, same line search | the accurate reference |
+//! | [`Integrator::BackwardEulerLinear`] | one sparse solve with `M - dt D0 - dt^2 K0`, the Jacobians at rest, factorised once per `dt` | small deformation only: blows up under a firm press |
+//! | [`Integrator::SemiImplicit`] | explicit forces, then each node's velocity filtered by its own 3x3 block `(I - dt^2/m alpha J_F)^-1` precomputed at rest (eq. 34) | the paper's scheme; with [`Filter::Stable`] unconditionally stable (linear) |
 //!
 //! All take the state at `t` to `t + dt` with `f_ext` held constant, keep fixed nodes at their
 //! position with zero velocity, allocate nothing after the first step, and never leave a
 //! non-finite state behind: the state is restored and [`StepError::NonFinite`] names the node.
 
 mod backward_euler;
+mod newton;
+mod potential;
+mod quasi_newton;
 mod semi_implicit;
 mod statics;
 
+pub use potential::{incremental_potential, incremental_potential_gradient};
+pub(crate) use newton::CgWorkspace;
+pub(crate) use potential::PotentialWorkspace;
+pub(crate) use quasi_newton::Lbfgs;
+pub(crate) use semi_implicit::stable_filter_factor;
 pub use statics::{static_solve, StaticOptions, StaticSolution};
 
 use crate::error::StepError;
 use crate::math::is_finite3;
 use crate::scene::{Model, State, Workspace};
 
+/// The filter of the paper's semi-implicit scheme (eq. 34).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Filter {
+    /// The paper's: each node's block `(I - dt^2/m J_F)^-1`, neighbours held fixed. Stable only
+    /// while the node blocks dominate the coupling (VALIDATION.md, known issue 2).
+    Paper,
+    /// The node blocks scaled by `alpha = lambda_max(blockdiag(K)^-1 K) / 2` (and the same for the
+    /// viscous blocks), computed when the model is compiled: the linearised scheme is then stable
+    /// at any `dt`, at the price of more numerical damping.
+    Stable,
+}
+
 /// Choice of time integrator (see the module table).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Integrator {
     /// The paper's semi-implicit scheme (eq. 34) with the per-node Jacobian block at rest.
-    SemiImplicit,
+    SemiImplicit {
+        /// The paper's filter, or the stable one.
+        filter: Filter,
+    },
     /// Backward Euler, linearised at rest: one factorisation per time step size.
     BackwardEulerLinear,
-    /// Backward Euler solved by Newton's method with the current tangent.
+    /// Backward Euler as the minimisation of the incremental potential by L-BFGS (the default).
+    BackwardEulerQuasiNewton {
+        /// Iteration cap per step (a capped step still lowers the potential).
+        max_iterations: usize,
+        /// The iterations stop when `|grad| <= tolerance * force scale` (`potential.rs`).
+        tolerance: f64,
+        /// Number of L-BFGS correction pairs kept (0: the rest matrix alone).
+        history: usize,
+    },
+    /// Backward Euler as the minimisation of the incremental potential by Newton's method, tangent
+    /// solves by conjugate gradients preconditioned by the rest factor.
     BackwardEulerNewton {
         /// Iteration cap per step (the step is accepted and reported unconverged after it).
         max_iterations: usize,
-        /// Relative reduction of the residual norm that ends the iterations.
+        /// The iterations stop when `|grad| <= tolerance * force scale` (`potential.rs`).
         tolerance: f64,
     },
 }
 
+impl Default for Integrator {
+    fn default() -> Integrator {
+        Integrator::quasi_newton()
+    }
+}
+
 impl Integrator {
-    /// Newton backward Euler with defaults suited to haptic rates (8 iterations, 1e-8).
-    pub fn newton() -> Integrator {
-        Integrator::BackwardEulerNewton { max_iterations: 8, tolerance: 1e-8 }
+    /// Default iteration cap of the quasi-Newton integrator.
+    pub const QUASI_NEWTON_MAX_ITERATIONS: usize = 25;
+    /// Default relative gradient tolerance of the quasi-Newton integrator.
+    pub const QUASI_NEWTON_TOLERANCE: f64 = 1e-2;
+    /// Default L-BFGS history of the quasi-Newton integrator.
+    pub const QUASI_NEWTON_HISTORY: usize = 5;
+    /// Default iteration cap of the Newton integrator.
+    pub const NEWTON_MAX_ITERATIONS: usize = 30;
+    /// Default relative gradient tolerance of the Newton integrator.
+    pub const NEWTON_TOLERANCE: f64 = 1e-8;
+
+    /// The default: quasi-Newton backward Euler with the default options.
+    pub const fn quasi_newton() -> Integrator {
+        Integrator::BackwardEulerQuasiNewton {
+            max_iterations: Self::QUASI_NEWTON_MAX_ITERATIONS,
+            tolerance: Self::QUASI_NEWTON_TOLERANCE,
+            history: Self::QUASI_NEWTON_HISTORY,
+        }
     }
 
-    pub(crate) fn validate(&self) -> Result<(), String> {
-        if let Integrator::BackwardEulerNewton { max_iterations, tolerance } = *self {
+    /// Newton backward Euler with the default options.
+    pub const fn newton() -> Integrator {
+        Integrator::BackwardEulerNewton { max_iterations: Self::NEWTON_MAX_ITERATIONS, tolerance: Self::NEWTON_TOLERANCE }
+    }
+
+    /// The paper's semi-implicit scheme with the paper's filter.
+    pub const fn semi_implicit() -> Integrator {
+        Integrator::SemiImplicit { filter: Filter::Paper }
+    }
+
+    /// Check the options (iteration caps, tolerances, history): the reason if they are invalid.
+    pub fn check(&self) -> Result<(), String> {
+        let check = |name: &str, max_iterations: usize, tolerance: f64| {
             if max_iterations == 0 {
-                return Err("Newton max_iterations must be at least 1".into());
+                return Err(format!("{name} max_iterations must be at least 1"));
             }
             if !(tolerance > 0.0 && tolerance < 1.0) {
-                return Err(format!("Newton tolerance {tolerance} must lie in (0, 1)"));
+                return Err(format!("{name} tolerance {tolerance} must lie in (0, 1)"));
             }
+            Ok(())
+        };
+        match *self {
+            Integrator::BackwardEulerNewton { max_iterations, tolerance } => check("Newton", max_iterations, tolerance),
+            Integrator::BackwardEulerQuasiNewton { max_iterations, tolerance, history } => {
+                check("quasi-Newton", max_iterations, tolerance)?;
+                if history > 64 {
+                    return Err(format!("quasi-Newton history {history} must be at most 64"));
+                }
+                Ok(())
+            }
+            _ => Ok(()),
         }
-        Ok(())
+    }
+
+    /// L-BFGS pairs the workspace must hold.
+    pub(crate) fn history(&self) -> usize {
+        match *self {
+            Integrator::BackwardEulerQuasiNewton { history, .. } => history,
+            _ => 0,
+        }
     }
 }
 
 /// What a step did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StepReport {
-    /// Linear solves performed (0 for the semi-implicit scheme).
+    /// Nonlinear iterations (accepted line-search steps); 1 for the one-shot schemes.
+    pub iterations: usize,
+    /// Evaluations of the forces (and, for the minimising schemes, the potential), line-search
+    /// trials included.
+    pub evaluations: usize,
+    /// Linear solves with the factorised matrix (0 for the semi-implicit scheme; for Newton, the
+    /// preconditioner applications of its conjugate gradients).
     pub solves: usize,
-    /// Whether the nonlinear iterations met their tolerance (always true for one-shot schemes).
+    /// Whether the iterations met their tolerance (always true for one-shot schemes).
     pub converged: bool,
-    /// Final relative residual of the Newton iterations (0 for one-shot schemes).
+    /// Final gradient norm of the incremental potential relative to the force scale (0 for
+    /// one-shot schemes).
     pub residual: f64,
+    /// Elements with `det F <= 0` at the end of the step (inverted or flat).
+    pub inverted: usize,
+    /// Change of the incremental potential over the step \[J\] (`<= 0` for the minimising
+    /// schemes; 0 for the others).
+    pub potential_change: f64,
 }
 
 /// Advance `state` by `dt` \[s\] with the model's integrator.
@@ -84,11 +181,12 @@ pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Re
     ws.x_save.copy_from_slice(&state.x);
     ws.v_save.copy_from_slice(&state.v);
     let result = match model.integrator {
-        Integrator::SemiImplicit => Ok(semi_implicit::step(model, state, ws, dt)),
+        Integrator::SemiImplicit { .. } => Ok(semi_implicit::step(model, state, ws, dt)),
         Integrator::BackwardEulerLinear => backward_euler::step_linear(model, state, ws, dt),
-        Integrator::BackwardEulerNewton { max_iterations, tolerance } => {
-            backward_euler::step_newton(model, state, ws, dt, max_iterations, tolerance)
+        Integrator::BackwardEulerQuasiNewton { max_iterations, tolerance, .. } => {
+            quasi_newton::step(model, state, ws, dt, max_iterations, tolerance)
         }
+        Integrator::BackwardEulerNewton { max_iterations, tolerance } => newton::step(model, state, ws, dt, max_iterations, tolerance),
     };
     let bad = match &result {
         Ok(_) => state
@@ -102,6 +200,7 @@ pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Re
     if result.is_err() || bad.is_some() {
         state.x.copy_from_slice(&ws.x_save);
         state.v.copy_from_slice(&ws.v_save);
+        ws.potential.invalidate();
     }
     let report = result?;
     if let Some((what, node)) = bad {

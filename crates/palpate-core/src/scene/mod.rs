@@ -2,7 +2,7 @@
 //! (MuJoCo's `mjModel` / `mjData` split). A model is validated once, by [`ModelBuilder::build`];
 //! stepping then assumes validity.
 
-mod model;
+pub(crate) mod model;
 mod state;
 
 pub use model::{Model, ModelBuilder};

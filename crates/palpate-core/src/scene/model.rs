@@ -2,7 +2,7 @@
 
 use crate::error::{ModelError, SolveError};
 use crate::fem::tet4::{self, TetRest};
-use crate::integrate::Integrator;
+use crate::integrate::{Filter, Integrator};
 use crate::linalg::{ordering, BlockPattern, Ldl};
 use crate::material::Material;
 use crate::math::{is_finite3, Mat3, Vec3};
@@ -22,9 +22,9 @@ pub struct ModelBuilder {
 
 impl ModelBuilder {
     /// A body of `mesh` (positions in \[m\]) made of `material`; no fixed nodes, no gravity,
-    /// the rest-linearised backward Euler integrator.
+    /// the default integrator (quasi-Newton backward Euler).
     pub fn new(mesh: TetMesh, material: Material) -> ModelBuilder {
-        ModelBuilder { mesh, material, fixed: Vec::new(), gravity: Vec3::zeros(), integrator: Integrator::BackwardEulerLinear }
+        ModelBuilder { mesh, material, fixed: Vec::new(), gravity: Vec3::zeros(), integrator: Integrator::default() }
     }
     /// Nodes held at their rest position (indices into the mesh's nodes).
     pub fn fixed_nodes(mut self, nodes: Vec<usize>) -> Self {
@@ -51,7 +51,7 @@ impl ModelBuilder {
         if !is_finite3(&gravity) {
             return Err(ModelError::Gravity(gravity.x, gravity.y, gravity.z));
         }
-        integrator.validate().map_err(ModelError::Integrator)?;
+        integrator.check().map_err(ModelError::Integrator)?;
         let mut is_fixed = vec![false; n];
         for &i in &fixed {
             if i >= n {
@@ -169,6 +169,12 @@ impl ModelBuilder {
             ap.push(ai.len());
         }
         let ldl = Ldl::symbolic(nf, ap, ai);
+        let filter_alpha = match integrator {
+            Integrator::SemiImplicit { filter: Filter::Stable } => {
+                crate::integrate::stable_filter_factor(&pattern, &k0, &d0, !material.is_undamped())
+            }
+            _ => 1.0,
+        };
 
         Ok(Model {
             mesh,
@@ -189,6 +195,7 @@ impl ModelBuilder {
             order,
             entry_to_a,
             ldl,
+            filter_alpha,
         })
     }
 }
@@ -222,6 +229,8 @@ pub struct Model {
     pub(crate) entry_to_a: Vec<usize>,
     /// Symbolic factorisation (cloned into each workspace for the numeric factors).
     pub(crate) ldl: Ldl,
+    /// Factor of the semi-implicit filter blocks (1: the paper's; see `integrate::Filter`).
+    pub(crate) filter_alpha: f64,
 }
 
 impl Model {
@@ -247,6 +256,9 @@ impl Model {
     pub fn node_jacobians(&self) -> &[Mat3] { &self.node_k0 }
     /// Number of unknowns of the implicit systems (3 per free node).
     pub fn n_dofs(&self) -> usize { 3 * self.free_nodes.len() }
+    /// The semi-implicit filter factor `alpha` (1 unless the integrator is
+    /// `SemiImplicit { filter: Filter::Stable }`).
+    pub fn filter_factor(&self) -> f64 { self.filter_alpha }
     /// Off-diagonal 3x3 blocks of the sparse factor L.
     pub fn factor_blocks(&self) -> usize { self.ldl.nnz_l() }
 

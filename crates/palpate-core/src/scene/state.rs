@@ -1,6 +1,7 @@
 //! The mutable simulation state and the preallocated scratch space of the step.
 
 use super::model::Model;
+use crate::integrate::{CgWorkspace, Integrator, Lbfgs, PotentialWorkspace};
 use crate::linalg::Ldl;
 use crate::math::{Mat3, Vec3};
 
@@ -40,7 +41,6 @@ pub struct Workspace {
     pub(crate) x_save: Vec<Vec3>,
     pub(crate) v_save: Vec<Vec3>,
     pub(crate) x_trial: Vec<Vec3>,
-    pub(crate) v_trial: Vec<Vec3>,
     pub(crate) rhs: Vec<Vec3>,
     pub(crate) a_values: Vec<Mat3>,
     pub(crate) k: Vec<Mat3>,
@@ -50,6 +50,12 @@ pub struct Workspace {
     pub(crate) factored_dt: f64,
     /// Semi-implicit scheme: per-node `(I - dt/m D_ii - dt^2/m J_ii)^-1`.
     pub(crate) node_inv: Vec<Mat3>,
+    /// Minimising integrators: the incremental potential's buffers and cache.
+    pub(crate) potential: PotentialWorkspace,
+    /// Quasi-Newton integrator: the L-BFGS pairs.
+    pub(crate) lbfgs: Lbfgs,
+    /// Newton integrator: the conjugate-gradient vectors.
+    pub(crate) cg: CgWorkspace,
 }
 
 impl Workspace {
@@ -62,7 +68,6 @@ impl Workspace {
             x_save: vec![Vec3::zeros(); n],
             v_save: vec![Vec3::zeros(); n],
             x_trial: vec![Vec3::zeros(); n],
-            v_trial: vec![Vec3::zeros(); n],
             rhs: vec![Vec3::zeros(); nf],
             a_values: vec![Mat3::zeros(); model.ldl.nnz_a()],
             k: vec![Mat3::zeros(); model.pattern.nnz()],
@@ -70,6 +75,9 @@ impl Workspace {
             ldl: model.ldl.clone(),
             factored_dt: f64::NAN,
             node_inv: vec![Mat3::identity(); n],
+            potential: PotentialWorkspace::new(n, nf),
+            lbfgs: Lbfgs::new(nf, model.integrator.history()),
+            cg: CgWorkspace::new(if matches!(model.integrator, Integrator::BackwardEulerNewton { .. }) { nf } else { 0 }),
         }
     }
 }

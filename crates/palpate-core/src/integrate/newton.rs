@@ -1,0 +1,192 @@
+//! Newton backward Euler: the minimisation of the incremental potential (`potential.rs`) by
+//! Newton's method, the accurate reference of the benchmark.
+//!
+//! Each iteration assembles the tangent Hessian `H(x) = M / h^2 - K(x) + d^2 D / dx^2` on the
+//! free pattern (the elastic law's exact Jacobian, `fem/tet4.rs`, and the dissipation's,
+//! `fem/viscous.rs`) and solves `H d = -grad Phi` by conjugate gradients preconditioned by the
+//! factorised rest matrix `H0` (the one the linearised and quasi-Newton steps use): no
+//! refactorisation, ever. Inexact Newton: the CG stops at a relative residual
+//! `eta = min(0.5, sqrt(|g| / scale))` (Eisenstat and Walker 1996), which tightens as the
+//! iterations converge. Where St. Venant-Kirchhoff's tangent is indefinite (compression), the CG
+//! is truncated at the first direction of non-positive curvature (Steihaug 1983): its iterate so
+//! far, or the preconditioned gradient, is a descent direction. The same Armijo line search as
+//! the quasi-Newton step then guarantees the potential decreases.
+
+use super::backward_euler::ensure_rest_factor;
+use super::potential::{self, dot, StepProblem};
+use crate::error::StepError;
+use crate::fem::{tet4, viscous};
+use crate::math::{Mat3, Vec3};
+use crate::scene::model::NONE;
+use crate::scene::{Model, State, Workspace};
+use crate::StepReport;
+
+/// Conjugate-gradient iterations per Newton iteration, at most.
+const MAX_CG: usize = 200;
+
+/// Free-node vectors of the preconditioned conjugate gradients.
+#[derive(Debug, Clone)]
+pub(crate) struct CgWorkspace {
+    r: Vec<Vec3>,
+    z: Vec<Vec3>,
+    p: Vec<Vec3>,
+    hp: Vec<Vec3>,
+    /// The Newton direction.
+    d: Vec<Vec3>,
+}
+
+impl CgWorkspace {
+    pub fn new(nf: usize) -> CgWorkspace {
+        let z = || vec![Vec3::zeros(); nf];
+        CgWorkspace { r: z(), z: z(), p: z(), hp: z(), d: z() }
+    }
+}
+
+/// Hessian blocks of `W + D` at `x` on the free pattern (the mass term is added in `hess_mul`).
+fn assemble_hessian(p: &StepProblem, x: &[Vec3], blocks: &mut [Mat3]) {
+    let model = p.model;
+    blocks.iter_mut().for_each(|b| *b = Mat3::zeros());
+    let damped = !model.material.is_undamped();
+    for ((t, r), tb) in model.mesh.tets().iter().zip(&model.rest).zip(&model.tet_blocks) {
+        let xe = t.map(|i| x[i]);
+        let (k, _) = tet4::jacobians(&xe, r, &model.material);
+        let dh = damped.then(|| viscous::step_dissipation_hessian(&xe, &t.map(|i| p.x_n[i]), r, &model.material, p.h));
+        for e in 0..16 {
+            let bi = tb[e];
+            if bi != NONE {
+                blocks[bi] -= k[e / 4][e % 4];
+                if let Some(dh) = &dh {
+                    blocks[bi] += dh[e / 4][e % 4];
+                }
+            }
+        }
+    }
+}
+
+/// `y = (M / h^2 + blocks) v` over the free nodes.
+fn hess_mul(model: &Model, blocks: &[Mat3], inv_h2: f64, v: &[Vec3], y: &mut [Vec3]) {
+    let pat = &model.pattern;
+    for (fi, &node) in model.free_nodes.iter().enumerate() {
+        let mut s = (model.mass[node] * inv_h2) * v[fi];
+        for k in pat.row_ptr[fi]..pat.row_ptr[fi + 1] {
+            s += blocks[k] * v[pat.col[k]];
+        }
+        y[fi] = s;
+    }
+}
+
+/// `out = H0^-1 v = h^2 A^-1 v` with the factorised rest matrix.
+fn precondition(model: &Model, ws_rhs: &mut [Vec3], ldl: &crate::linalg::Ldl, v: &[Vec3], out: &mut [Vec3], h: f64) {
+    for (fi, &pos) in model.node_pos.iter().enumerate() {
+        ws_rhs[pos] = v[fi];
+    }
+    ldl.solve_in_place(ws_rhs);
+    let h2 = h * h;
+    for (fi, &pos) in model.node_pos.iter().enumerate() {
+        out[fi] = h2 * ws_rhs[pos];
+    }
+}
+
+/// Truncated preconditioned CG for `H d = -g` into `cg.d`; returns the preconditioner applications.
+fn newton_direction(model: &Model, ws: &mut Workspace, cg: &mut CgWorkspace, g: &[Vec3], eta: f64, h: f64) -> usize {
+    let inv_h2 = 1.0 / (h * h);
+    let CgWorkspace { r, z, p, hp, d } = cg;
+    for (ri, gi) in r.iter_mut().zip(g) {
+        *ri = -gi;
+    }
+    d.iter_mut().for_each(|v| *v = Vec3::zeros());
+    let r0 = dot(r, r).sqrt();
+    precondition(model, &mut ws.rhs, &ws.ldl, r, z, h);
+    let mut solves = 1;
+    p.copy_from_slice(z);
+    let mut rz = dot(r, z);
+    for it in 0..MAX_CG {
+        hess_mul(model, &ws.k, inv_h2, p, hp);
+        let php = dot(p, hp);
+        if !(php > 0.0) {
+            if it == 0 {
+                d.copy_from_slice(z); // preconditioned steepest descent
+            }
+            break;
+        }
+        let a = rz / php;
+        for k in 0..d.len() {
+            d[k] += a * p[k];
+            r[k] -= a * hp[k];
+        }
+        if dot(r, r).sqrt() <= eta * r0 {
+            break;
+        }
+        precondition(model, &mut ws.rhs, &ws.ldl, r, z, h);
+        solves += 1;
+        let rz_new = dot(r, z);
+        let b = rz_new / rz;
+        rz = rz_new;
+        for k in 0..p.len() {
+            p[k] = z[k] + b * p[k];
+        }
+    }
+    solves
+}
+
+pub(super) fn step(
+    model: &Model,
+    state: &mut State,
+    ws: &mut Workspace,
+    dt: f64,
+    max_iterations: usize,
+    tolerance: f64,
+) -> Result<StepReport, StepError> {
+    ensure_rest_factor(model, ws, dt)?;
+    let h = dt;
+    let (x_n, v_n) = (std::mem::take(&mut ws.x_save), std::mem::take(&mut ws.v_save));
+    let mut x_trial = std::mem::take(&mut ws.x_trial);
+    let mut cg = std::mem::replace(&mut ws.cg, CgWorkspace::new(0));
+    x_trial.copy_from_slice(&state.x);
+    let p = StepProblem { model, x_n: &x_n, v_n: &v_n, f_ext: &state.f_ext, h };
+
+    let (mut cur, fresh) = potential::evaluate_start(&p, &mut ws.potential);
+    let phi0 = cur.phi;
+    let scale = potential::force_scale(&p);
+    let target = tolerance * scale;
+    let (mut iterations, mut solves, mut evaluations) = (0, 0, fresh as usize);
+    let mut gnorm = dot(&ws.potential.g, &ws.potential.g).sqrt();
+    while iterations < max_iterations && (iterations == 0 || gnorm > target) {
+        let mut blocks = std::mem::take(&mut ws.k);
+        assemble_hessian(&p, &state.x, &mut blocks);
+        ws.k = blocks;
+        let eta = if scale > 0.0 { (gnorm / scale).sqrt().min(0.5) } else { 0.5 };
+        let g = std::mem::take(&mut ws.potential.g);
+        solves += newton_direction(model, ws, &mut cg, &g, eta, h);
+        let gd = dot(&g, &cg.d);
+        ws.potential.g = g;
+        if !(gd < 0.0) {
+            break;
+        }
+        let Some((e, _)) = potential::line_search(&p, &mut ws.potential, &mut state.x, &mut x_trial, &cg.d, &cur, gd, &mut evaluations) else {
+            break;
+        };
+        cur = e;
+        iterations += 1;
+        gnorm = dot(&ws.potential.g, &ws.potential.g).sqrt();
+    }
+    let inv_h = 1.0 / h;
+    for &i in &model.free_nodes {
+        state.v[i] = (state.x[i] - x_n[i]) * inv_h;
+    }
+    potential::store_end(&mut ws.potential, &state.x, &cur);
+    let report = StepReport {
+        iterations,
+        evaluations,
+        solves,
+        converged: gnorm <= target,
+        residual: if scale > 0.0 { gnorm / scale } else { 0.0 },
+        inverted: cur.inverted,
+        potential_change: cur.phi - phi0,
+    };
+    ws.x_save = x_n;
+    ws.v_save = v_n;
+    ws.x_trial = x_trial;
+    ws.cg = cg;
+    Ok(report)
+}

@@ -1,0 +1,284 @@
+//! Backward Euler as the minimisation of the incremental potential (the minimising integrators'
+//! common part: the potential, its gradient, the force scale and the line search).
+//!
+//! A backward Euler step from `(x_n, v_n)` over `h` finds the end positions `x` that make
+//!
+//! ```text
+//! Phi(x) = sum_i m_i / (2 h^2) |x_i - x_n,i - h v_n,i|^2      inertia, in the mass metric
+//!        + W(x)                                             strain energy (elastic law)
+//!        + D(x; x_n)                                        viscous dissipation potential (fem/viscous.rs)
+//!        - sum_i (f_ext,i + m_i g) . (x_i - x_n,i)          work of the applied forces
+//! ```
+//!
+//! stationary: `grad Phi = M (x - x_n - h v_n) / h^2 - f_int(x) - f_applied = 0` is backward
+//! Euler's `M (v - v_n) = h f(x)` with `v = (x - x_n) / h`, the viscous force taken with the
+//! step's strain rate `(E(x) - E(x_n)) / h`. The minimising integrators (quasi-Newton, Newton)
+//! only accept steps that lower `Phi` (Armijo's condition), so a step can be cut short by its
+//! iteration cap and still be stable: it never returns to a higher potential than the start of
+//! the step, where `x = x_n`. Liu, Bouaziz and Kavan 2017, "Quasi-Newton methods for real-time
+//! simulation of hyperelastic materials" (ACM TOG 36(3)), describe this formulation.
+//!
+//! The work term is taken relative to `x_n`, so that `Phi` holds no large constant whose
+//! round-off would hide the small decreases of late iterations.
+
+use crate::fem::{tet4, viscous};
+use crate::math::Vec3;
+use crate::scene::Model;
+
+/// Armijo's sufficient-decrease constant.
+const ARMIJO_C1: f64 = 1e-4;
+/// Shortened trials before the line search gives up (the step is then below `1e-10`).
+const MAX_TRIALS: usize = 10;
+
+/// One step's problem: the start state, the applied forces and the step size.
+pub(crate) struct StepProblem<'a> {
+    pub model: &'a Model,
+    pub x_n: &'a [Vec3],
+    pub v_n: &'a [Vec3],
+    pub f_ext: &'a [Vec3],
+    pub h: f64,
+}
+
+/// The potential at one point, with what the integrators report of it.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Eval {
+    /// `Phi(x)` \[J\].
+    pub phi: f64,
+    /// Its strain energy term `W(x)` \[J\].
+    pub w: f64,
+    /// Sum of the magnitudes of `Phi`'s terms \[J\]: the scale of its round-off.
+    pub magnitude: f64,
+    /// Elements with `det F <= 0`.
+    pub inverted: usize,
+}
+
+/// Buffers of the potential's evaluations (allocated once per workspace), with a cache of the
+/// elastic force at the end of the previous step, which is the start of the next: at small
+/// deformation a step then costs one force evaluation and one solve, as the linearised step.
+#[derive(Debug, Clone)]
+pub(crate) struct PotentialWorkspace {
+    /// Elastic forces at the current iterate and at the trial point, `(n_nodes)`.
+    pub f_el: Vec<Vec3>,
+    pub f_el_trial: Vec<Vec3>,
+    /// Viscous forces (damped materials only), `(n_nodes)`.
+    pub f_visc: Vec<Vec3>,
+    pub f_visc_trial: Vec<Vec3>,
+    /// Gradient of `Phi` at the current iterate and at the trial point, `(n_free)`, free-node order.
+    pub g: Vec<Vec3>,
+    pub g_trial: Vec<Vec3>,
+    /// Positions at which `f_el` was last evaluated at the end of a step, its strain energy and
+    /// inverted count, and whether they are valid.
+    cache_x: Vec<Vec3>,
+    cache_w: f64,
+    cache_inverted: usize,
+    cache_valid: bool,
+}
+
+impl PotentialWorkspace {
+    pub fn new(n: usize, nf: usize) -> PotentialWorkspace {
+        let z = |k| vec![Vec3::zeros(); k];
+        PotentialWorkspace {
+            f_el: z(n),
+            f_el_trial: z(n),
+            f_visc: z(n),
+            f_visc_trial: z(n),
+            g: z(nf),
+            g_trial: z(nf),
+            cache_x: z(n),
+            cache_w: 0.0,
+            cache_inverted: 0,
+            cache_valid: false,
+        }
+    }
+
+    /// Forget the cached end-of-step forces (after a failed step restored the state).
+    pub fn invalidate(&mut self) {
+        self.cache_valid = false;
+    }
+
+    /// Accept the trial point as the current iterate.
+    pub fn accept_trial(&mut self) {
+        std::mem::swap(&mut self.f_el, &mut self.f_el_trial);
+        std::mem::swap(&mut self.f_visc, &mut self.f_visc_trial);
+        std::mem::swap(&mut self.g, &mut self.g_trial);
+    }
+}
+
+/// Evaluate `Phi` at `x` `(n_nodes)`: forces into `f_el` (and `f_visc` if damped), the gradient
+/// into `g` `(n_free)`.
+fn evaluate(p: &StepProblem, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3], g: &mut [Vec3]) -> Eval {
+    let model = p.model;
+    f_el.iter_mut().for_each(|f| *f = Vec3::zeros());
+    let mut w = 0.0;
+    let mut inverted = 0;
+    for (t, r) in model.mesh.tets().iter().zip(&model.rest) {
+        let (e, f, det) = tet4::elastic_energy_forces(&t.map(|i| x[i]), r, &model.material);
+        w += e;
+        inverted += (det <= 0.0) as usize;
+        for a in 0..4 {
+            f_el[t[a]] += f[a];
+        }
+    }
+    let damped = !model.material.is_undamped();
+    let mut d = 0.0;
+    if damped {
+        f_visc.iter_mut().for_each(|f| *f = Vec3::zeros());
+        for (t, r) in model.mesh.tets().iter().zip(&model.rest) {
+            let (e, f) = viscous::step_dissipation(&t.map(|i| x[i]), &t.map(|i| p.x_n[i]), r, &model.material, p.h);
+            d += e;
+            for a in 0..4 {
+                f_visc[t[a]] += f[a];
+            }
+        }
+    }
+    finish(p, x, w, d, inverted, f_el, damped.then_some(&*f_visc), g)
+}
+
+/// The nodal terms of `Phi` and its gradient, given the element terms `W` and `D`.
+#[allow(clippy::too_many_arguments)]
+fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f_el: &[Vec3], f_visc: Option<&[Vec3]>, g: &mut [Vec3]) -> Eval {
+    let model = p.model;
+    let inv_h2 = 1.0 / (p.h * p.h);
+    let (mut inertia, mut work, mut work_abs) = (0.0, 0.0, 0.0);
+    for (fi, &i) in model.free_nodes.iter().enumerate() {
+        let m = model.mass[i];
+        let du = x[i] - p.x_n[i];
+        let a = du - p.h * p.v_n[i];
+        let fa = p.f_ext[i] + m * model.gravity;
+        inertia += 0.5 * m * inv_h2 * a.norm_squared();
+        let wk = fa.dot(&du);
+        work += wk;
+        work_abs += wk.abs();
+        let mut gi = (m * inv_h2) * a - f_el[i] - fa;
+        if let Some(fv) = f_visc {
+            gi -= fv[i];
+        }
+        g[fi] = gi;
+    }
+    Eval { phi: inertia + w + d - work, w, magnitude: inertia + w + d + work_abs, inverted }
+}
+
+/// `Phi` at the start of the step (`x = x_n`, where the dissipation and its force vanish), into
+/// the current buffers; reuses the previous step's end-of-step elastic forces when `x_n` is the
+/// point they were computed at.
+/// Returns the evaluation and whether it was computed afresh (no cache).
+pub(crate) fn evaluate_start(p: &StepProblem, pw: &mut PotentialWorkspace) -> (Eval, bool) {
+    let PotentialWorkspace { f_el, f_visc, g, cache_x, cache_w, cache_inverted, cache_valid, .. } = pw;
+    if *cache_valid && cache_x.as_slice() == p.x_n {
+        f_visc.iter_mut().for_each(|f| *f = Vec3::zeros());
+        return (finish(p, p.x_n, *cache_w, 0.0, *cache_inverted, f_el, None, g), false);
+    }
+    (evaluate(p, p.x_n, f_el, f_visc, g), true)
+}
+
+/// Remember the end-of-step elastic forces (in the current buffer) for the next step's start.
+pub(crate) fn store_end(pw: &mut PotentialWorkspace, x: &[Vec3], e: &Eval) {
+    pw.cache_x.copy_from_slice(x);
+    pw.cache_w = e.w;
+    pw.cache_inverted = e.inverted;
+    pw.cache_valid = true;
+}
+
+/// The force scale of the convergence test \[N\]: the L2 norm over the free nodes of the applied
+/// forces and of the momenta over `h`, so that the relative gradient measures the error against
+/// the forces that drive the step, whether a load is held, ramped or released. (The elastic
+/// forces are left out: under a strong press a node's internal forces can far exceed the load
+/// they balance, which would loosen the test exactly where the law is most nonlinear.)
+pub(crate) fn force_scale(p: &StepProblem) -> f64 {
+    let mut s = 0.0;
+    for &i in &p.model.free_nodes {
+        let m = p.model.mass[i];
+        s += (p.f_ext[i] + m * p.model.gravity).norm_squared() + (m / p.h * p.v_n[i]).norm_squared();
+    }
+    s.sqrt()
+}
+
+/// Dot product of two free-node vectors.
+#[inline]
+pub(crate) fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {
+    a.iter().zip(b).map(|(a, b)| a.dot(b)).sum()
+}
+
+/// Line search from the current iterate `x` along the free-node direction `d` (`gd = g . d < 0`):
+/// the first trial is the full step `alpha = 1`; a trial that fails Armijo's sufficient decrease
+/// `Phi(x + alpha d) <= Phi(x) + c1 alpha gd` is replaced by the minimiser of the cubic that
+/// interpolates `Phi` and its slope at 0 and at the trial (Nocedal and Wright 2006, eq. 3.59),
+/// kept within `[0.1, 0.5]` of the trial (a decrease below the round-off of `Phi`'s terms counts
+/// as none). One interpolation usually lands on the curvature the initial Hessian missed, where
+/// halving would take two or three trials. On success `x` holds the new iterate, the workspace's
+/// current buffers its forces and gradient, and the new evaluation and `alpha` are returned; on
+/// failure `x` is left as it was.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn line_search(
+    p: &StepProblem,
+    pw: &mut PotentialWorkspace,
+    x: &mut [Vec3],
+    x_trial: &mut [Vec3],
+    d: &[Vec3],
+    cur: &Eval,
+    gd: f64,
+    evaluations: &mut usize,
+) -> Option<(Eval, f64)> {
+    let model = p.model;
+    let round_off = 64.0 * f64::EPSILON * cur.magnitude;
+    let mut alpha = 1.0;
+    for _ in 0..=MAX_TRIALS {
+        for (fi, &i) in model.free_nodes.iter().enumerate() {
+            x_trial[i] = x[i] + alpha * d[fi];
+        }
+        let e = evaluate(p, x_trial, &mut pw.f_el_trial, &mut pw.f_visc_trial, &mut pw.g_trial);
+        *evaluations += 1;
+        if e.phi.is_finite() && e.phi <= cur.phi + ARMIJO_C1 * alpha * gd + round_off {
+            for &i in &model.free_nodes {
+                x[i] = x_trial[i];
+            }
+            pw.accept_trial();
+            return Some((e, alpha));
+        }
+        alpha = if e.phi.is_finite() {
+            let slope = dot(&pw.g_trial, d);
+            alpha * cubic_step(cur.phi, gd * alpha, e.phi, slope * alpha)
+        } else {
+            0.1 * alpha
+        };
+    }
+    None
+}
+
+/// Minimiser, as a fraction of the interval, of the cubic with values `f0`, `f1` and slopes `s0`,
+/// `s1` (per unit of the interval) at its ends 0 and 1, clamped to `[0.1, 0.5]`.
+fn cubic_step(f0: f64, s0: f64, f1: f64, s1: f64) -> f64 {
+    let d1 = s0 + s1 - 3.0 * (f1 - f0);
+    let disc = d1 * d1 - s0 * s1;
+    let t = if disc >= 0.0 {
+        let d2 = disc.sqrt();
+        1.0 - (s1 + d2 - d1) / (s1 - s0 + 2.0 * d2)
+    } else {
+        // No real minimiser: the quadratic through f0, s0 and f1.
+        -s0 / (2.0 * (f1 - f0 - s0))
+    };
+    if t.is_finite() { t.clamp(0.1, 0.5) } else { 0.5 }
+}
+
+/// The incremental potential `Phi(x)` \[J\] of a backward Euler step of `h` \[s\] from positions
+/// `x_n` and velocities `v_n` under external forces `f_ext` \[N\] (all `(n_nodes)`), as the
+/// minimising integrators define it (module docs). For tests and diagnostics: it allocates.
+pub fn incremental_potential(model: &Model, x: &[Vec3], x_n: &[Vec3], v_n: &[Vec3], f_ext: &[Vec3], h: f64) -> f64 {
+    let n = model.n_nodes();
+    let p = StepProblem { model, x_n, v_n, f_ext, h };
+    let (mut f_el, mut f_visc, mut g) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n], vec![Vec3::zeros(); model.free_nodes.len()]);
+    evaluate(&p, x, &mut f_el, &mut f_visc, &mut g).phi
+}
+
+/// The gradient of [`incremental_potential`] \[N\] at `x`, `(n_nodes)` (zero at fixed nodes).
+pub fn incremental_potential_gradient(model: &Model, x: &[Vec3], x_n: &[Vec3], v_n: &[Vec3], f_ext: &[Vec3], h: f64) -> Vec<Vec3> {
+    let n = model.n_nodes();
+    let p = StepProblem { model, x_n, v_n, f_ext, h };
+    let (mut f_el, mut f_visc, mut g) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n], vec![Vec3::zeros(); model.free_nodes.len()]);
+    evaluate(&p, x, &mut f_el, &mut f_visc, &mut g);
+    let mut out = vec![Vec3::zeros(); n];
+    for (fi, &i) in model.free_nodes.iter().enumerate() {
+        out[i] = g[fi];
+    }
+    out
+}

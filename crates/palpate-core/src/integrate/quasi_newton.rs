@@ -1,0 +1,231 @@
+//! The default integrator: backward Euler as the minimisation of the incremental potential
+//! (`potential.rs`) by L-BFGS, after Liu, Bouaziz and Kavan 2017.
+//!
+//! * **Initial Hessian**: the rest matrix `H0 = (M - h D0 - h^2 K0) / h^2`, the matrix the
+//!   linearised step factorises once per `dt` (`backward_euler.rs`). Its factor is reused as is:
+//!   an iteration costs one evaluation of the forces and energy, one pair of sparse triangular
+//!   solves and a few vector operations over the free nodes.
+//! * **First iteration = the linearised step**: from `x = x_n` the direction `-H0^-1 grad Phi(x_n)`
+//!   is exactly the rest-linearised backward Euler step, so at small deformation one iteration
+//!   suffices and costs what that step costs (the forces at `x_n` are those computed at the end
+//!   of the previous step, kept in a cache). At least one iteration is always taken: a loose
+//!   tolerance never turns the step into an explicit drift.
+//! * **Curvature pairs** `(s, y)` with `s . y <= 0` (non-convex regions of St. Venant-Kirchhoff
+//!   under compression) are skipped, so the L-BFGS matrix stays positive definite and its
+//!   direction is a descent direction; if round-off makes it not one, the history is dropped and
+//!   the `H0` direction used.
+//! * **Momentum.** The first iteration conserves linear momentum as the linearised step does
+//!   (`1^T K0 = 0`), which leaves a gradient summing to zero over the nodes of a free body; the
+//!   L-BFGS corrections of later iterations do not preserve that sum, so on a body with no fixed
+//!   node their mass-weighted translation is removed (it is orthogonal to the gradient, so the
+//!   direction stays a descent direction). Momentum then changes by exactly `dt` times the applied
+//!   forces, at any tolerance.
+//! * **Stop** when `|grad Phi| <= tolerance * force scale` (`potential::force_scale`), at the
+//!   iteration cap, or when the line search finds no decrease (the iterate is then at the
+//!   round-off level of the potential). Every accepted iterate has a lower potential than the
+//!   last, so every step, capped or not, ends below the potential of its start: a press cannot
+//!   make the integrator blow up, whatever the load.
+
+use super::backward_euler::ensure_rest_factor;
+use super::potential::{self, dot, StepProblem};
+use crate::error::StepError;
+use crate::math::Vec3;
+use crate::scene::{Model, State, Workspace};
+use crate::StepReport;
+
+/// L-BFGS memory: `history` pairs `(s, y)` of free-node vectors in a ring, and scratch vectors.
+#[derive(Debug, Clone)]
+pub(crate) struct Lbfgs {
+    nf: usize,
+    history: usize,
+    s: Vec<Vec3>,
+    y: Vec<Vec3>,
+    rho: Vec<f64>,
+    alpha: Vec<f64>,
+    /// Pairs stored (<= history) and the ring slot of the newest.
+    len: usize,
+    newest: usize,
+    /// Search direction and the two-loop's work vector, `(n_free)`.
+    pub d: Vec<Vec3>,
+    q: Vec<Vec3>,
+}
+
+impl Lbfgs {
+    pub fn new(nf: usize, history: usize) -> Lbfgs {
+        Lbfgs {
+            nf,
+            history,
+            s: vec![Vec3::zeros(); nf * history],
+            y: vec![Vec3::zeros(); nf * history],
+            rho: vec![0.0; history],
+            alpha: vec![0.0; history],
+            len: 0,
+            newest: 0,
+            d: vec![Vec3::zeros(); nf],
+            q: vec![Vec3::zeros(); nf],
+        }
+    }
+
+    fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// Store the pair `s = alpha d`, `y = g_new - g_old` if its curvature `s . y` is positive.
+    fn push(&mut self, alpha: f64, g_new: &[Vec3], g_old: &[Vec3]) {
+        if self.history == 0 {
+            return;
+        }
+        let slot = if self.len == 0 { 0 } else { (self.newest + 1) % self.history };
+        let r = slot * self.nf..(slot + 1) * self.nf;
+        let mut sy = 0.0;
+        let (mut ss, mut yy) = (0.0, 0.0);
+        for ((s, y), k) in self.s[r.clone()].iter_mut().zip(&mut self.y[r]).zip(0..self.nf) {
+            *s = alpha * self.d[k];
+            *y = g_new[k] - g_old[k];
+            sy += s.dot(y);
+            ss += s.norm_squared();
+            yy += y.norm_squared();
+        }
+        // Skip pairs of non-positive (or round-off) curvature: they would make the matrix
+        // indefinite. The slot written was free, or held the oldest pair, now dropped.
+        if !(sy > 1e-12 * (ss * yy).sqrt()) {
+            if self.len == self.history {
+                self.len -= 1;
+            }
+            return;
+        }
+        self.rho[slot] = 1.0 / sy;
+        self.newest = slot;
+        self.len = (self.len + 1).min(self.history);
+    }
+}
+
+/// `out = H0^-1 q = h^2 A^-1 q` with the factorised rest matrix `A` (free-node vectors).
+fn apply_h0_inverse(model: &Model, ws: &mut Workspace, q: &[Vec3], out: &mut [Vec3], h: f64) {
+    for (fi, &pos) in model.node_pos.iter().enumerate() {
+        ws.rhs[pos] = q[fi];
+    }
+    ws.ldl.solve_in_place(&mut ws.rhs);
+    let h2 = h * h;
+    for (fi, &pos) in model.node_pos.iter().enumerate() {
+        out[fi] = h2 * ws.rhs[pos];
+    }
+}
+
+/// The L-BFGS direction `d = -H g` (two-loop recursion, Nocedal and Wright, Alg. 7.4) into `lb.d`.
+fn direction(model: &Model, ws: &mut Workspace, lb: &mut Lbfgs, g: &[Vec3], h: f64) {
+    lb.q.copy_from_slice(g);
+    let hist = lb.history.max(1);
+    for j in 0..lb.len {
+        let k = (lb.newest + hist - j) % hist;
+        let r = k * lb.nf..(k + 1) * lb.nf;
+        let a = lb.rho[k] * dot(&lb.s[r.clone()], &lb.q);
+        lb.alpha[k] = a;
+        for (q, y) in lb.q.iter_mut().zip(&lb.y[r]) {
+            *q -= a * y;
+        }
+    }
+    let (q, mut d) = (std::mem::take(&mut lb.q), std::mem::take(&mut lb.d));
+    apply_h0_inverse(model, ws, &q, &mut d, h);
+    lb.q = q;
+    lb.d = d;
+    for j in (0..lb.len).rev() {
+        let k = (lb.newest + hist - j) % hist;
+        let r = k * lb.nf..(k + 1) * lb.nf;
+        let c = lb.alpha[k] - lb.rho[k] * dot(&lb.y[r.clone()], &lb.d);
+        for (d, s) in lb.d.iter_mut().zip(&lb.s[r]) {
+            *d += c * s;
+        }
+    }
+    lb.d.iter_mut().for_each(|d| *d = -*d);
+}
+
+/// Subtract from `d` `(n_free)` its mass-weighted mean, a rigid translation (free bodies only).
+fn remove_translation(model: &Model, d: &mut [Vec3]) {
+    let (mut md, mut m) = (Vec3::zeros(), 0.0);
+    for (fi, &i) in model.free_nodes.iter().enumerate() {
+        md += model.mass[i] * d[fi];
+        m += model.mass[i];
+    }
+    let mean = md / m;
+    d.iter_mut().for_each(|v| *v -= mean);
+}
+
+pub(super) fn step(
+    model: &Model,
+    state: &mut State,
+    ws: &mut Workspace,
+    dt: f64,
+    max_iterations: usize,
+    tolerance: f64,
+) -> Result<StepReport, StepError> {
+    ensure_rest_factor(model, ws, dt)?;
+    let h = dt;
+    // `step` saved x_n, v_n into x_save, v_save; the iterate lives in state.x.
+    let (x_n, v_n) = (std::mem::take(&mut ws.x_save), std::mem::take(&mut ws.v_save));
+    let mut x_trial = std::mem::take(&mut ws.x_trial);
+    let mut lb = std::mem::replace(&mut ws.lbfgs, Lbfgs::new(0, 0));
+    x_trial.copy_from_slice(&state.x);
+    let p = StepProblem { model, x_n: &x_n, v_n: &v_n, f_ext: &state.f_ext, h };
+
+    let (mut cur, fresh) = potential::evaluate_start(&p, &mut ws.potential);
+    let phi0 = cur.phi;
+    let scale = potential::force_scale(&p);
+    let target = tolerance * scale;
+    lb.clear();
+    let (mut iterations, mut solves, mut evaluations) = (0, 0, fresh as usize);
+    let mut gnorm = dot(&ws.potential.g, &ws.potential.g).sqrt();
+    let free_body = model.free_nodes.len() == model.n_nodes();
+    loop {
+        let g = std::mem::take(&mut ws.potential.g);
+        direction(model, ws, &mut lb, &g, h);
+        solves += 1;
+        let mut gd = dot(&g, &lb.d);
+        if !(gd < 0.0) && lb.len > 0 {
+            lb.clear();
+            direction(model, ws, &mut lb, &g, h);
+            solves += 1;
+            gd = dot(&g, &lb.d);
+        }
+        if free_body && iterations > 0 {
+            // Keep the momentum exact (see the module docs): after the first iteration the
+            // gradient sums to zero, so removing the direction's mass-weighted translation
+            // leaves g . d unchanged.
+            remove_translation(model, &mut lb.d);
+        }
+        ws.potential.g = g;
+        if !(gd < 0.0) {
+            break; // a zero gradient: nothing to do
+        }
+        let Some((e, alpha)) = potential::line_search(&p, &mut ws.potential, &mut state.x, &mut x_trial, &lb.d, &cur, gd, &mut evaluations) else {
+            break;
+        };
+        // After the line search the current gradient is the new one and g_trial the old.
+        lb.push(alpha, &ws.potential.g, &ws.potential.g_trial);
+        cur = e;
+        iterations += 1;
+        gnorm = dot(&ws.potential.g, &ws.potential.g).sqrt();
+        if gnorm <= target || iterations >= max_iterations {
+            break;
+        }
+    }
+    let inv_h = 1.0 / h;
+    for &i in &model.free_nodes {
+        state.v[i] = (state.x[i] - x_n[i]) * inv_h;
+    }
+    potential::store_end(&mut ws.potential, &state.x, &cur);
+    let report = StepReport {
+        iterations,
+        evaluations,
+        solves,
+        converged: gnorm <= target,
+        residual: if scale > 0.0 { gnorm / scale } else { 0.0 },
+        inverted: cur.inverted,
+        potential_change: cur.phi - phi0,
+    };
+    ws.x_save = x_n;
+    ws.v_save = v_n;
+    ws.x_trial = x_trial;
+    ws.lbfgs = lb;
+    Ok(report)
+}
