@@ -78,7 +78,7 @@ pub fn strain_energy(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> f64 {
             let tr = e.trace();
             rest.volume * (m.mu() * e.norm_squared() + 0.5 * m.lambda() * tr * tr)
         }
-        Law::NeoHookean => rest.volume * neo_hookean::energy_density(m, &f),
+        Law::NeoHookean => rest.volume * neo_hookean_energy(m, &f),
     }
 }
 
@@ -102,23 +102,44 @@ fn nodal_forces(p: &Mat3, rest: &TetRest) -> [Vec3; 4] {
 #[inline]
 pub fn forces(x: &[Vec3; 4], v: Option<&[Vec3; 4]>, rest: &TetRest, m: &Material) -> [Vec3; 4] {
     let f = deformation_gradient(x, rest);
+    let s_v = v.map(|v| viscous(&f, v, rest, m));
     let p = match m.law() {
         Law::StVenantKirchhoff => {
             let mut s = material::stress(m, &material::green_strain(&f));
-            if let Some(v) = v {
-                s += viscous(&f, v, rest, m);
+            if let Some(s_v) = s_v {
+                s += s_v;
             }
             f * s
         }
         Law::NeoHookean => {
-            let mut p = neo_hookean::piola(m, &f);
-            if let Some(v) = v {
-                p += f * viscous(&f, v, rest, m);
+            let mut p = neo_hookean_piola(m, &f);
+            if let Some(s_v) = s_v {
+                p += f * s_v;
             }
             p
         }
     };
     nodal_forces(&p, rest)
+}
+
+/// `neo_hookean::piola`, kept out of line: inlined (with its `ln`, a libm call) into the
+/// assembly loops, it made the St. Venant-Kirchhoff path of the same loops ~13% slower
+/// (`Model::internal_forces`, 96k tets); out of line, SVK runs as fast as before the law option.
+#[inline(never)]
+fn neo_hookean_piola(m: &Material, f: &Mat3) -> Mat3 {
+    neo_hookean::piola(m, f)
+}
+
+/// `neo_hookean::energy_density`, out of line for the same reason as [`neo_hookean_piola`].
+#[inline(never)]
+fn neo_hookean_energy(m: &Material, f: &Mat3) -> f64 {
+    neo_hookean::energy_density(m, f)
+}
+
+/// `neo_hookean::energy_piola`, out of line for the same reason as [`neo_hookean_piola`].
+#[inline(never)]
+fn neo_hookean_energy_piola(m: &Material, f: &Mat3) -> (f64, Mat3, f64) {
+    neo_hookean::energy_piola(m, f)
 }
 
 /// Elastic energy \[J\], elastic nodal forces \[N\] and `det F` of positions `x` \[m\], in one pass
@@ -136,7 +157,7 @@ pub fn elastic_energy_forces(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> (f6
             (energy, nodal_forces(&(f * s), rest), f.determinant())
         }
         Law::NeoHookean => {
-            let (w, p, j) = neo_hookean::energy_piola(m, &f);
+            let (w, p, j) = neo_hookean_energy_piola(m, &f);
             (rest.volume * w, nodal_forces(&p, rest), j)
         }
     }
