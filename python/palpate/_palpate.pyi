@@ -55,6 +55,10 @@ class TetMesh:
     def nodes_below(self, z_cut: float = 0.0, tol: float = 1e-9) -> _IntArray: ...
     def __len__(self) -> int: ...
 
+class Law:
+    ST_VENANT_KIRCHHOFF: Law
+    NEO_HOOKEAN: Law
+
 class Material:
     def __init__(
         self,
@@ -65,11 +69,14 @@ class Material:
         density: float = 1000.0,
         phi: float = 0.0,
         psi: float = 0.0,
+        law: Law = ...,
     ) -> None: ...
     @staticmethod
     def myocardium() -> Material: ...
     @staticmethod
     def paper_ellipsoids() -> Material: ...
+    @property
+    def law(self) -> Law: ...
     @property
     def young(self) -> float: ...
     @property

@@ -22,6 +22,7 @@ file, and environment variables in it are expanded: ``$VAR``, ``${VAR}``, and ``
     poisson = 0.4
     density = 1000.0                   # [kg/m^3]
     # preset = "myocardium"            # or "paper_ellipsoids"; phi, psi [Pa s] optional
+    # law = "neo-hookean"              # or "st-venant-kirchhoff" (default, the paper's law)
 
     [fixed]                            # optional: node indices and/or a plane
     z_below = 1e-8                     # fix every node with z <= this [m]
@@ -85,12 +86,16 @@ _GENERATORS = {
 _TOP_KEYS = {"gravity", "mesh", "material", "fixed", "loads", "integrator", "run"}
 _SECTION_KEYS = {
     "mesh": {"file", "unit", "generator", "params"},
-    "material": {"young", "poisson", "lame_lambda", "lame_mu", "density", "phi", "psi", "preset"},
+    "material": {"young", "poisson", "lame_lambda", "lame_mu", "density", "phi", "psi", "preset", "law"},
     "fixed": {"z_below", "nodes"},
     "load": {"point", "radius", "force", "ramp", "surface"},
     "integrator": {"type", "solver", "filter", "max_iterations", "tolerance", "history"},
     "run": {"dt", "steps", "output_every", "output"},
 }
+
+
+#: Values of ``material.law``.
+LAWS = {"st-venant-kirchhoff": _p.Law.ST_VENANT_KIRCHHOFF, "neo-hookean": _p.Law.NEO_HOOKEAN}
 
 
 @dataclass
@@ -251,16 +256,21 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
         v = c.number(mat, "material", k)
         if v is not None:
             kw[k] = float(v)
+    law = mat.get("law", "st-venant-kirchhoff")
+    if not isinstance(law, str) or law not in LAWS:
+        raise c.err("material.law", f"must be one of {sorted(LAWS)}, got {law!r}")
     if "preset" in mat:
         presets = {"myocardium": _p.Material.myocardium, "paper_ellipsoids": _p.Material.paper_ellipsoids}
         if mat["preset"] not in presets:
             raise c.err("material.preset", f"must be one of {sorted(presets)}, got {mat['preset']!r}")
         if kw:
             raise c.err("material.preset", f"cannot be combined with {', '.join(sorted(kw))}")
-        material = presets[mat["preset"]]()
+        pre = presets[mat["preset"]]()
+        material = _p.Material(lame_lambda=pre.lame_lambda, lame_mu=pre.lame_mu, density=pre.density, phi=pre.phi,
+                               psi=pre.psi, law=LAWS[law])
     else:
         try:
-            material = _p.Material(**kw)
+            material = _p.Material(**kw, law=LAWS[law])
         except _p.MaterialError as e:
             raise c.err(_material_key(str(e), kw), str(e)) from None
 

@@ -5,7 +5,7 @@
 //! | `errors.rs` | core error enums -> `palpate.PalpateError` and its subclasses |
 //! | `conv.rs` | numpy <-> core arrays (dtype / shape checks) |
 //! | `mesh.rs` | `TetMesh`, `ellipsoid_wall`, `truncated_ellipsoid_wall`, `box_mesh` |
-//! | `material.rs` | `Material` |
+//! | `material.rs` | `Law`, `Material` |
 //! | `integrator.rs` | `SemiImplicit`, `BackwardEuler`, `Filter`, `Solver` |
 //! | `body.rs` | `Body` (model + state + workspace; stepping releases the GIL) |
 //! | `particles.rs` | `Kernel`, `ParticleBody`, `TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between`, `SurfaceError` |
@@ -28,6 +28,7 @@ fn _palpate(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     m.add_class::<mesh::PyTetMesh>()?;
+    m.add_class::<material::PyLaw>()?;
     m.add_class::<material::PyMaterial>()?;
     m.add_class::<integrator::PySemiImplicit>()?;
     m.add_class::<integrator::PyBackwardEuler>()?;

@@ -1,19 +1,67 @@
-//! `palpate.Material` (`crates/palpate-core/src/material`).
+//! `palpate.Law` and `palpate.Material` (`crates/palpate-core/src/material`).
 
-use palpate_core::material::{Damping, Elasticity, Material};
+use palpate_core::material::{Damping, Elasticity, Law, Material};
 use pyo3::prelude::*;
 
 use crate::errors::{self, MaterialError};
 
-/// An isotropic linear (St. Venant-Kirchhoff) material with viscous damping (paper eq. 9, 11).
+/// The elastic law of a ``Material`` (``palpate_core::material::Law``); both use the material's
+/// Lame constants and agree with linear elasticity at small strain.
 ///
-/// ``Material(young=None, poisson=None, lame_lambda=None, lame_mu=None, density=1000.0, phi=0.0, psi=0.0)``
+/// * ``ST_VENANT_KIRCHHOFF`` (default, the paper's eq. 9): ``S = lambda tr(E) I + 2 mu E`` on the
+///   Green strain. It softens under strong compression (its uniaxial stress returns to 0 as the
+///   stretch goes to 0), so a hard press can flatten or invert elements.
+/// * ``NEO_HOOKEAN``: compressible Neo-Hookean (Bonet & Wood; FEBio's ``neo-Hookean``),
+///   ``psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2``, continued below ``J = 0.1`` by its
+///   second-order Taylor polynomial in ``J`` (finite for inverted elements). It resists
+///   compression. FEM bodies only: ``ParticleBody`` refuses it (``MaterialError``).
+#[pyclass(module = "palpate", name = "Law", eq, eq_int, hash, frozen, from_py_object)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+pub enum PyLaw {
+    #[pyo3(name = "ST_VENANT_KIRCHHOFF")]
+    StVenantKirchhoff,
+    #[pyo3(name = "NEO_HOOKEAN")]
+    NeoHookean,
+}
+
+impl From<PyLaw> for Law {
+    fn from(l: PyLaw) -> Law {
+        match l {
+            PyLaw::StVenantKirchhoff => Law::StVenantKirchhoff,
+            PyLaw::NeoHookean => Law::NeoHookean,
+        }
+    }
+}
+
+impl From<Law> for PyLaw {
+    fn from(l: Law) -> PyLaw {
+        match l {
+            Law::StVenantKirchhoff => PyLaw::StVenantKirchhoff,
+            Law::NeoHookean => PyLaw::NeoHookean,
+        }
+    }
+}
+
+impl PyLaw {
+    fn py_name(self) -> &'static str {
+        match self {
+            PyLaw::StVenantKirchhoff => "Law.ST_VENANT_KIRCHHOFF",
+            PyLaw::NeoHookean => "Law.NEO_HOOKEAN",
+        }
+    }
+}
+
+/// An isotropic hyperelastic material with viscous damping (paper eq. 9, 11).
+///
+/// ``Material(young=None, poisson=None, lame_lambda=None, lame_mu=None, density=1000.0, phi=0.0,
+/// psi=0.0, law=Law.ST_VENANT_KIRCHHOFF)``
 ///
 /// Give exactly one pair: ``young`` [Pa] and ``poisson`` [-] (in (-1, 0.5)), or ``lame_lambda``
 /// [Pa] and ``lame_mu`` [Pa] (shear modulus). ``density`` [kg/m^3]. ``phi`` and ``psi`` [Pa s] are
 /// the volumetric and shear viscosities of the viscous stress ``phi tr(nu) I + 2 psi nu`` with the
 /// strain rate ``nu = dE/dt`` (palpate's convention; the paper's values correspond to twice
-/// theirs, see ``palpate_core::material``).
+/// theirs, see ``palpate_core::material``). ``law``: the elastic law (``Law``), St. Venant-Kirchhoff
+/// (the paper's) by default, or ``Law.NEO_HOOKEAN``.
 ///
 /// Raises ``MaterialError`` for unphysical values or a missing / doubled pair.
 #[pyclass(module = "palpate", name = "Material", frozen)]
@@ -25,7 +73,8 @@ pub struct PyMaterial {
 #[pymethods]
 impl PyMaterial {
     #[new]
-    #[pyo3(signature = (young = None, poisson = None, lame_lambda = None, lame_mu = None, density = 1000.0, phi = 0.0, psi = 0.0))]
+    #[pyo3(signature = (young = None, poisson = None, lame_lambda = None, lame_mu = None, density = 1000.0, phi = 0.0, psi = 0.0, law = PyLaw::StVenantKirchhoff))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         young: Option<f64>,
         poisson: Option<f64>,
@@ -34,6 +83,7 @@ impl PyMaterial {
         density: f64,
         phi: f64,
         psi: f64,
+        law: PyLaw,
     ) -> PyResult<Self> {
         let elasticity = match (young, poisson, lame_lambda, lame_mu) {
             (Some(young), Some(poisson), None, None) => Elasticity::YoungPoisson { young, poisson },
@@ -57,7 +107,7 @@ impl PyMaterial {
                 return Err(MaterialError::new_err(format!("lame_lambda and lame_mu go together: {missing} is missing")));
             }
         };
-        let inner = Material::new(elasticity, density, Damping { phi, psi }).map_err(errors::material_error)?;
+        let inner = Material::new(elasticity, density, Damping { phi, psi }).map_err(errors::material_error)?.with_law(law.into());
         Ok(PyMaterial { inner })
     }
 
@@ -74,6 +124,11 @@ impl PyMaterial {
         PyMaterial { inner: Material::paper_ellipsoids() }
     }
 
+    /// The elastic law (``Law``).
+    #[getter]
+    fn law(&self) -> PyLaw {
+        self.inner.law().into()
+    }
     /// Young's modulus E [Pa].
     #[getter]
     fn young(&self) -> f64 {
@@ -118,12 +173,13 @@ impl PyMaterial {
     fn __repr__(&self) -> String {
         let m = &self.inner;
         format!(
-            "Material(young={}, poisson={}, density={}, phi={}, psi={})",
+            "Material(young={}, poisson={}, density={}, phi={}, psi={}, law={})",
             m.young(),
             m.poisson(),
             m.density(),
             m.damping().phi,
-            m.damping().psi
+            m.damping().psi,
+            PyLaw::from(m.law()).py_name()
         )
     }
 

@@ -51,6 +51,9 @@ pub enum MaterialError {
     Poisson(f64),
     #[error("Lame parameters lambda = {lambda} Pa, mu = {mu} Pa give a non-positive bulk modulus")]
     Bulk { lambda: f64, mu: f64 },
+    /// A solver that implements only some laws was given another (never silently replaced).
+    #[error("{solver} supports the St. Venant-Kirchhoff law only for now, not {law}: give it a St. Venant-Kirchhoff material (the FEM body supports {law})")]
+    UnsupportedLaw { law: crate::material::Law, solver: &'static str },
 }
 
 /// A model that cannot be compiled.

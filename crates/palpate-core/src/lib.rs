@@ -34,7 +34,7 @@ pub mod scene;
 
 pub use error::{HybridError, MaterialError, MeshError, ModelError, ModelFileError, SolveError, StepError};
 pub use integrate::{step, Integrator, StepReport};
-pub use material::Material;
+pub use material::{Law, Material};
 pub use math::{Mat3, Real, Vec3};
 pub use mesh::TetMesh;
 pub use scene::{Model, ModelBuilder, State, Workspace};

@@ -381,3 +381,20 @@ fn hourglass_control_stiffens_the_checkerboard_mode() {
     // Measured 2026-11-22: about 3.3x stiffer with the default kappa = 0.5.
     assert!(with > 3.0 * without, "hourglass control does not stiffen the checkerboard mode: {with} vs {without}");
 }
+
+/// The particle hot loop (and its AVX2 copy) implements the St. Venant-Kirchhoff stress only. A
+/// Neo-Hookean material must be refused with a typed error naming the law, never silently run
+/// as SVK. What it catches: a builder that ignores `Material::law`.
+#[test]
+fn neo_hookean_material_is_refused_with_a_typed_error() {
+    use palpate_core::material::Law;
+    use palpate_core::{MaterialError, ModelError};
+    let (pts, m) = lattice([4, 4, 4]);
+    let nh = material(false).with_law(Law::NeoHookean);
+    let err = ParticleModelBuilder::new(pts.clone(), m.clone(), nh, 1.8 * SPACING).build().unwrap_err();
+    assert_eq!(err, ModelError::Material(MaterialError::UnsupportedLaw { law: Law::NeoHookean, solver: "the particle solid (meshfree)" }));
+    let msg = err.to_string();
+    assert!(msg.contains("St. Venant-Kirchhoff law only") && msg.contains("Neo-Hookean"), "{msg}");
+    // The same material with the SVK law builds.
+    ParticleModelBuilder::new(pts, m, nh.with_law(Law::StVenantKirchhoff), 1.8 * SPACING).build().unwrap();
+}

@@ -1,4 +1,8 @@
-//! Isotropic linear (St. Venant-Kirchhoff) material with Kelvin-Voigt-like viscous stress, paper §2.
+//! Isotropic hyperelastic material with Kelvin-Voigt-like viscous stress, paper §2.
+//!
+//! The elastic law is a [`Law`]: St. Venant-Kirchhoff (the paper's, the default) or the
+//! compressible Neo-Hookean law of [`neo_hookean`] (same Lame constants, same small-strain
+//! behaviour, but it resists strong compression and inversion, where SVK softens and collapses).
 //!
 //! * Elastic second Piola-Kirchhoff stress (paper eq. 9): `S = lambda tr(E) I + 2 mu E`, with the Green
 //!   strain `E = 1/2 (F^T F - I)` (eq. 3-4, read as the paper's README prescribes: `F` is the
@@ -11,6 +15,7 @@
 //!   rate `e_dot` costs stress `(phi + 2 psi) e_dot`, as `(lambda + 2 mu) e` for the elastic part.
 
 mod linear;
+pub mod neo_hookean;
 
 pub use linear::{green_strain, strain_rate, stress, viscous_stress};
 
@@ -43,14 +48,48 @@ impl Damping {
     }
 }
 
-/// A validated material. Construct with [`Material::new`]; fields are read through accessors so
-/// that an invalid material cannot exist.
+/// The elastic (hyperelastic) law of a [`Material`]. Both use the material's Lame constants
+/// `lambda`, `mu` and agree with linear elasticity at small strain; the viscous stress (eq. 11)
+/// is the same for both.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Law {
+    /// St. Venant-Kirchhoff, the paper's law (eq. 9): `S = lambda tr(E) I + 2 mu E` on the Green
+    /// strain. Cheap, but it softens under compression: its uniaxial nominal stress returns to
+    /// zero as the stretch goes to 0, so a strong press can flatten or invert elements.
+    #[default]
+    StVenantKirchhoff,
+    /// Compressible Neo-Hookean (Bonet & Wood; the `neo-Hookean` material of FEBio and SOFA):
+    /// `psi = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2`, extended below `J_MIN` so that it is
+    /// defined for inverted elements. See [`neo_hookean`].
+    NeoHookean,
+}
+
+impl Law {
+    /// A short human-readable name ("St. Venant-Kirchhoff", "Neo-Hookean").
+    pub fn name(self) -> &'static str {
+        match self {
+            Law::StVenantKirchhoff => "St. Venant-Kirchhoff",
+            Law::NeoHookean => "Neo-Hookean",
+        }
+    }
+}
+
+impl std::fmt::Display for Law {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A validated material. Construct with [`Material::new`] (St. Venant-Kirchhoff) and choose
+/// another law with [`Material::with_law`]; fields are read through accessors so that an invalid
+/// material cannot exist.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Material {
     lambda: f64,
     mu: f64,
     density: f64,
     damping: Damping,
+    law: Law,
 }
 
 fn finite(name: &'static str, value: f64) -> Result<f64, MaterialError> {
@@ -58,7 +97,8 @@ fn finite(name: &'static str, value: f64) -> Result<f64, MaterialError> {
 }
 
 impl Material {
-    /// A material from its elastic moduli, density `density` \[kg/m^3\] and damping.
+    /// A St. Venant-Kirchhoff material from its elastic moduli, density `density` \[kg/m^3\] and
+    /// damping (see [`Material::with_law`] for another law).
     ///
     /// Errors: non-finite values; `young <= 0`; `poisson` outside (-1, 0.5); `mu <= 0`;
     /// `lambda + 2/3 mu <= 0` (non-positive bulk modulus); `density <= 0`; negative viscosities.
@@ -101,7 +141,18 @@ impl Material {
         if psi < 0.0 {
             return Err(MaterialError::Negative { name: "viscosity psi", value: psi, unit: "Pa s" });
         }
-        Ok(Material { lambda, mu, density, damping: Damping { phi, psi } })
+        Ok(Material { lambda, mu, density, damping: Damping { phi, psi }, law: Law::StVenantKirchhoff })
+    }
+
+    /// The same material (moduli, density, damping) with the elastic law `law`.
+    ///
+    /// Every valid (lambda, mu) is valid for both laws. The Neo-Hookean volumetric term is convex
+    /// in `J` for `J < exp(1 + mu/lambda)` when `lambda >= 0` (Poisson's ratio >= 0, every soft
+    /// tissue); see [`neo_hookean`].
+    #[must_use]
+    pub fn with_law(mut self, law: Law) -> Material {
+        self.law = law;
+        self
     }
 
     /// Myocardium-like soft tissue in SI: E = 30 kPa, nu = 0.4, rho = 1060 kg/m^3, no damping.
@@ -121,6 +172,8 @@ impl Material {
     pub fn lambda(&self) -> f64 { self.lambda }
     /// Shear modulus \[Pa\].
     pub fn mu(&self) -> f64 { self.mu }
+    /// The elastic law.
+    pub fn law(&self) -> Law { self.law }
     /// Mass density \[kg/m^3\].
     pub fn density(&self) -> f64 { self.density }
     /// Viscous parameters \[Pa s\].
@@ -146,6 +199,18 @@ mod tests {
         assert!((m.lambda() - 42857.142857142855).abs() < 1e-8);
         assert!((m.young() - 3.0e4).abs() < 1e-8);
         assert!((m.poisson() - 0.4).abs() < 1e-14);
+    }
+
+    #[test]
+    fn law_defaults_to_svk_and_with_law_keeps_the_rest() {
+        let m = Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, Damping { phi: 1.0, psi: 2.0 }).unwrap();
+        assert_eq!(m.law(), Law::StVenantKirchhoff);
+        assert_eq!(Material::myocardium().law(), Law::StVenantKirchhoff);
+        let nh = m.with_law(Law::NeoHookean);
+        assert_eq!(nh.law(), Law::NeoHookean);
+        assert_eq!((nh.lambda(), nh.mu(), nh.density(), nh.damping()), (m.lambda(), m.mu(), m.density(), m.damping()));
+        assert_ne!(nh, m, "materials with different laws must not compare equal");
+        assert_eq!(nh.with_law(Law::StVenantKirchhoff), m);
     }
 
     #[test]

@@ -4,8 +4,8 @@
 use super::kernel::Kernel;
 use super::neighbors::neighbours_within;
 use super::pair_loop::{self, p4, v3, Cols, P4};
-use crate::error::{ModelError, SolveError, StepError};
-use crate::material::{self, Material};
+use crate::error::{MaterialError, ModelError, SolveError, StepError};
+use crate::material::{self, Law, Material};
 use crate::math::{is_finite3, Mat3, Vec3};
 
 /// Default dimensionless hourglass-control stiffness `kappa` (see [`crate::meshfree`]).
@@ -66,8 +66,17 @@ impl ParticleModelBuilder {
 
     /// Validate and precompute neighbours, volumes, MLS gradients, hourglass weights and the
     /// stable explicit time step.
+    ///
+    /// Errors: `ModelError::Material(MaterialError::UnsupportedLaw)` for a material whose law is
+    /// not St. Venant-Kirchhoff (the only law of the particle hot loop for now); invalid particles,
+    /// parameters, fixed indices or gravity.
     pub fn build(self) -> Result<ParticleModel, ModelError> {
         let ParticleModelBuilder { positions: rest, masses, material, support: h, kernel, fixed, gravity, hourglass, min_weight } = self;
+        // The pair loop (pair_loop.rs, with its AVX2 copy) evaluates the St. Venant-Kirchhoff
+        // stress only: refuse any other law rather than silently simulate SVK.
+        if material.law() != Law::StVenantKirchhoff {
+            return Err(MaterialError::UnsupportedLaw { law: material.law(), solver: "the particle solid (meshfree)" }.into());
+        }
         let n = rest.len();
         if n == 0 {
             return Err(ModelError::Empty("no particles"));

@@ -18,7 +18,8 @@
 //! ```
 //!
 //! which is exact for every affine motion (`sum_j X_ij g_ij^T = I`). Green strain, elastic and
-//! viscous stress are those of the FEM ([`crate::material`]).
+//! viscous stress are those of the FEM ([`crate::material`]), St. Venant-Kirchhoff law only: the
+//! builder refuses a Neo-Hookean material with `MaterialError::UnsupportedLaw`.
 //!
 //! **Forces.** The elastic energy `U = sum_i V_i psi(F_i)` gives, exactly, `f = -dU/dx`:
 //! each particle `i` exerts on each neighbour `j` the force `-V_i P_i g_ij` and on itself the
