@@ -131,6 +131,7 @@ class StepStats(TypedDict):
     iterations: int
     iterations_max: int
     evaluations: int
+    factorizations: int
     solves: int
     unconverged_steps: int
     max_residual: float
@@ -150,6 +151,7 @@ class ProbeRun(TypedDict):
     iterations_mean: float
     iterations_max: int
     evaluations: int
+    factorizations: int
     inverted_max: int
     unconverged_steps: int
     error: Optional[str]

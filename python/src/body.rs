@@ -51,6 +51,7 @@ struct StepTotals {
     iterations: usize,
     max_iterations: usize,
     evaluations: usize,
+    factorizations: usize,
     solves: usize,
     unconverged: usize,
     max_residual: f64,
@@ -64,6 +65,7 @@ impl StepTotals {
         self.iterations += r.iterations;
         self.max_iterations = self.max_iterations.max(r.iterations);
         self.evaluations += r.evaluations;
+        self.factorizations += r.factorizations;
         self.solves += r.solves;
         self.unconverged += !r.converged as usize;
         self.max_residual = self.max_residual.max(r.residual);
@@ -132,7 +134,9 @@ impl PyBody {
     /// Advance ``n`` steps of ``dt`` [s] with the current external forces (GIL released).
     ///
     /// Returns a dict: ``steps``; ``iterations`` (summed over the steps) and ``iterations_max``;
-    /// ``evaluations`` (force evaluations, line-search trials included); ``solves`` (solves with
+    /// ``evaluations`` (force evaluations, line-search trials included); ``factorizations``
+    /// (sparse factorisations: the first step at a new dt, refreshes of the quasi-Newton initial
+    /// Hessian); ``solves`` (solves with
     /// the factorised matrix); ``unconverged_steps`` (steps that hit ``max_iterations``);
     /// ``max_residual`` (relative gradient of the incremental potential); ``inverted_max``
     /// (elements with det F <= 0 after a step, the most over the steps); ``inverted`` and
@@ -155,6 +159,7 @@ impl PyBody {
         d.set_item("iterations", tot.iterations)?;
         d.set_item("iterations_max", tot.max_iterations)?;
         d.set_item("evaluations", tot.evaluations)?;
+        d.set_item("factorizations", tot.factorizations)?;
         d.set_item("solves", tot.solves)?;
         d.set_item("unconverged_steps", tot.unconverged)?;
         d.set_item("max_residual", tot.max_residual)?;
@@ -313,7 +318,7 @@ impl PyBody {
     ///   k >= steps // 2 [m]; ``probe_disp`` (steps,) the loaded nodes' mean |u| after each step
     ///   [m]; ``step_us`` (steps,) the time of each step call [us]; ``iterations_mean``,
     ///   ``iterations_max`` (nonlinear iterations per step), ``evaluations`` (force evaluations in
-    ///   all), ``inverted_max`` (most elements with det F <= 0 after a step), ``unconverged_steps``;
+    ///   all), ``factorizations``, ``inverted_max`` (most elements with det F <= 0 after a step), ``unconverged_steps``;
     ///   ``error`` (why the run stopped early, else None).
     /// The run stops early if a step fails, max |u| exceeds 1 m, or the timed wall-clock exceeds
     /// ``max_wall_s`` [s] (then ``stable`` covers the steps that ran).
@@ -436,6 +441,7 @@ impl PyBody {
         d.set_item("iterations_mean", if t.steps > 0 { t.iterations as f64 / t.steps as f64 } else { f64::NAN })?;
         d.set_item("iterations_max", t.max_iterations)?;
         d.set_item("evaluations", t.evaluations)?;
+        d.set_item("factorizations", t.factorizations)?;
         d.set_item("inverted_max", t.max_inverted)?;
         d.set_item("unconverged_steps", t.unconverged)?;
         d.set_item("error", run.error)?;

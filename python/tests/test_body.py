@@ -39,7 +39,7 @@ def test_step_defaults_and_stats(material):
     body = bar(material)
     stats = body.step()
     assert body.time == pytest.approx(1e-3)
-    assert set(stats) == {"steps", "iterations", "iterations_max", "evaluations", "solves", "unconverged_steps",
+    assert set(stats) == {"steps", "iterations", "iterations_max", "evaluations", "factorizations", "solves", "unconverged_steps",
                           "max_residual", "inverted_max", "inverted", "potential_change"}
     assert stats["iterations"] >= 1 and stats["solves"] >= 1 and stats["potential_change"] <= 0.0
 

@@ -27,8 +27,9 @@ fn main() {
     ];
     let mut reference: Option<Vec<Vec3>> = None;
     for (label, integ) in integrators {
-        if label != "newton" && only.as_deref().is_some_and(|o| o != label) { continue; }
-        let model = ModelBuilder::new(case.mesh.clone(), protocol::material()).fixed_nodes(case.fixed.clone()).integrator(integ).build().unwrap();
+        if only.as_deref().is_some_and(|o| o != label && !(o.ends_with('+') && (label == "newton" || label == &o[..o.len() - 1]))) { continue; }
+        let material = if std::env::var("LAW").as_deref() == Ok("nh") { protocol::material().with_law(palpate_core::material::Law::NeoHookean) } else { protocol::material() };
+        let model = ModelBuilder::new(case.mesh.clone(), material).fixed_nodes(case.fixed.clone()).integrator(integ).build().unwrap();
         let mut st = State::rest(&model);
         let mut ws = Workspace::new(&model);
         let mut times = Vec::with_capacity(steps);

@@ -148,6 +148,9 @@ pub struct StepReport {
     /// Evaluations of the forces (and, for the minimising schemes, the potential), line-search
     /// trials included.
     pub evaluations: usize,
+    /// Sparse factorisations done in the step (the first step at a new `dt`, and the quasi-Newton
+    /// integrator's refreshes of its initial Hessian; the step's cost then includes one).
+    pub factorizations: usize,
     /// Linear solves with the factorised matrix (0 for the semi-implicit scheme; for Newton, the
     /// preconditioner applications of its conjugate gradients).
     pub solves: usize,
@@ -180,6 +183,7 @@ pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Re
     }
     ws.x_save.copy_from_slice(&state.x);
     ws.v_save.copy_from_slice(&state.v);
+    let factor_count = ws.factor_count;
     let result = match model.integrator {
         Integrator::SemiImplicit { .. } => Ok(semi_implicit::step(model, state, ws, dt)),
         Integrator::BackwardEulerLinear => backward_euler::step_linear(model, state, ws, dt),
@@ -202,7 +206,8 @@ pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Re
         state.v.copy_from_slice(&ws.v_save);
         ws.potential.invalidate();
     }
-    let report = result?;
+    let mut report = result?;
+    report.factorizations = (ws.factor_count - factor_count) as usize;
     if let Some((what, node)) = bad {
         return Err(StepError::NonFinite { what, node, time: state.t });
     }

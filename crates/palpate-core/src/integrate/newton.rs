@@ -183,6 +183,7 @@ pub(super) fn step(
         residual: if scale > 0.0 { gnorm / scale } else { 0.0 },
         inverted: cur.inverted,
         potential_change: cur.phi - phi0,
+        factorizations: 0, // set by `step`
     };
     ws.x_save = x_n;
     ws.v_save = v_n;

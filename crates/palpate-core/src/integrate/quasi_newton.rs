@@ -20,6 +20,13 @@
 //!   node their mass-weighted translation is removed (it is orthogonal to the gradient, so the
 //!   direction stays a descent direction). Momentum then changes by exactly `dt` times the applied
 //!   forces, at any tolerance.
+//! * **Refreshed initial Hessian.** Under a held press the rest matrix misses the stiffness of the
+//!   deformed state and every step needs several iterations. When a step takes at least
+//!   [`REFRESH_ITERATIONS`] iterations, and [`REFRESH_INTERVAL`] steps have passed since the last
+//!   refresh, the initial Hessian is refactorised at the end state with a positive definite
+//!   approximation of the tangent (`fem/tangent.rs`): the next steps then converge in one or two
+//!   iterations. (A factorisation costs about ten iterations; the interval bounds how often it can
+//!   be paid. If it fails, the rest matrix is restored.)
 //! * **Stop** when `|grad Phi| <= tolerance * force scale` (`potential::force_scale`), at the
 //!   iteration cap, or when the line search finds no decrease (the iterate is then at the
 //!   round-off level of the potential). Every accepted iterate has a lower potential than the
@@ -29,9 +36,44 @@
 use super::backward_euler::ensure_rest_factor;
 use super::potential::{self, dot, StepProblem};
 use crate::error::StepError;
-use crate::math::Vec3;
+use crate::fem::tangent;
+use crate::math::{Mat3, Vec3};
+use crate::scene::model::NONE;
 use crate::scene::{Model, State, Workspace};
 use crate::StepReport;
+
+/// Iterations of a step from which the initial Hessian is refreshed at its end state.
+pub const REFRESH_ITERATIONS: usize = 4;
+/// Steps between two refreshes of the initial Hessian, at least.
+pub const REFRESH_INTERVAL: usize = 8;
+
+/// Refactorise `ws.ldl` with `M - dt D0 - dt^2 K~(x)`, `K~` the definite tangent approximation at
+/// `x`; on failure, the rest matrix again. Returns whether the refreshed matrix is in place.
+fn refresh_initial_hessian(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<bool, StepError> {
+    let mut k = std::mem::take(&mut ws.k);
+    k.iter_mut().for_each(|b| *b = Mat3::zeros());
+    for ((t, r), tb) in model.mesh.tets().iter().zip(&model.rest).zip(&model.tet_blocks) {
+        let ke = tangent::definite_jacobian(&t.map(|i| x[i]), r, &model.material);
+        for e in 0..16 {
+            if tb[e] != NONE {
+                k[tb[e]] += ke[e / 4][e % 4];
+            }
+        }
+    }
+    model.system_values(1.0, -dt, -dt * dt, &k, &model.d0, &mut ws.a_values);
+    ws.k = k;
+    ws.steps_since_refresh = 0;
+    ws.factored_dt = f64::NAN;
+    ws.factor_count += 1;
+    if model.factor(&mut ws.ldl, &ws.a_values).is_ok() {
+        ws.factored_dt = dt;
+        ws.refreshed = true;
+        return Ok(true);
+    }
+    ws.refreshed = false;
+    ensure_rest_factor(model, ws, dt)?;
+    Ok(false)
+}
 
 /// L-BFGS memory: `history` pairs `(s, y)` of free-node vectors in a ring, and scratch vectors.
 #[derive(Debug, Clone)]
@@ -159,6 +201,9 @@ pub(super) fn step(
     max_iterations: usize,
     tolerance: f64,
 ) -> Result<StepReport, StepError> {
+    if ws.factored_dt != dt {
+        ws.refreshed = false;
+    }
     ensure_rest_factor(model, ws, dt)?;
     let h = dt;
     // `step` saved x_n, v_n into x_save, v_save; the iterate lives in state.x.
@@ -214,6 +259,10 @@ pub(super) fn step(
         state.v[i] = (state.x[i] - x_n[i]) * inv_h;
     }
     potential::store_end(&mut ws.potential, &state.x, &cur);
+    ws.steps_since_refresh = ws.steps_since_refresh.saturating_add(1);
+    if iterations >= REFRESH_ITERATIONS && ws.steps_since_refresh >= REFRESH_INTERVAL {
+        refresh_initial_hessian(model, ws, &state.x, dt)?;
+    }
     let report = StepReport {
         iterations,
         evaluations,
@@ -222,6 +271,7 @@ pub(super) fn step(
         residual: if scale > 0.0 { gnorm / scale } else { 0.0 },
         inverted: cur.inverted,
         potential_change: cur.phi - phi0,
+        factorizations: 0, // set by `step`
     };
     ws.x_save = x_n;
     ws.v_save = v_n;

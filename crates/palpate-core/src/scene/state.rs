@@ -48,6 +48,12 @@ pub struct Workspace {
     pub(crate) ldl: Ldl,
     /// `dt` the current factorisation / per-node inverses were made for (NaN: none yet).
     pub(crate) factored_dt: f64,
+    /// Quasi-Newton: whether the factorisation holds a refreshed tangent instead of the rest
+    /// matrix, and the steps since it was refreshed.
+    pub(crate) refreshed: bool,
+    pub(crate) steps_since_refresh: usize,
+    /// Sparse factorisations done so far (the step reports its own).
+    pub(crate) factor_count: u64,
     /// Semi-implicit scheme: per-node `(I - dt/m D_ii - dt^2/m J_ii)^-1`.
     pub(crate) node_inv: Vec<Mat3>,
     /// Minimising integrators: the incremental potential's buffers and cache.
@@ -74,6 +80,9 @@ impl Workspace {
             d: vec![Mat3::zeros(); model.pattern.nnz()],
             ldl: model.ldl.clone(),
             factored_dt: f64::NAN,
+            refreshed: false,
+            steps_since_refresh: 0,
+            factor_count: 0,
             node_inv: vec![Mat3::identity(); n],
             potential: PotentialWorkspace::new(n, nf),
             lbfgs: Lbfgs::new(nf, model.integrator.history()),
