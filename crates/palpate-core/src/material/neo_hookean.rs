@@ -2,9 +2,9 @@
 //!
 //! Strain energy per unit rest volume (J. Bonet & R. D. Wood, *Nonlinear Continuum Mechanics for
 //! Finite Element Analysis*, 2nd ed., Cambridge 2008, ch. 6, "compressible neo-Hookean
-//! materials"; identical to the `neo-Hookean` material of the FEBio User's Manual; SOFA's
-//! hyperelastic force fields offer a Neo-Hookean material of the same family with another
-//! volumetric term), with `J = det F`, `I1 = tr(F^T F)`:
+//! materials"; the same energy as the `neo-Hookean` material of the FEBio User's Manual; SOFA's
+//! hyperelastic force fields also offer a Neo-Hookean material), with `J = det F`,
+//! `I1 = tr(F^T F)`:
 //!
 //! ```text
 //! psi(F) = mu/2 (I1 - 3) + h(J),      h(J) = -mu ln J + lambda/2 (ln J)^2     (J >= J_MIN)
