@@ -18,5 +18,10 @@ fn main() {
     let t = Instant::now();
     for _ in 0..n { step(&model, &mut st, &mut ws, 1e-3).unwrap(); }
     let ts = t.elapsed().as_secs_f64() / n as f64;
+    let t = Instant::now();
+    let m = 20;
+    for k in 0..m { step(&model, &mut st, &mut ws, if k % 2 == 0 { 1.0001e-3 } else { 1e-3 }).unwrap(); }
+    let tfac = t.elapsed().as_secs_f64() / m as f64 - ts;
+    println!("{name}: factorisation {:.1} us = {:.1} solves (model: {:.1})", tfac * 1e6, tfac / (ts - tf), model.factor_to_solve_ratio());
     println!("{name}: {} tets, {} free dofs, L blocks {}: forces {:.1} us, linear step {:.1} us (solve ~ {:.1} us)", model.n_tets(), model.n_dofs(), model.factor_blocks(), tf * 1e6, ts * 1e6, (ts - tf) * 1e6);
 }

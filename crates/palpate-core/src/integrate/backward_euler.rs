@@ -27,6 +27,7 @@ pub(super) fn ensure_rest_factor(model: &Model, ws: &mut Workspace, dt: f64) -> 
     if ws.factored_dt != dt {
         ws.factored_dt = f64::NAN;
         ws.refreshed = false;
+        ws.excess_iterations = 0;
         model.system_values(1.0, -dt, -dt * dt, &model.k0, &model.d0, &mut ws.a_values);
         model.factor(&mut ws.ldl, &ws.a_values)?;
         ws.factored_dt = dt;

@@ -21,7 +21,7 @@ mod statics;
 pub use potential::{incremental_potential, incremental_potential_gradient};
 pub(crate) use newton::CgWorkspace;
 pub(crate) use potential::PotentialWorkspace;
-pub(crate) use quasi_newton::Lbfgs;
+pub(crate) use quasi_newton::{Lbfgs, ITERATIONS_PER_FACTOR_RATIO};
 pub(crate) use semi_implicit::stable_filter_factor;
 pub use statics::{static_solve, StaticOptions, StaticSolution};
 

@@ -21,12 +21,15 @@
 //!   direction stays a descent direction). Momentum then changes by exactly `dt` times the applied
 //!   forces, at any tolerance.
 //! * **Refreshed initial Hessian.** Under a held press the rest matrix misses the stiffness of the
-//!   deformed state and every step needs several iterations. When a step takes at least
-//!   [`REFRESH_ITERATIONS`] iterations, and [`REFRESH_INTERVAL`] steps have passed since the last
-//!   refresh, the initial Hessian is refactorised at the end state with a positive definite
-//!   approximation of the tangent (`fem/tangent.rs`): the next steps then converge in one or two
-//!   iterations. (A factorisation costs about ten iterations; the interval bounds how often it can
-//!   be paid. If it fails, the rest matrix is restored.)
+//!   deformed state and every step needs several iterations. The iterations beyond the first are
+//!   counted since the last factorisation; once they add up to the cost of a factorisation (in
+//!   iterations, estimated from the factor's pattern when the model is compiled: about 8 on
+//!   lv_190, 13 on lv_1350, 38 on lv_10k), and the step just taken needed at least
+//!   [`REFRESH_MIN_ITERATIONS`], the initial Hessian is refactorised at the end state with a
+//!   positive definite approximation of the tangent (`fem/tangent.rs`): the next steps then
+//!   converge in one or two iterations. A refresh thus never costs more than the iterations it
+//!   replaces (ski-rental amortisation), on small meshes and large. If it fails, the rest matrix
+//!   is restored.
 //! * **Stop** when `|grad Phi| <= tolerance * force scale` (`potential::force_scale`), at the
 //!   iteration cap, or when the line search finds no decrease (the iterate is then at the
 //!   round-off level of the potential). Every accepted iterate has a lower potential than the
@@ -42,10 +45,11 @@ use crate::scene::model::NONE;
 use crate::scene::{Model, State, Workspace};
 use crate::StepReport;
 
-/// Iterations of a step from which the initial Hessian is refreshed at its end state.
-pub const REFRESH_ITERATIONS: usize = 4;
-/// Steps between two refreshes of the initial Hessian, at least.
-pub const REFRESH_INTERVAL: usize = 8;
+/// Iterations a step must take for the initial Hessian to be refreshed at its end state.
+pub const REFRESH_MIN_ITERATIONS: usize = 3;
+/// A factorisation's cost in quasi-Newton iterations per unit of `Ldl::factor_to_solve_ratio`
+/// (an iteration is one solve plus about 1.5 force evaluations; measured: BENCHMARKS.md).
+pub(crate) const ITERATIONS_PER_FACTOR_RATIO: f64 = 0.7;
 
 /// Refactorise `ws.ldl` with `M - dt D0 - dt^2 K~(x)`, `K~` the definite tangent approximation at
 /// `x`; on failure, the rest matrix again. Returns whether the refreshed matrix is in place.
@@ -62,7 +66,7 @@ fn refresh_initial_hessian(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f6
     }
     model.system_values(1.0, -dt, -dt * dt, &k, &model.d0, &mut ws.a_values);
     ws.k = k;
-    ws.steps_since_refresh = 0;
+    ws.excess_iterations = 0;
     ws.factored_dt = f64::NAN;
     ws.factor_count += 1;
     if model.factor(&mut ws.ldl, &ws.a_values).is_ok() {
@@ -259,8 +263,8 @@ pub(super) fn step(
         state.v[i] = (state.x[i] - x_n[i]) * inv_h;
     }
     potential::store_end(&mut ws.potential, &state.x, &cur);
-    ws.steps_since_refresh = ws.steps_since_refresh.saturating_add(1);
-    if iterations >= REFRESH_ITERATIONS && ws.steps_since_refresh >= REFRESH_INTERVAL {
+    ws.excess_iterations = ws.excess_iterations.saturating_add(iterations.saturating_sub(1));
+    if iterations >= REFRESH_MIN_ITERATIONS && ws.excess_iterations as f64 >= model.refresh_cost {
         refresh_initial_hessian(model, ws, &state.x, dt)?;
     }
     let report = StepReport {

@@ -114,6 +114,13 @@ impl Ldl {
     pub fn n(&self) -> usize { self.n }
     /// Number of off-diagonal blocks of L.
     pub fn nnz_l(&self) -> usize { self.lp[self.n] }
+    /// Relative cost of a numeric factorisation, in units of one pair of triangular solves
+    /// (block multiply-adds: `sum_k c_k^2` for the factorisation, `c_k` the column counts of L,
+    /// against `2 nnz(L) + n` for the solves). A rough model, calibrated in BENCHMARKS.md.
+    pub fn factor_to_solve_ratio(&self) -> f64 {
+        let f: f64 = (0..self.n).map(|k| ((self.lp[k + 1] - self.lp[k]) as f64 + 1.0).powi(2)).sum();
+        f / (2.0 * self.nnz_l() as f64 + self.n as f64).max(1.0)
+    }
     /// Number of stored input blocks (the length `ax` must have in [`Ldl::factor`]).
     pub fn nnz_a(&self) -> usize { self.ap[self.n] }
 

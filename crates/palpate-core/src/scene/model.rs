@@ -193,6 +193,7 @@ impl ModelBuilder {
             node_d0,
             node_pos,
             order,
+            refresh_cost: crate::integrate::ITERATIONS_PER_FACTOR_RATIO * ldl.factor_to_solve_ratio(),
             entry_to_a,
             ldl,
             filter_alpha,
@@ -229,6 +230,8 @@ pub struct Model {
     pub(crate) entry_to_a: Vec<usize>,
     /// Symbolic factorisation (cloned into each workspace for the numeric factors).
     pub(crate) ldl: Ldl,
+    /// A factorisation's cost in quasi-Newton iterations (when to refresh its initial Hessian).
+    pub(crate) refresh_cost: f64,
     /// Factor of the semi-implicit filter blocks (1: the paper's; see `integrate::Filter`).
     pub(crate) filter_alpha: f64,
 }
@@ -259,6 +262,9 @@ impl Model {
     /// The semi-implicit filter factor `alpha` (1 unless the integrator is
     /// `SemiImplicit { filter: Filter::Stable }`).
     pub fn filter_factor(&self) -> f64 { self.filter_alpha }
+    /// Cost of a factorisation of the implicit system relative to one pair of triangular solves
+    /// (a block-operation count; see `Ldl::factor_to_solve_ratio`).
+    pub fn factor_to_solve_ratio(&self) -> f64 { self.ldl.factor_to_solve_ratio() }
     /// Off-diagonal 3x3 blocks of the sparse factor L.
     pub fn factor_blocks(&self) -> usize { self.ldl.nnz_l() }
 

@@ -49,9 +49,9 @@ pub struct Workspace {
     /// `dt` the current factorisation / per-node inverses were made for (NaN: none yet).
     pub(crate) factored_dt: f64,
     /// Quasi-Newton: whether the factorisation holds a refreshed tangent instead of the rest
-    /// matrix, and the steps since it was refreshed.
+    /// matrix, and the iterations beyond the first of each step since the last factorisation.
     pub(crate) refreshed: bool,
-    pub(crate) steps_since_refresh: usize,
+    pub(crate) excess_iterations: usize,
     /// Sparse factorisations done so far (the step reports its own).
     pub(crate) factor_count: u64,
     /// Semi-implicit scheme: per-node `(I - dt/m D_ii - dt^2/m J_ii)^-1`.
@@ -81,7 +81,7 @@ impl Workspace {
             ldl: model.ldl.clone(),
             factored_dt: f64::NAN,
             refreshed: false,
-            steps_since_refresh: 0,
+            excess_iterations: 0,
             factor_count: 0,
             node_inv: vec![Mat3::identity(); n],
             potential: PotentialWorkspace::new(n, nf),
