@@ -69,6 +69,26 @@ def _hybrid_summary() -> None:
               f"{i['regions']:>9}{ratio:>16.4f}{i['build_s']:>9.2f}", flush=True)
 
 
+def _firm_press(a) -> None:
+    """A clinician's press, 2 N on the ventricle wall: the default integrator stays finite, the
+    rest-linearised one does not (BENCHMARKS.md, "Stable at any press")."""
+    print("\nfirm press: 2 N on the ventricle wall (what a clinician's finger applies), same probe:")
+    _, case = bodies()[1]
+    force = case.total_force * (2.0 / bench.FORCE)
+    for iname, make in [("backward Euler, quasi-Newton (default)", lambda: _p.BackwardEuler()),
+                        ("backward Euler, rest-linearised", lambda: _p.BackwardEuler(_p.Solver.LINEARISED))]:
+        body = _p.Body(case.mesh, bench.material(), fixed=case.fixed, integrator=make())
+        r = body.run_probe(case.loaded, force, bench.RAMP, a.steps, dt=1e-3, stable_limit=0.06,
+                           max_wall_s=a.max_wall)
+        sps = r["steps"] / r["wall_s"] if r["wall_s"] > 0 else float("inf")
+        if r["error"]:
+            what = r["error"]
+        else:
+            what = (f"finite, max |u| {r['max_disp_m'] * 1e3:.1f} mm, {r['iterations_mean']:.2f} iterations a step, "
+                    f"at most {r['inverted_max']} inverted tets")
+        print(f"  {iname:<40}{sps:>9.1f} steps/s  {what}", flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m palpate.demo", description=__doc__.split("\n\n")[0])
     ap.add_argument("--steps", type=int, default=1000)
@@ -99,6 +119,7 @@ def main(argv=None) -> int:
                   f"{f'{pfps:g} f/s ({ptets} tets)':<22}{probe:>13.4f}  {note}", flush=True)
             curves.append((f"{name}, {iname}", np.arange(1, r["steps"] + 1) * 1e-3, r["probe_disp"] * 1e3))
     print("\nsteps/s: stepping calls only (no set-up, no read-back); paper: frames/s on a Pentium IV.")
+    _firm_press(a)
     _hybrid_summary()
     if not a.no_plot:
         try:

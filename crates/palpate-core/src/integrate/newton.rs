@@ -147,10 +147,10 @@ pub(super) fn step(
 
     let (mut cur, fresh) = potential::evaluate_start(&p, &mut ws.potential);
     let phi0 = cur.phi;
-    let scale = potential::force_scale(&p);
+    let scale = potential::force_scale(&cur);
     let target = tolerance * scale;
     let (mut iterations, mut solves, mut evaluations) = (0, 0, fresh as usize);
-    let mut gnorm = dot(&ws.potential.g, &ws.potential.g).sqrt();
+    let mut gnorm = cur.gnorm2.sqrt();
     while iterations < max_iterations && (iterations == 0 || gnorm > target) {
         let mut blocks = std::mem::take(&mut ws.k);
         assemble_hessian(&p, &state.x, &mut blocks);
@@ -168,7 +168,7 @@ pub(super) fn step(
         };
         cur = e;
         iterations += 1;
-        gnorm = dot(&ws.potential.g, &ws.potential.g).sqrt();
+        gnorm = cur.gnorm2.sqrt();
     }
     let inv_h = 1.0 / h;
     for &i in &model.free_nodes {

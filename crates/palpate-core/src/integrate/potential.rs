@@ -50,6 +50,10 @@ pub(crate) struct Eval {
     pub magnitude: f64,
     /// Elements with `det F <= 0`.
     pub inverted: usize,
+    /// `|grad Phi|^2` over the free nodes \[N^2\].
+    pub gnorm2: f64,
+    /// The squared force scale of the step (`force_scale`), computed in the same pass \[N^2\].
+    pub scale2: f64,
 }
 
 /// Buffers of the potential's evaluations (allocated once per workspace), with a cache of the
@@ -139,7 +143,8 @@ fn evaluate(p: &StepProblem, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3],
 fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f_el: &[Vec3], f_visc: Option<&[Vec3]>, g: &mut [Vec3]) -> Eval {
     let model = p.model;
     let inv_h2 = 1.0 / (p.h * p.h);
-    let (mut inertia, mut work, mut work_abs) = (0.0, 0.0, 0.0);
+    let inv_h = 1.0 / p.h;
+    let (mut inertia, mut work, mut work_abs, mut gnorm2, mut scale2) = (0.0, 0.0, 0.0, 0.0, 0.0);
     for (fi, &i) in model.free_nodes.iter().enumerate() {
         let m = model.mass[i];
         let du = x[i] - p.x_n[i];
@@ -153,9 +158,11 @@ fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f_el: &[
         if let Some(fv) = f_visc {
             gi -= fv[i];
         }
+        gnorm2 += gi.norm_squared();
+        scale2 += fa.norm_squared() + (m * inv_h * p.v_n[i]).norm_squared();
         g[fi] = gi;
     }
-    Eval { phi: inertia + w + d - work, w, magnitude: inertia + w + d + work_abs, inverted }
+    Eval { phi: inertia + w + d - work, w, magnitude: inertia + w + d + work_abs, inverted, gnorm2, scale2 }
 }
 
 /// `Phi` at the start of the step (`x = x_n`, where the dissipation and its force vanish), into
@@ -179,18 +186,14 @@ pub(crate) fn store_end(pw: &mut PotentialWorkspace, x: &[Vec3], e: &Eval) {
     pw.cache_valid = true;
 }
 
-/// The force scale of the convergence test \[N\]: the L2 norm over the free nodes of the applied
-/// forces and of the momenta over `h`, so that the relative gradient measures the error against
-/// the forces that drive the step, whether a load is held, ramped or released. (The elastic
-/// forces are left out: under a strong press a node's internal forces can far exceed the load
-/// they balance, which would loosen the test exactly where the law is most nonlinear.)
-pub(crate) fn force_scale(p: &StepProblem) -> f64 {
-    let mut s = 0.0;
-    for &i in &p.model.free_nodes {
-        let m = p.model.mass[i];
-        s += (p.f_ext[i] + m * p.model.gravity).norm_squared() + (m / p.h * p.v_n[i]).norm_squared();
-    }
-    s.sqrt()
+/// The force scale of the convergence test \[N\], [`Eval::scale2`]'s root: the L2 norm over the
+/// free nodes of the applied forces and of the momenta over `h`, so that the relative gradient
+/// measures the error against the forces that drive the step, whether a load is held, ramped or
+/// released. (The elastic forces are left out: under a strong press a node's internal forces can
+/// far exceed the load they balance, which would loosen the test exactly where the law is most
+/// nonlinear.) It depends only on the step's data, not on the point evaluated.
+pub(crate) fn force_scale(e: &Eval) -> f64 {
+    e.scale2.sqrt()
 }
 
 /// Dot product of two free-node vectors.

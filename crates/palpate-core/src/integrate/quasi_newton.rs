@@ -219,11 +219,11 @@ pub(super) fn step(
 
     let (mut cur, fresh) = potential::evaluate_start(&p, &mut ws.potential);
     let phi0 = cur.phi;
-    let scale = potential::force_scale(&p);
+    let scale = potential::force_scale(&cur);
     let target = tolerance * scale;
     lb.clear();
     let (mut iterations, mut solves, mut evaluations) = (0, 0, fresh as usize);
-    let mut gnorm = dot(&ws.potential.g, &ws.potential.g).sqrt();
+    let mut gnorm = cur.gnorm2.sqrt();
     let free_body = model.free_nodes.len() == model.n_nodes();
     loop {
         let g = std::mem::take(&mut ws.potential.g);
@@ -249,14 +249,14 @@ pub(super) fn step(
         let Some((e, alpha)) = potential::line_search(&p, &mut ws.potential, &mut state.x, &mut x_trial, &lb.d, &cur, gd, &mut evaluations) else {
             break;
         };
-        // After the line search the current gradient is the new one and g_trial the old.
-        lb.push(alpha, &ws.potential.g, &ws.potential.g_trial);
         cur = e;
         iterations += 1;
-        gnorm = dot(&ws.potential.g, &ws.potential.g).sqrt();
+        gnorm = cur.gnorm2.sqrt();
         if gnorm <= target || iterations >= max_iterations {
             break;
         }
+        // After the line search the current gradient is the new one and g_trial the old.
+        lb.push(alpha, &ws.potential.g, &ws.potential.g_trial);
     }
     let inv_h = 1.0 / h;
     for &i in &model.free_nodes {
