@@ -20,6 +20,8 @@
 //!     the step's displacement), undamped and damped; and the quasi-Newton step with no history
 //!     and one iteration is the rest-linearised step (the documented "first iteration = the
 //!     linearised step") to round-off.
+//! (d) Known issue, pinned: with no load, a body at rest makes the minimising integrators run to
+//!     their limits (all line-search trials, or the iteration cap) every step.
 //!
 //! What a wrong implementation would do: a gradient missing a term of `Phi` (gravity, the work
 //! of `f_ext`, the dissipation, the `h v_n` of the inertia) or with the wrong factor (`1/h`
@@ -458,4 +460,87 @@ fn first_quasi_newton_iteration_is_the_linearised_step() {
         assert!(dx <= 1e-12 * du, "{what}: first quasi-Newton iteration differs from the linearised step by {:e} of the step", dx / du);
         assert!(dv <= 1e-12 * vmax, "{what}: velocities differ by {:e}", dv / vmax);
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// (d) Known issue of the minimising integrators (characterisation: pins measured behaviour; when
+// it is fixed this test fails, and should become a strict bound on the cost of a step at rest)
+// ---------------------------------------------------------------------------------------------
+
+/// The convergence test `|grad Phi| <= tolerance * force_scale` (`potential.rs`) has no absolute
+/// floor, and `force_scale` (the applied forces and the momenta over `h`) vanishes when a body
+/// with no load comes to rest, so the target falls below the round-off of the gradient:
+/// * untouched at rest (no load, no gravity; 180-tet wall, dt = 1 ms): the quasi-Newton steps
+///   chase round-off (|u| ~1e-18 m) and are all reported unconverged; force evaluations in the
+///   first 20 steps: 14, 14, 15, 20, 29, 178, 75, 32, 22 (x5), then 11 per step for good (every
+///   line-search trial fails: 10 shortenings, 0 iterations) instead of the 1 a step at small
+///   deformation costs. The same once a released body has come to rest (measured on the default
+///   wall, 0.2 N released, dt = 4 ms: 11 evaluations per step from ~1.2 s after the release for
+///   both quasi-Newton and Newton; Newton ran 30 iterations and 234 evaluations in one step of the
+///   transition at |v| ~ 5e-11 m/s).
+///
+/// * at rest in a deformed self-equilibrated state: St. Venant-Kirchhoff keeps a dent with inverted
+///   tets after a 1 N point press on the default truncated wall (E = 30 kPa, nu = 0.45; Newton
+///   settles on the same dent, 4.34 mm), where the internal forces are large and balanced: every
+///   quasi-Newton step runs its cap of 25 iterations (Newton: 30), residual ~1e2..1e4, unconverged.
+///
+/// For a haptic loop the cost of a step at rest is then 11x to 25x (at worst 178x) the cost of a
+/// step at small deformation.
+#[test]
+fn known_issue_steps_at_rest_without_load_run_to_the_limits() {
+    // (i) Untouched at rest.
+    let model = small_wall(material(3.0e4, 0.4, 1000.0, 0.0, 0.0), Integrator::quasi_newton(), Vec3::zeros());
+    let mut s = State::rest(&model);
+    let mut ws = Workspace::new(&model);
+    let mut reports = vec![];
+    for _ in 0..20 {
+        reports.push(step(&model, &mut s, &mut ws, 1e-3).unwrap());
+    }
+    let last = reports[19];
+    let evals: Vec<usize> = reports.iter().map(|r| r.evaluations).collect();
+    println!("untouched at rest, quasi-Newton: evaluations per step {evals:?}; last {last:?}; max|u| {:.1e} m", max_norm(&s.displacements(&model)));
+    assert!(
+        last.evaluations >= 11 && !last.converged,
+        "a step at rest without load now costs {} evaluations (converged {}): the known issue is fixed, update this test",
+        last.evaluations,
+        last.converged
+    );
+
+    // (ii) A dent after a 1 N point press: ramp 20 steps, hold 60, release 420, dt = 4 ms.
+    let p = TruncatedEllipsoidWall::default();
+    let mesh = truncated_ellipsoid_wall(&p);
+    let fixed = base_nodes(&mesh, p.z_cut, 1e-9);
+    let model = ModelBuilder::new(mesh, material(3.0e4, 0.45, 1000.0, 0.0, 0.0)).fixed_nodes(fixed).integrator(Integrator::quasi_newton()).build().unwrap();
+    let o = protocol::OUTER;
+    let px = o[0] * (1.0 - (protocol::PROBE_Z / o[2]).powi(2)).sqrt();
+    let probe = Vec3::new(px, 0.0, protocol::PROBE_Z);
+    let normal = -Vec3::new(probe.x / o[0].powi(2), 0.0, probe.z / o[2].powi(2)).normalize();
+    let probe = probe * protocol::SCALE;
+    let pts = model.mesh().points();
+    let level = |x: &Vec3| ((x.x / p.outer[0]).powi(2) + (x.y / p.outer[1]).powi(2) + (x.z / p.outer[2]).powi(2)).sqrt();
+    let node = (0..model.n_nodes())
+        .filter(|&i| (level(&pts[i]) - 1.0).abs() < 1e-6)
+        .min_by(|&a, &b| (pts[a] - probe).norm().total_cmp(&(pts[b] - probe).norm()))
+        .unwrap();
+    let mut s = State::rest(&model);
+    let mut ws = Workspace::new(&model);
+    let mut tail = vec![];
+    for k in 0..500 {
+        let r = if k < 20 { (k + 1) as f64 / 20.0 } else if k < 80 { 1.0 } else { 0.0 };
+        s.f_ext[node] = normal * r;
+        let rep = step(&model, &mut s, &mut ws, 4e-3).unwrap();
+        if k >= 480 {
+            tail.push(rep);
+        }
+    }
+    let capped = tail.iter().filter(|r| r.iterations == Integrator::QUASI_NEWTON_MAX_ITERATIONS && !r.converged).count();
+    println!(
+        "dent after a released 1 N press, last 20 steps: {capped} at the cap of {}, last {:?}; max|u| {:.2e} m, max|v| {:.1e} m/s",
+        Integrator::QUASI_NEWTON_MAX_ITERATIONS,
+        tail[19],
+        max_norm(&s.displacements(&model)),
+        max_norm(&s.v)
+    );
+    assert!(tail[19].inverted > 0, "no dent left after the release: the scenario changed ({:?})", tail[19]);
+    assert!(capped >= 15, "only {capped} of the last 20 steps at rest ran to the cap: the known issue is fixed, update this test");
 }
