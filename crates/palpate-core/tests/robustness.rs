@@ -105,6 +105,55 @@ fn step_allocates_nothing_after_the_first_step() {
     }
 }
 
+/// The loads above are gentle (0.01 N): the minimising integrators take one iteration per step
+/// and their line search accepts the first trial, so the L-BFGS two-loop, the curvature-pair ring,
+/// the line search's shortened trials and Newton's CG iterations are not all exercised. Here a
+/// 2 N press and release on the apex of the small wall at dt = 4 ms (max |u| ~8 cm, every tet
+/// inverted at some point) makes them run; the test checks that the window did contain
+/// multi-iteration steps and rejected line-search trials (else it would pass vacuously), and that
+/// nothing was allocated. A `Vec` built on any of those paths (e.g. a fresh direction buffer per
+/// iteration, a `collect` in the line search, a growing history) makes it fail.
+#[test]
+fn step_allocates_nothing_under_a_firm_press() {
+    let schemes = [
+        ("BE quasi-Newton (default)", Integrator::quasi_newton()),
+        ("BE Newton (default)", Integrator::newton()),
+        ("semi-implicit, stable filter", Integrator::SemiImplicit { filter: palpate_core::integrate::Filter::Stable }),
+    ];
+    for (name, integ) in schemes {
+        let model = model(integ);
+        let mut s = State::rest(&model);
+        let mut ws = Workspace::new(&model);
+        let top = (0..model.n_nodes()).max_by(|&a, &b| model.mesh().points()[a].z.total_cmp(&model.mesh().points()[b].z)).unwrap();
+        step(&model, &mut s, &mut ws, 1e-3).unwrap(); // warm-up
+        let before = allocations();
+        let (mut max_iterations, mut rejected_trials, mut max_inverted) = (0, 0, 0);
+        for k in 0..100 {
+            // 2 N pressed for 10 steps, released for 10, swinging sideways, at dt = 4 ms with 2 ms
+            // every 10th step (refactorisation): at dt = 1 ms the full L-BFGS step is nearly always
+            // accepted at once; at 4 ms the rest Hessian misses more curvature and trials get cut.
+            let r = if (k / 10) % 2 == 0 { 1.0 } else { 0.0 };
+            s.f_ext[top] = Vec3::new(0.8 * (k as f64 * 0.15).sin(), 0.3, -1.8).normalize() * (2.0 * r);
+            let dt = if k % 10 == 5 { 2e-3 } else { 4e-3 };
+            let rep = step(&model, &mut s, &mut ws, dt).unwrap_or_else(|e| panic!("{name}: step {k}: {e}"));
+            max_iterations = max_iterations.max(rep.iterations);
+            // One evaluation per accepted trial, plus the start if not cached: more means rejected trials.
+            rejected_trials += rep.evaluations.saturating_sub(rep.iterations + 1);
+            max_inverted = max_inverted.max(rep.inverted);
+        }
+        let n = allocations() - before;
+        println!(
+            "{name}: {n} allocations in 100 steps under 2 N (max iterations {max_iterations}, rejected line-search trials >= {rejected_trials}, max inverted {max_inverted}, max|u| {:.2e} m)",
+            max_norm(&s.displacements(&model))
+        );
+        assert_eq!(n, 0, "{name}: step allocated {n} times in 100 steps under a 2 N press");
+        if !matches!(integ, Integrator::SemiImplicit { .. }) {
+            assert!(max_iterations >= 3, "{name}: at most {max_iterations} iterations per step: the press does not exercise the iterations");
+            assert!(rejected_trials > 0, "{name}: no rejected line-search trial: the line search's shortening is not exercised");
+        }
+    }
+}
+
 #[test]
 fn allocation_counter_works() {
     // Guard against a vacuous pass of the test above.
