@@ -294,7 +294,10 @@ fn press(case: &protocol::Case, mat: Material, integ: Integrator, peak: f64, ste
             (p0, p1, m0 + m1)
         };
         let rise = phi1 - phi0;
-        let tol = 1e-12 * scale.abs();
+        // Relative round-off of Phi's terms, and an absolute floor far below any physical change
+        // (1 pN over 1 pm): at rest without load the one iteration a step always takes moves the
+        // nodes by ~1e-18 m within the gradient's round-off, changing Phi by ~1e-33 J either way.
+        let tol = 1e-12 * scale.abs() + 1e-24;
         sum.worst_rise = sum.worst_rise.max(rise / scale);
         if strict {
             assert!(rise <= tol, "{integ:?}, {peak} N, step {k} (t = {:.3} s): Phi rose by {rise:e} J (scale {scale:e} J), report {rep:?}", s.t);
@@ -463,13 +466,13 @@ fn first_quasi_newton_iteration_is_the_linearised_step() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// (d) Known issue of the minimising integrators (characterisation: pins measured behaviour; when
-// it is fixed this test fails, and should become a strict bound on the cost of a step at rest)
+// (d) The cost of a step at rest (a regression test of a defect this suite found)
 // ---------------------------------------------------------------------------------------------
 
-/// The convergence test `|grad Phi| <= tolerance * force_scale` (`potential.rs`) has no absolute
-/// floor, and `force_scale` (the applied forces and the momenta over `h`) vanishes when a body
-/// with no load comes to rest, so the target falls below the round-off of the gradient:
+/// Found by this suite, now fixed: the convergence test `|grad Phi| <= tolerance * force_scale`
+/// had no absolute floor, and `force_scale` (the applied forces and the momenta over `h`)
+/// vanishes when a body with no load comes to rest, so the target fell below the round-off of the
+/// gradient. Measured before the fix:
 /// * untouched at rest (no load, no gravity; 180-tet wall, dt = 1 ms): the quasi-Newton steps
 ///   chase round-off (|u| ~1e-18 m) and are all reported unconverged; force evaluations in the
 ///   first 20 steps: 14, 14, 15, 20, 29, 178, 75, 32, 22 (x5), then 11 per step for good (every
@@ -484,10 +487,14 @@ fn first_quasi_newton_iteration_is_the_linearised_step() {
 ///   settles on the same dent, 4.34 mm), where the internal forces are large and balanced: every
 ///   quasi-Newton step runs its cap of 25 iterations (Newton: 30), residual ~1e2..1e4, unconverged.
 ///
-/// For a haptic loop the cost of a step at rest is then 11x to 25x (at worst 178x) the cost of a
-/// step at small deformation.
+/// For a haptic loop the cost of a step at rest was then 11x to 25x (at worst 178x) the cost of a
+/// step at small deformation. The target now has a floor at the gradient's round-off level
+/// (`Eval::floor`: eps times the element forces that cancel in it, and the positions' round-off),
+/// and a step whose start gradient is below it accepts its one iteration within that noise.
+/// The test asserts the cost: at most 2 force evaluations a step at rest, converged, and no step
+/// of the dent at the iteration cap.
 #[test]
-fn known_issue_steps_at_rest_without_load_run_to_the_limits() {
+fn steps_at_rest_cost_one_iteration() {
     // (i) Untouched at rest.
     let model = small_wall(material(3.0e4, 0.4, 1000.0, 0.0, 0.0), Integrator::quasi_newton(), Vec3::zeros());
     let mut s = State::rest(&model);
@@ -499,12 +506,9 @@ fn known_issue_steps_at_rest_without_load_run_to_the_limits() {
     let last = reports[19];
     let evals: Vec<usize> = reports.iter().map(|r| r.evaluations).collect();
     println!("untouched at rest, quasi-Newton: evaluations per step {evals:?}; last {last:?}; max|u| {:.1e} m", max_norm(&s.displacements(&model)));
-    assert!(
-        last.evaluations >= 11 && !last.converged,
-        "a step at rest without load now costs {} evaluations (converged {}): the known issue is fixed, update this test",
-        last.evaluations,
-        last.converged
-    );
+    for (k, r) in reports.iter().enumerate().skip(1) {
+        assert!(r.evaluations <= 2 && r.converged, "step {k} at rest: {r:?}");
+    }
 
     // (ii) A dent after a 1 N point press: ramp 20 steps, hold 60, release 420, dt = 4 ms.
     let p = TruncatedEllipsoidWall::default();
@@ -542,5 +546,6 @@ fn known_issue_steps_at_rest_without_load_run_to_the_limits() {
         max_norm(&s.v)
     );
     assert!(tail[19].inverted > 0, "no dent left after the release: the scenario changed ({:?})", tail[19]);
-    assert!(capped >= 15, "only {capped} of the last 20 steps at rest ran to the cap: the known issue is fixed, update this test");
+    let worst = tail.iter().map(|r| r.evaluations).max().unwrap();
+    assert!(capped == 0 && worst <= 3, "{capped} of the last 20 steps at rest ran to the cap, worst {worst} evaluations");
 }

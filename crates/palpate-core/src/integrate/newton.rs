@@ -148,7 +148,7 @@ pub(super) fn step(
     let (mut cur, fresh) = potential::evaluate_start(&p, &mut ws.potential);
     let phi0 = cur.phi;
     let scale = potential::force_scale(&cur);
-    let target = tolerance * scale;
+    let mut target = (tolerance * scale).max(cur.floor);
     let (mut iterations, mut solves, mut evaluations) = (0, 0, fresh as usize);
     let mut gnorm = cur.gnorm2.sqrt();
     while iterations < max_iterations && (iterations == 0 || gnorm > target) {
@@ -169,6 +169,7 @@ pub(super) fn step(
         cur = e;
         iterations += 1;
         gnorm = cur.gnorm2.sqrt();
+        target = (tolerance * scale).max(cur.floor);
     }
     let inv_h = 1.0 / h;
     for &i in &model.free_nodes {

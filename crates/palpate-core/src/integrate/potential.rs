@@ -25,6 +25,8 @@ use crate::fem::{tet4, viscous};
 use crate::math::Vec3;
 use crate::scene::Model;
 
+/// Multiple of `eps` times the magnitude of the gradient's terms taken as its round-off level.
+const ROUND_OFF_FACTOR: f64 = 64.0;
 /// Armijo's sufficient-decrease constant.
 const ARMIJO_C1: f64 = 1e-4;
 /// Shortened trials before the line search gives up (the step is then below `1e-10`).
@@ -54,6 +56,12 @@ pub(crate) struct Eval {
     pub gnorm2: f64,
     /// The squared force scale of the step (`force_scale`), computed in the same pass \[N^2\].
     pub scale2: f64,
+    /// Sum over elements and their nodes of the squared element forces \[N^2\].
+    pub elastic_f2: f64,
+    /// The round-off level of `|grad Phi|` \[N\]: a gradient below it cannot be resolved, and the
+    /// iterations stop there whatever the tolerance (a body at rest without load, or a dent held
+    /// by balanced internal stresses, has a force scale near zero).
+    pub floor: f64,
 }
 
 /// Buffers of the potential's evaluations (allocated once per workspace), with a cache of the
@@ -74,6 +82,7 @@ pub(crate) struct PotentialWorkspace {
     /// inverted count, and whether they are valid.
     cache_x: Vec<Vec3>,
     cache_w: f64,
+    cache_f2: f64,
     cache_inverted: usize,
     cache_valid: bool,
 }
@@ -90,6 +99,7 @@ impl PotentialWorkspace {
             g_trial: z(nf),
             cache_x: z(n),
             cache_w: 0.0,
+            cache_f2: 0.0,
             cache_inverted: 0,
             cache_valid: false,
         }
@@ -115,12 +125,14 @@ fn evaluate(p: &StepProblem, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3],
     f_el.iter_mut().for_each(|f| *f = Vec3::zeros());
     let mut w = 0.0;
     let mut inverted = 0;
+    let mut f2 = 0.0;
     for (t, r) in model.mesh.tets().iter().zip(&model.rest) {
         let (e, f, det) = tet4::elastic_energy_forces(&t.map(|i| x[i]), r, &model.material);
         w += e;
         inverted += (det <= 0.0) as usize;
         for a in 0..4 {
             f_el[t[a]] += f[a];
+            f2 += f[a].norm_squared();
         }
     }
     let damped = !model.material.is_undamped();
@@ -135,16 +147,16 @@ fn evaluate(p: &StepProblem, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3],
             }
         }
     }
-    finish(p, x, w, d, inverted, f_el, damped.then_some(&*f_visc), g)
+    finish(p, x, w, d, inverted, f2, f_el, damped.then_some(&*f_visc), g)
 }
 
 /// The nodal terms of `Phi` and its gradient, given the element terms `W` and `D`.
 #[allow(clippy::too_many_arguments)]
-fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f_el: &[Vec3], f_visc: Option<&[Vec3]>, g: &mut [Vec3]) -> Eval {
+fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64, f_el: &[Vec3], f_visc: Option<&[Vec3]>, g: &mut [Vec3]) -> Eval {
     let model = p.model;
     let inv_h2 = 1.0 / (p.h * p.h);
     let inv_h = 1.0 / p.h;
-    let (mut inertia, mut work, mut work_abs, mut gnorm2, mut scale2) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let (mut inertia, mut work, mut work_abs, mut gnorm2, mut scale2, mut noise2) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     for (fi, &i) in model.free_nodes.iter().enumerate() {
         let m = model.mass[i];
         let du = x[i] - p.x_n[i];
@@ -160,9 +172,14 @@ fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f_el: &[
         }
         gnorm2 += gi.norm_squared();
         scale2 += fa.norm_squared() + (m * inv_h * p.v_n[i]).norm_squared();
+        noise2 += (m * inv_h2) * (m * inv_h2) * x[i].norm_squared();
         g[fi] = gi;
     }
-    Eval { phi: inertia + w + d - work, w, magnitude: inertia + w + d + work_abs, inverted, gnorm2, scale2 }
+    // Round-off of the gradient: eps times the element forces summed into it (which cancel at an
+    // equilibrium, however large they are), the strain error of positions far from the origin,
+    // and the inertial term's positions.
+    let floor = ROUND_OFF_FACTOR * f64::EPSILON * (f2 + noise2 + model.position_noise2).sqrt();
+    Eval { phi: inertia + w + d - work, w, magnitude: inertia + w + d + work_abs, inverted, gnorm2, scale2, elastic_f2: f2, floor }
 }
 
 /// `Phi` at the start of the step (`x = x_n`, where the dissipation and its force vanish), into
@@ -170,10 +187,10 @@ fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f_el: &[
 /// point they were computed at.
 /// Returns the evaluation and whether it was computed afresh (no cache).
 pub(crate) fn evaluate_start(p: &StepProblem, pw: &mut PotentialWorkspace) -> (Eval, bool) {
-    let PotentialWorkspace { f_el, f_visc, g, cache_x, cache_w, cache_inverted, cache_valid, .. } = pw;
+    let PotentialWorkspace { f_el, f_visc, g, cache_x, cache_w, cache_f2, cache_inverted, cache_valid, .. } = pw;
     if *cache_valid && cache_x.as_slice() == p.x_n {
         f_visc.iter_mut().for_each(|f| *f = Vec3::zeros());
-        return (finish(p, p.x_n, *cache_w, 0.0, *cache_inverted, f_el, None, g), false);
+        return (finish(p, p.x_n, *cache_w, 0.0, *cache_inverted, *cache_f2, f_el, None, g), false);
     }
     (evaluate(p, p.x_n, f_el, f_visc, g), true)
 }
@@ -182,6 +199,7 @@ pub(crate) fn evaluate_start(p: &StepProblem, pw: &mut PotentialWorkspace) -> (E
 pub(crate) fn store_end(pw: &mut PotentialWorkspace, x: &[Vec3], e: &Eval) {
     pw.cache_x.copy_from_slice(x);
     pw.cache_w = e.w;
+    pw.cache_f2 = e.elastic_f2;
     pw.cache_inverted = e.inverted;
     pw.cache_valid = true;
 }
@@ -224,6 +242,10 @@ pub(crate) fn line_search(
 ) -> Option<(Eval, f64)> {
     let model = p.model;
     let round_off = 64.0 * f64::EPSILON * cur.magnitude;
+    // At a point whose gradient is below its round-off level the potential's changes along `d`
+    // are noise of about `floor |d|` per unit step: such a step (the one iteration a step always
+    // takes, at rest) is accepted within that noise rather than shortened until it vanishes.
+    let noise_per_alpha = if cur.gnorm2 <= cur.floor * cur.floor { cur.floor * dot(d, d).sqrt() } else { 0.0 };
     let mut alpha = 1.0;
     for _ in 0..=MAX_TRIALS {
         for (fi, &i) in model.free_nodes.iter().enumerate() {
@@ -231,7 +253,7 @@ pub(crate) fn line_search(
         }
         let e = evaluate(p, x_trial, &mut pw.f_el_trial, &mut pw.f_visc_trial, &mut pw.g_trial);
         *evaluations += 1;
-        if e.phi.is_finite() && e.phi <= cur.phi + ARMIJO_C1 * alpha * gd + round_off {
+        if e.phi.is_finite() && e.phi <= cur.phi + ARMIJO_C1 * alpha * gd + round_off + noise_per_alpha * alpha {
             for &i in &model.free_nodes {
                 x[i] = x_trial[i];
             }

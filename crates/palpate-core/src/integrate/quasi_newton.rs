@@ -220,7 +220,7 @@ pub(super) fn step(
     let (mut cur, fresh) = potential::evaluate_start(&p, &mut ws.potential);
     let phi0 = cur.phi;
     let scale = potential::force_scale(&cur);
-    let target = tolerance * scale;
+    let mut target = (tolerance * scale).max(cur.floor);
     lb.clear();
     let (mut iterations, mut solves, mut evaluations) = (0, 0, fresh as usize);
     let mut gnorm = cur.gnorm2.sqrt();
@@ -252,6 +252,7 @@ pub(super) fn step(
         cur = e;
         iterations += 1;
         gnorm = cur.gnorm2.sqrt();
+        target = (tolerance * scale).max(cur.floor);
         if gnorm <= target || iterations >= max_iterations {
             break;
         }

@@ -26,10 +26,11 @@
 //!
 //! **The stable filter** ([`crate::integrate::Filter::Stable`]). Scaling the filter blocks by
 //! `alpha >= lambda_max(blockdiag(K)^-1 K) / 2` makes the linearised scheme stable at any `dt`:
-//! for `v+ = (M + alpha h^2 K_d)^-1 (M v - h K x)`, `x+ = x + h v+` the amplification matrix has
-//! determinant below 1 and trace above `-(1 + det)` exactly when `h^2 K <= 2 (M + alpha h^2 K_d)`,
-//! which `2 alpha K_d >= K` guarantees for every `h` (and likewise `alpha >= lambda_max(D_d^-1 D)/2`
-//! for the viscous blocks). `alpha` is computed once, when the model is compiled, by power
+//! for `v+ = (M + alpha h^2 K_d)^-1 (M v - h K x)`, `x+ = x + h v+` (one mode: `m`, `k`, `k_d`) the
+//! amplification matrix has determinant `m / (m + alpha h^2 k_d) < 1` and trace above `-(1 + det)`
+//! exactly when `h^2 k <= 4 m + 2 alpha h^2 k_d`, which `2 alpha K_d >= K` guarantees for every `h`
+//! (and likewise `alpha >= lambda_max(D_d^-1 D)/2` for the viscous blocks; the bound is sufficient,
+//! not necessary: at a given `h` the `4 M` term allows a smaller `alpha`). `alpha` is computed once, when the model is compiled, by power
 //! iteration ([`stable_filter_factor`]); the price is more numerical damping.
 //!
 //! Backward Euler has none of these defects; the semi-implicit scheme is kept as the paper's reference.

@@ -169,6 +169,11 @@ impl ModelBuilder {
             ap.push(ai.len());
         }
         let ldl = Ldl::symbolic(nf, ap, ai);
+        // A position x carries a round-off of eps |x|, hence a strain error of eps |x| |Dm^-1| and
+        // an element force error of V (lambda + 2 mu) |Dm^-1|^2 eps |x| (the static solve's floor).
+        let xmax = pts.iter().map(|p| p.norm()).fold(0.0, f64::max);
+        let modulus = material.lambda() + 2.0 * material.mu();
+        let position_noise2: f64 = rest.iter().map(|r| (r.volume * modulus * r.dm_inv.norm_squared() * xmax).powi(2)).sum();
         let filter_alpha = match integrator {
             Integrator::SemiImplicit { filter: Filter::Stable } => {
                 crate::integrate::stable_filter_factor(&pattern, &k0, &d0, !material.is_undamped())
@@ -194,6 +199,7 @@ impl ModelBuilder {
             node_pos,
             order,
             refresh_cost: crate::integrate::ITERATIONS_PER_FACTOR_RATIO * ldl.factor_to_solve_ratio(),
+            position_noise2,
             entry_to_a,
             ldl,
             filter_alpha,
@@ -230,6 +236,9 @@ pub struct Model {
     pub(crate) entry_to_a: Vec<usize>,
     /// Symbolic factorisation (cloned into each workspace for the numeric factors).
     pub(crate) ldl: Ldl,
+    /// Squared force error \[N^2\] (over eps^2) from the round-off of positions far from the origin,
+    /// summed over elements: `(V (lambda + 2 mu) |Dm^-1|^2 |x|max)^2` (integrate/potential.rs).
+    pub(crate) position_noise2: f64,
     /// A factorisation's cost in quasi-Newton iterations (when to refresh its initial Hessian).
     pub(crate) refresh_cost: f64,
     /// Factor of the semi-implicit filter blocks (1: the paper's; see `integrate::Filter`).
