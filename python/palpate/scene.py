@@ -39,7 +39,7 @@ file, and environment variables in it are expanded: ``$VAR``, ``${VAR}``, and ``
     type = "backward_euler"            # "semi_implicit", "backward_euler" (default) or "newton"
     # solver = "quasi_newton"          # backward_euler: "quasi_newton" (default), "newton", "linearised"
     # max_iterations = 25              # quasi_newton / newton: iteration cap per step
-    # tolerance = 1e-2                 # quasi_newton / newton: relative gradient tolerance
+    # tolerance = 2e-2                 # quasi_newton / newton: relative gradient tolerance
     # history = 5                      # quasi_newton: L-BFGS pairs
     # filter = "paper"                 # semi_implicit: "paper" (default) or "stable"
 
@@ -326,7 +326,7 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
         if "max_iterations" in it:
             kw["max_iterations"] = c.number(it, "integrator", "max_iterations", 1, positive=True, integer=True)
         if "tolerance" in it:
-            tol = c.number(it, "integrator", "tolerance", 1e-2, positive=True)
+            tol = c.number(it, "integrator", "tolerance", 2e-2, positive=True)
             if not tol < 1:
                 raise c.err("integrator.tolerance", f"must lie in (0, 1), got {tol!r}")
             kw["tolerance"] = float(tol)

@@ -78,7 +78,7 @@ impl PySemiImplicit {
 /// ``max_iterations`` caps the iterations of a step (quasi-Newton default 25, Newton 30; a capped
 /// step still lowers the incremental potential, so it stays stable); the iterations stop when the
 /// gradient of the incremental potential falls under ``tolerance`` times the force scale (the
-/// applied forces and the momenta over dt; quasi-Newton default 1e-2, Newton 1e-8); ``history``
+/// applied forces and the momenta over dt; quasi-Newton default 2e-2, Newton 1e-8); ``history``
 /// is the number of L-BFGS pairs (quasi-Newton only, default 5). ``None`` takes the default.
 /// The rest-linearised solver takes none of them.
 #[pyclass(module = "palpate", name = "BackwardEuler", frozen)]

@@ -63,7 +63,7 @@ def test_integrators():
     be = palpate.BackwardEuler()
     # The defaults are the core's (one definition: Integrator::QUASI_NEWTON_* / NEWTON_*).
     assert be.solver == palpate.Solver.QUASI_NEWTON
-    assert (be.max_iterations, be.tolerance, be.history) == (25, 1e-2, 5)
+    assert (be.max_iterations, be.tolerance, be.history) == (25, 2e-2, 5)
     nt = palpate.BackwardEuler(palpate.Solver.NEWTON)
     assert nt.solver == palpate.Solver.NEWTON and nt.max_iterations == 30 and nt.tolerance == 1e-8
     assert nt.history is None

@@ -29,7 +29,8 @@ fn bench_steps(c: &mut Criterion) {
     let mut group = c.benchmark_group("step_1ms");
     group.sample_size(20);
     for (name, case) in &cases {
-        let mut integrators = vec![("backward_euler_linear", Integrator::BackwardEulerLinear)];
+        let mut integrators =
+            vec![("quasi_newton", Integrator::quasi_newton()), ("backward_euler_linear", Integrator::BackwardEulerLinear)];
         // The semi-implicit scheme is unstable at 1 ms on the 48k-tet mesh (BENCHMARKS.md).
         if case.mesh.n_tets() < 20_000 {
             integrators.push(("semi_implicit", Integrator::semi_implicit()));
@@ -50,6 +51,33 @@ fn bench_steps(c: &mut Criterion) {
             }
             // Warm up into the loaded regime (and make the first-step factorisation).
             for _ in 0..50 {
+                step(&model, &mut state, &mut ws, protocol::DT).expect("stable");
+            }
+            group.bench_with_input(BenchmarkId::new(iname, name), &(), |b, _| {
+                b.iter(|| step(&model, &mut state, &mut ws, protocol::DT).expect("stable"))
+            });
+        }
+    }
+    group.finish();
+
+    // A firm press: 2 N on the same nodes, held (after the 0.1 s ramp and 0.4 s of hold), where
+    // the rest-linearised step blows up; the default integrator's steady cost there.
+    let mut group = c.benchmark_group("step_1ms_2N_hold");
+    group.sample_size(20);
+    for (name, case) in cases.iter().filter(|(n, _)| n == "lv_190" || n == "lv_1350") {
+        for (iname, integ) in [("quasi_newton", Integrator::quasi_newton()), ("backward_euler_newton", Integrator::newton())] {
+            let model = ModelBuilder::new(case.mesh.clone(), protocol::material())
+                .fixed_nodes(case.fixed.clone())
+                .integrator(integ)
+                .build()
+                .expect("model");
+            let mut state = State::rest(&model);
+            let mut ws = Workspace::new(&model);
+            for k in 0..500 {
+                let s = protocol::ramp((k + 1) as f64 * protocol::DT) * 2.0 / protocol::FORCE;
+                for &i in &case.loaded {
+                    state.f_ext[i] = case.f_node * s;
+                }
                 step(&model, &mut state, &mut ws, protocol::DT).expect("stable");
             }
             group.bench_with_input(BenchmarkId::new(iname, name), &(), |b, _| {

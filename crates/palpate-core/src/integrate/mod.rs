@@ -80,7 +80,7 @@ impl Integrator {
     /// Default iteration cap of the quasi-Newton integrator.
     pub const QUASI_NEWTON_MAX_ITERATIONS: usize = 25;
     /// Default relative gradient tolerance of the quasi-Newton integrator.
-    pub const QUASI_NEWTON_TOLERANCE: f64 = 1e-2;
+    pub const QUASI_NEWTON_TOLERANCE: f64 = 2e-2;
     /// Default L-BFGS history of the quasi-Newton integrator.
     pub const QUASI_NEWTON_HISTORY: usize = 5;
     /// Default iteration cap of the Newton integrator.

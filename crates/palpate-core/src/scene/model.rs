@@ -174,6 +174,7 @@ impl ModelBuilder {
         let xmax = pts.iter().map(|p| p.norm()).fold(0.0, f64::max);
         let modulus = material.lambda() + 2.0 * material.mu();
         let position_noise2: f64 = rest.iter().map(|r| (r.volume * modulus * r.dm_inv.norm_squared() * xmax).powi(2)).sum();
+        let tet_stiffness: Vec<f64> = rest.iter().map(|r| 2.0 * r.volume * modulus * r.dm_inv.norm_squared()).collect();
         let filter_alpha = match integrator {
             Integrator::SemiImplicit { filter: Filter::Stable } => {
                 crate::integrate::stable_filter_factor(&pattern, &k0, &d0, !material.is_undamped())
@@ -200,6 +201,7 @@ impl ModelBuilder {
             order,
             refresh_cost: crate::integrate::ITERATIONS_PER_FACTOR_RATIO * ldl.factor_to_solve_ratio(),
             position_noise2,
+            tet_stiffness,
             entry_to_a,
             ldl,
             filter_alpha,
@@ -239,6 +241,9 @@ pub struct Model {
     /// Squared force error \[N^2\] (over eps^2) from the round-off of positions far from the origin,
     /// summed over elements: `(V (lambda + 2 mu) |Dm^-1|^2 |x|max)^2` (integrate/potential.rs).
     pub(crate) position_noise2: f64,
+    /// Per tet, `2 V (lambda + 2 mu) |Dm^-1|^2` \[N/m\]: with its energy `W`, `2 W k` estimates the
+    /// squared magnitude of its nodal forces (for the gradient's round-off level).
+    pub(crate) tet_stiffness: Vec<f64>,
     /// A factorisation's cost in quasi-Newton iterations (when to refresh its initial Hessian).
     pub(crate) refresh_cost: f64,
     /// Factor of the semi-implicit filter blocks (1: the paper's; see `integrate::Filter`).
