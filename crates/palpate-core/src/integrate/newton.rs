@@ -5,7 +5,9 @@
 //! free pattern (the elastic law's exact Jacobian, `fem/tet4.rs`, and the dissipation's,
 //! `fem/viscous.rs`) and solves `H d = -grad Phi` by conjugate gradients preconditioned by the
 //! factorised rest matrix `H0` (the one the linearised and quasi-Newton steps use): no
-//! refactorisation, ever. Inexact Newton: the CG stops at a relative residual
+//! refactorisation per iteration (the preconditioner is refreshed at the deformed state by the
+//! quasi-Newton integrator's rule, `quasi_newton.rs`, when the CG iterations it saves pay for the
+//! factorisation). Inexact Newton: the CG stops at a relative residual
 //! `eta = min(0.5, sqrt(|g| / scale))` (Eisenstat and Walker 1996), which tightens as the
 //! iterations converge. Where St. Venant-Kirchhoff's tangent is indefinite (compression), the CG
 //! is truncated at the first direction of non-positive curvature (Steihaug 1983): its iterate so
@@ -151,13 +153,17 @@ pub(super) fn step(
     let mut target = (tolerance * scale).max(cur.floor);
     let (mut iterations, mut solves, mut evaluations) = (0, 0, fresh as usize);
     let mut gnorm = cur.gnorm2.sqrt();
+    let free_body = model.free_nodes.len() == model.n_nodes();
     while iterations < max_iterations && (iterations == 0 || gnorm > target) {
         let mut blocks = std::mem::take(&mut ws.k);
         assemble_hessian(&p, &state.x, &mut blocks);
         ws.k = blocks;
-        let eta = if scale > 0.0 { (gnorm / scale).sqrt().min(0.5) } else { 0.5 };
+        let eta = if scale > 0.0 { (gnorm / scale).min(0.25) } else { 0.25 };
         let g = std::mem::take(&mut ws.potential.g);
         solves += newton_direction(model, ws, &mut cg, &g, eta, h);
+        if free_body {
+            potential::exact_translation(model, &g, &mut cg.d, h);
+        }
         let gd = dot(&g, &cg.d);
         ws.potential.g = g;
         if !(gd < 0.0) {
@@ -176,6 +182,13 @@ pub(super) fn step(
         state.v[i] = (state.x[i] - x_n[i]) * inv_h;
     }
     potential::store_end(&mut ws.potential, &state.x, &cur);
+    // The preconditioner is refreshed by the quasi-Newton rule: the preconditioner applications
+    // beyond one per Newton iteration count as surplus, and once they have cost a factorisation
+    // the factor is redone with the definite tangent at the end state.
+    ws.excess_iterations = ws.excess_iterations.saturating_add(solves.saturating_sub(iterations.max(1)));
+    if solves >= 2 * iterations.max(1) && ws.excess_iterations as f64 >= model.refresh_cost {
+        super::quasi_newton::refresh_initial_hessian(model, ws, &state.x, dt)?;
+    }
     let report = StepReport {
         iterations,
         evaluations,

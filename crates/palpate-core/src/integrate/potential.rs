@@ -217,6 +217,22 @@ pub(crate) fn force_scale(e: &Eval) -> f64 {
     e.scale2.sqrt()
 }
 
+/// On a body with no fixed node, give the direction `d` `(n_free)` the exact rigid translation of
+/// backward Euler, `-h^2 sum(g) / sum(m)` (mass-weighted): for a translation the Hessian is exactly
+/// `M / h^2` (internal forces are translation invariant), so after the step the gradient sums to
+/// zero and linear momentum changes by exactly `h` times the applied forces, however inexactly
+/// the rest of the direction was solved (CG, L-BFGS).
+pub(crate) fn exact_translation(model: &Model, g: &[Vec3], d: &mut [Vec3], h: f64) {
+    let (mut md, mut sg, mut m) = (Vec3::zeros(), Vec3::zeros(), 0.0);
+    for (fi, &i) in model.free_nodes.iter().enumerate() {
+        md += model.mass[i] * d[fi];
+        sg += g[fi];
+        m += model.mass[i];
+    }
+    let shift = -(h * h) * sg / m - md / m;
+    d.iter_mut().for_each(|v| *v += shift);
+}
+
 /// Dot product of two free-node vectors.
 #[inline]
 pub(crate) fn dot(a: &[Vec3], b: &[Vec3]) -> f64 {

@@ -17,9 +17,10 @@
 //! * **Momentum.** The first iteration conserves linear momentum as the linearised step does
 //!   (`1^T K0 = 0`), which leaves a gradient summing to zero over the nodes of a free body; the
 //!   L-BFGS corrections of later iterations do not preserve that sum, so on a body with no fixed
-//!   node their mass-weighted translation is removed (it is orthogonal to the gradient, so the
-//!   direction stays a descent direction). Momentum then changes by exactly `dt` times the applied
-//!   forces, at any tolerance.
+//!   node every direction gets backward Euler's exact rigid translation
+//!   (`potential::exact_translation`; after the first iteration that removes the correction's
+//!   translation, which is orthogonal to the gradient). Momentum then changes by exactly `dt`
+//!   times the applied forces, at any tolerance.
 //! * **Refreshed initial Hessian.** Under a held press the rest matrix misses the stiffness of the
 //!   deformed state and every step needs several iterations. The iterations beyond the first are
 //!   counted since the last factorisation; once they add up to the cost of a factorisation (in
@@ -53,7 +54,7 @@ pub(crate) const ITERATIONS_PER_FACTOR_RATIO: f64 = 0.7;
 
 /// Refactorise `ws.ldl` with `M - dt D0 - dt^2 K~(x)`, `K~` the definite tangent approximation at
 /// `x`; on failure, the rest matrix again. Returns whether the refreshed matrix is in place.
-fn refresh_initial_hessian(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<bool, StepError> {
+pub(super) fn refresh_initial_hessian(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<bool, StepError> {
     let mut k = std::mem::take(&mut ws.k);
     k.iter_mut().for_each(|b| *b = Mat3::zeros());
     for ((t, r), tb) in model.mesh.tets().iter().zip(&model.rest).zip(&model.tet_blocks) {
@@ -186,17 +187,6 @@ fn direction(model: &Model, ws: &mut Workspace, lb: &mut Lbfgs, g: &[Vec3], h: f
     lb.d.iter_mut().for_each(|d| *d = -*d);
 }
 
-/// Subtract from `d` `(n_free)` its mass-weighted mean, a rigid translation (free bodies only).
-fn remove_translation(model: &Model, d: &mut [Vec3]) {
-    let (mut md, mut m) = (Vec3::zeros(), 0.0);
-    for (fi, &i) in model.free_nodes.iter().enumerate() {
-        md += model.mass[i] * d[fi];
-        m += model.mass[i];
-    }
-    let mean = md / m;
-    d.iter_mut().for_each(|v| *v -= mean);
-}
-
 pub(super) fn step(
     model: &Model,
     state: &mut State,
@@ -236,11 +226,9 @@ pub(super) fn step(
             solves += 1;
             gd = dot(&g, &lb.d);
         }
-        if free_body && iterations > 0 {
-            // Keep the momentum exact (see the module docs): after the first iteration the
-            // gradient sums to zero, so removing the direction's mass-weighted translation
-            // leaves g . d unchanged.
-            remove_translation(model, &mut lb.d);
+        if free_body {
+            // Keep the momentum exact (see the module docs).
+            potential::exact_translation(model, &g, &mut lb.d, h);
         }
         ws.potential.g = g;
         if !(gd < 0.0) {
