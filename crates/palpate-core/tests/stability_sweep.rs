@@ -24,9 +24,10 @@
 //! `sweep` to see it fail.)
 //!
 //! Runtime (release, this 2-core VM, the four meshes as four tests run by the default harness):
-//! measured 9.5-17.6 s for the file over four runs (lv_1350 9-17 s, the 1320-tet wall 8.5-15 s,
-//! lv_190 and the ellipsoid wall ~1 s each; the two large ones overlap when the VM gives the
-//! second core), all 140 steps per run kept on every mesh.
+//! measured 9.5-17.6 s for the file over four runs when written (lv_1350 9-17 s, the 1320-tet wall
+//! 8.5-15 s, lv_190 and the ellipsoid wall ~1 s each); 8.9 s with one test thread after the
+//! quasi-Newton integrator gained its refreshed initial Hessian and round-off floor (lv_1350 4.2 s,
+//! 1320-tet wall 4.2 s, lv_190 0.3 s, ellipsoid wall 0.2 s). All 140 steps per run kept on every mesh.
 //!
 //! Measured on this VM: no failure on any mesh; worst max |u| 0.10-0.12 m (E = 1 kPa, 5 N:
 //! the wall is pushed through), up to 25 iterations (the cap), 395-1201 unconverged steps of
