@@ -159,7 +159,7 @@ fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64,
     let model = p.model;
     let inv_h2 = 1.0 / (p.h * p.h);
     let inv_h = 1.0 / p.h;
-    let (mut inertia, mut work, mut work_abs, mut gnorm2, mut scale2, mut noise2) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let (mut inertia, mut work, mut work_abs, mut gnorm2, mut scale2) = (0.0, 0.0, 0.0, 0.0, 0.0);
     for (fi, &i) in model.free_nodes.iter().enumerate() {
         let m = model.mass[i];
         let du = x[i] - p.x_n[i];
@@ -175,12 +175,12 @@ fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64,
         }
         gnorm2 += gi.norm_squared();
         scale2 += fa.norm_squared() + (m * inv_h * p.v_n[i]).norm_squared();
-        noise2 += (m * inv_h2) * (m * inv_h2) * x[i].norm_squared();
         g[fi] = gi;
     }
     // Round-off of the gradient: eps times the element forces summed into it (which cancel at an
     // equilibrium, however large they are), the strain error of positions far from the origin,
-    // and the inertial term's positions.
+    // and the inertial term's positions (`sum m^2 |x|^2 / h^4`, at rest: a scale, not a value).
+    let noise2 = model.mass_position2 * inv_h2 * inv_h2;
     let floor = ROUND_OFF_FACTOR * f64::EPSILON * (f2 + noise2 + model.position_noise2).sqrt();
     Eval { phi: inertia + w + d - work, w, magnitude: inertia + w + d + work_abs, inverted, gnorm2, scale2, elastic_f2: f2, floor }
 }
@@ -192,7 +192,9 @@ fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64,
 pub(crate) fn evaluate_start(p: &StepProblem, pw: &mut PotentialWorkspace) -> (Eval, bool) {
     let PotentialWorkspace { f_el, f_visc, g, cache_x, cache_w, cache_f2, cache_inverted, cache_valid, .. } = pw;
     if *cache_valid && cache_x.as_slice() == p.x_n {
-        f_visc.iter_mut().for_each(|f| *f = Vec3::zeros());
+        if !p.model.material.is_undamped() {
+            f_visc.iter_mut().for_each(|f| *f = Vec3::zeros());
+        }
         return (finish(p, p.x_n, *cache_w, 0.0, *cache_inverted, *cache_f2, f_el, None, g), false);
     }
     (evaluate(p, p.x_n, f_el, f_visc, g), true)

@@ -161,6 +161,18 @@ fn apply_h0_inverse(model: &Model, ws: &mut Workspace, q: &[Vec3], out: &mut [Ve
 
 /// The L-BFGS direction `d = -H g` (two-loop recursion, Nocedal and Wright, Alg. 7.4) into `lb.d`.
 fn direction(model: &Model, ws: &mut Workspace, lb: &mut Lbfgs, g: &[Vec3], h: f64) {
+    if lb.len == 0 {
+        // No pairs: d = -H0^-1 g directly.
+        for (fi, &pos) in model.node_pos.iter().enumerate() {
+            ws.rhs[pos] = g[fi];
+        }
+        ws.ldl.solve_in_place(&mut ws.rhs);
+        let mh2 = -h * h;
+        for (fi, &pos) in model.node_pos.iter().enumerate() {
+            lb.d[fi] = mh2 * ws.rhs[pos];
+        }
+        return;
+    }
     lb.q.copy_from_slice(g);
     let hist = lb.history.max(1);
     for j in 0..lb.len {

@@ -174,6 +174,7 @@ impl ModelBuilder {
         let xmax = pts.iter().map(|p| p.norm()).fold(0.0, f64::max);
         let modulus = material.lambda() + 2.0 * material.mu();
         let position_noise2: f64 = rest.iter().map(|r| (r.volume * modulus * r.dm_inv.norm_squared() * xmax).powi(2)).sum();
+        let mass_position2: f64 = (0..n).filter(|&i| !is_fixed[i]).map(|i| mass[i] * mass[i] * pts[i].norm_squared()).sum();
         let tet_stiffness: Vec<f64> = rest.iter().map(|r| 2.0 * r.volume * modulus * r.dm_inv.norm_squared()).collect();
         let filter_alpha = match integrator {
             Integrator::SemiImplicit { filter: Filter::Stable } => {
@@ -202,6 +203,7 @@ impl ModelBuilder {
             refresh_cost: crate::integrate::ITERATIONS_PER_FACTOR_RATIO * ldl.factor_to_solve_ratio(),
             position_noise2,
             tet_stiffness,
+            mass_position2,
             entry_to_a,
             ldl,
             filter_alpha,
@@ -244,6 +246,9 @@ pub struct Model {
     /// Per tet, `2 V (lambda + 2 mu) |Dm^-1|^2` \[N/m\]: with its energy `W`, `2 W k` estimates the
     /// squared magnitude of its nodal forces (for the gradient's round-off level).
     pub(crate) tet_stiffness: Vec<f64>,
+    /// `sum m_i^2 |X_i|^2` over the free nodes \[kg^2 m^2\]: over `h^4`, the squared round-off
+    /// scale (over eps^2) of the incremental potential's inertial gradient.
+    pub(crate) mass_position2: f64,
     /// A factorisation's cost in quasi-Newton iterations (when to refresh its initial Hessian).
     pub(crate) refresh_cost: f64,
     /// Factor of the semi-implicit filter blocks (1: the paper's; see `integrate::Filter`).
