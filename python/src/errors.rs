@@ -4,10 +4,12 @@
 //! refuses is a `PalpateError`.
 //!
 //! Structured details ride along as attributes: `MeshError.tet` / `.node` (the offending tet or
-//! node, 0-based, or `None`), `StepError.node` / `.time`.
+//! node, 0-based, or `None`), `SurfaceError.triangle` / `.vertex`, `StepError.node` / `.time`.
+//! The whole tree is defined here, once (the other files only convert into it).
 
 use palpate_core::error as core;
-use pyo3::exceptions::{PyException, PyUserWarning};
+use palpate_core::mesh::SurfaceError as CoreSurfaceError;
+use pyo3::exceptions::{PyException, PyOSError, PyUserWarning, PyValueError};
 use pyo3::prelude::*;
 use pyo3::{create_exception, PyErr};
 
@@ -35,6 +37,20 @@ create_exception!(
      Attributes `node` and `time` [s] locate a non-finite value when known, else None."
 );
 create_exception!(palpate, MeshWarning, PyUserWarning, "Something in a mesh was repaired (e.g. inverted tets reoriented).");
+create_exception!(
+    palpate,
+    SurfaceError,
+    MeshError,
+    "A triangle surface (array or file) that cannot be used, or surfaces that do not nest. The message \
+     names the file, the triangle / vertex / edge and the reason; attributes `triangle` and `vertex` hold \
+     the offending 0-based index, or None. A subclass of MeshError."
+);
+create_exception!(
+    palpate,
+    ModelFileError,
+    PalpateError,
+    "A compiled-model file that cannot be read: not a palpate model, another format version, truncated or corrupted. The message names the file and the reason."
+);
 
 /// Register the classes on the module and give the detail attributes a class-level `None`.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -46,6 +62,11 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("SolveError", py.get_type::<SolveError>())?;
     m.add("StepError", py.get_type::<StepError>())?;
     m.add("MeshWarning", py.get_type::<MeshWarning>())?;
+    m.add("ModelFileError", py.get_type::<ModelFileError>())?;
+    let surface = py.get_type::<SurfaceError>();
+    surface.setattr("triangle", py.None())?;
+    surface.setattr("vertex", py.None())?;
+    m.add("SurfaceError", surface)?;
     let mesh = py.get_type::<MeshError>();
     mesh.setattr("tet", py.None())?;
     mesh.setattr("node", py.None())?;
@@ -117,4 +138,47 @@ pub fn step_error(e: core::StepError, context: &str) -> PyErr {
         set_attr(py, &err, "time", time);
     });
     err
+}
+
+fn surface_location(e: &CoreSurfaceError) -> (Option<usize>, Option<usize>) {
+    use CoreSurfaceError as E;
+    match e {
+        E::NonFiniteVertex { vertex, .. } | E::NotNested { vertex, .. } => (None, Some(*vertex)),
+        E::IndexOutOfRange { triangle, .. } | E::Degenerate { triangle, .. } | E::DuplicateTriangle { triangle, .. } | E::OpenEdge { triangle, .. } => {
+            (Some(*triangle), None)
+        }
+        E::RepeatedVertex { triangle, vertex } => (Some(*triangle), Some(*vertex)),
+        E::InconsistentOrientation { first, .. } => (Some(*first), None),
+        E::NonManifoldEdge { triangles, .. } => (triangles.first().copied(), None),
+        E::InFile { source, .. } => surface_location(source),
+        _ => (None, None),
+    }
+}
+
+/// A core surface error as a Python exception: bad sampling arguments are `ValueError`, the rest
+/// `SurfaceError` with `.triangle` / `.vertex`.
+pub fn surface_error(e: CoreSurfaceError) -> PyErr {
+    if matches!(e, CoreSurfaceError::Parameter { .. } | CoreSurfaceError::TooLarge { .. }) {
+        return PyValueError::new_err(e.to_string());
+    }
+    let (triangle, vertex) = surface_location(&e);
+    let err = SurfaceError::new_err(e.to_string());
+    Python::attach(|py| {
+        let v = err.value(py);
+        if let Some(t) = triangle {
+            let _ = v.setattr("triangle", t);
+        }
+        if let Some(i) = vertex {
+            let _ = v.setattr("vertex", i);
+        }
+    });
+    err
+}
+
+/// A model-file error: an I/O failure is `OSError`, anything else `ModelFileError`.
+pub fn file_error(e: core::ModelFileError) -> PyErr {
+    match e {
+        core::ModelFileError::Io { .. } => PyOSError::new_err(e.to_string()),
+        other => ModelFileError::new_err(other.to_string()),
+    }
 }

@@ -2,26 +2,18 @@
 //! regions) built from the surfaces of an organ wall, saved and loaded as one file.
 
 use crate::conv;
-use crate::errors::{self, PalpateError};
-use crate::particles::{surface_error, PyTriSurface};
+use crate::errors;
+use crate::errors::{file_error, surface_error};
+use crate::particles::PyTriSurface;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use palpate_core::hybrid::{self, HybridModel, HybridOptions, Projection, Spacing, VoxelLabel, Wall, WallPart};
 use palpate_core::mesh::TriSurface;
-use palpate_core::{HybridError, ModelFileError as CoreFileError};
-use pyo3::create_exception;
+use palpate_core::HybridError;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-create_exception!(
-    palpate,
-    ModelFileError,
-    PalpateError,
-    "A compiled-model file that cannot be read: not a palpate model, another format version, truncated or corrupted. The message names the file and the reason."
-);
-
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add("ModelFileError", m.py().get_type::<ModelFileError>())?;
     m.add_class::<PyProjection>()?;
     m.add_class::<PyHybridModel>()?;
     m.add_function(wrap_pyfunction!(ventricle_surface, m)?)?;
@@ -54,12 +46,6 @@ fn hybrid_error(e: HybridError) -> PyErr {
     }
 }
 
-fn file_error(e: CoreFileError) -> PyErr {
-    match e {
-        CoreFileError::Io { .. } => pyo3::exceptions::PyOSError::new_err(e.to_string()),
-        other => ModelFileError::new_err(other.to_string()),
-    }
-}
 
 /// How the builder projects between the outer surface and the core.
 #[pyclass(name = "Projection", module = "palpate", eq, eq_int, hash, frozen, from_py_object)]

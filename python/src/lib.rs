@@ -2,13 +2,13 @@
 //!
 //! | file | binds |
 //! |---|---|
-//! | `errors.rs` | core error enums -> `palpate.PalpateError` and its subclasses |
+//! | `errors.rs` | core error enums -> `palpate.PalpateError` and its subclasses (the whole tree: `MeshError`, `SurfaceError`, `MaterialError`, `ModelError`, `ModelFileError`, `SolveError`, `StepError`, `MeshWarning`) |
 //! | `conv.rs` | numpy <-> core arrays (dtype / shape checks) |
 //! | `mesh.rs` | `TetMesh`, `ellipsoid_wall`, `truncated_ellipsoid_wall`, `box_mesh` |
 //! | `material.rs` | `Law`, `Material` |
 //! | `integrator.rs` | `SemiImplicit`, `BackwardEuler`, `Filter`, `Solver` |
 //! | `body.rs` | `Body` (model + state + workspace; stepping releases the GIL) |
-//! | `particles.rs` | `Kernel`, `ParticleBody`, `TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between`, `SurfaceError` |
+//! | `particles.rs` | `Kernel`, `ParticleBody`, `TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between` |
 //!
 //! The Pythonic layer (file IO, CLI, benchmark) lives in `python/palpate/*.py`.
 

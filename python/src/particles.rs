@@ -1,6 +1,6 @@
 //! The meshfree side: `palpate.Kernel`, `palpate.ParticleBody` (`palpate_core::meshfree`),
 //! `palpate.TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between`
-//! (`palpate_core::mesh::{surface, sample}`) and `palpate.SurfaceError`.
+//! (`palpate_core::mesh::{surface, sample}`); its errors are `palpate.SurfaceError` (errors.rs).
 //! Building, stepping, sampling and the timed run release the GIL.
 
 use std::collections::HashSet;
@@ -10,35 +10,20 @@ use std::time::Instant;
 use numpy::ndarray::Array1;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDescrMethods, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use palpate_core::error::ModelError as CoreModelError;
-use palpate_core::mesh::{self, SurfaceError as CoreSurfaceError, TriSurface};
+use palpate_core::mesh::{self, TriSurface};
 use palpate_core::meshfree::{Kernel, ParticleModel, ParticleModelBuilder, ParticleState, ParticleWorkspace, DEFAULT_HOURGLASS};
 use palpate_core::Vec3;
-use pyo3::create_exception;
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::IntoPyObjectExt;
 use pyo3::types::PyDict;
 
 use crate::conv;
-use crate::errors::{self, MeshError, MeshWarning};
+use crate::errors::{self, surface_error, MeshWarning};
 use crate::material::PyMaterial;
 
-create_exception!(
-    palpate,
-    SurfaceError,
-    MeshError,
-    "A triangle surface (array or file) that cannot be used, or surfaces that do not nest. The message \
-     names the file, the triangle / vertex / edge and the reason; attributes `triangle` and `vertex` hold \
-     the offending 0-based index, or None. A subclass of MeshError."
-);
-
-/// Register `SurfaceError` (with class-level `triangle` / `vertex` = None).
+/// Register the meshfree classes and functions.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    let py = m.py();
-    let t = py.get_type::<SurfaceError>();
-    t.setattr("triangle", py.None())?;
-    t.setattr("vertex", py.None())?;
-    m.add("SurfaceError", t)?;
     m.add_class::<PyKernel>()?;
     m.add_class::<PyParticleBody>()?;
     m.add_class::<PyTriSurface>()?;
@@ -63,40 +48,6 @@ fn set_simd_enabled(enabled: bool) {
     palpate_core::meshfree::set_simd_enabled(enabled)
 }
 
-fn surface_location(e: &CoreSurfaceError) -> (Option<usize>, Option<usize>) {
-    use CoreSurfaceError as E;
-    match e {
-        E::NonFiniteVertex { vertex, .. } | E::NotNested { vertex, .. } => (None, Some(*vertex)),
-        E::IndexOutOfRange { triangle, .. } | E::Degenerate { triangle, .. } | E::DuplicateTriangle { triangle, .. } | E::OpenEdge { triangle, .. } => {
-            (Some(*triangle), None)
-        }
-        E::RepeatedVertex { triangle, vertex } => (Some(*triangle), Some(*vertex)),
-        E::InconsistentOrientation { first, .. } => (Some(*first), None),
-        E::NonManifoldEdge { triangles, .. } => (triangles.first().copied(), None),
-        E::InFile { source, .. } => surface_location(source),
-        _ => (None, None),
-    }
-}
-
-/// A core surface error as a Python exception: bad sampling arguments are `ValueError`, the rest
-/// `SurfaceError` with `.triangle` / `.vertex`.
-pub fn surface_error(e: CoreSurfaceError) -> PyErr {
-    if matches!(e, CoreSurfaceError::Parameter { .. } | CoreSurfaceError::TooLarge { .. }) {
-        return PyValueError::new_err(e.to_string());
-    }
-    let (triangle, vertex) = surface_location(&e);
-    let err = SurfaceError::new_err(e.to_string());
-    Python::attach(|py| {
-        let v = err.value(py);
-        if let Some(t) = triangle {
-            let _ = v.setattr("triangle", t);
-        }
-        if let Some(i) = vertex {
-            let _ = v.setattr("vertex", i);
-        }
-    });
-    err
-}
 
 // ---------------------------------------------------------------------------------------------
 // Array helpers local to the particle API
