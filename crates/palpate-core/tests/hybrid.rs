@@ -1,5 +1,14 @@
 //! The hybrid model builder (paper §4, §6): volumes, particles, regions, skin, the transmural
 //! field, and the model file.
+//!
+//! What a wrong implementation would do: a core that pokes out of the wall or a shell sampled
+//! into the core double-counts volume (core + shell against the wall's volume); a region that
+//! misses the particles under its triangles, a box that does not contain them, or a skin link
+//! with barycentric coordinates outside the face breaks the activation and coupling the runtime
+//! relies on; a transmural field solved with the wrong boundary values is not radial for
+//! concentric spheres; a model file that is not written and read field by field is not
+//! bit-identical after a round trip; a reader that trusts lengths and indices panics or hangs on
+//! damaged or mutated files instead of naming the file and the reason.
 use palpate_core::hybrid::file::{from_bytes, to_bytes, FORMAT_VERSION};
 use palpate_core::hybrid::geometry::TetGrid;
 use palpate_core::hybrid::{build, shapes, HybridModel, HybridOptions, Projection, Spacing, VoxelLabel, Wall, WallPart};

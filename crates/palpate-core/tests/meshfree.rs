@@ -1,4 +1,13 @@
 //! The meshfree (particle) solid: invariants and analytic checks (paper §3.2).
+//!
+//! What a wrong implementation would do: an MLS gradient that is not corrected (`A^-1` missing or
+//! stale) gives a wrong F for affine motions and forces under a rigid rotation; a force that is
+//! not the gradient of the energy (a sign, a factor 2, a missing neighbour term, a pair counted
+//! for an inactive particle) fails the finite-difference and active-set checks; a pair force
+//! that is not antisymmetric drifts the momentum; a SIMD copy that skips a lane or reads a
+//! padded column differs from the portable one; a stability bound that is too loose grows the
+//! energy; hourglass control of the wrong sign lets particles clump; a Neo-Hookean material
+//! silently run as St. Venant-Kirchhoff is refused instead.
 use palpate_core::material::{Damping, Elasticity};
 use palpate_core::meshfree::{ParticleModel, ParticleModelBuilder, ParticleState, ParticleWorkspace};
 use palpate_core::{Mat3, Material, Vec3};
