@@ -8,7 +8,7 @@ mod protocol;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use palpate_core::mesh::generate::{ellipsoid_wall, EllipsoidWall};
-use palpate_core::{step, Integrator, ModelBuilder, State, Workspace};
+use palpate_core::{step, Integrator, Model, ModelBuilder, State, Workspace};
 
 fn ellipsoid_case() -> protocol::Case {
     // The paper's Ellipsoids Model (192 tets), in mesh units so that the protocol's load applies:
@@ -17,6 +17,17 @@ fn ellipsoid_case() -> protocol::Case {
     let pts: Vec<[f64; 3]> = mesh.points().iter().map(|p| [p.x, p.y, p.z]).collect();
     let tets: Vec<[i64; 4]> = mesh.tets().iter().map(|t| t.map(|i| i as i64)).collect();
     protocol::case_from_mesh_units(&pts, &tets)
+}
+
+/// The protocol case compiled for `integ`, at rest.
+fn body(case: &protocol::Case, integ: Integrator) -> (Model, State, Workspace) {
+    let model = ModelBuilder::new(case.mesh.clone(), protocol::material())
+        .fixed_nodes(case.fixed.clone())
+        .integrator(integ)
+        .build()
+        .expect("model");
+    let (state, ws) = (State::rest(&model), Workspace::new(&model));
+    (model, state, ws)
 }
 
 fn bench_steps(c: &mut Criterion) {
@@ -39,13 +50,7 @@ fn bench_steps(c: &mut Criterion) {
             integrators.push(("backward_euler_newton", Integrator::newton()));
         }
         for (iname, integ) in integrators {
-            let model = ModelBuilder::new(case.mesh.clone(), protocol::material())
-                .fixed_nodes(case.fixed.clone())
-                .integrator(integ)
-                .build()
-                .expect("model");
-            let mut state = State::rest(&model);
-            let mut ws = Workspace::new(&model);
+            let (model, mut state, mut ws) = body(case, integ);
             for &i in &case.loaded {
                 state.f_ext[i] = case.f_node;
             }
@@ -66,13 +71,7 @@ fn bench_steps(c: &mut Criterion) {
     group.sample_size(20);
     for (name, case) in cases.iter().filter(|(n, _)| n == "lv_190" || n == "lv_1350") {
         for (iname, integ) in [("quasi_newton", Integrator::quasi_newton()), ("backward_euler_newton", Integrator::newton())] {
-            let model = ModelBuilder::new(case.mesh.clone(), protocol::material())
-                .fixed_nodes(case.fixed.clone())
-                .integrator(integ)
-                .build()
-                .expect("model");
-            let mut state = State::rest(&model);
-            let mut ws = Workspace::new(&model);
+            let (model, mut state, mut ws) = body(case, integ);
             for k in 0..500 {
                 let s = protocol::ramp((k + 1) as f64 * protocol::DT) * 2.0 / protocol::FORCE;
                 for &i in &case.loaded {

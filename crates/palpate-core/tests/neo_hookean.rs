@@ -32,7 +32,6 @@
 mod common;
 
 use common::*;
-use nalgebra::DMatrix;
 use palpate_core::fem::tet4;
 use palpate_core::integrate::{static_solve, StaticOptions};
 use palpate_core::material::{Damping, Elasticity, Law};
@@ -53,11 +52,6 @@ fn nh_piola(f: &Mat3, lambda: f64, mu: f64) -> Mat3 {
     mu * f + (lambda * j.ln() - mu) * f_inv_t
 }
 
-fn forces(model: &Model, x: &[Vec3]) -> Vec<Vec3> {
-    let mut f = vec![Vec3::zeros(); model.n_nodes()];
-    model.internal_forces(x, None, &mut f);
-    f
-}
 
 #[test]
 fn nh_total_force_and_jacobian_match_finite_differences() {
@@ -74,42 +68,12 @@ fn nh_total_force_and_jacobian_match_finite_differences() {
         let j_min = model.mesh().tets().iter().zip(model.rest()).map(|(t, r)| tet4::deformation_gradient(&t.map(|i| x[i]), r).determinant()).fold(f64::INFINITY, f64::min);
         assert!(j_min > 0.2, "{what}: set-up inverted or over-compressed an element (J = {j_min})");
         // Total force = -grad(total energy).
-        let f = forces(&model, &x);
-        let scale = max_norm(&f);
-        let h = 1e-8;
-        let mut xp = x.clone();
-        let mut worst: f64 = 0.0;
-        for i in 0..model.n_nodes() {
-            for c in 0..3 {
-                xp[i][c] = x[i][c] + h;
-                let wp = model.strain_energy(&xp);
-                xp[i][c] = x[i][c] - h;
-                let wm = model.strain_energy(&xp);
-                xp[i][c] = x[i][c];
-                worst = worst.max((-(wp - wm) / (2.0 * h) - f[i][c]).abs() / scale);
-            }
-        }
+        let worst = energy_gradient_error(&model, &x);
         println!("{what}: max |f + dW/dx| / max|f| = {worst:.2e}");
         assert!(worst <= 1e-6, "{what}: force is not minus the energy gradient ({worst:e})");
         // Assembled tangent = FD of the assembled force.
-        let n = model.n_nodes();
         let k = dense_jacobian(&model, &x);
-        let mut fd = DMatrix::zeros(3 * n, 3 * n);
-        let h = 1e-7;
-        for j in 0..n {
-            for c in 0..3 {
-                xp[j][c] = x[j][c] + h;
-                let fp = forces(&model, &xp);
-                xp[j][c] = x[j][c] - h;
-                let fm = forces(&model, &xp);
-                xp[j][c] = x[j][c];
-                for i in 0..n {
-                    for r in 0..3 {
-                        fd[(3 * i + r, 3 * j + c)] = (fp[i][r] - fm[i][r]) / (2.0 * h);
-                    }
-                }
-            }
-        }
+        let fd = fd_jacobian(&model, &x, 1e-7);
         let err = (&k - &fd).amax() / k.amax();
         println!("{what}: max |K - FD| / max|K| = {err:.2e}");
         assert!(err <= 1e-6, "{what}: assembled NH tangent differs from FD by {err:e}");

@@ -84,14 +84,22 @@ fn same_state(a: &State, b: &State) -> bool {
     bits(&a.x) == bits(&b.x) && bits(&a.v) == bits(&b.v) && a.t.to_bits() == b.t.to_bits() && bits(&a.f_ext) == bits(&b.f_ext)
 }
 
+/// The small wall of `model(integ)` after one warm-up step (which allocates the lazy parts, e.g.
+/// the first factorisation), and its topmost node, where the tests press.
+fn warmed_up(integ: Integrator) -> (Model, State, Workspace, usize) {
+    let model = model(integ);
+    let mut s = State::rest(&model);
+    let mut ws = Workspace::new(&model);
+    let pts = model.mesh().points();
+    let top = (0..model.n_nodes()).max_by(|&a, &b| pts[a].z.total_cmp(&pts[b].z)).unwrap();
+    step(&model, &mut s, &mut ws, 1e-3).unwrap();
+    (model, s, ws, top)
+}
+
 #[test]
 fn step_allocates_nothing_after_the_first_step() {
     for (name, integ) in SCHEMES {
-        let model = model(integ);
-        let mut s = State::rest(&model);
-        let mut ws = Workspace::new(&model);
-        let top = (0..model.n_nodes()).max_by(|&a, &b| model.mesh().points()[a].z.total_cmp(&model.mesh().points()[b].z)).unwrap();
-        step(&model, &mut s, &mut ws, 1e-3).unwrap(); // warm-up
+        let (model, mut s, mut ws, top) = warmed_up(integ);
         let before = allocations();
         for k in 0..100 {
             // A changing load and, every 10th step, a different dt (refactorisation / new filters).
@@ -121,11 +129,7 @@ fn step_allocates_nothing_under_a_firm_press() {
         ("semi-implicit, stable filter", Integrator::SemiImplicit { filter: palpate_core::integrate::Filter::Stable }),
     ];
     for (name, integ) in schemes {
-        let model = model(integ);
-        let mut s = State::rest(&model);
-        let mut ws = Workspace::new(&model);
-        let top = (0..model.n_nodes()).max_by(|&a, &b| model.mesh().points()[a].z.total_cmp(&model.mesh().points()[b].z)).unwrap();
-        step(&model, &mut s, &mut ws, 1e-3).unwrap(); // warm-up
+        let (model, mut s, mut ws, top) = warmed_up(integ);
         let before = allocations();
         let (mut max_iterations, mut rejected_trials, mut max_inverted) = (0, 0, 0);
         for k in 0..100 {

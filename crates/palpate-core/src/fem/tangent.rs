@@ -17,50 +17,37 @@
 //!
 //! Blocks are returned with palpate's sign convention for `df/dx` (negative semi-definite).
 
-use crate::fem::tet4::{deformation_gradient, TetRest};
+use crate::fem::tet4::{deformation_gradient, svk_form_blocks, TetRest};
 use crate::material::{self, neo_hookean, Law, Material};
 use crate::math::{Mat3, Vec3};
 
 /// Negative semi-definite approximation of `d f / d x` (3x3 blocks) at positions `x` \[m\].
 pub fn definite_jacobian(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> [[Mat3; 4]; 4] {
     let f = deformation_gradient(x, rest);
-    let g = rest.grads();
-    let vol = rest.volume;
     let (lam, mu) = (m.lambda(), m.mu());
-    let mut k = [[Mat3::zeros(); 4]; 4];
     match m.law() {
         Law::StVenantKirchhoff => {
             let s = material::stress(m, &material::green_strain(&f));
             let eig = s.symmetric_eigen();
             let clamped = eig.eigenvalues.map(|l| l.max(0.0));
             let s_pos = eig.eigenvectors * Mat3::from_diagonal(&clamped) * eig.eigenvectors.transpose();
-            let fg: [Vec3; 4] = [f * g[0], f * g[1], f * g[2], f * g[3]];
-            let fft = f * f.transpose();
-            for a in 0..4 {
-                for b in 0..4 {
-                    let gg = g[a].dot(&g[b]);
-                    k[a][b] = -vol
-                        * (Mat3::from_diagonal_element(g[a].dot(&(s_pos * g[b])))
-                            + lam * fg[a] * fg[b].transpose()
-                            + (mu * gg) * fft
-                            + mu * fg[b] * fg[a].transpose());
-                }
-            }
+            svk_form_blocks(&f, &s_pos, lam, mu, rest, -rest.volume)
         }
         Law::NeoHookean => {
+            let g = rest.grads();
             let cof = neo_hookean::cofactor(&f);
             let j = f.column(0).dot(&cof.column(0));
-            let (_, _, h2) = neo_hookean::volumetric(lam, mu, j);
+            let h2 = neo_hookean::volumetric(lam, mu, j).2.max(0.0);
             let cg: [Vec3; 4] = [cof * g[0], cof * g[1], cof * g[2], cof * g[3]];
-            let h2 = h2.max(0.0);
+            let mut k = [[Mat3::zeros(); 4]; 4];
             for a in 0..4 {
                 for b in 0..4 {
-                    k[a][b] = -vol * (Mat3::from_diagonal_element(mu * g[a].dot(&g[b])) + h2 * cg[a] * cg[b].transpose());
+                    k[a][b] = -rest.volume * (Mat3::from_diagonal_element(mu * g[a].dot(&g[b])) + h2 * cg[a] * cg[b].transpose());
                 }
             }
+            k
         }
     }
-    k
 }
 
 #[cfg(test)]

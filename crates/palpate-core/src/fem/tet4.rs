@@ -178,51 +178,56 @@ pub fn elastic_energy_forces(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> (f6
 pub fn jacobians(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> ([[Mat3; 4]; 4], Option<[[Mat3; 4]; 4]>) {
     let f = deformation_gradient(x, rest);
     let g = rest.grads();
-    let fg: [Vec3; 4] = [f * g[0], f * g[1], f * g[2], f * g[3]];
-    let fft = f * f.transpose();
     let vol = rest.volume;
     let (lam, mu) = (m.lambda(), m.mu());
-    let dmp = m.damping();
-    let damped = !m.is_undamped();
-    let mut k = [[Mat3::zeros(); 4]; 4];
-    let mut d = [[Mat3::zeros(); 4]; 4];
-    match m.law() {
+    let k = match m.law() {
         Law::StVenantKirchhoff => {
             let s = material::stress(m, &material::green_strain(&f));
-            let sg: [Vec3; 4] = [s * g[0], s * g[1], s * g[2], s * g[3]];
-            for a in 0..4 {
-                for b in 0..4 {
-                    let gg = g[a].dot(&g[b]);
-                    let outer_ab = fg[a] * fg[b].transpose();
-                    let outer_ba = fg[b] * fg[a].transpose();
-                    k[a][b] = -vol * (Mat3::from_diagonal_element(g[a].dot(&sg[b])) + lam * outer_ab + (mu * gg) * fft + mu * outer_ba);
-                    if damped {
-                        d[a][b] = -vol * (dmp.phi * outer_ab + (dmp.psi * gg) * fft + dmp.psi * outer_ba);
-                    }
-                }
-            }
+            svk_form_blocks(&f, &s, lam, mu, rest, -vol)
         }
         Law::NeoHookean => {
             let cof = neo_hookean::cofactor(&f);
             let j = f.column(0).dot(&cof.column(0));
             let (_, h1, h2) = neo_hookean::volumetric(lam, mu, j);
             let cg: [Vec3; 4] = [cof * g[0], cof * g[1], cof * g[2], cof * g[3]];
+            let mut k = [[Mat3::zeros(); 4]; 4];
             for a in 0..4 {
                 for b in 0..4 {
-                    let gg = g[a].dot(&g[b]);
                     let geo = neo_hookean::cross_matrix(&(f * g[b].cross(&g[a])));
-                    k[a][b] = -vol * (Mat3::from_diagonal_element(mu * gg) + h2 * cg[a] * cg[b].transpose() + h1 * geo);
-                    if damped {
-                        // The viscous stress F S_v is the same as SVK's, hence the same D.
-                        let outer_ab = fg[a] * fg[b].transpose();
-                        let outer_ba = fg[b] * fg[a].transpose();
-                        d[a][b] = -vol * (dmp.phi * outer_ab + (dmp.psi * gg) * fft + dmp.psi * outer_ba);
-                    }
+                    k[a][b] = -vol * (Mat3::from_diagonal_element(mu * g[a].dot(&g[b])) + h2 * cg[a] * cg[b].transpose() + h1 * geo);
                 }
             }
+            k
+        }
+    };
+    // The viscous stress F S_v has the St. Venant-Kirchhoff form for both laws, without stress term.
+    let d = (!m.is_undamped()).then(|| {
+        let dmp = m.damping();
+        svk_form_blocks(&f, &Mat3::zeros(), dmp.phi, dmp.psi, rest, -vol)
+    });
+    (k, d)
+}
+
+/// The St. Venant-Kirchhoff-form stiffness blocks, with `g = grad N` and a factor `c`:
+/// `c [ (g_a . S g_b) I + l (F g_a)(F g_b)^T + m (g_a . g_b) F F^T + m (F g_b)(F g_a)^T ]`
+/// (`c = V`: a Hessian, positive at rest; `c = -V`: a force Jacobian).
+/// The one place this form is written: the SVK tangent is `-` it with the stress `S` and Lame's
+/// `(l, m)`; the viscous Jacobian with `S = 0` and the viscosities `(phi, psi)`; the step's
+/// dissipation Hessian (`viscous.rs`) and the definite tangent (`tangent.rs`) use it too.
+pub fn svk_form_blocks(f: &Mat3, s: &Mat3, l: f64, m: f64, rest: &TetRest, c: f64) -> [[Mat3; 4]; 4] {
+    let g = rest.grads();
+    let fg: [Vec3; 4] = [f * g[0], f * g[1], f * g[2], f * g[3]];
+    let sg: [Vec3; 4] = [s * g[0], s * g[1], s * g[2], s * g[3]];
+    let fft = f * f.transpose();
+    let mut out = [[Mat3::zeros(); 4]; 4];
+    for a in 0..4 {
+        for b in 0..4 {
+            let gg = g[a].dot(&g[b]);
+            out[a][b] = c
+                * (Mat3::from_diagonal_element(g[a].dot(&sg[b])) + l * fg[a] * fg[b].transpose() + (m * gg) * fft + m * fg[b] * fg[a].transpose());
         }
     }
-    (k, if damped { Some(d) } else { None })
+    out
 }
 
 #[cfg(test)]
@@ -280,43 +285,47 @@ mod tests {
         }
     }
 
-    #[test]
-    fn jacobians_match_finite_differences() {
-        let m = mat(true);
-        let r = TetRest::new(&rest_tet());
-        let x = deformed();
-        let v = [Vec3::new(0.1, -0.2, 0.05), Vec3::new(0.0, 0.1, 0.2), Vec3::new(-0.1, 0.0, 0.1), Vec3::new(0.2, 0.1, -0.1)];
-        let (k, d) = jacobians(&x, &r, &m);
-        let d = d.unwrap();
+    /// `K_ab` and `D_ab` of [`jacobians`] against central differences of [`forces`] at `x`, `v`
+    /// (position step 1e-8 m; velocity step `hv`: the viscous force is linear in `v`, so a large
+    /// step is exact and keeps the difference above the round-off of a large elastic force).
+    pub(super) fn check_jacobians_fd(x: &[Vec3; 4], v: &[Vec3; 4], r: &TetRest, m: &Material, hv: f64, name: &str) {
+        let (k, d) = jacobians(x, r, m);
+        let d = d.expect("a damped material");
         let h = 1e-8;
-        let elastic = |x: &[Vec3; 4]| forces(x, None, &r, &m);
+        let elastic = |x: &[Vec3; 4]| forces(x, None, r, m);
         let viscous = |v: &[Vec3; 4]| {
-            let fv = forces(&x, Some(v), &r, &m);
-            let fe = forces(&x, None, &r, &m);
+            let fv = forces(x, Some(v), r, m);
+            let fe = forces(x, None, r, m);
             [fv[0] - fe[0], fv[1] - fe[1], fv[2] - fe[2], fv[3] - fe[3]]
         };
         let scale_k = k.iter().flatten().map(|b| b.norm()).fold(0.0, f64::max);
         let scale_d = d.iter().flatten().map(|b| b.norm()).fold(0.0, f64::max);
         for b in 0..4 {
             for c in 0..3 {
-                let (mut xp, mut xm) = (x, x);
+                let (mut xp, mut xm) = (*x, *x);
                 xp[b][c] += h;
                 xm[b][c] -= h;
                 let (fp, fm) = (elastic(&xp), elastic(&xm));
-                let (mut vp, mut vm) = (v, v);
-                vp[b][c] += h;
-                vm[b][c] -= h;
+                let (mut vp, mut vm) = (*v, *v);
+                vp[b][c] += hv;
+                vm[b][c] -= hv;
                 let (gp, gm) = (viscous(&vp), viscous(&vm));
                 for a in 0..4 {
                     let col = (fp[a] - fm[a]) / (2.0 * h);
                     let err = (col - k[a][b].column(c)).norm();
-                    assert!(err <= 1e-6 * scale_k, "K[{a}][{b}] col {c}: {err}");
-                    let col = (gp[a] - gm[a]) / (2.0 * h);
+                    assert!(err <= 1e-6 * scale_k, "{name}: K[{a}][{b}] col {c}: {err:e} of {scale_k:e}");
+                    let col = (gp[a] - gm[a]) / (2.0 * hv);
                     let err = (col - d[a][b].column(c)).norm();
-                    assert!(err <= 1e-6 * scale_d, "D[{a}][{b}] col {c}: {err}");
+                    assert!(err <= 1e-6 * scale_d, "{name}: D[{a}][{b}] col {c}: {err:e}");
                 }
             }
         }
+    }
+
+    #[test]
+    fn jacobians_match_finite_differences() {
+        let v = [Vec3::new(0.1, -0.2, 0.05), Vec3::new(0.0, 0.1, 0.2), Vec3::new(-0.1, 0.0, 0.1), Vec3::new(0.2, 0.1, -0.1)];
+        check_jacobians_fd(&deformed(), &v, &TetRest::new(&rest_tet()), &mat(true), 1e-8, "SVK");
     }
 
     #[test]
@@ -433,40 +442,7 @@ mod neo_hookean_tests {
         let v = [Vec3::new(0.1, -0.2, 0.05), Vec3::new(0.0, 0.1, 0.2), Vec3::new(-0.1, 0.0, 0.1), Vec3::new(0.2, 0.1, -0.1)];
         for (name, j, _) in STATES {
             let (x, _) = configuration(j);
-            let (k, d) = jacobians(&x, &r, &m);
-            let d = d.unwrap();
-            let h = 1e-8;
-            let elastic = |x: &[Vec3; 4]| forces(x, None, &r, &m);
-            let viscous = |v: &[Vec3; 4]| {
-                let fv = forces(&x, Some(v), &r, &m);
-                let fe = forces(&x, None, &r, &m);
-                [fv[0] - fe[0], fv[1] - fe[1], fv[2] - fe[2], fv[3] - fe[3]]
-            };
-            let scale_k = k.iter().flatten().map(|b| b.norm()).fold(0.0, f64::max);
-            let scale_d = d.iter().flatten().map(|b| b.norm()).fold(0.0, f64::max);
-            for b in 0..4 {
-                for c in 0..3 {
-                    let (mut xp, mut xm) = (x, x);
-                    xp[b][c] += h;
-                    xm[b][c] -= h;
-                    let (fp, fm) = (elastic(&xp), elastic(&xm));
-                    // The viscous force is linear in v: a large step is exact and keeps the
-                    // difference fv - fe (fe large under strong compression) above round-off.
-                    let hv = 1.0;
-                    let (mut vp, mut vm) = (v, v);
-                    vp[b][c] += hv;
-                    vm[b][c] -= hv;
-                    let (gp, gm) = (viscous(&vp), viscous(&vm));
-                    for a in 0..4 {
-                        let col = (fp[a] - fm[a]) / (2.0 * h);
-                        let err = (col - k[a][b].column(c)).norm();
-                        assert!(err <= 1e-6 * scale_k, "{name}: K[{a}][{b}] col {c}: {err:e} of {scale_k:e}");
-                        let col = (gp[a] - gm[a]) / (2.0 * hv);
-                        let err = (col - d[a][b].column(c)).norm();
-                        assert!(err <= 1e-6 * scale_d, "{name}: D[{a}][{b}] col {c}: {err:e}");
-                    }
-                }
-            }
+            super::tests::check_jacobians_fd(&x, &v, &r, &m, 1.0, name);
         }
     }
 

@@ -15,7 +15,7 @@
 //! within the step has `E(x) = E(x_n)` and costs nothing (a rate `F^T Fdot` frozen at `x_n`
 //! would not be).
 
-use crate::fem::tet4::{deformation_gradient, TetRest};
+use crate::fem::tet4::{deformation_gradient, svk_form_blocks, TetRest};
 use crate::material::{self, Material};
 use crate::math::{Mat3, Vec3};
 
@@ -37,30 +37,14 @@ pub fn step_dissipation(x: &[Vec3; 4], x_n: &[Vec3; 4], rest: &TetRest, m: &Mate
 
 /// Hessian blocks `d^2 D / dx_a dx_b` (3x3 each, positive at rest) of [`step_dissipation`].
 ///
-/// With `g = grad N`, `S = S_v(nu_h)` and `F` at `x`:
-/// `H_ab = V/h [ h (g_a . S g_b) I + phi (F g_a)(F g_b)^T + psi (g_a . g_b) F F^T + psi (F g_b)(F g_a)^T ]`
-/// (the St. Venant-Kirchhoff form of `tet4::jacobians` with `(phi, psi)/h`, negated).
+/// With `S = S_v(nu_h)` and `F` at `x` it is the St. Venant-Kirchhoff form
+/// ([`svk_form_blocks`]) with `(phi, psi) / h` for Lame's constants.
 pub fn step_dissipation_hessian(x: &[Vec3; 4], x_n: &[Vec3; 4], rest: &TetRest, m: &Material, h: f64) -> [[Mat3; 4]; 4] {
     let d = m.damping();
     let f = deformation_gradient(x, rest);
     let de = material::green_strain(&f) - material::green_strain(&deformation_gradient(x_n, rest));
     let s = (Mat3::from_diagonal_element(d.phi * de.trace()) + 2.0 * d.psi * de) / h;
-    let g = rest.grads();
-    let fg: [Vec3; 4] = [f * g[0], f * g[1], f * g[2], f * g[3]];
-    let fft = f * f.transpose();
-    let (phi, psi) = (d.phi / h, d.psi / h);
-    let mut out = [[Mat3::zeros(); 4]; 4];
-    for a in 0..4 {
-        for b in 0..4 {
-            let gg = g[a].dot(&g[b]);
-            out[a][b] = rest.volume
-                * (Mat3::from_diagonal_element(g[a].dot(&(s * g[b])))
-                    + phi * fg[a] * fg[b].transpose()
-                    + (psi * gg) * fft
-                    + psi * fg[b] * fg[a].transpose());
-        }
-    }
-    out
+    svk_form_blocks(&f, &s, d.phi / h, d.psi / h, rest, rest.volume)
 }
 
 #[cfg(test)]

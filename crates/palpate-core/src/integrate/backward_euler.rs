@@ -22,22 +22,8 @@ use crate::math::Vec3;
 use crate::scene::{Model, State, Workspace};
 use crate::StepReport;
 
-/// Factorise the rest matrix `M - dt D0 - dt^2 K0` into `ws.ldl` unless it already holds it for `dt`.
-pub(super) fn ensure_rest_factor(model: &Model, ws: &mut Workspace, dt: f64) -> Result<(), StepError> {
-    if ws.factored_dt != dt {
-        ws.factored_dt = f64::NAN;
-        ws.refreshed = false;
-        ws.excess_iterations = 0;
-        model.system_values(1.0, -dt, -dt * dt, &model.k0, &model.d0, &mut ws.a_values);
-        model.factor(&mut ws.ldl, &ws.a_values)?;
-        ws.factored_dt = dt;
-        ws.factor_count += 1;
-    }
-    Ok(())
-}
-
 pub(super) fn step_linear(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Result<StepReport, StepError> {
-    ensure_rest_factor(model, ws, dt)?;
+    super::factor::ensure(model, ws, dt)?;
     model.internal_forces(&state.x, Some(&state.v), &mut ws.force);
     model.add_applied(&state.f_ext, &mut ws.force);
     let damped = !model.material.is_undamped();

@@ -12,6 +12,7 @@
 //! non-finite state behind: the state is restored and [`StepError::NonFinite`] names the node.
 
 mod backward_euler;
+mod factor;
 mod newton;
 mod potential;
 mod quasi_newton;
@@ -21,7 +22,8 @@ mod statics;
 pub use potential::{incremental_potential, incremental_potential_gradient};
 pub(crate) use newton::CgWorkspace;
 pub(crate) use potential::PotentialWorkspace;
-pub(crate) use quasi_newton::{Lbfgs, ITERATIONS_PER_FACTOR_RATIO};
+pub(crate) use factor::ITERATIONS_PER_FACTOR_RATIO;
+pub(crate) use quasi_newton::Lbfgs;
 pub(crate) use semi_implicit::stable_filter_factor;
 pub use statics::{static_solve, StaticOptions, StaticSolution};
 

@@ -14,8 +14,8 @@
 //! far, or the preconditioned gradient, is a descent direction. The same Armijo line search as
 //! the quasi-Newton step then guarantees the potential decreases.
 
-use super::backward_euler::ensure_rest_factor;
-use super::potential::{self, dot, StepProblem};
+use super::factor;
+use super::potential::{self, dot, Progress, StepProblem};
 use crate::error::StepError;
 use crate::fem::{tet4, viscous};
 use crate::math::{Mat3, Vec3};
@@ -77,18 +77,6 @@ fn hess_mul(model: &Model, blocks: &[Mat3], inv_h2: f64, v: &[Vec3], y: &mut [Ve
     }
 }
 
-/// `out = H0^-1 v = h^2 A^-1 v` with the factorised rest matrix.
-fn precondition(model: &Model, ws_rhs: &mut [Vec3], ldl: &crate::linalg::Ldl, v: &[Vec3], out: &mut [Vec3], h: f64) {
-    for (fi, &pos) in model.node_pos.iter().enumerate() {
-        ws_rhs[pos] = v[fi];
-    }
-    ldl.solve_in_place(ws_rhs);
-    let h2 = h * h;
-    for (fi, &pos) in model.node_pos.iter().enumerate() {
-        out[fi] = h2 * ws_rhs[pos];
-    }
-}
-
 /// Truncated preconditioned CG for `H d = -g` into `cg.d`; returns the preconditioner applications.
 fn newton_direction(model: &Model, ws: &mut Workspace, cg: &mut CgWorkspace, g: &[Vec3], eta: f64, h: f64) -> usize {
     let inv_h2 = 1.0 / (h * h);
@@ -98,7 +86,7 @@ fn newton_direction(model: &Model, ws: &mut Workspace, cg: &mut CgWorkspace, g: 
     }
     d.iter_mut().for_each(|v| *v = Vec3::zeros());
     let r0 = dot(r, r).sqrt();
-    precondition(model, &mut ws.rhs, &ws.ldl, r, z, h);
+    factor::apply_inverse(model, ws, r, z, h);
     let mut solves = 1;
     p.copy_from_slice(z);
     let mut rz = dot(r, z);
@@ -119,7 +107,7 @@ fn newton_direction(model: &Model, ws: &mut Workspace, cg: &mut CgWorkspace, g: 
         if dot(r, r).sqrt() <= eta * r0 {
             break;
         }
-        precondition(model, &mut ws.rhs, &ws.ldl, r, z, h);
+        factor::apply_inverse(model, ws, r, z, h);
         solves += 1;
         let rz_new = dot(r, z);
         let b = rz_new / rz;
@@ -139,7 +127,7 @@ pub(super) fn step(
     max_iterations: usize,
     tolerance: f64,
 ) -> Result<StepReport, StepError> {
-    ensure_rest_factor(model, ws, dt)?;
+    factor::ensure(model, ws, dt)?;
     let h = dt;
     let (x_n, v_n) = (std::mem::take(&mut ws.x_save), std::mem::take(&mut ws.v_save));
     let mut x_trial = std::mem::take(&mut ws.x_trial);
@@ -147,20 +135,16 @@ pub(super) fn step(
     x_trial.copy_from_slice(&state.x);
     let p = StepProblem { model, x_n: &x_n, v_n: &v_n, f_ext: &state.f_ext, h };
 
-    let (mut cur, fresh) = potential::evaluate_start(&p, &mut ws.potential);
-    let phi0 = cur.phi;
-    let scale = potential::force_scale(&cur);
-    let mut target = (tolerance * scale).max(cur.floor);
-    let (mut iterations, mut solves, mut evaluations) = (0, 0, fresh as usize);
-    let mut gnorm = cur.gnorm2.sqrt();
-    let free_body = model.free_nodes.len() == model.n_nodes();
-    while iterations < max_iterations && (iterations == 0 || gnorm > target) {
+    let (start, fresh) = potential::evaluate_start(&p, &mut ws.potential);
+    let mut pr = Progress::start(start, fresh, tolerance);
+    let free_body = model.is_free_body();
+    while pr.iterations < max_iterations && (pr.iterations == 0 || !pr.converged()) {
         let mut blocks = std::mem::take(&mut ws.k);
         assemble_hessian(&p, &state.x, &mut blocks);
         ws.k = blocks;
-        let eta = if scale > 0.0 { (gnorm / scale).min(0.25) } else { 0.25 };
+        let eta = pr.relative_gradient(0.25);
         let g = std::mem::take(&mut ws.potential.g);
-        solves += newton_direction(model, ws, &mut cg, &g, eta, h);
+        pr.solves += newton_direction(model, ws, &mut cg, &g, eta, h);
         if free_body {
             potential::exact_translation(model, &g, &mut cg.d, h);
         }
@@ -169,36 +153,18 @@ pub(super) fn step(
         if !(gd < 0.0) {
             break;
         }
-        let Some((e, _)) = potential::line_search(&p, &mut ws.potential, &mut state.x, &mut x_trial, &cg.d, &cur, gd, &mut evaluations) else {
+        let Some((e, _)) = potential::line_search(&p, &mut ws.potential, &mut state.x, &mut x_trial, &cg.d, &pr.cur, gd, &mut pr.evaluations) else {
             break;
         };
-        cur = e;
-        iterations += 1;
-        gnorm = cur.gnorm2.sqrt();
-        target = (tolerance * scale).max(cur.floor);
+        pr.accept(e);
     }
-    let inv_h = 1.0 / h;
-    for &i in &model.free_nodes {
-        state.v[i] = (state.x[i] - x_n[i]) * inv_h;
-    }
-    potential::store_end(&mut ws.potential, &state.x, &cur);
+    potential::end_step(&p, &mut ws.potential, &state.x, &mut state.v, &pr.cur);
     // The preconditioner is refreshed by the quasi-Newton rule: the preconditioner applications
     // beyond one per Newton iteration count as surplus, and once they have cost a factorisation
     // the factor is redone with the definite tangent at the end state.
-    ws.excess_iterations = ws.excess_iterations.saturating_add(solves.saturating_sub(iterations.max(1)));
-    if solves >= 2 * iterations.max(1) && ws.excess_iterations as f64 >= model.refresh_cost {
-        super::quasi_newton::refresh_initial_hessian(model, ws, &state.x, dt)?;
-    }
-    let report = StepReport {
-        iterations,
-        evaluations,
-        solves,
-        converged: gnorm <= target,
-        residual: if scale > 0.0 { gnorm / scale } else { 0.0 },
-        inverted: cur.inverted,
-        potential_change: cur.phi - phi0,
-        factorizations: 0, // set by `step`
-    };
+    let n = pr.iterations.max(1);
+    factor::refresh_if_paid(model, ws, &state.x, dt, pr.solves.saturating_sub(n), pr.solves >= 2 * n)?;
+    let report = pr.report();
     ws.x_save = x_n;
     ws.v_save = v_n;
     ws.x_trial = x_trial;

@@ -201,7 +201,7 @@ pub(crate) fn evaluate_start(p: &StepProblem, pw: &mut PotentialWorkspace) -> (E
 }
 
 /// Remember the end-of-step elastic forces (in the current buffer) for the next step's start.
-pub(crate) fn store_end(pw: &mut PotentialWorkspace, x: &[Vec3], e: &Eval) {
+fn store_end(pw: &mut PotentialWorkspace, x: &[Vec3], e: &Eval) {
     pw.cache_x.copy_from_slice(x);
     pw.cache_w = e.w;
     pw.cache_f2 = e.elastic_f2;
@@ -215,7 +215,7 @@ pub(crate) fn store_end(pw: &mut PotentialWorkspace, x: &[Vec3], e: &Eval) {
 /// released. (The elastic forces are left out: under a strong press a node's internal forces can
 /// far exceed the load they balance, which would loosen the test exactly where the law is most
 /// nonlinear.) It depends only on the step's data, not on the point evaluated.
-pub(crate) fn force_scale(e: &Eval) -> f64 {
+fn force_scale(e: &Eval) -> f64 {
     e.scale2.sqrt()
 }
 
@@ -233,6 +233,63 @@ pub(crate) fn exact_translation(model: &Model, g: &[Vec3], d: &mut [Vec3], h: f6
     }
     let shift = -(h * h) * sg / m - md / m;
     d.iter_mut().for_each(|v| *v += shift);
+}
+
+/// The bookkeeping both minimising integrators keep over a step: the current evaluation, the
+/// convergence target (`tolerance` times the force scale, or the gradient's round-off floor),
+/// the counts a `StepReport` gives, and the potential at the start.
+pub(crate) struct Progress {
+    pub cur: Eval,
+    pub iterations: usize,
+    pub evaluations: usize,
+    pub solves: usize,
+    phi0: f64,
+    scale: f64,
+    tolerance: f64,
+}
+
+impl Progress {
+    /// From the start of the step (`fresh`: its evaluation was computed, not cached).
+    pub fn start(cur: Eval, fresh: bool, tolerance: f64) -> Progress {
+        Progress { cur, iterations: 0, evaluations: fresh as usize, solves: 0, phi0: cur.phi, scale: force_scale(&cur), tolerance }
+    }
+    /// Accept a line search's new iterate.
+    pub fn accept(&mut self, e: Eval) {
+        self.cur = e;
+        self.iterations += 1;
+    }
+    pub fn gnorm(&self) -> f64 {
+        self.cur.gnorm2.sqrt()
+    }
+    pub fn converged(&self) -> bool {
+        self.gnorm() <= (self.tolerance * self.scale).max(self.cur.floor)
+    }
+    /// The forcing term of an inexact solve: `min(cap, |g| / scale)`.
+    pub fn relative_gradient(&self, cap: f64) -> f64 {
+        if self.scale > 0.0 { (self.gnorm() / self.scale).min(cap) } else { cap }
+    }
+    pub fn report(&self) -> crate::StepReport {
+        crate::StepReport {
+            iterations: self.iterations,
+            evaluations: self.evaluations,
+            solves: self.solves,
+            converged: self.converged(),
+            residual: if self.scale > 0.0 { self.gnorm() / self.scale } else { 0.0 },
+            inverted: self.cur.inverted,
+            potential_change: self.cur.phi - self.phi0,
+            factorizations: 0, // set by `step`
+        }
+    }
+}
+
+/// End of a minimising step: velocities `(x - x_n) / h` of the free nodes, and the end-of-step
+/// forces kept for the next step's start.
+pub(crate) fn end_step(p: &StepProblem, pw: &mut PotentialWorkspace, x: &[Vec3], v: &mut [Vec3], cur: &Eval) {
+    let inv_h = 1.0 / p.h;
+    for &i in &p.model.free_nodes {
+        v[i] = (x[i] - p.x_n[i]) * inv_h;
+    }
+    store_end(pw, x, cur);
 }
 
 /// Dot product of two free-node vectors.
@@ -310,21 +367,24 @@ fn cubic_step(f0: f64, s0: f64, f1: f64, s1: f64) -> f64 {
 /// `x_n` and velocities `v_n` under external forces `f_ext` \[N\] (all `(n_nodes)`), as the
 /// minimising integrators define it (module docs). For tests and diagnostics: it allocates.
 pub fn incremental_potential(model: &Model, x: &[Vec3], x_n: &[Vec3], v_n: &[Vec3], f_ext: &[Vec3], h: f64) -> f64 {
-    let n = model.n_nodes();
-    let p = StepProblem { model, x_n, v_n, f_ext, h };
-    let (mut f_el, mut f_visc, mut g) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n], vec![Vec3::zeros(); model.free_nodes.len()]);
-    evaluate(&p, x, &mut f_el, &mut f_visc, &mut g).phi
+    evaluate_alone(model, x, x_n, v_n, f_ext, h).0.phi
 }
 
 /// The gradient of [`incremental_potential`] \[N\] at `x`, `(n_nodes)` (zero at fixed nodes).
 pub fn incremental_potential_gradient(model: &Model, x: &[Vec3], x_n: &[Vec3], v_n: &[Vec3], f_ext: &[Vec3], h: f64) -> Vec<Vec3> {
-    let n = model.n_nodes();
-    let p = StepProblem { model, x_n, v_n, f_ext, h };
-    let (mut f_el, mut f_visc, mut g) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n], vec![Vec3::zeros(); model.free_nodes.len()]);
-    evaluate(&p, x, &mut f_el, &mut f_visc, &mut g);
-    let mut out = vec![Vec3::zeros(); n];
+    let g = evaluate_alone(model, x, x_n, v_n, f_ext, h).1;
+    let mut out = vec![Vec3::zeros(); model.n_nodes()];
     for (fi, &i) in model.free_nodes.iter().enumerate() {
         out[i] = g[fi];
     }
     out
+}
+
+/// [`evaluate`] with buffers of its own; returns the evaluation and the gradient `(n_free)`.
+fn evaluate_alone(model: &Model, x: &[Vec3], x_n: &[Vec3], v_n: &[Vec3], f_ext: &[Vec3], h: f64) -> (Eval, Vec<Vec3>) {
+    let n = model.n_nodes();
+    let p = StepProblem { model, x_n, v_n, f_ext, h };
+    let (mut f_el, mut f_visc, mut g) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n], vec![Vec3::zeros(); model.free_nodes.len()]);
+    let e = evaluate(&p, x, &mut f_el, &mut f_visc, &mut g);
+    (e, g)
 }

@@ -37,49 +37,15 @@
 //!   last, so every step, capped or not, ends below the potential of its start: a press cannot
 //!   make the integrator blow up, whatever the load.
 
-use super::backward_euler::ensure_rest_factor;
-use super::potential::{self, dot, StepProblem};
+use super::factor;
+use super::potential::{self, dot, Progress, StepProblem};
 use crate::error::StepError;
-use crate::fem::tangent;
-use crate::math::{Mat3, Vec3};
-use crate::scene::model::NONE;
+use crate::math::Vec3;
 use crate::scene::{Model, State, Workspace};
 use crate::StepReport;
 
 /// Iterations a step must take for the initial Hessian to be refreshed at its end state.
 pub const REFRESH_MIN_ITERATIONS: usize = 3;
-/// A factorisation's cost in quasi-Newton iterations per unit of `Ldl::factor_to_solve_ratio`
-/// (an iteration is one solve plus about 1.5 force evaluations; measured: BENCHMARKS.md).
-pub(crate) const ITERATIONS_PER_FACTOR_RATIO: f64 = 0.7;
-
-/// Refactorise `ws.ldl` with `M - dt D0 - dt^2 K~(x)`, `K~` the definite tangent approximation at
-/// `x`; on failure, the rest matrix again. Returns whether the refreshed matrix is in place.
-pub(super) fn refresh_initial_hessian(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<bool, StepError> {
-    let mut k = std::mem::take(&mut ws.k);
-    k.iter_mut().for_each(|b| *b = Mat3::zeros());
-    for ((t, r), tb) in model.mesh.tets().iter().zip(&model.rest).zip(&model.tet_blocks) {
-        let ke = tangent::definite_jacobian(&t.map(|i| x[i]), r, &model.material);
-        for e in 0..16 {
-            if tb[e] != NONE {
-                k[tb[e]] += ke[e / 4][e % 4];
-            }
-        }
-    }
-    model.system_values(1.0, -dt, -dt * dt, &k, &model.d0, &mut ws.a_values);
-    ws.k = k;
-    ws.excess_iterations = 0;
-    ws.factored_dt = f64::NAN;
-    ws.factor_count += 1;
-    if model.factor(&mut ws.ldl, &ws.a_values).is_ok() {
-        ws.factored_dt = dt;
-        ws.refreshed = true;
-        return Ok(true);
-    }
-    ws.refreshed = false;
-    ensure_rest_factor(model, ws, dt)?;
-    Ok(false)
-}
-
 /// L-BFGS memory: `history` pairs `(s, y)` of free-node vectors in a ring, and scratch vectors.
 #[derive(Debug, Clone)]
 pub(crate) struct Lbfgs {
@@ -147,30 +113,12 @@ impl Lbfgs {
     }
 }
 
-/// `out = H0^-1 q = h^2 A^-1 q` with the factorised rest matrix `A` (free-node vectors).
-fn apply_h0_inverse(model: &Model, ws: &mut Workspace, q: &[Vec3], out: &mut [Vec3], h: f64) {
-    for (fi, &pos) in model.node_pos.iter().enumerate() {
-        ws.rhs[pos] = q[fi];
-    }
-    ws.ldl.solve_in_place(&mut ws.rhs);
-    let h2 = h * h;
-    for (fi, &pos) in model.node_pos.iter().enumerate() {
-        out[fi] = h2 * ws.rhs[pos];
-    }
-}
-
 /// The L-BFGS direction `d = -H g` (two-loop recursion, Nocedal and Wright, Alg. 7.4) into `lb.d`.
 fn direction(model: &Model, ws: &mut Workspace, lb: &mut Lbfgs, g: &[Vec3], h: f64) {
     if lb.len == 0 {
         // No pairs: d = -H0^-1 g directly.
-        for (fi, &pos) in model.node_pos.iter().enumerate() {
-            ws.rhs[pos] = g[fi];
-        }
-        ws.ldl.solve_in_place(&mut ws.rhs);
-        let mh2 = -h * h;
-        for (fi, &pos) in model.node_pos.iter().enumerate() {
-            lb.d[fi] = mh2 * ws.rhs[pos];
-        }
+        factor::apply_inverse(model, ws, g, &mut lb.d, h);
+        lb.d.iter_mut().for_each(|d| *d = -*d);
         return;
     }
     lb.q.copy_from_slice(g);
@@ -185,7 +133,7 @@ fn direction(model: &Model, ws: &mut Workspace, lb: &mut Lbfgs, g: &[Vec3], h: f
         }
     }
     let (q, mut d) = (std::mem::take(&mut lb.q), std::mem::take(&mut lb.d));
-    apply_h0_inverse(model, ws, &q, &mut d, h);
+    factor::apply_inverse(model, ws, &q, &mut d, h);
     lb.q = q;
     lb.d = d;
     for j in (0..lb.len).rev() {
@@ -207,10 +155,7 @@ pub(super) fn step(
     max_iterations: usize,
     tolerance: f64,
 ) -> Result<StepReport, StepError> {
-    if ws.factored_dt != dt {
-        ws.refreshed = false;
-    }
-    ensure_rest_factor(model, ws, dt)?;
+    factor::ensure(model, ws, dt)?;
     let h = dt;
     // `step` saved x_n, v_n into x_save, v_save; the iterate lives in state.x.
     let (x_n, v_n) = (std::mem::take(&mut ws.x_save), std::mem::take(&mut ws.v_save));
@@ -219,23 +164,19 @@ pub(super) fn step(
     x_trial.copy_from_slice(&state.x);
     let p = StepProblem { model, x_n: &x_n, v_n: &v_n, f_ext: &state.f_ext, h };
 
-    let (mut cur, fresh) = potential::evaluate_start(&p, &mut ws.potential);
-    let phi0 = cur.phi;
-    let scale = potential::force_scale(&cur);
-    let mut target = (tolerance * scale).max(cur.floor);
+    let (start, fresh) = potential::evaluate_start(&p, &mut ws.potential);
+    let mut pr = Progress::start(start, fresh, tolerance);
     lb.clear();
-    let (mut iterations, mut solves, mut evaluations) = (0, 0, fresh as usize);
-    let mut gnorm = cur.gnorm2.sqrt();
-    let free_body = model.free_nodes.len() == model.n_nodes();
+    let free_body = model.is_free_body();
     loop {
         let g = std::mem::take(&mut ws.potential.g);
         direction(model, ws, &mut lb, &g, h);
-        solves += 1;
+        pr.solves += 1;
         let mut gd = dot(&g, &lb.d);
         if !(gd < 0.0) && lb.len > 0 {
             lb.clear();
             direction(model, ws, &mut lb, &g, h);
-            solves += 1;
+            pr.solves += 1;
             gd = dot(&g, &lb.d);
         }
         if free_body {
@@ -246,38 +187,20 @@ pub(super) fn step(
         if !(gd < 0.0) {
             break; // a zero gradient: nothing to do
         }
-        let Some((e, alpha)) = potential::line_search(&p, &mut ws.potential, &mut state.x, &mut x_trial, &lb.d, &cur, gd, &mut evaluations) else {
+        let Some((e, alpha)) = potential::line_search(&p, &mut ws.potential, &mut state.x, &mut x_trial, &lb.d, &pr.cur, gd, &mut pr.evaluations) else {
             break;
         };
-        cur = e;
-        iterations += 1;
-        gnorm = cur.gnorm2.sqrt();
-        target = (tolerance * scale).max(cur.floor);
-        if gnorm <= target || iterations >= max_iterations {
+        pr.accept(e);
+        if pr.converged() || pr.iterations >= max_iterations {
             break;
         }
         // After the line search the current gradient is the new one and g_trial the old.
         lb.push(alpha, &ws.potential.g, &ws.potential.g_trial);
     }
-    let inv_h = 1.0 / h;
-    for &i in &model.free_nodes {
-        state.v[i] = (state.x[i] - x_n[i]) * inv_h;
-    }
-    potential::store_end(&mut ws.potential, &state.x, &cur);
-    ws.excess_iterations = ws.excess_iterations.saturating_add(iterations.saturating_sub(1));
-    if iterations >= REFRESH_MIN_ITERATIONS && ws.excess_iterations as f64 >= model.refresh_cost {
-        refresh_initial_hessian(model, ws, &state.x, dt)?;
-    }
-    let report = StepReport {
-        iterations,
-        evaluations,
-        solves,
-        converged: gnorm <= target,
-        residual: if scale > 0.0 { gnorm / scale } else { 0.0 },
-        inverted: cur.inverted,
-        potential_change: cur.phi - phi0,
-        factorizations: 0, // set by `step`
-    };
+    potential::end_step(&p, &mut ws.potential, &state.x, &mut state.v, &pr.cur);
+    let it = pr.iterations;
+    factor::refresh_if_paid(model, ws, &state.x, dt, it.saturating_sub(1), it >= REFRESH_MIN_ITERATIONS)?;
+    let report = pr.report();
     ws.x_save = x_n;
     ws.v_save = v_n;
     ws.x_trial = x_trial;

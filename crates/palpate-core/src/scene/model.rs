@@ -260,6 +260,8 @@ impl Model {
     pub fn mesh(&self) -> &TetMesh { &self.mesh }
     /// Number of nodes.
     pub fn n_nodes(&self) -> usize { self.mesh.n_nodes() }
+    /// `true` when no node is fixed (linear momentum is then conserved).
+    pub fn is_free_body(&self) -> bool { self.free_nodes.len() == self.n_nodes() }
     /// Number of tets.
     pub fn n_tets(&self) -> usize { self.mesh.n_tets() }
     /// The material.

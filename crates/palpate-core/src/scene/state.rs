@@ -48,9 +48,7 @@ pub struct Workspace {
     pub(crate) ldl: Ldl,
     /// `dt` the current factorisation / per-node inverses were made for (NaN: none yet).
     pub(crate) factored_dt: f64,
-    /// Quasi-Newton: whether the factorisation holds a refreshed tangent instead of the rest
-    /// matrix, and the iterations beyond the first of each step since the last factorisation.
-    pub(crate) refreshed: bool,
+    /// Minimising integrators: the surplus iterations since the last factorisation (`integrate/factor.rs`).
     pub(crate) excess_iterations: usize,
     /// Sparse factorisations done so far (the step reports its own).
     pub(crate) factor_count: u64,
@@ -80,7 +78,6 @@ impl Workspace {
             d: vec![Mat3::zeros(); model.pattern.nnz()],
             ldl: model.ldl.clone(),
             factored_dt: f64::NAN,
-            refreshed: false,
             excess_iterations: 0,
             factor_count: 0,
             node_inv: vec![Mat3::identity(); n],

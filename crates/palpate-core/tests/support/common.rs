@@ -151,6 +151,56 @@ pub fn dense_jacobian(model: &Model, x: &[Vec3]) -> nalgebra::DMatrix<f64> {
     k
 }
 
+/// Internal elastic forces \[N\] at `x` (a fresh vector).
+pub fn forces(model: &Model, x: &[Vec3]) -> Vec<Vec3> {
+    let mut f = vec![Vec3::zeros(); model.n_nodes()];
+    model.internal_forces(x, None, &mut f);
+    f
+}
+
+/// Dense central-difference Jacobian `df/dx` (3n x 3n) of the elastic force at `x`, step `h` \[m\].
+pub fn fd_jacobian(model: &Model, x: &[Vec3], h: f64) -> nalgebra::DMatrix<f64> {
+    let n = model.n_nodes();
+    let mut k = nalgebra::DMatrix::zeros(3 * n, 3 * n);
+    let mut xp = x.to_vec();
+    for j in 0..n {
+        for c in 0..3 {
+            xp[j][c] = x[j][c] + h;
+            let fp = forces(model, &xp);
+            xp[j][c] = x[j][c] - h;
+            let fm = forces(model, &xp);
+            xp[j][c] = x[j][c];
+            for i in 0..n {
+                for r in 0..3 {
+                    k[(3 * i + r, 3 * j + c)] = (fp[i][r] - fm[i][r]) / (2.0 * h);
+                }
+            }
+        }
+    }
+    k
+}
+
+/// Largest `|f + dW/dx|` over the nodes and components, relative to `max |f|`, with `dW/dx` by
+/// central differences of the total strain energy (step 1e-8 m) at `x`.
+pub fn energy_gradient_error(model: &Model, x: &[Vec3]) -> f64 {
+    let f = forces(model, x);
+    let scale = max_norm(&f);
+    let h = 1e-8;
+    let mut xp = x.to_vec();
+    let mut worst: f64 = 0.0;
+    for i in 0..model.n_nodes() {
+        for c in 0..3 {
+            xp[i][c] = x[i][c] + h;
+            let wp = model.strain_energy(&xp);
+            xp[i][c] = x[i][c] - h;
+            let wm = model.strain_energy(&xp);
+            xp[i][c] = x[i][c];
+            worst = worst.max((-(wp - wm) / (2.0 * h) - f[i][c]).abs() / scale);
+        }
+    }
+    worst
+}
+
 pub fn max_norm(v: &[Vec3]) -> f64 {
     v.iter().map(|x| x.norm()).fold(0.0, f64::max)
 }
