@@ -214,6 +214,16 @@ class Body:
         stable_limit: float = 0.02,
         max_wall_s: Optional[float] = None,
     ) -> ProbeRun: ...
+    def run_loads(
+        self,
+        loads: Sequence[Tuple[_Indices, _Vec3, float]],
+        steps: int,
+        dt: float = 1e-3,
+        *,
+        ramp_start: Optional[float] = None,
+        stable_limit: float = ...,
+        max_wall_s: Optional[float] = None,
+    ) -> ProbeRun: ...
 
 def ellipsoid_wall(
     inner: Optional[Tuple[float, float, float]] = None,

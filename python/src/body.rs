@@ -5,6 +5,7 @@ use std::time::Instant;
 
 use numpy::{PyArray1, PyArray2};
 use palpate_core::integrate::{static_solve, StaticOptions};
+use palpate_core::probe::{self, ProbeLoad, ProbeOptions, Ramp, StepClock};
 use palpate_core::{step, Model, ModelBuilder, State, StepReport, Vec3, Workspace};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -85,18 +86,55 @@ impl PyBody {
     }
 }
 
-/// What `run_probe` measured (filled without the GIL, converted after).
-struct ProbeRun {
-    steps: usize,
-    wall_s: f64,
-    stable: bool,
-    max_disp: f64,
-    probe_disp_avg: f64,
-    mean_u: Vec<Vec3>,
-    probe_hist: Vec<f64>,
-    step_us: Vec<f64>,
-    totals: StepTotals,
-    error: Option<String>,
+/// A wall clock for `run_probe` (the core has none: it is passed in).
+struct WallClock(Instant);
+
+impl StepClock for WallClock {
+    fn now(&mut self) -> f64 {
+        self.0.elapsed().as_secs_f64()
+    }
+}
+
+/// One probe load from Python values, its ramp starting at `start` [s].
+fn py_load(n: usize, nodes: Vec<usize>, total_force: &Bound<'_, PyAny>, ramp_time: f64, start: f64) -> PyResult<ProbeLoad> {
+    let total = conv::vec3(total_force, "total_force")?;
+    if !(ramp_time >= 0.0 && ramp_time.is_finite()) {
+        return Err(PyValueError::new_err(format!("ramp_time = {ramp_time} s must be finite and >= 0")));
+    }
+    ProbeLoad::new(n, nodes, total, Ramp { start, duration: ramp_time }).map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
+impl PyBody {
+    /// `probe::run_probe` timed by a wall clock, GIL released; its result as a dict.
+    fn run_timed<'py>(&mut self, py: Python<'py>, loads: &[ProbeLoad], steps: usize, dt: f64, stable_limit: f64, max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+        if steps == 0 {
+            return Err(PyValueError::new_err("steps must be at least 1"));
+        }
+        let opts = ProbeOptions { max_wall_s, ..ProbeOptions::new(steps, dt, stable_limit) };
+        let run = py.detach(|| {
+            let mut clock = WallClock(Instant::now());
+            probe::run_probe(&self.model, &mut self.state, &mut self.ws, loads, &opts, &mut clock)
+        });
+        let d = PyDict::new(py);
+        d.set_item("steps", run.steps)?;
+        d.set_item("wall_s", run.wall_s)?;
+        d.set_item("stable", run.stable)?;
+        d.set_item("max_disp_m", run.max_disp)?;
+        d.set_item("probe_disp_avg_m", run.probe_disp_avg)?;
+        d.set_item("mean_disp", conv::vec3s_to_py(py, &run.mean_disp))?;
+        d.set_item("probe_disp", conv::f64s_to_py(py, &run.probe_disp))?;
+        let step_us: Vec<f64> = run.step_s.iter().map(|s| s * 1e6).collect();
+        d.set_item("step_us", conv::f64s_to_py(py, &step_us))?;
+        let t = &run.totals;
+        d.set_item("iterations_mean", t.mean_iterations())?;
+        d.set_item("iterations_max", t.max_iterations)?;
+        d.set_item("evaluations", t.evaluations)?;
+        d.set_item("factorizations", t.factorizations)?;
+        d.set_item("inverted_max", t.max_inverted)?;
+        d.set_item("unconverged_steps", t.unconverged)?;
+        d.set_item("error", run.stop.map(|s| s.to_string()))?;
+        Ok(d)
+    }
 }
 
 #[pymethods]
@@ -306,8 +344,9 @@ impl PyBody {
     /// The benchmark's probe run, timed in Rust (GIL released).
     ///
     /// For step k = 0 .. steps-1 the nodes ``nodes`` each carry ``total_force / len(nodes)`` [N]
-    /// scaled by ``min(1, (k+1) dt / ramp_time)`` (the ramp starts at this call; every other node
-    /// carries no external force), then one step of ``dt`` [s] is taken. Only the step calls are
+    /// scaled by ``min(1, (k+1) dt / ramp_time)`` (the ramp starts at this call and the load of a
+    /// step is its value at the step's end, the one convention of ``palpate_core::probe``; every
+    /// other node carries no external force), then one step of ``dt`` [s] is taken. Only the step calls are
     /// timed (``std::time::Instant``); the bookkeeping between them is not.
     ///
     /// Returns a dict:
@@ -341,111 +380,37 @@ impl PyBody {
         if loaded.is_empty() {
             return Err(PyValueError::new_err("nodes: at least one loaded node is needed"));
         }
-        let total = conv::vec3(total_force, "total_force")?;
-        if !(ramp_time >= 0.0 && ramp_time.is_finite()) {
-            return Err(PyValueError::new_err(format!("ramp_time = {ramp_time} s must be finite and >= 0")));
-        }
-        if steps == 0 {
-            return Err(PyValueError::new_err("steps must be at least 1"));
-        }
-        let per_node = total / loaded.len() as f64;
-        let run = py.detach(|| {
-            let x0: Vec<Vec3> = this.model.mesh().points().to_vec();
-            let half = steps / 2;
-            let mut out = ProbeRun {
-                steps: 0,
-                wall_s: 0.0,
-                stable: true,
-                max_disp: 0.0,
-                probe_disp_avg: 0.0,
-                mean_u: vec![Vec3::zeros(); n],
-                probe_hist: Vec::with_capacity(steps),
-                step_us: Vec::with_capacity(steps),
-                totals: StepTotals::default(),
-                error: None,
-            };
-            let mut n_mean = 0usize;
-            for f in this.state.f_ext.iter_mut() {
-                *f = Vec3::zeros();
-            }
-            for k in 0..steps {
-                let s = if ramp_time > 0.0 { ((k + 1) as f64 * dt / ramp_time).min(1.0) } else { 1.0 };
-                for &i in &loaded {
-                    this.state.f_ext[i] = per_node * s;
-                }
-                let t0 = Instant::now();
-                let r = step(&this.model, &mut this.state, &mut this.ws, dt);
-                let elapsed = t0.elapsed().as_secs_f64();
-                out.wall_s += elapsed;
-                let r = match r {
-                    Ok(r) => r,
-                    Err(e) => {
-                        out.error = Some(format!("step {} of {steps}: {e}", k + 1));
-                        out.stable = false;
-                        break;
-                    }
-                };
-                out.step_us.push(elapsed * 1e6);
-                out.totals.add(&r);
-                out.steps += 1;
-                // Bookkeeping (not timed).
-                let mut umax: f64 = 0.0;
-                let mut finite = true;
-                for (x, x0) in this.state.x.iter().zip(&x0) {
-                    let u = (x - x0).norm();
-                    finite &= u.is_finite();
-                    umax = umax.max(u);
-                }
-                let probe = loaded.iter().map(|&i| (this.state.x[i] - x0[i]).norm()).sum::<f64>() / loaded.len() as f64;
-                out.probe_hist.push(probe);
-                out.max_disp = out.max_disp.max(umax);
-                if !finite || !(umax < stable_limit) {
-                    out.stable = false;
-                }
-                if k >= half {
-                    for ((m, x), x0) in out.mean_u.iter_mut().zip(&this.state.x).zip(&x0) {
-                        *m += x - x0;
-                    }
-                    n_mean += 1;
-                }
-                if !finite || umax > 1.0 {
-                    out.error = Some(format!("blew up at step {} of {steps}: max |u| = {umax:.3e} m", k + 1));
-                    break;
-                }
-                if let Some(cap) = max_wall_s {
-                    if out.wall_s > cap && k + 1 < steps {
-                        out.error = Some(format!("stopped after {} of {steps} steps: wall-clock cap of {cap} s reached", k + 1));
-                        break;
-                    }
-                }
-            }
-            if n_mean > 0 {
-                for m in out.mean_u.iter_mut() {
-                    *m /= n_mean as f64;
-                }
-            }
-            let second = &out.probe_hist[out.probe_hist.len() / 2..];
-            out.probe_disp_avg = if second.is_empty() { f64::NAN } else { second.iter().sum::<f64>() / second.len() as f64 };
-            out
-        });
-        let d = PyDict::new(py);
-        d.set_item("steps", run.steps)?;
-        d.set_item("wall_s", run.wall_s)?;
-        d.set_item("stable", run.stable)?;
-        d.set_item("max_disp_m", run.max_disp)?;
-        d.set_item("probe_disp_avg_m", run.probe_disp_avg)?;
-        d.set_item("mean_disp", conv::vec3s_to_py(py, &run.mean_u))?;
-        d.set_item("probe_disp", conv::f64s_to_py(py, &run.probe_hist))?;
-        d.set_item("step_us", conv::f64s_to_py(py, &run.step_us))?;
-        let t = &run.totals;
-        d.set_item("iterations_mean", if t.steps > 0 { t.iterations as f64 / t.steps as f64 } else { f64::NAN })?;
-        d.set_item("iterations_max", t.max_iterations)?;
-        d.set_item("evaluations", t.evaluations)?;
-        d.set_item("factorizations", t.factorizations)?;
-        d.set_item("inverted_max", t.max_inverted)?;
-        d.set_item("unconverged_steps", t.unconverged)?;
-        d.set_item("error", run.error)?;
-        Ok(d)
+        let load = py_load(n, loaded, total_force, ramp_time, this.state.t)?;
+        this.run_timed(py, &[load], steps, dt, stable_limit, max_wall_s)
+    }
+
+    /// Steps under several loads, as ``run_probe`` under one (GIL released): the scene runner's
+    /// loop. ``loads`` is a sequence of ``(nodes, total_force, ramp_time)``: ``total_force`` [N]
+    /// (3,) shared evenly by ``nodes``, ramped linearly over ``ramp_time`` [s] from
+    /// ``ramp_start`` [s] (default: the body's time now), the load of each step taken at the
+    /// step's end; every other node carries no external force. Returns ``run_probe``'s dict
+    /// (``probe_disp`` over all loaded nodes; ``stable`` against ``stable_limit`` [m]).
+    #[pyo3(signature = (loads, steps, dt = 1e-3, *, ramp_start = None, stable_limit = f64::INFINITY, max_wall_s = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn run_loads<'py>(
+        mut slf: PyRefMut<'py, Self>,
+        py: Python<'py>,
+        loads: Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)>,
+        steps: usize,
+        dt: f64,
+        ramp_start: Option<f64>,
+        stable_limit: f64,
+        max_wall_s: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let this = &mut *slf;
+        let n = this.model.n_nodes();
+        let start = ramp_start.unwrap_or(this.state.t);
+        let loads = loads
+            .iter()
+            .enumerate()
+            .map(|(k, (nodes, force, ramp))| py_load(n, conv::node_indices(nodes, &format!("loads[{k}] nodes"), n)?, force, *ramp, start))
+            .collect::<PyResult<Vec<_>>>()?;
+        this.run_timed(py, &loads, steps, dt, stable_limit, max_wall_s)
     }
 
     fn __repr__(&self) -> String {

@@ -8,6 +8,7 @@ mod protocol;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use palpate_core::mesh::generate::{ellipsoid_wall, EllipsoidWall};
+use palpate_core::probe::apply_loads;
 use palpate_core::{step, Integrator, Model, ModelBuilder, State, Workspace};
 
 fn ellipsoid_case() -> protocol::Case {
@@ -72,11 +73,9 @@ fn bench_steps(c: &mut Criterion) {
     for (name, case) in cases.iter().filter(|(n, _)| n == "lv_190" || n == "lv_1350") {
         for (iname, integ) in [("quasi_newton", Integrator::quasi_newton()), ("backward_euler_newton", Integrator::newton())] {
             let (model, mut state, mut ws) = body(case, integ);
-            for k in 0..500 {
-                let s = protocol::ramp((k + 1) as f64 * protocol::DT) * 2.0 / protocol::FORCE;
-                for &i in &case.loaded {
-                    state.f_ext[i] = case.f_node * s;
-                }
+            let load = [protocol::probe_load(case, 2.0, 0.0)];
+            for _ in 0..500 {
+                apply_loads(&load, &mut state.f_ext, state.t + protocol::DT);
                 step(&model, &mut state, &mut ws, protocol::DT).expect("stable");
             }
             group.bench_with_input(BenchmarkId::new(iname, name), &(), |b, _| {

@@ -3,7 +3,8 @@
 mod protocol;
 
 use palpate_core::integrate::{static_solve, StaticOptions};
-use palpate_core::{step, Integrator, ModelBuilder, State, Vec3, Workspace};
+use palpate_core::probe::{run_probe, ProbeOptions};
+use palpate_core::{Integrator, ModelBuilder, State, Vec3, Workspace};
 use std::time::Instant;
 
 fn main() {
@@ -24,30 +25,15 @@ fn main() {
         let u_static: Vec<Vec3> = stat.x.iter().zip(model.mesh().points()).map(|(x, x0)| x - x0).collect();
         let mut st = State::rest(&model);
         let mut ws = Workspace::new(&model);
-        let mut wall = 0.0;
-        let mut mean = vec![Vec3::zeros(); model.n_nodes()];
-        let mut cnt = 0;
-        let mut umax: f64 = 0.0;
-        for k in 0..steps {
-            let s = protocol::ramp((k + 1) as f64 * protocol::DT); // as shared/bench/common.py: the load at the step's end
-            for &i in &case.loaded { st.f_ext[i] = case.f_node * s; }
-            let t = Instant::now();
-            if let Err(e) = step(&model, &mut st, &mut ws, protocol::DT) {
-                println!("{name:>5} {:?}: UNSTABLE after {k} steps: {e}", integ);
-                break;
-            }
-            wall += t.elapsed().as_secs_f64();
-            for (i, (x, x0)) in st.x.iter().zip(model.mesh().points()).enumerate() {
-                let u = x - x0;
-                umax = umax.max(u.norm());
-                if k >= steps / 2 { mean[i] += u; }
-            }
-            if k >= steps / 2 { cnt += 1; }
+        let load = [protocol::probe_load(&case, protocol::FORCE, 0.0)];
+        let run = run_probe(&model, &mut st, &mut ws, &load, &ProbeOptions::new(steps, protocol::DT, f64::INFINITY), &mut protocol::WallClock::new());
+        if let Some(stop) = &run.stop {
+            println!("{name:>5} {:?}: UNSTABLE: {stop}", integ);
         }
-        if cnt == 0 { continue; }
-        let num: f64 = mean.iter().zip(&u_static).map(|(m, u)| (m / cnt as f64 - u).norm_squared()).sum::<f64>().sqrt();
+        if run.steps <= steps / 2 { continue; }
+        let num: f64 = run.mean_disp.iter().zip(&u_static).map(|(m, u)| (m - u).norm_squared()).sum::<f64>().sqrt();
         let den: f64 = u_static.iter().map(|u| u.norm_squared()).sum::<f64>().sqrt();
         println!("{name:>5} {:?}: build {:.3}s nnzL {} | {:.0} steps/s | max|u| {:.3e} m | rel L2 vs static {:.3}% | static iters {}",
-            integ, build, model.factor_blocks(), steps as f64 / wall, umax, 100.0 * num / den, stat.iterations);
+            integ, build, model.factor_blocks(), run.steps as f64 / run.wall_s, run.max_disp, 100.0 * num / den, stat.iterations);
     }
 }

@@ -147,3 +147,17 @@ pub enum ModelFileError {
     #[error("{path}: corrupted: {reason}")]
     Corrupt { path: String, reason: String },
 }
+
+/// A probe load that cannot be applied to its body (`probe::ProbeLoad::new`).
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum LoadError {
+    #[error("a load needs at least one node")]
+    NoNodes,
+    #[error("loaded node {index}: index {node} out of range (body has {n_nodes} nodes)")]
+    NodeOutOfRange { index: usize, node: usize, n_nodes: usize },
+    #[error("the load's force is not finite")]
+    NonFiniteForce,
+    #[error("ramp (start {start} s, duration {duration} s): both must be finite and the duration >= 0")]
+    BadRamp { start: f64, duration: f64 },
+}

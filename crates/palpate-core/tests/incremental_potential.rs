@@ -45,6 +45,7 @@ mod protocol;
 
 use common::*;
 use palpate_core::integrate::{incremental_potential, incremental_potential_gradient};
+use palpate_core::probe::apply_loads;
 use palpate_core::mesh::generate::{base_nodes, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
 use palpate_core::{step, Integrator, Mat3, Material, Model, ModelBuilder, State, Vec3, Workspace};
 
@@ -248,17 +249,14 @@ struct PressSummary {
 fn press(case: &protocol::Case, mat: Material, integ: Integrator, peak: f64, steps: usize, strict: bool) -> Result<PressSummary, String> {
     let model = ModelBuilder::new(case.mesh.clone(), mat).fixed_nodes(case.fixed.clone()).integrator(integ).build().unwrap();
     assert_eq!(model.gravity(), Vec3::zeros());
-    let f_node = case.f_node * (peak / protocol::FORCE);
     let damped = !mat.is_undamped();
     let mut s = State::rest(&model);
     let mut ws = Workspace::new(&model);
     let mut sum = PressSummary { worst_rise: f64::NEG_INFINITY, ..PressSummary::default() };
     let h = protocol::DT;
+    let load = [protocol::probe_load(case, peak, 0.0)];
     for k in 0..steps {
-        let r = protocol::ramp(s.t);
-        for &i in &case.loaded {
-            s.f_ext[i] = f_node * r;
-        }
+        apply_loads(&load, &mut s.f_ext, s.t + h);
         let (x_n, v_n) = (s.x.clone(), s.v.clone());
         let rep = match step(&model, &mut s, &mut ws, h) {
             Ok(rep) => rep,

@@ -19,8 +19,9 @@ mod protocol;
 mod common;
 
 use common::max_norm;
+use palpate_core::probe::{run_probe, NoClock, ProbeOptions};
 use palpate_core::integrate::{static_solve, StaticOptions};
-use palpate_core::{step, Integrator, ModelBuilder, State, Vec3, Workspace};
+use palpate_core::{Integrator, ModelBuilder, State, Vec3, Workspace};
 
 /// Runs the protocol; returns (max |u| over the run, rel L2 of the second-half mean vs static).
 fn run(name: &str, integ: Integrator) -> Option<(f64, f64)> {
@@ -39,22 +40,13 @@ fn run(name: &str, integ: Integrator) -> Option<(f64, f64)> {
     let steps = 1000;
     let mut s = State::rest(&model);
     let mut ws = Workspace::new(&model);
-    let mut mean = vec![Vec3::zeros(); model.n_nodes()];
-    let mut umax: f64 = 0.0;
-    for k in 0..steps {
-        let r = protocol::ramp(s.t);
-        for &i in &case.loaded {
-            s.f_ext[i] = case.f_node * r;
-        }
-        step(&model, &mut s, &mut ws, protocol::DT).unwrap_or_else(|e| panic!("lv_{name} {integ:?}: step {k}: {e}"));
-        let u = s.displacements(&model);
-        umax = umax.max(max_norm(&u));
-        if k >= steps / 2 {
-            mean.iter_mut().zip(&u).for_each(|(m, u)| *m += u);
-        }
+    let load = protocol::probe_load(&case, protocol::FORCE, 0.0);
+    let run = run_probe(&model, &mut s, &mut ws, &[load], &ProbeOptions::new(steps, protocol::DT, f64::INFINITY), &mut NoClock);
+    if let Some(stop) = &run.stop {
+        panic!("lv_{name} {integ:?}: {stop}");
     }
-    let cnt = (steps - steps / 2) as f64;
-    let num: f64 = mean.iter().zip(&u_static).map(|(m, u)| (m / cnt - u).norm_squared()).sum::<f64>().sqrt();
+    let (umax, mean) = (run.max_disp, run.mean_disp);
+    let num: f64 = mean.iter().zip(&u_static).map(|(m, u)| (m - u).norm_squared()).sum::<f64>().sqrt();
     let den: f64 = u_static.iter().map(|u| u.norm_squared()).sum::<f64>().sqrt();
     println!(
         "lv_{name} ({} tets) {integ:?}: max|u| {umax:.3e} m (static max {:.3e}), second-half mean vs static: rel L2 {:.3e}",

@@ -5,6 +5,7 @@
 #![allow(dead_code)]
 
 use palpate_core::material::{Damping, Elasticity};
+use palpate_core::probe::{ProbeLoad, Ramp, StepClock};
 use palpate_core::{Material, TetMesh, Vec3};
 use std::path::{Path, PathBuf};
 
@@ -103,6 +104,24 @@ pub fn load_case(name: &str) -> Option<Case> {
     Some(case_from_mesh_units(&p, &t))
 }
 
-pub fn ramp(t: f64) -> f64 {
-    (t / RAMP).min(1.0)
+/// The protocol's probe load scaled to `force` \[N\] (the protocol's is [`FORCE`]), ramped
+/// over [`RAMP`] from `start` \[s\] (the one ramp convention: `palpate_core::probe`).
+pub fn probe_load(case: &Case, force: f64, start: f64) -> ProbeLoad {
+    let total = case.f_node * (case.loaded.len() as f64 * force / FORCE);
+    ProbeLoad::new(case.mesh.n_nodes(), case.loaded.clone(), total, Ramp { start, duration: RAMP }).expect("valid protocol load")
+}
+
+/// A wall clock for timed runs (examples and benches; the core has none).
+pub struct WallClock(std::time::Instant);
+
+impl WallClock {
+    pub fn new() -> WallClock {
+        WallClock(std::time::Instant::now())
+    }
+}
+
+impl StepClock for WallClock {
+    fn now(&mut self) -> f64 {
+        self.0.elapsed().as_secs_f64()
+    }
 }
