@@ -58,7 +58,8 @@ PROBE_FORCE = 0.01             # [N], total
 N_PROBE = 5
 FIXED_FRACTION = 0.10
 DT = 1e-3                      # one haptic tick [s]
-ALL = [200, 600, 2000, 28000]
+ALL = [200, 600, 2000, 28000]  # --all
+TICKS = 200                    # ticks timed per case
 
 FLOPS_PER_PAIR = 50
 FLOPS_PER_PARTICLE = 285
@@ -167,7 +168,7 @@ def cluster(n: int, spacing: float, kernel: str = "wendland", support: float = S
     return pos, m, fixed, probe, len(_FILLS[spacing][0])
 
 
-def run(n: int, spacing: float = SPACING, kernel: str = "wendland", ticks: int = 200,
+def run(n: int, spacing: float = SPACING, kernel: str = "wendland", ticks: int = TICKS,
         max_wall_s: Optional[float] = None, support: float = SUPPORT_FACTOR) -> dict:
     """Build the cluster of ``n`` particles and time ``ticks`` ticks of 1 ms; a JSON-able dict."""
     pos, m, fixed, probe, n_fill = cluster(n, spacing, kernel, support)
