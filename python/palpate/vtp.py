@@ -149,15 +149,19 @@ class _Reader:
 
     # --- pieces -------------------------------------------------------------------------------
 
-    def _count(self, piece, attr: str, k: int) -> int:
-        v = piece.get(attr, "0")
+    def _int_attr(self, elem, attr: str, default: str, where: str, minimum: int) -> int:
+        """The integer attribute ``attr`` of ``elem`` (``default`` if absent), at least ``minimum``."""
+        v = elem.get(attr, default)
         try:
             n = int(v)
         except ValueError:
-            raise self.error(f"piece {k}: {attr}={v!r} is not an integer") from None
-        if n < 0:
-            raise self.error(f"piece {k}: {attr}={n} is negative")
+            raise self.error(f"{where}: {attr}={v!r} is not an integer") from None
+        if n < minimum:
+            raise self.error(f"{where}: {attr}={n}" + (" is negative" if minimum == 0 else ""))
         return n
+
+    def _count(self, piece, attr: str, k: int) -> int:
+        return self._int_attr(piece, attr, "0", f"piece {k}", 0)
 
     def _piece(self, piece, k: int, n_pieces: int):
         where = f"piece {k}: " if n_pieces > 1 else ""
@@ -261,14 +265,7 @@ class _Reader:
     # --- data arrays --------------------------------------------------------------------------
 
     def _ncomp(self, a, what: str) -> int:
-        v = a.get("NumberOfComponents", "1")
-        try:
-            n = int(v)
-        except ValueError:
-            raise self.error(f"{what}: NumberOfComponents={v!r} is not an integer") from None
-        if n < 1:
-            raise self.error(f"{what}: NumberOfComponents={n}")
-        return n
+        return self._int_attr(a, "NumberOfComponents", "1", what, 1)
 
     def _array(self, a, what: str, n_tuples: Optional[int], expect_components: Optional[int] = None,
                integer: bool = False) -> np.ndarray:
