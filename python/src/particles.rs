@@ -55,6 +55,15 @@ pub struct PyParticleBody {
     material: Py<PyMaterial>,
 }
 
+/// A time step [s] for `run_timed` / `substeps`: positive and finite, else ValueError.
+fn check_dt(dt: f64) -> PyResult<()> {
+    if dt > 0.0 && dt.is_finite() {
+        Ok(())
+    } else {
+        Err(PyValueError::new_err(format!("dt = {dt} s must be positive and finite")))
+    }
+}
+
 /// What `run_timed` measured.
 struct TimedRun {
     tick_wall: Vec<f64>,
@@ -135,9 +144,7 @@ impl PyParticleBody {
     /// ``max_wall_s`` [s].
     #[pyo3(signature = (ticks, dt = 1e-3, max_wall_s = None))]
     fn run_timed<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, ticks: usize, dt: f64, max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
-        if !(dt > 0.0 && dt.is_finite()) {
-            return Err(PyValueError::new_err(format!("dt = {dt} s must be positive and finite")));
-        }
+        check_dt(dt)?;
         let this = &mut *slf;
         let (model, state, ws) = (&this.model, &mut this.state, &mut this.ws);
         let substeps = model.substeps(dt);
@@ -259,9 +266,7 @@ impl PyParticleBody {
 
     /// Sub-steps one step of ``dt`` [s] takes.
     fn substeps(&self, dt: f64) -> PyResult<usize> {
-        if !(dt > 0.0 && dt.is_finite()) {
-            return Err(PyValueError::new_err(format!("dt = {dt} s must be positive and finite")));
-        }
+        check_dt(dt)?;
         Ok(self.model.substeps(dt))
     }
 
