@@ -97,6 +97,9 @@ fn kernel_value<'py>(py: Python<'py>, kernel: PyKernel, r: &Bound<'py, PyAny>, h
     Ok(out.into_any())
 }
 
+/// Compressed rows `(ptr, idx)`, int64.
+type Csr<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>);
+
 /// Neighbours of every point within ``radius`` [m] (excluding itself; distance strictly less
 /// than ``radius``): the core's cell-grid search (``palpate_core::meshfree::neighbors``), the one
 /// a ``ParticleBody`` pairs its particles with. GIL released.
@@ -104,7 +107,7 @@ fn kernel_value<'py>(py: Python<'py>, kernel: PyKernel, r: &Bound<'py, PyAny>, h
 /// Returns ``(ptr, idx)``, int64 compressed rows: the neighbours of point ``i`` are
 /// ``idx[ptr[i]:ptr[i + 1]]``, ascending; ``ptr`` has shape (n + 1,).
 #[pyfunction]
-fn neighbours<'py>(py: Python<'py>, points: &Bound<'py, PyAny>, radius: f64) -> PyResult<(Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>)> {
+fn neighbours<'py>(py: Python<'py>, points: &Bound<'py, PyAny>, radius: f64) -> PyResult<Csr<'py>> {
     check_radius(radius, "radius")?;
     let p = conv::points_vec3(points, "points")?;
     let (ptr, idx) = py.detach(|| neighbours_within(&p, radius));

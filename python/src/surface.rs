@@ -57,7 +57,7 @@ fn per_point<'py, T: numpy::Element + Copy + IntoPyObject<'py>>(
         return f(&p).into_bound_py_any(py);
     }
     let pts = conv::points_vec3(points, what)?;
-    let out: Vec<T> = py.detach(|| pts.iter().map(|q| f(q)).collect());
+    let out: Vec<T> = py.detach(|| pts.iter().map(&f).collect());
     Ok(Array1::from_vec(out).into_pyarray(py).into_any())
 }
 
