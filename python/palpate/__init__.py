@@ -44,6 +44,8 @@ from ._palpate import (
     box_mesh,
     ellipsoid_surface,
     ellipsoid_wall,
+    kernel_value,
+    neighbours,
     sample_between,
     sample_inside,
     set_simd_enabled,
@@ -51,6 +53,7 @@ from ._palpate import (
     truncated_ellipsoid_wall,
     ventricle_surface,
 )
+from . import defaults
 from .hybrid import build_from_files, build_shape, build_tagged_file
 from .io import UNITS, VtuSeries, load_mesh, read_mesh_arrays
 from .surfaces import (load_surface, orient_consistently, read_surface_arrays, read_tagged_surface,
@@ -87,10 +90,13 @@ __all__ = [
     "build_from_files",
     "build_shape",
     "build_tagged_file",
+    "defaults",
     "ellipsoid_surface",
     "ellipsoid_wall",
     "load_mesh",
+    "kernel_value",
     "load_surface",
+    "neighbours",
     "orient_consistently",
     "read_mesh_arrays",
     "read_surface_arrays",

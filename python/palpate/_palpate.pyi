@@ -1,7 +1,10 @@
 # Type stubs of the Rust extension palpate._palpate (python/src/*.rs). Hand-kept: update with the binding.
 # Units are SI: m, m/s, N, s, Pa, kg/m^3, Pa s. Per-node arrays are float64 (n, 3).
+# Defaults written `...` are the Rust core's, readable as `palpate.defaults` (one definition).
 import os
-from typing import Optional, Sequence, Tuple, TypedDict, Union, overload
+from typing import Any, Dict, Optional, Sequence, Tuple, TypedDict, Union, overload
+
+from typing_extensions import Unpack
 
 import numpy as np
 import numpy.typing as npt
@@ -249,6 +252,13 @@ class Kernel:
     CUBIC_SPLINE: Kernel
     LINEAR_LENNARD_JONES: Kernel
 
+@overload
+def kernel_value(kernel: Kernel, r: float, h: float) -> float: ...
+@overload
+def kernel_value(kernel: Kernel, r: npt.ArrayLike, h: float) -> _FloatArray: ...
+
+def neighbours(points: npt.ArrayLike, radius: float) -> Tuple[_IntArray, _IntArray]: ...
+
 class ParticleStepStats(TypedDict):
     steps: int
     substeps: int
@@ -271,8 +281,8 @@ class ParticleBody:
         kernel: Kernel = ...,
         fixed: Optional[_Indices] = None,
         gravity: Optional[_Vec3] = None,
-        hourglass: float = 0.5,
-        min_relative_weight: float = 1e-3,
+        hourglass: float = ...,              # palpate.defaults.particles.hourglass
+        min_relative_weight: float = ...,    # palpate.defaults.particles.min_relative_weight
     ) -> None: ...
     def step(self, n: int = 1, dt: float = 1e-3) -> ParticleStepStats: ...
     def run_timed(self, ticks: int, dt: float = 1e-3, max_wall_s: Optional[float] = None) -> TimedRun: ...
@@ -401,37 +411,24 @@ class HybridInfo(TypedDict):
     fallback_particle_core: int
     fallback_skin: int
 
+class _HybridOptions(TypedDict, total=False):
+    # The hybrid builders' keyword options; each one not given is palpate.defaults.hybrid's.
+    projection: Projection
+    core_fraction: float
+    core_triangles: int
+    core_layers: int
+    spacing: Optional[float]
+    particles: int
+    density: float
+    min_region_particles: int
+    field_voxels: int
+
 class HybridModel:
     @staticmethod
-    def build_nested(
-        inner: TriSurface,
-        outer: TriSurface,
-        *,
-        projection: Projection = ...,
-        core_fraction: float = 0.5,
-        core_triangles: int = 0,
-        core_layers: int = 1,
-        spacing: Optional[float] = None,
-        particles: int = 28000,
-        density: float = 1000.0,
-        min_region_particles: int = 50,
-        field_voxels: int = 120000,
-    ) -> HybridModel: ...
+    def build_nested(inner: TriSurface, outer: TriSurface, **options: Unpack[_HybridOptions]) -> HybridModel: ...
     @staticmethod
     def build_tagged(
-        points: npt.ArrayLike,
-        triangles: npt.ArrayLike,
-        parts: npt.ArrayLike,
-        *,
-        projection: Projection = ...,
-        core_fraction: float = 0.5,
-        core_triangles: int = 0,
-        core_layers: int = 1,
-        spacing: Optional[float] = None,
-        particles: int = 28000,
-        density: float = 1000.0,
-        min_region_particles: int = 50,
-        field_voxels: int = 120000,
+        points: npt.ArrayLike, triangles: npt.ArrayLike, parts: npt.ArrayLike, **options: Unpack[_HybridOptions]
     ) -> HybridModel: ...
     def save(self, path: Union[str, os.PathLike[str]]) -> None: ...
     @staticmethod
@@ -485,3 +482,4 @@ def sample_between(inner: TriSurface, outer: TriSurface, spacing: float, density
 def ventricle_surface(circumferential: int = 96, longitudinal: int = 24) -> Tuple[_FloatArray, _IntArray, npt.NDArray[np.int8]]: ...
 def simd_path() -> str: ...
 def set_simd_enabled(enabled: bool) -> None: ...
+def _defaults() -> Dict[str, Dict[str, Any]]: ...

@@ -26,6 +26,7 @@ from typing import Dict, List, Optional
 import numpy as np
 
 from . import _palpate as _p
+from . import defaults
 from .io import read_mesh_arrays
 
 SCALE = 0.01          # mesh unit -> m
@@ -58,9 +59,16 @@ INTEGRATORS = {
     "semi-implicit-stable": lambda: _p.SemiImplicit(filter=_p.Filter.STABLE),
 }
 
-#: The converged Newton run that ``rel_L2_vs_newton`` compares against.
+#: Iteration cap of the Newton reference: above the solver's default
+#: (``palpate.defaults.newton.max_iterations``), so that a hard step converges rather than stops.
+NEWTON_REFERENCE_MAX_ITERATIONS = 50
+
+
 def newton_reference():
-    return _p.BackwardEuler(_p.Solver.NEWTON, max_iterations=50, tolerance=1e-8)
+    """The converged Newton run that ``rel_L2_vs_newton`` compares against: the core's Newton
+    tolerance (``palpate.defaults.newton.tolerance``), :data:`NEWTON_REFERENCE_MAX_ITERATIONS`."""
+    return _p.BackwardEuler(_p.Solver.NEWTON, max_iterations=NEWTON_REFERENCE_MAX_ITERATIONS,
+                            tolerance=defaults.newton.tolerance)
 
 
 def probe_point():

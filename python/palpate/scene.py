@@ -38,9 +38,10 @@ file, and environment variables in it are expanded: ``$VAR``, ``${VAR}``, and ``
     [integrator]
     type = "backward_euler"            # "semi_implicit", "backward_euler" (default) or "newton"
     # solver = "quasi_newton"          # backward_euler: "quasi_newton" (default), "newton", "linearised"
-    # max_iterations = 25              # quasi_newton / newton: iteration cap per step
-    # tolerance = 2e-2                 # quasi_newton / newton: relative gradient tolerance
-    # history = 5                      # quasi_newton: L-BFGS pairs
+    # max_iterations = 40              # quasi_newton / newton: iteration cap per step
+    # tolerance = 1e-2                 # quasi_newton / newton: relative gradient tolerance
+    # history = 8                      # quasi_newton: L-BFGS pairs
+    #                                  # (left out: the solver's default, palpate.defaults.quasi_newton / .newton)
     # filter = "paper"                 # semi_implicit: "paper" (default) or "stable"
 
     [run]
@@ -323,14 +324,14 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
             raise c.err("integrator.solver", "type = 'newton' is backward Euler with solver = 'newton'")
         kw = {}
         if "max_iterations" in it:
-            kw["max_iterations"] = c.number(it, "integrator", "max_iterations", 1, positive=True, integer=True)
+            kw["max_iterations"] = c.number(it, "integrator", "max_iterations", positive=True, integer=True)
         if "tolerance" in it:
-            tol = c.number(it, "integrator", "tolerance", 2e-2, positive=True)
+            tol = c.number(it, "integrator", "tolerance", positive=True)
             if not tol < 1:
                 raise c.err("integrator.tolerance", f"must lie in (0, 1), got {tol!r}")
             kw["tolerance"] = float(tol)
         if "history" in it:
-            kw["history"] = c.number(it, "integrator", "history", 5, nonneg=True, integer=True)
+            kw["history"] = c.number(it, "integrator", "history", nonneg=True, integer=True)
         try:
             integrator = _p.BackwardEuler(solvers[name], **kw)
         except ValueError as e:

@@ -149,15 +149,19 @@ class _Reader:
 
     # --- pieces -------------------------------------------------------------------------------
 
-    def _count(self, piece, attr: str, k: int) -> int:
-        v = piece.get(attr, "0")
+    def _int_attr(self, elem, attr: str, default: str, where: str, minimum: int) -> int:
+        """The integer attribute ``attr`` of ``elem`` (``default`` if absent), at least ``minimum``."""
+        v = elem.get(attr, default)
         try:
             n = int(v)
         except ValueError:
-            raise self.error(f"piece {k}: {attr}={v!r} is not an integer") from None
-        if n < 0:
-            raise self.error(f"piece {k}: {attr}={n} is negative")
+            raise self.error(f"{where}: {attr}={v!r} is not an integer") from None
+        if n < minimum:
+            raise self.error(f"{where}: {attr}={n}" + (" is negative" if minimum == 0 else ""))
         return n
+
+    def _count(self, piece, attr: str, k: int) -> int:
+        return self._int_attr(piece, attr, "0", f"piece {k}", 0)
 
     def _piece(self, piece, k: int, n_pieces: int):
         where = f"piece {k}: " if n_pieces > 1 else ""
@@ -261,14 +265,7 @@ class _Reader:
     # --- data arrays --------------------------------------------------------------------------
 
     def _ncomp(self, a, what: str) -> int:
-        v = a.get("NumberOfComponents", "1")
-        try:
-            n = int(v)
-        except ValueError:
-            raise self.error(f"{what}: NumberOfComponents={v!r} is not an integer") from None
-        if n < 1:
-            raise self.error(f"{what}: NumberOfComponents={n}")
-        return n
+        return self._int_attr(a, "NumberOfComponents", "1", what, 1)
 
     def _array(self, a, what: str, n_tuples: Optional[int], expect_components: Optional[int] = None,
                integer: bool = False) -> np.ndarray:
@@ -330,29 +327,37 @@ class _Reader:
 
     def _decode_base64_block(self, text: str, what: str) -> bytes:
         """Inline base64: the header and the data are encoded separately (VTK) or together."""
+        return self._base64_block(text, what, bounded=False)
+
+    def _base64_block(self, text, what: str, bounded: bool) -> bytes:
+        """One base64 data block at the start of ``text`` (str or bytes): ``[nbytes] data``, the header
+        encoded on its own (VTK) or with the data, or compressed ``[nblocks, blocksize, lastsize,
+        csize_1 .. csize_n]`` (encoded on its own) and the blocks. ``bounded``: the text goes on with
+        the next arrays (an appended stream), so only this block's characters are decoded."""
         hs = self.header_dtype.itemsize
         if self.compressor is None:
             hchars = self._b64_chars(hs)
             head = text[:hchars]
             if len(head) < hchars:
                 raise self.error(f"{what}: base64 data cut short (truncated file)")
-            pad = head.endswith("=") if isinstance(head, str) else head.endswith(b"=")
-            if pad:  # the header encoded on its own
+            if head.endswith("=" if isinstance(head, str) else b"="):  # the header encoded on its own
                 nbytes = int(self._header_ints(self._b64(head, what), 1, what)[0])
-                body = self._b64(text[hchars:], what)
-            else:
-                buf = self._b64(text, what)
-                nbytes = int(self._header_ints(buf, 1, what)[0])
-                body = buf[hs:]
+                rest = text[hchars:]
+                body = self._b64(rest[:self._b64_chars(nbytes)] if bounded else rest, what)
+            else:  # header and data encoded together
+                first = self._b64(head if bounded else text, what)
+                nbytes = int(self._header_ints(first, 1, what)[0])
+                body = (self._b64(text[:self._b64_chars(hs + nbytes)], what) if bounded else first)[hs:]
             return self._take(body, nbytes, what)
-        # compressed: [nblocks, blocksize, lastsize, csize_1 .. csize_n] encoded on its own
-        first = self._b64(text[:self._b64_chars(3 * hs)], what) if len(text) >= self._b64_chars(3 * hs) else b""
+        n3 = self._b64_chars(3 * hs)
+        first = self._b64(text[:n3], what) if len(text) >= n3 else b""
         nblocks = self._nblocks(first, what)
         hchars = self._b64_chars((3 + nblocks) * hs)
         if len(text) < hchars:
             raise self.error(f"{what}: compressed-data header cut short (truncated file)")
         header = self._header_ints(self._b64(text[:hchars], what), 3 + nblocks, what)
-        body = self._b64(text[hchars:], what)
+        rest = text[hchars:]
+        body = self._b64(rest[:self._b64_chars(int(header[3:].sum()))] if bounded else rest, what)
         return self._inflate(header, body, what)
 
     def _take(self, body: bytes, nbytes: int, what: str) -> bytes:
@@ -418,31 +423,7 @@ class _Reader:
 
     def _appended_base64(self, text: bytes, what: str) -> bytes:
         """One array at the start of an appended base64 stream (which continues with the next arrays)."""
-        hs = self.header_dtype.itemsize
-        if self.compressor is None:
-            hchars = self._b64_chars(hs)
-            head = text[:hchars]
-            if len(head) < hchars:
-                raise self.error(f"{what}: base64 data cut short (truncated file)")
-            if head.endswith(b"="):  # header encoded on its own
-                nbytes = int(self._header_ints(self._b64(head, what), 1, what)[0])
-                body = self._b64(text[hchars:hchars + self._b64_chars(nbytes)], what)
-            else:  # header and data encoded together
-                first = self._b64(head, what)
-                nbytes = int(self._header_ints(first, 1, what)[0])
-                body = self._b64(text[:self._b64_chars(hs + nbytes)], what)[hs:]
-            return self._take(body, nbytes, what)
-        n3 = self._b64_chars(3 * hs)
-        first = self._b64(text[:n3], what) if len(text) >= n3 else b""
-        nblocks = self._nblocks(first, what)
-        hchars = self._b64_chars((3 + nblocks) * hs)
-        if len(text) < hchars:
-            raise self.error(f"{what}: compressed-data header cut short (truncated file)")
-        header = self._header_ints(self._b64(text[:hchars], what), 3 + nblocks, what)
-        total = int(header[3:].sum())
-        body = self._b64(text[hchars:hchars + self._b64_chars(total)], what)
-        return self._inflate(header, body, what)
-
+        return self._base64_block(text, what, bounded=True)
 
 def read_vtp(path: PathLike) -> PolyData:
     """Read a VTK XML PolyData file holding a triangle surface.

@@ -1,4 +1,5 @@
-//! `palpate.Body`: a compiled model with its state and workspace (`crates/palpate-core/src/scene`).
+//! `palpate.Body`: the FEM body, a compiled model with its state and workspace (`palpate_core::{Model,
+//! State, Workspace}`, the FEM body of `crates/palpate-core/src/fem/`; `step` from `integrate/`).
 //! Stepping, static solves and the timed probe run release the GIL.
 
 use std::time::Instant;
@@ -151,7 +152,7 @@ impl PyBody {
     ) -> PyResult<Self> {
         let n = mesh.get().inner.n_nodes();
         let fixed = match fixed {
-            Some(f) if !f.is_none() => conv::node_indices(f, "fixed", n)?,
+            Some(f) if !f.is_none() => conv::indices(f, "fixed", n, conv::NODES, false)?,
             _ => Vec::new(),
         };
         let gravity = match gravity {
@@ -276,8 +277,7 @@ impl PyBody {
     /// Indices of the fixed nodes, int64 (k,), ascending.
     #[getter]
     fn fixed<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
-        let idx: Vec<usize> = self.model.fixed().iter().enumerate().filter(|(_, &f)| f).map(|(i, _)| i).collect();
-        conv::usizes_to_py(py, &idx)
+        conv::flagged_to_py(py, self.model.fixed())
     }
 
     /// Lumped node masses [kg], (n,).
@@ -289,8 +289,7 @@ impl PyBody {
     /// Gravitational acceleration [m/s^2], (3,).
     #[getter]
     fn gravity<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        let g = self.model.gravity();
-        conv::f64s_to_py(py, &[g.x, g.y, g.z])
+        conv::vec3_to_py(py, self.model.gravity())
     }
 
     /// Elastic strain energy of the current positions [J].
@@ -312,9 +311,9 @@ impl PyBody {
     /// and gravity, by Newton's method on the full nonlinear forces (GIL released).
     ///
     /// Returns the equilibrium positions [m], (n, 3). The body's state is not changed.
-    /// Defaults are the core's (``StaticOptions::default``: 100 iterations, tolerance 1e-10 on
-    /// max |residual| relative to max |applied force|, 1 load step). ``load_steps`` > 1 applies
-    /// the load in increments (for large loads).
+    /// ``tolerance`` is on max |residual| relative to max |applied force|; ``load_steps`` > 1
+    /// applies the load in increments (for large loads). ``None`` takes the core's default
+    /// (``StaticOptions::default()``, as ``palpate.defaults.static_solve``).
     /// Raises ``SolveError`` if Newton does not converge.
     #[pyo3(signature = (forces = None, *, max_iterations = None, tolerance = None, load_steps = None))]
     fn static_solve<'py>(

@@ -7,6 +7,9 @@
 //! node, 0-based, or `None`), `SurfaceError.triangle` / `.vertex`, `StepError.node` / `.time`.
 //! The whole tree is defined here, once (the other files only convert into it).
 
+use std::ffi::CString;
+use std::fmt::Display;
+
 use palpate_core::error as core;
 use palpate_core::mesh::SurfaceError as CoreSurfaceError;
 use pyo3::exceptions::{PyException, PyOSError, PyUserWarning, PyValueError};
@@ -181,4 +184,22 @@ pub fn file_error(e: core::ModelFileError) -> PyErr {
         core::ModelFileError::Io { .. } => PyOSError::new_err(e.to_string()),
         other => ModelFileError::new_err(other.to_string()),
     }
+}
+
+/// Issue each of `warnings` as a `palpate.MeshWarning`, prefixed `"{source}: "` when the arrays
+/// came from a file.
+pub fn warn_all<W: Display>(py: Python<'_>, source: Option<&str>, warnings: impl IntoIterator<Item = W>) -> PyResult<()> {
+    for w in warnings {
+        warn(py, match source {
+            Some(s) => format!("{s}: {w}"),
+            None => w.to_string(),
+        })?;
+    }
+    Ok(())
+}
+
+/// Issue `msg` as a `palpate.MeshWarning`.
+pub fn warn(py: Python<'_>, msg: String) -> PyResult<()> {
+    let msg = CString::new(msg).unwrap_or_else(|_| CString::new("mesh warning").unwrap());
+    PyErr::warn(py, &py.get_type::<MeshWarning>(), &msg, 1)
 }

@@ -4,12 +4,12 @@
 use crate::conv;
 use crate::errors;
 use crate::errors::{file_error, surface_error};
-use crate::particles::PyTriSurface;
+use crate::surface::PyTriSurface;
 use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use palpate_core::hybrid::{self, HybridModel, HybridOptions, Projection, Spacing, VoxelLabel, Wall, WallPart};
 use palpate_core::mesh::TriSurface;
 use palpate_core::HybridError;
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -57,6 +57,15 @@ pub enum PyProjection {
     RADIAL,
 }
 
+impl From<Projection> for PyProjection {
+    fn from(p: Projection) -> Self {
+        match p {
+            Projection::Transmural => PyProjection::TRANSMURAL,
+            Projection::Radial => PyProjection::RADIAL,
+        }
+    }
+}
+
 impl From<PyProjection> for Projection {
     fn from(p: PyProjection) -> Self {
         match p {
@@ -75,21 +84,58 @@ pub struct PyHybridModel {
     pub model: HybridModel,
 }
 
-#[allow(clippy::too_many_arguments)]
-fn options(projection: PyProjection, core_fraction: f64, core_triangles: usize, core_layers: usize, spacing: Option<f64>, particles: usize, density: f64, min_region_particles: usize, field_voxels: usize) -> HybridOptions {
-    HybridOptions {
-        projection: projection.into(),
-        core_fraction,
-        core_triangles,
-        core_layers,
-        spacing: match spacing {
-            Some(s) => Spacing::Length(s),
-            None => Spacing::Count(particles),
-        },
-        density,
-        min_region_particles,
-        field_voxels,
+/// The build options from keyword arguments; each one not given is the core's
+/// (`HybridOptions::default()`, also `palpate.defaults.hybrid`).
+fn options(kw: Option<&Bound<'_, PyDict>>) -> PyResult<HybridOptions> {
+    let mut o = HybridOptions::default();
+    let (mut spacing, mut particles) = (None, None);
+    for (k, v) in kw.into_iter().flatten() {
+        let key: String = k.extract()?;
+        let arg = |e: PyErr| PyTypeError::new_err(format!("argument '{key}': {e}"));
+        match key.as_str() {
+            "projection" => o.projection = v.extract::<PyProjection>().map_err(|e| arg(e.into()))?.into(),
+            "core_fraction" => o.core_fraction = v.extract().map_err(arg)?,
+            "core_triangles" => o.core_triangles = v.extract().map_err(arg)?,
+            "core_layers" => o.core_layers = v.extract().map_err(arg)?,
+            "spacing" => spacing = v.extract::<Option<f64>>().map_err(arg)?,
+            "particles" => particles = Some(v.extract::<usize>().map_err(arg)?),
+            "density" => o.density = v.extract().map_err(arg)?,
+            "min_region_particles" => o.min_region_particles = v.extract().map_err(arg)?,
+            "field_voxels" => o.field_voxels = v.extract().map_err(arg)?,
+            _ => return Err(PyTypeError::new_err(format!("unexpected keyword argument '{key}' (the build options are {})", OPTION_NAMES.join(", ")))),
+        }
     }
+    match (spacing, particles) {
+        (Some(s), _) => o.spacing = Spacing::Length(s),
+        (None, Some(n)) => o.spacing = Spacing::Count(n),
+        (None, None) => {}
+    }
+    Ok(o)
+}
+
+/// The keyword arguments of the builders, in the order of the docs.
+const OPTION_NAMES: [&str; 9] = ["projection", "core_fraction", "core_triangles", "core_layers", "spacing", "particles", "density", "min_region_particles", "field_voxels"];
+
+/// `HybridOptions::default()` as a dict keyed as the builders' keyword arguments (`spacing` None
+/// with a particle count, `particles` None with a spacing).
+pub fn default_options(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let o = HybridOptions::default();
+    let d = PyDict::new(py);
+    d.set_item("projection", PyProjection::from(o.projection))?;
+    d.set_item("core_fraction", o.core_fraction)?;
+    d.set_item("core_triangles", o.core_triangles)?;
+    d.set_item("core_layers", o.core_layers)?;
+    let (spacing, particles) = match o.spacing {
+        Spacing::Length(s) => (Some(s), None),
+        Spacing::Count(n) => (None, Some(n)),
+    };
+    d.set_item("spacing", spacing)?;
+    d.set_item("particles", particles)?;
+    d.set_item("density", o.density)?;
+    d.set_item("min_region_particles", o.min_region_particles)?;
+    d.set_item("field_voxels", o.field_voxels)?;
+    debug_assert_eq!(d.len(), OPTION_NAMES.len());
+    Ok(d)
 }
 
 fn build_wall(py: Python<'_>, wall: Wall, o: HybridOptions) -> PyResult<PyHybridModel> {
@@ -97,86 +143,63 @@ fn build_wall(py: Python<'_>, wall: Wall, o: HybridOptions) -> PyResult<PyHybrid
     Ok(PyHybridModel { model })
 }
 
-fn u32s_to_py<'py>(py: Python<'py>, v: &[u32]) -> Bound<'py, PyArray1<i64>> {
-    PyArray1::from_vec(py, v.iter().map(|&x| x as i64).collect())
-}
-
 #[pymethods]
 impl PyHybridModel {
     /// Build from two nested closed surfaces (the wall lies inside ``outer``, outside ``inner``).
     ///
+    /// Keyword-only options, each defaulting to the core's (``HybridOptions::default()``; the
+    /// values are in ``palpate.defaults.hybrid``): ``projection`` (:class:`Projection`);
     /// ``core_fraction``: the fraction of the wall (transmural coordinate, from the inner
     /// surface) the FEM core takes; ``core_triangles``: triangles of the simplified inner
-    /// surface (3 tets each per layer; 0: automatic, 64 for a closed wall, 300 for one with a
-    /// base, raised while prisms would twist); ``spacing`` [m] or, if None, about ``particles``
-    /// particles in the shell; ``density`` [kg/m^3]; ``min_region_particles``: activation
-    /// regions grow by rings of outer triangles until they hold this many; ``field_voxels``:
-    /// wall voxels of the transmural solve.
+    /// surface (3 tets each per layer; 0: automatic, ``AUTO_CORE_TRIANGLES_CLOSED`` for a closed
+    /// wall, ``AUTO_CORE_TRIANGLES_BASE`` for one with a base, raised while prisms would twist);
+    /// ``core_layers``: prism layers of the core; ``spacing`` [m] or, if None, about
+    /// ``particles`` particles in the shell; ``density`` [kg/m^3]; ``min_region_particles``:
+    /// activation regions grow by rings of outer triangles until they hold this many;
+    /// ``field_voxels``: wall voxels of the transmural solve. An unknown option is a TypeError.
     #[staticmethod]
-    #[pyo3(signature = (inner, outer, *, projection = PyProjection::TRANSMURAL, core_fraction = 0.5, core_triangles = 0, core_layers = 1, spacing = None, particles = 28000, density = 1000.0, min_region_particles = 50, field_voxels = 120000))]
-    #[allow(clippy::too_many_arguments)]
-    fn build_nested(
-        py: Python<'_>,
-        inner: &PyTriSurface,
-        outer: &PyTriSurface,
-        projection: PyProjection,
-        core_fraction: f64,
-        core_triangles: usize,
-        core_layers: usize,
-        spacing: Option<f64>,
-        particles: usize,
-        density: f64,
-        min_region_particles: usize,
-        field_voxels: usize,
-    ) -> PyResult<PyHybridModel> {
+    #[pyo3(signature = (inner, outer, **options))]
+    fn build_nested(py: Python<'_>, inner: &PyTriSurface, outer: &PyTriSurface, options: Option<&Bound<'_, PyDict>>) -> PyResult<PyHybridModel> {
+        let o = self::options(options)?;
         let wall = Wall::nested(&inner.inner, &outer.inner).map_err(hybrid_error)?;
-        build_wall(py, wall, options(projection, core_fraction, core_triangles, core_layers, spacing, particles, density, min_region_particles, field_voxels))
+        build_wall(py, wall, o)
     }
 
     /// Build from one closed surface ``points`` (n, 3) [m], ``triangles`` (m, 3) with a part per
     /// triangle, ``parts`` (m,) int: 0 inner, 1 outer, 2 base (a truncated ventricle). Same
     /// options as :meth:`build_nested`.
     #[staticmethod]
-    #[pyo3(signature = (points, triangles, parts, *, projection = PyProjection::TRANSMURAL, core_fraction = 0.5, core_triangles = 0, core_layers = 1, spacing = None, particles = 28000, density = 1000.0, min_region_particles = 50, field_voxels = 120000))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (points, triangles, parts, **options))]
     fn build_tagged(
         py: Python<'_>,
         points: &Bound<'_, PyAny>,
         triangles: &Bound<'_, PyAny>,
         parts: &Bound<'_, PyAny>,
-        projection: PyProjection,
-        core_fraction: f64,
-        core_triangles: usize,
-        core_layers: usize,
-        spacing: Option<f64>,
-        particles: usize,
-        density: f64,
-        min_region_particles: usize,
-        field_voxels: usize,
+        options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<PyHybridModel> {
+        let o = self::options(options)?;
         let pts = conv::points(points, "points")?;
-        let tris = crate::particles::triangles_arg(triangles, "triangles")?;
-        let parts_arr = numpy::PyArrayLike1::<i64, numpy::AllowTypeChange>::extract(parts.as_borrowed())
-            .map_err(|_| PyValueError::new_err("parts: expected a 1-D integer array (0 inner, 1 outer, 2 base)"))?;
-        let raw: Vec<i64> = parts_arr.as_array().iter().copied().collect();
+        let tris = conv::index_rows::<3>(triangles, "triangles")?;
+        let raw = conv::codes(parts, "parts", "a 1-D integer array (0 inner, 1 outer, 2 base)")?;
         if raw.len() != tris.len() {
             return Err(PyValueError::new_err(format!("parts: {} entries for {} triangles", raw.len(), tris.len())));
         }
-        let mut tags = Vec::with_capacity(raw.len());
-        for (t, &p) in raw.iter().enumerate() {
-            tags.push(match p {
-                0 => WallPart::Inner,
-                1 => WallPart::Outer,
-                2 => WallPart::Base,
-                _ => return Err(PyValueError::new_err(format!("parts: triangle {t} has part {p}; expected 0 (inner), 1 (outer) or 2 (base)"))),
-            });
-        }
+        let tags = raw
+            .iter()
+            .enumerate()
+            .map(|(t, &p)| match p {
+                0 => Ok(WallPart::Inner),
+                1 => Ok(WallPart::Outer),
+                2 => Ok(WallPart::Base),
+                _ => Err(PyValueError::new_err(format!("parts: triangle {t} has part {p}; expected 0 (inner), 1 (outer) or 2 (base)"))),
+            })
+            .collect::<PyResult<Vec<_>>>()?;
         let (surface, _) = TriSurface::from_arrays(&pts, &tris).map_err(surface_error)?;
         let wall = Wall::tagged(surface, tags).map_err(hybrid_error)?;
         if wall.dropped_pieces > 0 {
-            crate::particles::warn(py, format!("dropped {} closed piece(s) of the surface enclosing less than {} of the largest (specks, e.g. left by a surface repair)", wall.dropped_pieces, palpate_core::hybrid::build::MIN_PIECE_VOLUME))?;
+            errors::warn(py, format!("dropped {} closed piece(s) of the surface enclosing less than {} of the largest (specks, e.g. left by a surface repair)", wall.dropped_pieces, palpate_core::hybrid::build::MIN_PIECE_VOLUME))?;
         }
-        build_wall(py, wall, options(projection, core_fraction, core_triangles, core_layers, spacing, particles, density, min_region_particles, field_voxels))
+        build_wall(py, wall, o)
     }
 
     /// Save to ``path`` (one versioned binary file with a checksum).
@@ -217,10 +240,10 @@ impl PyHybridModel {
     fn particle_masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> { conv::f64s_to_py(py, &self.model.particle_mass) }
     /// Outer triangle above each particle, int64 (p,).
     #[getter]
-    fn particle_outer_triangle<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { u32s_to_py(py, &self.model.particle_outer_tri) }
+    fn particle_outer_triangle<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { conv::u32s_to_py(py, &self.model.particle_outer_tri) }
     /// Core face below each particle, int64 (p,).
     #[getter]
-    fn particle_core_face<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { u32s_to_py(py, &self.model.particle_core_face) }
+    fn particle_core_face<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { conv::u32s_to_py(py, &self.model.particle_core_face) }
     /// Outer surface vertices [m], (s, 3): one activation region and one skin link each.
     #[getter]
     fn outer_points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> { conv::vec3s_to_py(py, &self.model.outer_points) }
@@ -229,12 +252,11 @@ impl PyHybridModel {
     fn outer_triangles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> { conv::index_rows_to_py(py, &self.model.outer_tris) }
     /// Skin: the core face each outer vertex is tied to, int64 (s,).
     #[getter]
-    fn skin_faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { u32s_to_py(py, &self.model.skin_face) }
+    fn skin_faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { conv::u32s_to_py(py, &self.model.skin_face) }
     /// Skin: barycentric coordinates on that face, (s, 3), each in [0, 1], rows summing to 1.
     #[getter]
     fn skin_barycentric<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let flat: Vec<f64> = self.model.skin_bary.iter().flatten().copied().collect();
-        PyArray1::from_vec(py, flat).reshape([self.model.skin_bary.len(), 3]).expect("shape")
+        conv::f64_rows_to_py(py, &self.model.skin_bary)
     }
     /// Skin: rest offset from the anchor point on the face to the vertex [m], (s, 3).
     #[getter]
@@ -264,12 +286,12 @@ impl PyHybridModel {
     /// nv(p_s): the outer triangles of region ``s``, int64.
     fn region_triangles<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
         self.check_region(s)?;
-        Ok(u32s_to_py(py, &self.model.region_triangles(s)))
+        Ok(conv::u32s_to_py(py, &self.model.region_triangles(s)))
     }
     /// The core faces under RV(p_s), int64.
     fn region_core_faces<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
         self.check_region(s)?;
-        Ok(u32s_to_py(py, &self.model.region_core_faces(s)))
+        Ok(conv::u32s_to_py(py, &self.model.region_core_faces(s)))
     }
     /// C(p_s): the projections on the core of nv(p_s)'s boundary vertices [m], (k, 3).
     fn region_curve<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {

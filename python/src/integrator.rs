@@ -75,12 +75,13 @@ impl PySemiImplicit {
 ///
 /// ``BackwardEuler(solver=Solver.QUASI_NEWTON, *, max_iterations=None, tolerance=None, history=None)``
 ///
-/// ``max_iterations`` caps the iterations of a step (quasi-Newton default 25, Newton 30; a capped
-/// step still lowers the incremental potential, so it stays stable); the iterations stop when the
-/// gradient of the incremental potential falls under ``tolerance`` times the force scale (the
-/// applied forces and the momenta over dt; quasi-Newton default 2e-2, Newton 1e-8); ``history``
-/// is the number of L-BFGS pairs (quasi-Newton only, default 5). ``None`` takes the default.
-/// The rest-linearised solver takes none of them.
+/// ``max_iterations`` caps the iterations of a step (a capped step still lowers the incremental
+/// potential, so it stays stable); the iterations stop when the gradient of the incremental
+/// potential falls under ``tolerance`` times the force scale (the applied forces and the momenta
+/// over dt); ``history`` is the number of L-BFGS pairs (quasi-Newton only). ``None`` takes the
+/// solver's default, the core's ``Integrator::QUASI_NEWTON_*`` / ``NEWTON_*`` constants
+/// (``palpate.defaults.quasi_newton`` / ``palpate.defaults.newton``). The rest-linearised solver
+/// takes none of them.
 #[pyclass(module = "palpate", name = "BackwardEuler", frozen)]
 #[derive(Clone)]
 pub struct PyBackwardEuler {

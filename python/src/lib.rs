@@ -2,24 +2,31 @@
 //!
 //! | file | binds |
 //! |---|---|
-//! | `errors.rs` | core error enums -> `palpate.PalpateError` and its subclasses (the whole tree: `MeshError`, `SurfaceError`, `MaterialError`, `ModelError`, `ModelFileError`, `SolveError`, `StepError`, `MeshWarning`) |
-//! | `conv.rs` | numpy <-> core arrays (dtype / shape checks) |
-//! | `mesh.rs` | `TetMesh`, `ellipsoid_wall`, `truncated_ellipsoid_wall`, `box_mesh` |
-//! | `material.rs` | `Law`, `Material` |
-//! | `integrator.rs` | `SemiImplicit`, `BackwardEuler`, `Filter`, `Solver` |
-//! | `body.rs` | `Body` (model + state + workspace; stepping releases the GIL) |
-//! | `particles.rs` | `Kernel`, `ParticleBody`, `TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between` |
+//! | `errors.rs` | core error enums -> `palpate.PalpateError` and its subclasses (the whole tree: `MeshError`, `SurfaceError`, `MaterialError`, `ModelError`, `ModelFileError`, `SolveError`, `StepError`, `MeshWarning`), and the warnings |
+//! | `conv.rs` | numpy <-> core arrays (dtype / shape checks): the one conversion layer, used by every file |
+//! | `defaults.rs` | the core's defaults (hybrid builder, backward Euler, static solve, particle body) for `palpate.defaults` |
+//! | `mesh.rs` | `TetMesh`, `ellipsoid_wall`, `truncated_ellipsoid_wall`, `box_mesh` (`palpate_core::mesh`) |
+//! | `surface.rs` | `TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between` (`palpate_core::mesh::{surface, sample}`) |
+//! | `material.rs` | `Law`, `Material` (`palpate_core::material`) |
+//! | `integrator.rs` | `SemiImplicit`, `BackwardEuler`, `Filter`, `Solver` (`palpate_core::integrate`) |
+//! | `body.rs` | `Body`: the FEM body (model + state + workspace; stepping releases the GIL) |
+//! | `meshfree.rs` | `Kernel`, `kernel_value`, `neighbours`, `simd_path`, `set_simd_enabled` (`palpate_core::meshfree::{kernel, neighbors}`) |
+//! | `particles.rs` | `ParticleBody`: the meshfree body (`palpate_core::meshfree`) |
+//! | `hybrid.rs` | `HybridModel`, `Projection`, `ventricle_surface` (`palpate_core::hybrid`) |
 //!
-//! The Pythonic layer (file IO, CLI, benchmark) lives in `python/palpate/*.py`.
+//! The Pythonic layer (file IO, CLI, benchmarks, `palpate.defaults`) lives in `python/palpate/`.
 
 mod body;
 mod conv;
+mod defaults;
 mod errors;
 mod hybrid;
 mod integrator;
 mod material;
 mod mesh;
+mod meshfree;
 mod particles;
+mod surface;
 
 use pyo3::prelude::*;
 
@@ -35,10 +42,13 @@ fn _palpate(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<integrator::PyFilter>()?;
     m.add_class::<integrator::PySolver>()?;
     m.add_class::<body::PyBody>()?;
+    m.add_class::<particles::PyParticleBody>()?;
     m.add_function(wrap_pyfunction!(mesh::ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::truncated_ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::box_mesh, m)?)?;
-    particles::register(m)?;
+    meshfree::register(m)?;
+    surface::register(m)?;
     hybrid::register(m)?;
+    defaults::register(m)?;
     Ok(())
 }

@@ -1,6 +1,4 @@
-//! `palpate.TetMesh` and the mesh generators (`crates/palpate-core/src/mesh/`).
-
-use std::ffi::CString;
+//! `palpate.TetMesh` and the tet-mesh generators (`crates/palpate-core/src/mesh/`).
 
 use numpy::{PyArray1, PyArray2};
 use palpate_core::mesh::generate::{self, EllipsoidWall, TruncatedEllipsoidWall};
@@ -9,7 +7,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::conv;
-use crate::errors::{self, MeshWarning};
+use crate::errors;
 
 /// A validated mesh of linear tetrahedra.
 ///
@@ -51,19 +49,12 @@ impl PyTetMesh {
     #[pyo3(signature = (points, tets, *, source = None))]
     fn new(py: Python<'_>, points: &Bound<'_, PyAny>, tets: &Bound<'_, PyAny>, source: Option<String>) -> PyResult<Self> {
         let p = conv::points(points, "points")?;
-        let t = conv::tets(tets, "tets")?;
+        let t = conv::index_rows::<4>(tets, "tets")?;
         let (mesh, warnings) = TetMesh::from_arrays(&p, &t).map_err(|e| match &source {
             Some(s) => errors::mesh_error(e.in_file(s.clone())),
             None => errors::mesh_error(e),
         })?;
-        for w in warnings {
-            let msg = match &source {
-                Some(s) => format!("{s}: {w}"),
-                None => w.to_string(),
-            };
-            let msg = CString::new(msg).unwrap_or_else(|_| CString::new("mesh warning").unwrap());
-            PyErr::warn(py, &py.get_type::<MeshWarning>(), &msg, 1)?;
-        }
+        errors::warn_all(py, source.as_deref(), warnings)?;
         Ok(PyTetMesh { inner: mesh })
     }
 

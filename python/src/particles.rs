@@ -1,210 +1,26 @@
-//! The meshfree side: `palpate.Kernel`, `palpate.ParticleBody` (`palpate_core::meshfree`),
-//! `palpate.TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between`
-//! (`palpate_core::mesh::{surface, sample}`); its errors are `palpate.SurfaceError` (errors.rs).
-//! Building, stepping, sampling and the timed run release the GIL.
+//! `palpate.ParticleBody`: a meshfree solid (`palpate_core::meshfree`), its model, state and
+//! workspace. Building, stepping and the timed run release the GIL.
 
-use std::collections::HashSet;
-use std::ffi::CString;
 use std::time::Instant;
 
-use numpy::ndarray::Array1;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayDescrMethods, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
-use palpate_core::error::ModelError as CoreModelError;
-use palpate_core::mesh::{self, TriSurface};
-use palpate_core::meshfree::{Kernel, ParticleModel, ParticleModelBuilder, ParticleState, ParticleWorkspace, DEFAULT_HOURGLASS};
+use numpy::{PyArray1, PyArray2};
+use palpate_core::meshfree::{Kernel, ParticleModel, ParticleModelBuilder, ParticleState, ParticleWorkspace, DEFAULT_HOURGLASS, DEFAULT_MIN_WEIGHT};
 use palpate_core::Vec3;
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::IntoPyObjectExt;
 use pyo3::types::PyDict;
 
-use crate::conv;
-use crate::errors::{self, surface_error, MeshWarning};
+use crate::conv::{self, PARTICLES};
+use crate::errors;
 use crate::material::PyMaterial;
-
-/// Register the meshfree classes and functions.
-pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<PyKernel>()?;
-    m.add_class::<PyParticleBody>()?;
-    m.add_class::<PyTriSurface>()?;
-    m.add_function(wrap_pyfunction!(ellipsoid_surface, m)?)?;
-    m.add_function(wrap_pyfunction!(sample_inside, m)?)?;
-    m.add_function(wrap_pyfunction!(sample_between, m)?)?;
-    m.add_function(wrap_pyfunction!(simd_path, m)?)?;
-    m.add_function(wrap_pyfunction!(set_simd_enabled, m)?)?;
-    Ok(())
-}
-
-/// The copy of the particle hot loop that runs on this CPU: ``"avx2+fma"`` or ``"baseline"``.
-#[pyfunction]
-fn simd_path() -> &'static str {
-    palpate_core::meshfree::simd_path()
-}
-
-/// Allow (default) or forbid the AVX2 + FMA copy of the particle hot loop, process-wide (for
-/// comparing the two copies; results agree to round-off).
-#[pyfunction]
-fn set_simd_enabled(enabled: bool) {
-    palpate_core::meshfree::set_simd_enabled(enabled)
-}
-
-
-// ---------------------------------------------------------------------------------------------
-// Array helpers local to the particle API
-// ---------------------------------------------------------------------------------------------
-
-fn asarray<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Bound<'py, PyUntypedArray>> {
-    if let Ok(a) = obj.cast::<PyUntypedArray>() {
-        return Ok(a.clone());
-    }
-    let np = obj.py().import("numpy")?;
-    np.call_method1("asarray", (obj,))
-        .ok()
-        .and_then(|a| a.cast_into::<PyUntypedArray>().ok())
-        .ok_or_else(|| PyTypeError::new_err(format!("{what} must be an array-like of numbers")))
-}
-
-fn shape_str(s: &[usize]) -> String {
-    match s.len() {
-        1 => format!("({},)", s[0]),
-        _ => format!("({})", s.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")),
-    }
-}
-
-/// `obj` converted to a C-contiguous array of `dtype` (after a dtype-kind check).
-fn converted<'py>(a: &Bound<'py, PyUntypedArray>, what: &str, kinds: &[u8], dtype: &str, hint: &str) -> PyResult<Bound<'py, PyAny>> {
-    let kind = a.dtype().kind();
-    if !kinds.contains(&kind) {
-        let d = a.dtype().str().map(|s| s.to_string()).unwrap_or_default();
-        return Err(PyTypeError::new_err(format!("{what} must be {hint}, got dtype {d}")));
-    }
-    let np = a.py().import("numpy")?;
-    np.call_method1("ascontiguousarray", (a, dtype))
-}
-
-/// Real values of a 1-D array of length `n`, as f64.
-fn reals_1d(obj: &Bound<'_, PyAny>, what: &str, n: usize) -> PyResult<Vec<f64>> {
-    let a = asarray(obj, what)?;
-    if a.shape() != [n] {
-        return Err(PyValueError::new_err(format!("{what} must have shape ({n},) (one per particle), got {}", shape_str(a.shape()))));
-    }
-    let c = converted(&a, what, b"fiu", "float64", "real numbers")?;
-    let arr = c.cast::<PyArray1<f64>>()?.readonly();
-    Ok(arr.as_slice()?.to_vec())
-}
-
-/// Triangles `(m, 3)` as signed indices (any integer dtype).
-pub fn triangles_arg(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<[i64; 3]>> {
-    let a = asarray(obj, what)?;
-    let s = a.shape();
-    if !(s.len() == 2 && s[1] == 3) && !(s.len() == 1 && s[0] == 0) {
-        return Err(PyValueError::new_err(format!("{what} must have shape (m, 3), got {}", shape_str(s))));
-    }
-    if s.len() == 1 {
-        return Ok(Vec::new());
-    }
-    let c = converted(&a, what, b"iu", "int64", "an integer array (convert with .astype(np.int64) if the values are whole)")?;
-    let arr = c.cast::<PyArray2<i64>>()?.readonly();
-    Ok(arr.as_slice()?.chunks_exact(3).map(|r| [r[0], r[1], r[2]]).collect())
-}
-
-/// Particle indices: a 1-D integer array-like in `0..n`, or a boolean mask of length `n`; with
-/// `unique`, a repeated index is an error.
-fn particle_indices(obj: &Bound<'_, PyAny>, what: &str, n: usize, unique: bool) -> PyResult<Vec<usize>> {
-    let a = asarray(obj, what)?;
-    let s = a.shape().to_vec();
-    if s.len() != 1 {
-        return Err(PyValueError::new_err(format!(
-            "{what} must be a 1-D array of particle indices (or a boolean mask of length {n}), got shape {}",
-            shape_str(&s)
-        )));
-    }
-    if s[0] == 0 {
-        return Ok(Vec::new());
-    }
-    let idx: Vec<usize> = if a.dtype().kind() == b'b' {
-        if s[0] != n {
-            return Err(PyValueError::new_err(format!("{what}: a boolean mask must have length {n} (one per particle), got {}", s[0])));
-        }
-        let c = converted(&a, what, b"b", "bool", "booleans")?;
-        let m = c.cast::<PyArray1<bool>>()?.readonly();
-        m.as_slice()?.iter().enumerate().filter(|(_, &b)| b).map(|(i, _)| i).collect()
-    } else {
-        let c = converted(&a, what, b"iu", "int64", "an integer array of particle indices or a boolean mask")?;
-        let v = c.cast::<PyArray1<i64>>()?.readonly();
-        let mut out = Vec::with_capacity(s[0]);
-        for &i in v.as_slice()? {
-            if i < 0 || i as u64 >= n as u64 {
-                return Err(PyValueError::new_err(format!("{what}: particle index {i} out of range (the body has {n} particles)")));
-            }
-            out.push(i as usize);
-        }
-        out
-    };
-    if unique {
-        let mut seen = HashSet::with_capacity(idx.len());
-        if let Some(&i) = idx.iter().find(|&&i| !seen.insert(i)) {
-            return Err(PyValueError::new_err(format!("{what}: particle {i} is listed more than once")));
-        }
-    }
-    Ok(idx)
-}
-
-pub fn warn(py: Python<'_>, msg: String) -> PyResult<()> {
-    let msg = CString::new(msg).unwrap_or_else(|_| CString::new("surface warning").unwrap());
-    PyErr::warn(py, &py.get_type::<MeshWarning>(), &msg, 1)
-}
-
-// ---------------------------------------------------------------------------------------------
-// Kernel
-// ---------------------------------------------------------------------------------------------
-
-/// The smoothing kernel of a particle body (``palpate_core::meshfree::kernel``); every kernel
-/// vanishes at the support radius ``h``.
-///
-/// * ``WENDLAND_C2`` (default): ``21/(2 pi h^3) (1-q)^4 (1+4q)``, ``q = r/h``.
-/// * ``CUBIC_SPLINE``: the M4 spline with smoothing length ``h/2``.
-/// * ``LINEAR_LENNARD_JONES``: the paper's linearised Lennard-Jones tent, ``3/(pi h^3) (1-q)``.
-#[pyclass(module = "palpate", name = "Kernel", eq, eq_int, hash, frozen, from_py_object)]
-#[derive(Clone, Copy, PartialEq, Eq, Hash)]
-pub enum PyKernel {
-    #[pyo3(name = "WENDLAND_C2")]
-    WendlandC2,
-    #[pyo3(name = "CUBIC_SPLINE")]
-    CubicSpline,
-    #[pyo3(name = "LINEAR_LENNARD_JONES")]
-    LinearLennardJones,
-}
-
-impl From<PyKernel> for Kernel {
-    fn from(k: PyKernel) -> Kernel {
-        match k {
-            PyKernel::WendlandC2 => Kernel::WendlandC2,
-            PyKernel::CubicSpline => Kernel::CubicSpline,
-            PyKernel::LinearLennardJones => Kernel::LinearLennardJones,
-        }
-    }
-}
-
-impl From<Kernel> for PyKernel {
-    fn from(k: Kernel) -> PyKernel {
-        match k {
-            Kernel::WendlandC2 => PyKernel::WendlandC2,
-            Kernel::CubicSpline => PyKernel::CubicSpline,
-            Kernel::LinearLennardJones => PyKernel::LinearLennardJones,
-        }
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
-// ParticleBody
-// ---------------------------------------------------------------------------------------------
+use crate::meshfree::PyKernel;
 
 /// A meshfree (particle) solid: the continuum law of ``Material`` on particles (paper §3.2),
 /// stepped by explicit Verlet sub-steps (eq. 33) at the stable step.
 ///
-/// ``ParticleBody(positions, masses, material, support_radius, kernel=Kernel.WENDLAND_C2,
-/// fixed=None, gravity=None, hourglass=0.5)``
+/// ``ParticleBody(positions, masses, material, support_radius, kernel=..., fixed=None,
+/// gravity=None, hourglass=..., min_relative_weight=...)``; the defaults are the core's
+/// (``palpate.defaults.particles``).
 ///
 /// Parameters
 /// ----------
@@ -216,12 +32,15 @@ impl From<Kernel> for PyKernel {
 /// support_radius : float
 ///     Kernel support radius h [m] (neighbours within h at rest; typically 1.5-2 spacings).
 /// kernel : Kernel
+///     Default ``Kernel.WENDLAND_C2``.
 /// fixed : array_like of int, or bool mask of shape (n,), optional
 ///     Particles held at their rest position.
 /// gravity : (3,) float, optional
 ///     [m/s^2], default zero.
 /// hourglass : float
 ///     Dimensionless hourglass-control stiffness kappa (0 disables it).
+/// min_relative_weight : float
+///     Pair only the neighbours whose kernel weight is at least this fraction of its peak [-].
 ///
 /// Raises ``ModelError`` naming the particle (non-finite position, non-positive mass, too few
 /// neighbours to span 3D) or the parameter; ``ValueError`` / ``TypeError`` for shapes and dtypes.
@@ -236,6 +55,15 @@ pub struct PyParticleBody {
     material: Py<PyMaterial>,
 }
 
+/// A time step [s] for `run_timed` / `substeps`: positive and finite, else ValueError.
+fn check_dt(dt: f64) -> PyResult<()> {
+    if dt > 0.0 && dt.is_finite() {
+        Ok(())
+    } else {
+        Err(PyValueError::new_err(format!("dt = {dt} s must be positive and finite")))
+    }
+}
+
 /// What `run_timed` measured.
 struct TimedRun {
     tick_wall: Vec<f64>,
@@ -247,7 +75,7 @@ struct TimedRun {
 #[pymethods]
 impl PyParticleBody {
     #[new]
-    #[pyo3(signature = (positions, masses, material, support_radius, kernel = PyKernel::WendlandC2, fixed = None, gravity = None, hourglass = DEFAULT_HOURGLASS, min_relative_weight = palpate_core::meshfree::DEFAULT_MIN_WEIGHT))]
+    #[pyo3(signature = (positions, masses, material, support_radius, kernel = PyKernel::from(Kernel::default()), fixed = None, gravity = None, hourglass = DEFAULT_HOURGLASS, min_relative_weight = DEFAULT_MIN_WEIGHT))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -261,24 +89,24 @@ impl PyParticleBody {
         hourglass: f64,
         min_relative_weight: f64,
     ) -> PyResult<Self> {
-        let p = conv::points(positions, "positions")?;
+        let p = conv::points_vec3(positions, "positions")?;
         let n = p.len();
-        let m = reals_1d(masses, "masses", n)?;
+        let m = conv::reals(masses, "masses", n, "(one per particle)")?;
         let fixed = match fixed {
-            Some(f) if !f.is_none() => particle_indices(f, "fixed", n, false)?,
+            Some(f) if !f.is_none() => conv::indices(f, "fixed", n, PARTICLES, false)?,
             _ => Vec::new(),
         };
         let gravity = match gravity {
             Some(g) if !g.is_none() => conv::vec3(g, "gravity")?,
             _ => Vec3::zeros(),
         };
-        let builder = ParticleModelBuilder::new(p.iter().map(|q| Vec3::new(q[0], q[1], q[2])).collect(), m, material.get().inner, support_radius)
+        let builder = ParticleModelBuilder::new(p, m, material.get().inner, support_radius)
             .kernel(kernel.into())
             .fixed_particles(fixed)
             .gravity(gravity)
             .hourglass(hourglass)
             .min_relative_weight(min_relative_weight);
-        let model = py.detach(|| builder.build()).map_err(|e: CoreModelError| errors::model_error(e))?;
+        let model = py.detach(|| builder.build()).map_err(errors::model_error)?;
         let state = ParticleState::rest(&model);
         let ws = ParticleWorkspace::new(&model);
         Ok(PyParticleBody { model, state, ws, material: material.unbind() })
@@ -316,9 +144,7 @@ impl PyParticleBody {
     /// ``max_wall_s`` [s].
     #[pyo3(signature = (ticks, dt = 1e-3, max_wall_s = None))]
     fn run_timed<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, ticks: usize, dt: f64, max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
-        if !(dt > 0.0 && dt.is_finite()) {
-            return Err(PyValueError::new_err(format!("dt = {dt} s must be positive and finite")));
-        }
+        check_dt(dt)?;
         let this = &mut *slf;
         let (model, state, ws) = (&this.model, &mut this.state, &mut this.ws);
         let substeps = model.substeps(dt);
@@ -416,15 +242,14 @@ impl PyParticleBody {
 
     #[setter]
     fn set_active(&mut self, active: &Bound<'_, PyAny>) -> PyResult<()> {
-        self.state.active = particle_indices(active, "active", self.model.n_particles(), true)?;
+        self.state.active = conv::indices(active, "active", self.model.n_particles(), PARTICLES, true)?;
         Ok(())
     }
 
     /// Indices of the fixed particles, int64 (k,), ascending.
     #[getter]
     fn fixed<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
-        let idx: Vec<usize> = self.model.fixed().iter().enumerate().filter(|(_, &f)| f).map(|(i, _)| i).collect();
-        conv::usizes_to_py(py, &idx)
+        conv::flagged_to_py(py, self.model.fixed())
     }
 
     /// Largest stable explicit sub-step [s] (with the core's safety factor).
@@ -441,9 +266,7 @@ impl PyParticleBody {
 
     /// Sub-steps one step of ``dt`` [s] takes.
     fn substeps(&self, dt: f64) -> PyResult<usize> {
-        if !(dt > 0.0 && dt.is_finite()) {
-            return Err(PyValueError::new_err(format!("dt = {dt} s must be positive and finite")));
-        }
+        check_dt(dt)?;
         Ok(self.model.substeps(dt))
     }
 
@@ -527,8 +350,7 @@ impl PyParticleBody {
 
     /// Linear momentum [kg m/s], (3,).
     fn momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        let p = self.model.momentum(&self.state.v);
-        conv::f64s_to_py(py, &[p.x, p.y, p.z])
+        conv::vec3_to_py(py, self.model.momentum(&self.state.v))
     }
 
     /// Internal (elastic + viscous + hourglass) forces at the current state [N], (n, 3).
@@ -564,183 +386,3 @@ impl PyParticleBody {
     }
 }
 
-// ---------------------------------------------------------------------------------------------
-// Surfaces and sampling
-// ---------------------------------------------------------------------------------------------
-
-/// A closed, manifold triangle surface [m], validated in the Rust core.
-///
-/// ``TriSurface(points, triangles, *, source=None)``
-///
-/// Parameters
-/// ----------
-/// points : array_like, shape (n, 3)
-///     Vertex positions [m].
-/// triangles : array_like, shape (m, 3)
-///     Vertex indices, 0-based (any integer dtype).
-/// source : str, optional
-///     Where the arrays came from (a file name), prefixed to error and warning messages.
-///
-/// Refused with ``SurfaceError`` (naming the triangle / vertex / edge): non-finite vertices,
-/// indices out of range, a repeated vertex in a triangle, a degenerate (zero-area) or duplicate
-/// triangle, an open surface (an edge used by one triangle), a non-manifold one (an edge used by
-/// more than two triangles, or twice in the same direction: inconsistent orientation), no
-/// enclosed volume. An inward-oriented surface is reversed with a ``MeshWarning``.
-#[pyclass(module = "palpate", name = "TriSurface", frozen)]
-pub struct PyTriSurface {
-    pub inner: TriSurface,
-}
-
-/// Apply `f` to one point (3,) -> Python scalar, or to points (n, 3) -> array (n,).
-fn per_point<'py, T: numpy::Element + Copy + IntoPyObject<'py>>(
-    py: Python<'py>,
-    points: &Bound<'py, PyAny>,
-    what: &str,
-    f: impl Fn(&Vec3) -> T + Send + Sync,
-) -> PyResult<Bound<'py, PyAny>> {
-    let a = asarray(points, what)?;
-    if a.shape() == [3] {
-        let p = conv::vec3(points, what)?;
-        return f(&p).into_bound_py_any(py);
-    }
-    let pts = conv::points(points, what)?;
-    let out: Vec<T> = py.detach(|| pts.iter().map(|q| f(&Vec3::new(q[0], q[1], q[2]))).collect());
-    Ok(Array1::from_vec(out).into_pyarray(py).into_any())
-}
-
-#[pymethods]
-impl PyTriSurface {
-    #[new]
-    #[pyo3(signature = (points, triangles, *, source = None))]
-    fn new(py: Python<'_>, points: &Bound<'_, PyAny>, triangles: &Bound<'_, PyAny>, source: Option<String>) -> PyResult<Self> {
-        let p = conv::points(points, "points")?;
-        let t = triangles_arg(triangles, "triangles")?;
-        let (surface, warnings) = py.detach(|| TriSurface::from_arrays(&p, &t)).map_err(|e| match &source {
-            Some(s) => surface_error(e.in_file(s.clone())),
-            None => surface_error(e),
-        })?;
-        for w in warnings {
-            warn(py, match &source {
-                Some(s) => format!("{s}: {w}"),
-                None => w.to_string(),
-            })?;
-        }
-        Ok(PyTriSurface { inner: surface })
-    }
-
-    /// Vertex positions [m], (n, 3) (a copy).
-    #[getter]
-    fn points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        conv::vec3s_to_py(py, self.inner.points())
-    }
-
-    /// Triangles, int64 (m, 3), outward oriented (counter-clockwise seen from outside).
-    #[getter]
-    fn triangles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
-        conv::index_rows_to_py(py, self.inner.triangles())
-    }
-
-    /// Number of vertices.
-    #[getter]
-    fn n_vertices(&self) -> usize {
-        self.inner.n_vertices()
-    }
-
-    /// Number of triangles.
-    #[getter]
-    fn n_triangles(&self) -> usize {
-        self.inner.n_triangles()
-    }
-
-    /// Enclosed volume [m^3] (divergence theorem; positive).
-    #[getter]
-    fn volume(&self) -> f64 {
-        self.inner.volume()
-    }
-
-    /// Surface area [m^2].
-    #[getter]
-    fn area(&self) -> f64 {
-        self.inner.area()
-    }
-
-    /// ``(lo, hi)``: the axis-aligned bounding box [m] of the vertices in use, two (3,) arrays.
-    #[getter]
-    fn bounding_box<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
-        let (lo, hi) = self.inner.bounding_box();
-        (conv::f64s_to_py(py, &[lo.x, lo.y, lo.z]), conv::f64s_to_py(py, &[hi.x, hi.y, hi.z]))
-    }
-
-    /// Inside test for one point (3,) -> bool, or points (n, 3) -> bool array (n,).
-    ///
-    /// ``method="winding"`` (default): generalised winding number > 1/2 (O(triangles) per point);
-    /// ``method="parity"``: parity of the +z ray's crossings (grid-accelerated, what the samplers use).
-    #[pyo3(signature = (points, method = "winding"))]
-    fn contains<'py>(&self, py: Python<'py>, points: &Bound<'py, PyAny>, method: &str) -> PyResult<Bound<'py, PyAny>> {
-        let s = &self.inner;
-        match method {
-            "winding" => per_point(py, points, "points", |p| s.contains(p)),
-            "parity" => per_point(py, points, "points", |p| s.contains_parity(p)),
-            other => Err(PyValueError::new_err(format!("method must be 'winding' or 'parity', got {other:?}"))),
-        }
-    }
-
-    /// Generalised winding number (1 inside, 0 outside, 1/2 on the surface) of one point (3,) ->
-    /// float, or of points (n, 3) -> float64 array (n,).
-    fn winding_number<'py>(&self, py: Python<'py>, points: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
-        let s = &self.inner;
-        per_point(py, points, "points", |p| s.winding_number(p))
-    }
-
-    fn __len__(&self) -> usize {
-        self.inner.n_triangles()
-    }
-
-    fn __repr__(&self) -> String {
-        format!("TriSurface(n_vertices={}, n_triangles={}, volume={:.6e} m^3)", self.inner.n_vertices(), self.inner.n_triangles(), self.inner.volume())
-    }
-}
-
-/// The ellipsoid of semi-axes ``semi_axes`` [m] centred at the origin, as a closed outward
-/// surface: the octahedron cut ``subdivisions`` times into 4, projected onto the ellipsoid.
-/// ``8 * 4**subdivisions`` triangles (default 4: 2048); the volume converges to 4/3 pi a b c.
-#[pyfunction]
-#[pyo3(signature = (semi_axes = [0.026, 0.026, 0.042], subdivisions = 4))]
-pub fn ellipsoid_surface(py: Python<'_>, semi_axes: [f64; 3], subdivisions: usize) -> PyResult<PyTriSurface> {
-    if !semi_axes.iter().all(|a| a.is_finite() && *a > 0.0) {
-        return Err(PyValueError::new_err(format!("semi_axes must be finite and positive [m], got {semi_axes:?}")));
-    }
-    if subdivisions > 9 {
-        return Err(PyValueError::new_err(format!("subdivisions = {subdivisions} is too many (at most 9: 2 million triangles)")));
-    }
-    Ok(PyTriSurface { inner: py.detach(|| mesh::ellipsoid_surface(semi_axes, subdivisions)) })
-}
-
-type Sampled<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>);
-
-/// Particles on a cubic lattice of ``spacing`` [m] inside ``surface``: returns ``(positions (n, 3)
-/// [m], masses (n,) [kg])``, each mass ``density * spacing**3`` (``density`` in kg/m^3). The lattice
-/// is centred on the surface's bounding box (half a spacing inside it when the extent is a whole
-/// number of spacings). ``ValueError`` for a non-positive spacing / density or a lattice too large.
-#[pyfunction]
-pub fn sample_inside<'py>(py: Python<'py>, surface: &Bound<'py, PyTriSurface>, spacing: f64, density: f64) -> PyResult<Sampled<'py>> {
-    let s = &surface.get().inner;
-    let set = py.detach(|| mesh::sample_inside(s, spacing, density)).map_err(surface_error)?;
-    Ok((conv::vec3s_to_py(py, &set.positions), conv::f64s_to_py(py, &set.masses)))
-}
-
-/// Particles on a cubic lattice of ``spacing`` [m] (over ``outer``'s bounding box) inside
-/// ``outer`` and not inside ``inner``: a shell. Returns ``(positions, masses)`` as
-/// :func:`sample_inside`. ``SurfaceError`` if a vertex of ``inner`` is not inside ``outer``.
-#[pyfunction]
-pub fn sample_between<'py>(
-    py: Python<'py>,
-    inner: &Bound<'py, PyTriSurface>,
-    outer: &Bound<'py, PyTriSurface>,
-    spacing: f64,
-    density: f64,
-) -> PyResult<Sampled<'py>> {
-    let (i, o) = (&inner.get().inner, &outer.get().inner);
-    let set = py.detach(|| mesh::sample_between(i, o, spacing, density)).map_err(surface_error)?;
-    Ok((conv::vec3s_to_py(py, &set.positions), conv::f64s_to_py(py, &set.masses)))
-}

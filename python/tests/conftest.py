@@ -1,9 +1,14 @@
-"""Shared fixtures: the repository root and the project's shared folder (bench meshes).
+"""Shared fixtures and checks: the repository root and the project's shared folder (bench meshes),
+the Rodero LV file, a unit tet, a material; the check of a malformed-file corpus entry and the
+measure of how much Python ran during a call (GIL release).
 
 The shared folder is found as $PALPATE_SHARED, else <repo>/../shared; tests that need it are
 skipped with a reason when it is absent.
 """
 import os
+import threading
+import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -44,3 +49,64 @@ def unit_tet():
 def material():
     import palpate
     return palpate.Material(young=3.0e4, poisson=0.4, density=1000.0)
+
+
+@pytest.fixture(scope="session")
+def lv_path():
+    """The Rodero et al. left ventricle (palpate.data), skipped when not cached and not downloadable."""
+    from palpate import data
+    try:
+        return data.rodero_lv_path()
+    except data.DataError as e:
+        pytest.skip(f"Rodero LV not cached in {data.data_dir()} and the download failed: {e}")
+
+
+def python_work_during(call):
+    """Run ``call()`` in a thread and count loop iterations of pure Python (which need the GIL)
+    meanwhile: ``(count, wall time of the call [s])``. A call that holds the GIL throughout leaves
+    the count at a handful."""
+    started, done = threading.Event(), {}
+
+    def work():
+        started.set()
+        t0 = time.perf_counter()
+        call()
+        done["wall"] = time.perf_counter() - t0
+
+    th = threading.Thread(target=work)
+    th.start()
+    started.wait()
+    count = 0
+    while th.is_alive():
+        count += 1   # pure Python work: needs the GIL
+    th.join()
+    return count, done["wall"]
+
+
+def check_corpus_entry(name, exp, load, base):
+    """One entry ``exp`` of a malformed-file corpus (an EXPECTED.toml table): with warnings as
+    errors, ``load()`` raises ``exp["error"]`` (a subclass of ``base``) on one line naming the file
+    and containing each of ``exp["contains"]``; or it warns ``exp["warning"]`` naming the file (and
+    the contents) and returns an object of positive volume."""
+    import palpate
+    if "error" in exp:
+        cls = getattr(palpate, exp["error"])
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(cls) as e:
+                load()
+        msg = str(e.value)
+        assert isinstance(e.value, base)
+        assert name in msg, f"message does not name the file: {msg}"
+        for part in exp["contains"]:
+            assert part in msg, f"{part!r} not in {msg!r}"
+        assert "\n" not in msg
+    else:
+        cls = getattr(palpate, exp["warning"])
+        with pytest.warns(cls) as rec:
+            m = load()
+        assert m.volume > 0
+        msg = str(rec[0].message)
+        assert name in msg
+        for part in exp["contains"]:
+            assert part in msg

@@ -1,11 +1,11 @@
 """Bodies: stepping stays finite, energies, reset, static solve, the probe run, GIL release."""
-import threading
-import time
 
 import numpy as np
 import pytest
 
 import palpate
+
+from conftest import python_work_during
 
 INTEGRATORS = [palpate.SemiImplicit(), palpate.SemiImplicit(filter=palpate.Filter.STABLE), palpate.BackwardEuler(),
                palpate.BackwardEuler(palpate.Solver.NEWTON), palpate.BackwardEuler(palpate.Solver.LINEARISED)]
@@ -110,23 +110,8 @@ def test_step_releases_the_gil(material):
     f = np.zeros((body.n_nodes, 3))
     f[int(np.argmax(mesh.points[:, 2])), 2] = -0.05
     body.set_forces(f)
-    started = threading.Event()
-    done = {}
-
-    def work():
-        started.set()
-        t0 = time.perf_counter()
-        body.step(2000, dt=1e-3)
-        done["wall"] = time.perf_counter() - t0
-
-    th = threading.Thread(target=work)
-    th.start()
-    started.wait()
-    count = 0
-    while th.is_alive():
-        count += 1   # pure Python work: needs the GIL
-    th.join()
+    count, wall = python_work_during(lambda: body.step(2000, dt=1e-3))
     assert body.time == pytest.approx(2.0)
     # Holding the GIL for the whole call would leave this loop at a handful of iterations.
-    rate = count / done["wall"]
-    assert count > 1000 and rate > 1e4, (count, done["wall"])
+    rate = count / wall
+    assert count > 1000 and rate > 1e4, (count, wall)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import palpate
-from palpate import cli, data, hybrid
+from palpate import cli, hybrid
 
 from conftest import DATA
 from test_cli import palpate_cli
@@ -346,14 +346,6 @@ def test_cli_main_in_process(tmp_path, capsys):
 
 
 # ---- the real left ventricle ---------------------------------------------------------------
-
-@pytest.fixture(scope="module")
-def lv_path():
-    try:
-        return data.rodero_lv_path()
-    except data.DataError as e:
-        pytest.skip(f"Rodero LV not cached in {data.data_dir()} and the download failed: {e}")
-
 
 def test_rodero_model(lv_path):
     with warnings.catch_warnings():

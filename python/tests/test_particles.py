@@ -1,14 +1,13 @@
 """Particle bodies: building from arrays and from sampling, stepping, momentum, the active set,
 errors, the timed run, GIL release, and the `palpate bench particles` command."""
 import json
-import threading
-import time
 
 import numpy as np
 import pytest
 
 import palpate
 
+from conftest import python_work_during
 from test_cli import palpate_cli
 
 S = 1e-3          # lattice spacing [m]
@@ -227,23 +226,9 @@ def test_internal_forces_balance(material):
 def test_step_releases_the_gil(material):
     pos, m = block(8)
     body = palpate.ParticleBody(pos, m, material, H)
-    started, done = threading.Event(), {}
-
-    def work():
-        started.set()
-        t0 = time.perf_counter()
-        body.step(300)
-        done["wall"] = time.perf_counter() - t0
-
-    th = threading.Thread(target=work)
-    th.start()
-    started.wait()
-    count = 0
-    while th.is_alive():
-        count += 1   # pure Python work: needs the GIL
-    th.join()
+    count, wall = python_work_during(lambda: body.step(300))
     assert body.time == pytest.approx(0.3)
-    assert count > 1000 and count / done["wall"] > 1e4, (count, done["wall"])
+    assert count > 1000 and count / wall > 1e4, (count, wall)
 
 
 def test_cli_bench_particles_json():

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 import palpate
-from palpate import data
 from vtpwrite import OCTA_POINTS, OCTA_TAGS, OCTA_TRIS, vtp
 
 # unit cube, outward
@@ -178,14 +177,6 @@ def test_load_surface_repair_keyword(tmp_path):
 
 
 # --- the real left ventricle -----------------------------------------------------------------
-
-@pytest.fixture(scope="module")
-def lv_path():
-    try:
-        return data.rodero_lv_path()
-    except data.DataError as e:
-        pytest.skip(f"Rodero LV not cached in {data.data_dir()} and the download failed: {e}")
-
 
 def test_rodero_repair(lv_path):
     p0, t0, part0 = palpate.read_tagged_surface(lv_path, unit="mm", repair=False)

@@ -13,14 +13,6 @@ from palpate import data
 
 
 @pytest.fixture(scope="module")
-def lv_path():
-    try:
-        return data.rodero_lv_path()
-    except data.DataError as e:
-        pytest.skip(f"Rodero LV not cached in {data.data_dir()} and the download failed: {e}")
-
-
-@pytest.fixture(scope="module")
 def lv(lv_path):
     """As stored in the file (repair=False): the numbers below are the file's."""
     return palpate.read_tagged_surface(lv_path, unit="mm", repair=False)

@@ -13,8 +13,11 @@ A case with ``warning`` instead of ``error`` must load, with that warning class.
 """
 import os
 import random
+import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.dirname(HERE))
+from corpus import entry, write_case, write_expected  # noqa: E402
 
 P = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (1.0, 1.0, 1.0)]
 T = [(0, 1, 2, 3), (1, 2, 3, 4)]
@@ -234,27 +237,13 @@ def main():
              "# contains: substrings of the message (the file's own name is always required too).", ""]
     for name, content, exp in CASES:
         if content is not None:
-            mode = "wb" if isinstance(content, bytes) else "w"
-            with open(os.path.join(HERE, name), mode) as fh:
-                fh.write(content)
+            write_case(HERE, name, content)
         if exp["error"] is None and exp["warning"] is None:
             continue
-        lines.append(f'["{name}"]')
-        if exp["error"]:
-            lines.append(f'error = "{exp["error"]}"')
-        if exp["warning"]:
-            lines.append(f'warning = "{exp["warning"]}"')
-        lines.append("contains = [" + ", ".join(f'"{c}"' for c in exp["contains"]).replace("\\", "\\\\") + "]")
-        if exp["note"]:
-            lines.append(f'note = "{exp["note"]}"')
-        lines.append("")
+        lines += entry(name, exp)
     npz = write_npz()
     lines += [f'["{npz}"]', 'error = "MeshError"', 'contains = ["missing array", "tets"]', ""]
-    with open(os.path.join(HERE, "EXPECTED.toml"), "w") as fh:
-        fh.write("\n".join(lines))
-    n = sum(1 for line in lines if line.startswith('["'))
-    print(f"wrote {n} cases to {HERE}")
-
+    write_expected(HERE, lines)
 
 if __name__ == "__main__":
     main()

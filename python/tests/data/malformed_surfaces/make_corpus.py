@@ -20,6 +20,8 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
+sys.path.insert(0, os.path.dirname(HERE))
+from corpus import entry, write_case, write_expected  # noqa: E402
 from vtpwrite import OCTA_POINTS, OCTA_TAGS, OCTA_TRIS, vtp  # noqa: E402
 
 P = [tuple(p) for p in OCTA_POINTS]
@@ -106,26 +108,11 @@ def main():
              "# error: exception class name in palpate; warning: the file must load with this warning class;",
              "# contains: substrings of the message (the file's own name is always required too).", ""]
     for name, content, exp in CASES:
-        with open(os.path.join(HERE, name), "wb") as fh:
-            fh.write(content)
+        write_case(HERE, name, content)
         if exp is None:
             continue
-        lines.append(f'["{name}"]')
-        if exp["call"] != "load_surface":
-            lines.append(f'call = "{exp["call"]}"')
-        if exp["error"]:
-            lines.append(f'error = "{exp["error"]}"')
-        if exp["warning"]:
-            lines.append(f'warning = "{exp["warning"]}"')
-        lines.append("contains = [" + ", ".join(json.dumps(c) for c in exp["contains"]) + "]")
-        if exp["note"]:
-            lines.append(f'note = "{exp["note"]}"')
-        lines.append("")
-    with open(os.path.join(HERE, "EXPECTED.toml"), "w") as fh:
-        fh.write("\n".join(lines))
-    n = sum(1 for line in lines if line.startswith('["'))
-    print(f"wrote {n} cases to {HERE}")
-
+        lines += entry(name, exp, default_call="load_surface")
+    write_expected(HERE, lines)
 
 if __name__ == "__main__":
     main()

@@ -1,0 +1,59 @@
+"""The ``palpate`` command line (also ``python -m palpate``): one module per command (``run``,
+``bench``, ``build``, ``info``), shared helpers in ``_common``.
+
+    palpate run SCENE.toml [--out DIR] [--steps N]
+    palpate bench protocol MESH [--force F] [--steps N] [--json] [--integrator NAME] [--newton auto|on|off]
+    palpate bench protocol --all [--force F] [--steps N] [--json] [--integrator NAME]
+    palpate bench particles N [--spacing S] [--kernel wendland|cubic|lj] [--ticks T] [--json]
+    palpate bench particles --all [...]
+    palpate build INNER OUTER -o MODEL [--unit m|cm|mm] [build options]
+    palpate build --tagged SURFACE -o MODEL [--unit m|cm|mm] [--tag-array NAME] [--inner 1,2] [--outer 3]
+                  [--base 4,5] [build options]
+    palpate build --shape ellipsoids|ventricle|rodero -o MODEL [build options]
+        build options: [--projection transmural|radial] [--core-fraction F] [--core-triangles N]
+                       [--core-layers N] [--spacing M | --particles N] [--density RHO]
+                       [--min-region-particles N] [--field-voxels N]
+    palpate info MODEL                  (a palpate model file, written by palpate build)
+    palpate info MESH [--unit m|cm|mm]  (a tet mesh file)
+
+Exit codes: 0 success, 1 a simulation failed (e.g. a step diverged), a hybrid build failed on
+valid surfaces or an output could not be written, 2 bad input (arguments, scene file, mesh,
+surface or model file), with one line on stderr and no traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import List, Optional
+
+from .. import __version__
+from . import bench, build, info, run
+from ._common import Fail
+
+#: The commands, in the order of ``palpate --help``: each module adds its parser and handler.
+COMMANDS = (run, bench, build, info)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="palpate", description="Real-time soft-tissue FEM for haptic interaction (SI units).")
+    ap.add_argument("--version", action="version", version=f"palpate {__version__}")
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for command in COMMANDS:
+        command.add_parser(sub)
+    return ap
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    ap = build_parser()
+    a = ap.parse_args(argv)
+    if getattr(a, "steps", None) is not None and a.steps <= 0:
+        ap.error("--steps must be positive")
+    try:
+        return a.func(a)
+    except Fail as e:
+        print(f"palpate: error: {e}", file=sys.stderr)
+        return e.code
+    except KeyboardInterrupt:
+        print("palpate: interrupted", file=sys.stderr)
+        return 130

@@ -1,0 +1,159 @@
+"""``palpate bench protocol|particles``: the shared FEM probe case (:mod:`palpate.bench`) and the
+per-tick cost of a particle body (:mod:`palpate.bench_particles`). The defaults are those modules'
+(the benchmarks' definitions)."""
+from __future__ import annotations
+
+import json
+import math
+
+from .. import __version__
+from .. import bench
+from .. import bench_particles as bp
+from ._common import Fail, fmt_mm, num, palpate_errors
+
+
+def add_parser(sub) -> None:
+    b = sub.add_parser("bench", help="benchmarks")
+    bsub = b.add_subparsers(dest="bench", metavar="BENCH")
+    bsub.required = True
+    p = bsub.add_parser("protocol", help="the shared LV probe case (shared/bench/PROTOCOL.md)",
+                        description="Run the shared benchmark case on MESH (.msh, .vtu or .npz in mesh units; "
+                                    f"'{bench.GENERATED}' for the generated paper-size ellipsoid), or --all.")
+    p.add_argument("mesh", nargs="?", metavar="MESH")
+    p.add_argument("--all", action="store_true", help=f"the {len(bench.MESHES)} shared meshes and the generated 192-tet "
+                        "closed ellipsoid (same probe; its nodes with z <= 0, the lower half-shell, are fixed)")
+    p.add_argument("--steps", type=int, default=bench.STEPS,
+                   help=f"steps of {num(bench.DT * 1e3)} ms (default {bench.STEPS})")
+    p.add_argument("--json", action="store_true", help="one JSON object per mesh (JSON lines)")
+    p.add_argument("--integrator", default="backward-euler", choices=list(bench.INTEGRATORS),
+                   help="backward-euler (the default: quasi-Newton), newton, linearised, semi-implicit, "
+                        "semi-implicit-stable")
+    p.add_argument("--force", type=float, default=bench.FORCE, metavar="F",
+                   help=f"total probe force [N] (default {num(bench.FORCE)}, the protocol's; same loaded nodes)")
+    p.add_argument("--newton", choices=["auto", "on", "off"], default="auto",
+                   help="also run converged Newton for rel_L2_vs_newton (auto: meshes up to "
+                        f"{bench.NEWTON_REFERENCE_MAX_TETS // 1000}k tets)")
+    p.add_argument("--max-wall", type=float, default=None, metavar="S",
+                   help="stop a run after S seconds of stepping (default: no cap)")
+    p.set_defaults(func=cmd_bench_protocol)
+
+    sizes = ", ".join(map(str, bp.ALL))
+    q = bsub.add_parser("particles", help="per-tick cost of a meshfree particle body (an LV-shell cluster of N particles)",
+                        description="Time 1 ms ticks of the N particles of the LV shell fill nearest the probe point "
+                                    f"(see palpate/bench_particles.py), or --all: N = {sizes}.")
+    q.add_argument("n", nargs="?", type=int, metavar="N", help="number of (active) particles")
+    q.add_argument("--all", action="store_true", help=f"N = {sizes}")
+    q.add_argument("--spacing", type=float, default=bp.SPACING, metavar="M",
+                   help=f"lattice spacing [m] (default {num(bp.SPACING)})")
+    q.add_argument("--kernel", default="wendland", choices=list(bp.KERNELS))
+    q.add_argument("--support", type=float, default=bp.SUPPORT_FACTOR, metavar="F",
+                   help=f"kernel support radius in lattice spacings (default {num(bp.SUPPORT_FACTOR)})")
+    q.add_argument("--ticks", type=int, default=bp.TICKS, help=f"ticks of 1 ms to time (default {bp.TICKS})")
+    q.add_argument("--json", action="store_true", help="one JSON object per N (JSON lines)")
+    q.add_argument("--max-wall", type=float, default=None, metavar="S",
+                   help="stop a case after S seconds of ticks (default: no cap)")
+    q.set_defaults(func=cmd_bench_particles)
+
+
+def _bench_cases(a):
+    from ..io import MeshError
+
+    if a.all:
+        if a.mesh:
+            raise Fail("palpate bench protocol: give MESH or --all, not both")
+        shared = bench.shared_dir()
+        if shared is None:
+            raise Fail("palpate bench protocol --all: shared bench meshes not found "
+                       "(set PALPATE_SHARED to the folder holding bench/meshes)")
+        paths = [shared / "bench" / "meshes" / f"lv_{m}.msh" for m in bench.MESHES]
+        yield (lambda: bench.generated_case(a.force))
+        for p in paths:
+            yield (lambda p=p: bench.load_case(str(p), a.force))
+        return
+    if not a.mesh:
+        raise Fail("palpate bench protocol: give a MESH file (.msh, .vtu, .npz) or --all")
+    if a.mesh == bench.GENERATED:
+        yield (lambda: bench.generated_case(a.force))
+        return
+
+    def one():
+        try:
+            return bench.load_case(a.mesh, a.force)
+        except MeshError as e:
+            raise Fail(f"palpate bench protocol: {e}") from None
+    yield one
+
+
+def cmd_bench_protocol(a) -> int:
+    if not (math.isfinite(a.force) and a.force > 0):
+        raise Fail(f"palpate bench protocol: --force must be a positive number of newtons, got {a.force}")
+    if a.steps < 1:
+        raise Fail("palpate bench protocol: --steps must be at least 1")
+    newton = {"auto": None, "on": True, "off": False}[a.newton]
+    if not a.json:
+        print(f"palpate {__version__} bench protocol: {a.force:g} N, {a.steps} steps of {bench.DT * 1e3:g} ms, "
+              f"integrator {a.integrator}, single thread (shared/bench/PROTOCOL.md)")
+        print(f"{'mesh':<16}{'tets':>7}{'steps/s':>10}{'stable':>8}{'max|u| mm':>11}{'probe mm':>10}"
+              f"{'iter':>6}{'inv':>5}{'p50 us':>8}{'p99 us':>8}{'max us':>8}{'vsStatic':>10}{'vsNewton':>10}")
+    for make in _bench_cases(a):
+        case = make()
+        r = bench.run(case, a.integrator, steps=a.steps, max_wall_s=a.max_wall, newton=newton)
+        if a.json:
+            print(json.dumps(r), flush=True)
+        else:
+            def rel(k):
+                return "-" if r[k] is None else f"{100 * r[k]:.3f}%"
+            sps = "-" if r["steps_per_s"] is None else f"{r['steps_per_s']:.1f}"
+            us = lambda k: "-" if r[k] is None else f"{r[k]:.0f}"  # noqa: E731
+            it = "-" if r["iterations_mean"] is None else f"{r['iterations_mean']:.2f}"
+            print(f"{r['mesh']:<16}{r['tets']:>7}{sps:>10}{str(r['stable']):>8}"
+                  f"{fmt_mm(r['max_disp_m']):>11}{fmt_mm(r['probe_disp_avg_m']):>10}{it:>6}"
+                  f"{r['inverted_max']:>5}{us('step_us_p50'):>8}{us('step_us_p99'):>8}{us('step_us_max'):>8}"
+                  f"{rel('rel_L2_vs_static'):>10}{rel('rel_L2_vs_newton'):>10}", flush=True)
+            if r.get("error"):
+                print(f"  note: {r['error']}")
+    return 0
+
+
+def cmd_bench_particles(a) -> int:
+    if a.all == (a.n is not None):
+        raise Fail("palpate bench particles: give N or --all (not both)")
+    if a.spacing <= 0 or a.spacing != a.spacing:
+        raise Fail(f"palpate bench particles: --spacing must be positive, got {a.spacing}")
+    if a.ticks <= 0:
+        raise Fail("palpate bench particles: --ticks must be positive")
+    if not (1.0 < a.support < 4.0):
+        raise Fail(f"palpate bench particles: --support must lie between 1 and 4 spacings, got {a.support}")
+    sizes = bp.ALL if a.all else [a.n]
+    if not a.json:
+        mhz = bp.cpu_mhz()
+        peak = "unknown" if mhz is None else f"{mhz * bp.FLOPS_PER_CYCLE / 1e3:.1f} GFlop/s"
+        print(f"palpate {__version__} bench particles: LV-shell cluster at {a.spacing * 1e3:g} mm, kernel {a.kernel}, "
+              f"support {a.support:g} spacings, "
+              f"E = {bp.E:g} Pa, nu = {bp.NU}, rho = {bp.RHO:g} kg/m^3, {bp.PROBE_FORCE:g} N on {bp.N_PROBE} particles, "
+              f"{a.ticks} ticks of {bp.DT * 1e3:g} ms, one thread")
+        print(f"  flops per pair per sub-step {bp.FLOPS_PER_PAIR}, per particle {bp.FLOPS_PER_PARTICLE}; peak {peak} "
+              f"(cpu MHz {mhz} x {bp.FLOPS_PER_CYCLE} flop/cycle: AVX2 FMA, 2 units x 4 doubles x 2); "
+              f"hot loop: {bp._p.simd_path()}")
+        print(f"{'N':>7}{'in h':>6}{'nbrs':>7}{'fixed':>7}{'sub/tick':>9}{'sub dt us':>10}{'tick ms':>9}{'ticks/s':>9}"
+              f"{'GFlop/s':>9}{'%peak':>7}{'build s':>9}{'max|u| mm':>10}")
+    failed = False
+    for n in sizes:
+        try:
+            r = bp.run(n, a.spacing, a.kernel, a.ticks, a.max_wall, a.support)
+        except ValueError as e:
+            raise Fail(f"palpate bench particles: {e}") from None
+        except palpate_errors() as e:
+            raise Fail(f"palpate bench particles: N = {n}: {type(e).__name__}: {e}", 1) from None
+        failed |= r["error"] is not None and "wall-clock cap" not in r["error"]
+        if a.json:
+            print(json.dumps(r), flush=True)
+            continue
+        f = lambda v, fmt: "-" if v is None else format(v, fmt)  # noqa: E731
+        print(f"{r['n']:>7}{r['mean_neighbours_in_support']:>6.1f}{r['mean_neighbours']:>7.1f}{r['fixed']:>7}{r['substeps']:>9}{r['substep_dt_s'] * 1e6:>10.1f}"
+              f"{f(r['tick_median_s'] and r['tick_median_s'] * 1e3, '.3f'):>9}{f(r['ticks_per_s'], '.1f'):>9}"
+              f"{f(r['gflops'], '.2f'):>9}{f(r['peak_fraction'] and 100 * r['peak_fraction'], '.1f'):>7}"
+              f"{r['build_s']:>9.2f}{fmt_mm(r['max_disp_m']):>10}", flush=True)
+        if r["error"]:
+            print(f"  note: {r['error']} (median over {r['ticks']} ticks)")
+    return 1 if failed else 0

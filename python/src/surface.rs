@@ -1,0 +1,194 @@
+//! `palpate.TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between`
+//! (`palpate_core::mesh::{surface, sample}`); their errors are `palpate.SurfaceError`
+//! (errors.rs). Validation, the per-point queries on many points and sampling release the GIL.
+
+use numpy::ndarray::Array1;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyUntypedArrayMethods};
+use palpate_core::mesh::{self, TriSurface};
+use palpate_core::Vec3;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::IntoPyObjectExt;
+
+use crate::conv;
+use crate::errors::{self, surface_error};
+
+/// Register the surface class, the ellipsoid generator and the samplers.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyTriSurface>()?;
+    m.add_function(wrap_pyfunction!(ellipsoid_surface, m)?)?;
+    m.add_function(wrap_pyfunction!(sample_inside, m)?)?;
+    m.add_function(wrap_pyfunction!(sample_between, m)?)?;
+    Ok(())
+}
+
+/// A closed, manifold triangle surface [m], validated in the Rust core.
+///
+/// ``TriSurface(points, triangles, *, source=None)``
+///
+/// Parameters
+/// ----------
+/// points : array_like, shape (n, 3)
+///     Vertex positions [m].
+/// triangles : array_like, shape (m, 3)
+///     Vertex indices, 0-based (any integer dtype).
+/// source : str, optional
+///     Where the arrays came from (a file name), prefixed to error and warning messages.
+///
+/// Refused with ``SurfaceError`` (naming the triangle / vertex / edge): non-finite vertices,
+/// indices out of range, a repeated vertex in a triangle, a degenerate (zero-area) or duplicate
+/// triangle, an open surface (an edge used by one triangle), a non-manifold one (an edge used by
+/// more than two triangles, or twice in the same direction: inconsistent orientation), no
+/// enclosed volume. An inward-oriented surface is reversed with a ``MeshWarning``.
+#[pyclass(module = "palpate", name = "TriSurface", frozen)]
+pub struct PyTriSurface {
+    pub inner: TriSurface,
+}
+
+/// Apply `f` to one point (3,) -> Python scalar, or to points (n, 3) -> array (n,).
+fn per_point<'py, T: numpy::Element + Copy + IntoPyObject<'py>>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    what: &str,
+    f: impl Fn(&Vec3) -> T + Send + Sync,
+) -> PyResult<Bound<'py, PyAny>> {
+    if conv::as_array(points, what)?.shape() == [3] {
+        let p = conv::vec3(points, what)?;
+        return f(&p).into_bound_py_any(py);
+    }
+    let pts = conv::points_vec3(points, what)?;
+    let out: Vec<T> = py.detach(|| pts.iter().map(&f).collect());
+    Ok(Array1::from_vec(out).into_pyarray(py).into_any())
+}
+
+#[pymethods]
+impl PyTriSurface {
+    #[new]
+    #[pyo3(signature = (points, triangles, *, source = None))]
+    fn new(py: Python<'_>, points: &Bound<'_, PyAny>, triangles: &Bound<'_, PyAny>, source: Option<String>) -> PyResult<Self> {
+        let p = conv::points(points, "points")?;
+        let t = conv::index_rows::<3>(triangles, "triangles")?;
+        let (surface, warnings) = py.detach(|| TriSurface::from_arrays(&p, &t)).map_err(|e| match &source {
+            Some(s) => surface_error(e.in_file(s.clone())),
+            None => surface_error(e),
+        })?;
+        errors::warn_all(py, source.as_deref(), warnings)?;
+        Ok(PyTriSurface { inner: surface })
+    }
+
+    /// Vertex positions [m], (n, 3) (a copy).
+    #[getter]
+    fn points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        conv::vec3s_to_py(py, self.inner.points())
+    }
+
+    /// Triangles, int64 (m, 3), outward oriented (counter-clockwise seen from outside).
+    #[getter]
+    fn triangles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
+        conv::index_rows_to_py(py, self.inner.triangles())
+    }
+
+    /// Number of vertices.
+    #[getter]
+    fn n_vertices(&self) -> usize {
+        self.inner.n_vertices()
+    }
+
+    /// Number of triangles.
+    #[getter]
+    fn n_triangles(&self) -> usize {
+        self.inner.n_triangles()
+    }
+
+    /// Enclosed volume [m^3] (divergence theorem; positive).
+    #[getter]
+    fn volume(&self) -> f64 {
+        self.inner.volume()
+    }
+
+    /// Surface area [m^2].
+    #[getter]
+    fn area(&self) -> f64 {
+        self.inner.area()
+    }
+
+    /// ``(lo, hi)``: the axis-aligned bounding box [m] of the vertices in use, two (3,) arrays.
+    #[getter]
+    fn bounding_box<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
+        let (lo, hi) = self.inner.bounding_box();
+        (conv::vec3_to_py(py, lo), conv::vec3_to_py(py, hi))
+    }
+
+    /// Inside test for one point (3,) -> bool, or points (n, 3) -> bool array (n,).
+    ///
+    /// ``method="winding"`` (default): generalised winding number > 1/2 (O(triangles) per point);
+    /// ``method="parity"``: parity of the +z ray's crossings (grid-accelerated, what the samplers use).
+    #[pyo3(signature = (points, method = "winding"))]
+    fn contains<'py>(&self, py: Python<'py>, points: &Bound<'py, PyAny>, method: &str) -> PyResult<Bound<'py, PyAny>> {
+        let s = &self.inner;
+        match method {
+            "winding" => per_point(py, points, "points", |p| s.contains(p)),
+            "parity" => per_point(py, points, "points", |p| s.contains_parity(p)),
+            other => Err(PyValueError::new_err(format!("method must be 'winding' or 'parity', got {other:?}"))),
+        }
+    }
+
+    /// Generalised winding number (1 inside, 0 outside, 1/2 on the surface) of one point (3,) ->
+    /// float, or of points (n, 3) -> float64 array (n,).
+    fn winding_number<'py>(&self, py: Python<'py>, points: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
+        let s = &self.inner;
+        per_point(py, points, "points", |p| s.winding_number(p))
+    }
+
+    fn __len__(&self) -> usize {
+        self.inner.n_triangles()
+    }
+
+    fn __repr__(&self) -> String {
+        format!("TriSurface(n_vertices={}, n_triangles={}, volume={:.6e} m^3)", self.inner.n_vertices(), self.inner.n_triangles(), self.inner.volume())
+    }
+}
+
+/// The ellipsoid of semi-axes ``semi_axes`` [m] centred at the origin, as a closed outward
+/// surface: the octahedron cut ``subdivisions`` times into 4, projected onto the ellipsoid.
+/// ``8 * 4**subdivisions`` triangles (default 4: 2048); the volume converges to 4/3 pi a b c.
+#[pyfunction]
+#[pyo3(signature = (semi_axes = [0.026, 0.026, 0.042], subdivisions = 4))]
+pub fn ellipsoid_surface(py: Python<'_>, semi_axes: [f64; 3], subdivisions: usize) -> PyResult<PyTriSurface> {
+    if !semi_axes.iter().all(|a| a.is_finite() && *a > 0.0) {
+        return Err(PyValueError::new_err(format!("semi_axes must be finite and positive [m], got {semi_axes:?}")));
+    }
+    if subdivisions > 9 {
+        return Err(PyValueError::new_err(format!("subdivisions = {subdivisions} is too many (at most 9: 2 million triangles)")));
+    }
+    Ok(PyTriSurface { inner: py.detach(|| mesh::ellipsoid_surface(semi_axes, subdivisions)) })
+}
+
+type Sampled<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>);
+
+/// Particles on a cubic lattice of ``spacing`` [m] inside ``surface``: returns ``(positions (n, 3)
+/// [m], masses (n,) [kg])``, each mass ``density * spacing**3`` (``density`` in kg/m^3). The lattice
+/// is centred on the surface's bounding box (half a spacing inside it when the extent is a whole
+/// number of spacings). ``ValueError`` for a non-positive spacing / density or a lattice too large.
+#[pyfunction]
+pub fn sample_inside<'py>(py: Python<'py>, surface: &Bound<'py, PyTriSurface>, spacing: f64, density: f64) -> PyResult<Sampled<'py>> {
+    let s = &surface.get().inner;
+    let set = py.detach(|| mesh::sample_inside(s, spacing, density)).map_err(surface_error)?;
+    Ok((conv::vec3s_to_py(py, &set.positions), conv::f64s_to_py(py, &set.masses)))
+}
+
+/// Particles on a cubic lattice of ``spacing`` [m] (over ``outer``'s bounding box) inside
+/// ``outer`` and not inside ``inner``: a shell. Returns ``(positions, masses)`` as
+/// :func:`sample_inside`. ``SurfaceError`` if a vertex of ``inner`` is not inside ``outer``.
+#[pyfunction]
+pub fn sample_between<'py>(
+    py: Python<'py>,
+    inner: &Bound<'py, PyTriSurface>,
+    outer: &Bound<'py, PyTriSurface>,
+    spacing: f64,
+    density: f64,
+) -> PyResult<Sampled<'py>> {
+    let (i, o) = (&inner.get().inner, &outer.get().inner);
+    let set = py.detach(|| mesh::sample_between(i, o, spacing, density)).map_err(surface_error)?;
+    Ok((conv::vec3s_to_py(py, &set.positions), conv::f64s_to_py(py, &set.masses)))
+}
