@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use numpy::{PyArray1, PyArray2};
 use palpate_core::integrate::{static_solve, StaticOptions};
-use palpate_core::probe::{self, ProbeLoad, ProbeOptions, Ramp, StepClock};
-use palpate_core::{step, Model, ModelBuilder, State, StepReport, Vec3, Workspace};
+use palpate_core::probe::{self, ProbeLoad, ProbeOptions, Ramp, StepClock, StepTotals};
+use palpate_core::{step, Model, ModelBuilder, State, Vec3, Workspace};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -44,36 +44,6 @@ pub struct PyBody {
     ws: Workspace,
     mesh: Py<PyTetMesh>,
     material: Py<PyMaterial>,
-}
-
-/// Per-call summary of `step`.
-#[derive(Default)]
-struct StepTotals {
-    steps: usize,
-    iterations: usize,
-    max_iterations: usize,
-    evaluations: usize,
-    factorizations: usize,
-    solves: usize,
-    unconverged: usize,
-    max_residual: f64,
-    max_inverted: usize,
-    last: StepReport,
-}
-
-impl StepTotals {
-    fn add(&mut self, r: &StepReport) {
-        self.steps += 1;
-        self.iterations += r.iterations;
-        self.max_iterations = self.max_iterations.max(r.iterations);
-        self.evaluations += r.evaluations;
-        self.factorizations += r.factorizations;
-        self.solves += r.solves;
-        self.unconverged += !r.converged as usize;
-        self.max_residual = self.max_residual.max(r.residual);
-        self.max_inverted = self.max_inverted.max(r.inverted);
-        self.last = *r;
-    }
 }
 
 impl PyBody {
