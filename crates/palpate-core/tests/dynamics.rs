@@ -31,15 +31,6 @@ use palpate_core::mesh::generate::{base_nodes, ellipsoid_wall, truncated_ellipso
 use palpate_core::integrate::Filter;
 use palpate_core::{step, Integrator, Material, Model, ModelBuilder, State, Vec3, Workspace};
 
-const SCHEMES: [(&str, Integrator); 5] = [
-    ("semi-implicit", Integrator::semi_implicit()),
-    ("BE linear", Integrator::BackwardEulerLinear),
-    // Tight enough that its momentum error, `dt` times the sum of the final gradient, is round-off.
-    ("BE Newton", Integrator::BackwardEulerNewton { max_iterations: 30, tolerance: 1e-12 }),
-    ("BE quasi-Newton (default)", Integrator::quasi_newton()),
-    ("semi-implicit, stable filter", Integrator::SemiImplicit { filter: palpate_core::integrate::Filter::Stable }),
-];
-
 fn free_body(integ: Integrator, phi: f64, psi: f64) -> Model {
     let mesh = ellipsoid_wall(&EllipsoidWall::default());
     ModelBuilder::new(mesh, material(3.0e4, 0.4, 1000.0, phi, psi)).integrator(integ).build().unwrap()

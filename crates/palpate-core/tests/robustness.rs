@@ -56,15 +56,6 @@ fn allocations() -> usize {
     ALLOCS.with(|c| c.get())
 }
 
-const SCHEMES: [(&str, Integrator); 5] = [
-    ("semi-implicit", Integrator::semi_implicit()),
-    ("BE linear", Integrator::BackwardEulerLinear),
-    // Tight enough that its momentum error, `dt` times the sum of the final gradient, is round-off.
-    ("BE Newton", Integrator::BackwardEulerNewton { max_iterations: 30, tolerance: 1e-12 }),
-    ("BE quasi-Newton (default)", Integrator::quasi_newton()),
-    ("semi-implicit, stable filter", Integrator::SemiImplicit { filter: palpate_core::integrate::Filter::Stable }),
-];
-
 /// A small clamped wall with damping and gravity, so every code path of the step is exercised.
 fn model(integ: Integrator) -> Model {
     let p = TruncatedEllipsoidWall::with_resolution(3);

@@ -209,3 +209,13 @@ pub fn max_norm(v: &[Vec3]) -> f64 {
 pub fn rotation(axis: Vec3, angle: f64) -> Mat3 {
     nalgebra::Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle).into_inner()
 }
+
+/// Every time-stepping scheme, labelled: the tests that must hold for all of them loop over this.
+pub const SCHEMES: [(&str, palpate_core::Integrator); 5] = [
+    ("semi-implicit", palpate_core::Integrator::semi_implicit()),
+    ("BE linear", palpate_core::Integrator::BackwardEulerLinear),
+    // Tight enough that its momentum error, `dt` times the sum of the final gradient, is round-off.
+    ("BE Newton", palpate_core::Integrator::BackwardEulerNewton { max_iterations: 30, tolerance: 1e-12 }),
+    ("BE quasi-Newton (default)", palpate_core::Integrator::quasi_newton()),
+    ("semi-implicit, stable filter", palpate_core::Integrator::SemiImplicit { filter: palpate_core::integrate::Filter::Stable }),
+];
