@@ -31,6 +31,7 @@ pub mod math;
 pub mod mesh;
 pub mod meshfree;
 pub mod scene;
+pub mod spatial;
 
 pub use error::{HybridError, MaterialError, MeshError, ModelError, ModelFileError, SolveError, StepError};
 pub use integrate::{step, Integrator, StepReport};
