@@ -3,10 +3,12 @@
 //! File formats are read in Python (meshio) and handed here as arrays; everything that can be
 //! wrong with a mesh is checked here, once, in [`TetMesh::from_arrays`].
 
+pub mod adjacency;
 pub mod generate;
+pub mod prism;
 mod tet_mesh;
 
-pub use tet_mesh::{signed_volume, MeshWarning, TetMesh};
+pub use tet_mesh::{boundary_faces, signed_volume, MeshWarning, TetMesh};
 
 pub mod sample;
 pub mod simplify;
