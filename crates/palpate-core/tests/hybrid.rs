@@ -10,10 +10,10 @@
 //! bit-identical after a round trip; a reader that trusts lengths and indices panics or hangs on
 //! damaged or mutated files instead of naming the file and the reason.
 use palpate_core::hybrid::file::{from_bytes, to_bytes, FORMAT_VERSION};
-use palpate_core::hybrid::geometry::TetGrid;
 use palpate_core::hybrid::{build, shapes, HybridModel, HybridOptions, Projection, Spacing, VoxelLabel, Wall, WallPart};
 use palpate_core::mesh::generate::TruncatedEllipsoidWall;
 use palpate_core::mesh::{ellipsoid_surface, TriSurface};
+use palpate_core::spatial::{TetGrid, TriangleGrid};
 use palpate_core::{HybridError, ModelFileError, Vec3};
 use std::sync::OnceLock;
 
@@ -134,7 +134,7 @@ fn transmural_directions_are_radial_for_concentric_spheres() {
     let r = [0.02, 0.02, 0.02];
     let wall = Wall::nested(&ellipsoid_surface(r, 5), &ellipsoid_surface([0.03; 3], 5)).unwrap();
     let s = &wall.surface;
-    let grid = palpate_core::hybrid::geometry::TriangleGrid::new(s.points(), s.triangles(), 0.004);
+    let grid = TriangleGrid::new(s.points(), s.triangles(), 0.004);
     let f = palpate_core::hybrid::transmural::solve(s, &wall.parts, 0.0008, &grid);
     let mut worst: f64 = 0.0;
     for k in 0..200 {
