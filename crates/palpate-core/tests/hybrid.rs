@@ -274,3 +274,16 @@ fn mutated_model_files_never_panic() {
     }
     assert!(ok > 0 && refused > 0, "ok {ok}, refused {refused}");
 }
+
+/// A file of another format version names the file and says to rebuild the model; a twisted
+/// core is a typed error (the builder retries on it) whose message still says what to try.
+#[test]
+fn version_and_twisted_core_errors_say_what_to_do() {
+    let mut b = to_bytes(&ellipsoids().1);
+    b[16..20].copy_from_slice(&(FORMAT_VERSION + 7).to_le_bytes());
+    let e = from_bytes(&b, "old.palpate").unwrap_err().to_string();
+    assert!(e.contains("old.palpate") && e.contains("rebuild the model"), "{e}");
+    let twisted = HybridError::TwistedCore { prism: 7, triangle: 3, radial: true }.to_string();
+    assert!(twisted.starts_with("FEM core: prism 7 (coarse inner triangle 3) stays twisted") && twisted.contains("try more core triangles") && twisted.contains("use the transmural projection"), "{twisted}");
+    assert!(!HybridError::TwistedCore { prism: 7, triangle: 3, radial: false }.to_string().contains("radial"));
+}

@@ -17,11 +17,10 @@
 //! regions.rs); this is the order they run in and what they are timed by.
 
 use super::file::{Reader, Res, Writer};
-use super::model::{HybridModel, Parts};
-use super::outer::Outer;
+use super::model::HybridModel;
 use super::shell::Projector;
 use super::transmural;
-use super::{core, options, region_field, regions, shell, skin};
+use super::{core, options, outer, region_field, regions, shell, skin};
 use crate::error::HybridError;
 use crate::spatial::{TetGrid, TriangleGrid};
 use std::time::Instant;
@@ -68,35 +67,38 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     stats.field_iterations = field.iterations;
     stats.field_s = t_start.elapsed().as_secs_f64();
 
+    let mut m = HybridModel { options: *o, wall_volume, ..HybridModel::default() };
+
     // --- FEM core ---
     let t0 = Instant::now();
-    let core = core::build(wall, &field, &wall_grid, o)?;
+    core::build(&mut m, wall, &field, &wall_grid)?;
     stats.core_s = t0.elapsed().as_secs_f64();
 
     // --- particles, and the shared voxels they take their outer triangle from ---
     let t0 = Instant::now();
-    let spacing = shell::spacing(o, wall_volume, core.volume);
-    let core_grid = TetGrid::new(&core.points, &core.tets, 2.0 * spacing.max(h));
-    let particles = shell::lattice(wall, &core, &core_grid, spacing, o.density)?;
-    let outer = Outer::of(wall);
-    let project = Projector { field: &field, options: o, outer: &outer, outer_grid: outer.grid(0.5 * h), core: &core, core_face_grid: TriangleGrid::new(&core.points, &core.faces, 2.0 * h.max(spacing)) };
-    let (voxels, _) = region_field::owners(&field, &core, &core_grid, &project);
-    let (shell, fallbacks) = shell::assign(particles, spacing, &voxels, &project);
+    let spacing = shell::spacing(o, wall_volume, m.core_volume());
+    let core_grid = TetGrid::new(&m.core_points, &m.core_tets, 2.0 * spacing.max(h));
+    let particles = shell::lattice(wall, &m.core_points, &core_grid, spacing, o.density)?;
+    outer::build(&mut m, wall);
+    let project = Projector { field: &field, outer_grid: outer::grid(&m, 0.5 * h), core_face_grid: TriangleGrid::new(&m.core_points, &m.core_faces, 2.0 * h.max(spacing)) };
+    region_field::owners(&mut m, &field, &core_grid, &project);
+    let fallbacks = shell::assign(&mut m, particles, spacing, &project);
     stats.fallback_particle_outer = fallbacks.outer;
     stats.fallback_particle_core = fallbacks.core;
     stats.particles_s = t0.elapsed().as_secs_f64();
 
     // --- skin, and the activation regions ---
     let t0 = Instant::now();
-    let (skin, fallback_skin) = skin::build(&project);
-    stats.fallback_skin = fallback_skin;
-    let regions = regions::build(&outer, &shell, &voxels.grid, o.min_region_particles);
+    stats.fallback_skin = skin::build(&mut m, &project);
+    regions::build(&mut m);
     stats.regions_s = t0.elapsed().as_secs_f64();
     stats.total_s = t_start.elapsed().as_secs_f64();
-    Ok(HybridModel::from_parts(Parts { options: *o, wall_volume, core, shell, outer, regions, skin, voxels, stats }))
+    m.stats = stats;
+    Ok(m)
 }
 
-pub(super) fn write_stats(s: &BuildStats, w: &mut Writer) {
+pub(super) fn write_stats(m: &HybridModel, w: &mut Writer) {
+    let s = &m.stats;
     for x in [s.field_s, s.core_s, s.particles_s, s.regions_s, s.total_s] {
         w.f64(x);
     }
@@ -105,7 +107,7 @@ pub(super) fn write_stats(s: &BuildStats, w: &mut Writer) {
     }
 }
 
-pub(super) fn read_stats(r: &mut Reader) -> Res<BuildStats> {
+pub(super) fn read_stats(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     let mut t = [0.0; 5];
     for x in t.iter_mut() {
         *x = r.f64("build statistics")?;
@@ -114,7 +116,7 @@ pub(super) fn read_stats(r: &mut Reader) -> Res<BuildStats> {
     for x in c.iter_mut() {
         *x = r.u64("build statistics")? as usize;
     }
-    Ok(BuildStats {
+    m.stats = BuildStats {
         field_s: t[0],
         core_s: t[1],
         particles_s: t[2],
@@ -124,5 +126,6 @@ pub(super) fn read_stats(r: &mut Reader) -> Res<BuildStats> {
         fallback_particle_outer: c[1],
         fallback_particle_core: c[2],
         fallback_skin: c[3],
-    })
+    };
+    Ok(())
 }

@@ -4,7 +4,7 @@
 
 use super::file::{finite, in_range, Reader, Res, Writer};
 use super::model::HybridModel;
-use super::options::{HybridOptions, AUTO_CORE_TRIANGLES_BASE, AUTO_CORE_TRIANGLES_CLOSED};
+use super::options::{AUTO_CORE_TRIANGLES_BASE, AUTO_CORE_TRIANGLES_CLOSED};
 use super::transmural::{Projection, Transmural, WallPart};
 use super::wall::Wall;
 use crate::error::HybridError;
@@ -15,7 +15,7 @@ use crate::mesh::{signed_volume, TetMesh, TriSurface};
 use crate::spatial::{Nearest, TriangleGrid};
 
 /// Quality of the FEM core.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CoreQuality {
     /// Smallest dihedral angle \[deg\].
     pub min_dihedral_deg: f64,
@@ -24,28 +24,18 @@ pub struct CoreQuality {
     pub max_volume: f64,
 }
 
-/// The core as built: nodes, tets, the faces towards the shell (oriented outward), the nodes on
-/// a base (held fixed; empty for a closed wall), its quality and volume \[m^3\].
-#[derive(Debug, Clone, PartialEq)]
-pub(super) struct Core {
-    pub points: Vec<Vec3>,
-    pub tets: Vec<[usize; 4]>,
-    pub faces: Vec<[usize; 3]>,
-    pub base_nodes: Vec<usize>,
-    pub quality: CoreQuality,
-    pub volume: f64,
-}
-
-/// The core of `wall` with [`HybridOptions::core_triangles`] coarse triangles, or, when that is
-/// 0, the automatic count raised by half (up to twice) while a prism stays twisted.
-pub(super) fn build(wall: &Wall, field: &Transmural, wall_grid: &TriangleGrid, o: &HybridOptions) -> Result<Core, HybridError> {
+/// The core of `wall` with [`super::HybridOptions::core_triangles`] coarse triangles, or, when that is
+/// 0, the automatic count raised by half (up to twice) while a prism stays twisted: the core
+/// fields of `m` (from `m.options`).
+pub(super) fn build(m: &mut HybridModel, wall: &Wall, field: &Transmural, wall_grid: &TriangleGrid) -> Result<(), HybridError> {
+    let o = m.options;
     let closed = !wall.parts.contains(&WallPart::Base);
     let (mut n_tri, mut tries) = match o.core_triangles {
         0 => (if closed { AUTO_CORE_TRIANGLES_CLOSED } else { AUTO_CORE_TRIANGLES_BASE }, 3),
         n => (n, 1),
     };
     loop {
-        match build_with(wall, field, wall_grid, o, n_tri) {
+        match build_with(m, wall, field, wall_grid, n_tri) {
             Err(HybridError::TwistedCore { .. }) if tries > 1 => {
                 tries -= 1;
                 n_tri += n_tri / 2;
@@ -56,8 +46,9 @@ pub(super) fn build(wall: &Wall, field: &Transmural, wall_grid: &TriangleGrid, o
 }
 
 /// The FEM core: the inner surface simplified to `n_tri` triangles, lifted into the wall,
-/// offset in layers along the field and split into tets.
-fn build_with(wall: &Wall, field: &Transmural, wall_grid: &TriangleGrid, o: &HybridOptions, n_tri: usize) -> Result<Core, HybridError> {
+/// offset in layers along the field and split into tets (`m` is changed only on success).
+fn build_with(m: &mut HybridModel, wall: &Wall, field: &Transmural, wall_grid: &TriangleGrid, n_tri: usize) -> Result<(), HybridError> {
+    let o = &m.options;
     let surf = &wall.surface;
     let inner = wall.part(WallPart::Inner);
     let mut coarse = simplify(&inner.points, &inner.tris, n_tri);
@@ -129,12 +120,11 @@ fn build_with(wall: &Wall, field: &Transmural, wall_grid: &TriangleGrid, o: &Hyb
         return Err(HybridError::Core(format!("{w:?} (try fewer core triangles, more layers or a larger core fraction)")));
     }
     let vols: Vec<f64> = core_tets.iter().map(|t| tet_vol(&core_points, t)).collect();
-    let core_quality = CoreQuality {
+    m.core_quality = CoreQuality {
         min_dihedral_deg: mesh.min_dihedral_deg(),
         min_volume: vols.iter().copied().fold(f64::INFINITY, f64::min),
         max_volume: vols.iter().copied().fold(0.0, f64::max),
     };
-    let core_volume: f64 = vols.iter().sum();
     let mut core_base_nodes: Vec<usize> = Vec::new();
     for (v, &b) in coarse.boundary.iter().enumerate() {
         if b {
@@ -144,7 +134,11 @@ fn build_with(wall: &Wall, field: &Transmural, wall_grid: &TriangleGrid, o: &Hyb
         }
     }
     core_base_nodes.sort_unstable();
-    Ok(Core { points: core_points, tets: core_tets, faces: core_faces, base_nodes: core_base_nodes, quality: core_quality, volume: core_volume })
+    m.core_base_nodes = core_base_nodes;
+    m.core_points = core_points;
+    m.core_tets = core_tets;
+    m.core_faces = core_faces;
+    Ok(())
 }
 
 fn tet_vol(pts: &[Vec3], t: &[usize; 4]) -> f64 { signed_volume(&pts[t[0]], &pts[t[1]], &pts[t[2]], &pts[t[3]]) }
@@ -258,13 +252,13 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
     w.f64(q.max_volume);
 }
 
-pub(super) fn read(r: &mut Reader) -> Res<Core> {
-    let points = r.vec3s("core points")?;
-    let tets = r.idx::<4>("core tets")?;
-    let faces = r.idx::<3>("core faces")?;
-    let base_nodes = r.usizes("core base nodes")?;
-    let quality = CoreQuality { min_dihedral_deg: r.f64("core quality")?, min_volume: r.f64("core quality")?, max_volume: r.f64("core quality")? };
-    Ok(Core { points, tets, faces, base_nodes, quality, volume: f64::NAN })
+pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
+    m.core_points = r.vec3s("core points")?;
+    m.core_tets = r.idx::<4>("core tets")?;
+    m.core_faces = r.idx::<3>("core faces")?;
+    m.core_base_nodes = r.usizes("core base nodes")?;
+    m.core_quality = CoreQuality { min_dihedral_deg: r.f64("core quality")?, min_volume: r.f64("core quality")?, max_volume: r.f64("core quality")? };
+    Ok(())
 }
 
 pub(super) fn check(m: &HybridModel) -> Result<(), String> {

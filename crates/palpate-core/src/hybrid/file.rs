@@ -1,7 +1,7 @@
 //! Saving and loading a compiled [`HybridModel`]: one versioned binary file with a checksum.
 //! This module is the container (header, framing, array codecs); each part of the model writes,
-//! reads and checks its own section (`write`, `read`, `check` in its module), in [`SECTIONS`]
-//! order.
+//! reads and checks its own section (`write`, `read`, `check` in its module), in the order of
+//! the table `SECTIONS`.
 //!
 //! Layout (little endian):
 //!
@@ -19,8 +19,8 @@
 //! offset table monotone), so that a loaded model is as valid as a built one. Saving then
 //! loading gives a model equal to the original, field by field and bit by bit.
 
-use super::model::{HybridModel, Parts};
-use super::{build, core, model, options, outer, region_field, regions, shell, skin};
+use super::model::{self, HybridModel};
+use super::{build, core, options, outer, region_field, regions, shell, skin};
 use crate::error::ModelFileError;
 use crate::math::Vec3;
 
@@ -30,8 +30,32 @@ pub const MAGIC: &[u8; 16] = b"PALPATE\0HYBRID\0\0";
 pub const FORMAT_VERSION: u32 = 1;
 const HEADER: usize = 40;
 
-/// The sections of the payload, in file order (each written, read and checked by its module).
-pub const SECTIONS: [&str; 9] = ["options", "wall", "core", "shell", "outer surface", "regions", "skin", "voxels", "build statistics"];
+/// A section of the payload: its part's writer, reader (into a model being assembled) and
+/// structure check (once every section is read).
+struct Section {
+    write: fn(&HybridModel, &mut Writer),
+    read: fn(&mut Reader, &mut HybridModel) -> Res<()>,
+    check: fn(&HybridModel) -> Result<(), String>,
+}
+
+const fn section(write: fn(&HybridModel, &mut Writer), read: fn(&mut Reader, &mut HybridModel) -> Res<()>, check: fn(&HybridModel) -> Result<(), String>) -> Section {
+    Section { write, read, check }
+}
+
+fn unchecked(_: &HybridModel) -> Result<(), String> { Ok(()) }
+
+/// The sections of the payload, in file order.
+const SECTIONS: [Section; 9] = [
+    section(options::write, options::read, unchecked),
+    section(model::write_wall, model::read_wall, unchecked),
+    section(core::write, core::read, core::check),
+    section(shell::write, shell::read, shell::check),
+    section(outer::write, outer::read, outer::check),
+    section(regions::write, regions::read, regions::check),
+    section(skin::write, skin::read, skin::check),
+    section(region_field::write, region_field::read, region_field::check),
+    section(build::write_stats, build::read_stats, unchecked),
+];
 
 /// FNV-1a, 64 bit.
 pub fn checksum(bytes: &[u8]) -> u64 {
@@ -145,15 +169,9 @@ impl<'a> Reader<'a> {
 /// The model as the bytes of a model file.
 pub fn to_bytes(m: &HybridModel) -> Vec<u8> {
     let mut w = Writer(Vec::new());
-    options::write(&m.options, &mut w);
-    model::write_wall(m, &mut w);
-    core::write(m, &mut w);
-    shell::write(m, &mut w);
-    outer::write(m, &mut w);
-    regions::write(m, &mut w);
-    skin::write(m, &mut w);
-    region_field::write(m, &mut w);
-    build::write_stats(&m.stats, &mut w);
+    for s in &SECTIONS {
+        (s.write)(m, &mut w);
+    }
     let payload = w.0;
     let mut out = Vec::with_capacity(HEADER + payload.len());
     out.extend_from_slice(MAGIC);
@@ -192,24 +210,15 @@ pub fn from_bytes(bytes: &[u8], path: &str) -> Result<HybridModel, ModelFileErro
         return Err(ModelFileError::Checksum { path: path.into(), stored, computed });
     }
     let mut r = Reader { b: payload, off: 0, path };
-    let parts = Parts {
-        options: options::read(&mut r)?,
-        wall_volume: model::read_wall(&mut r)?,
-        core: core::read(&mut r)?,
-        shell: shell::read(&mut r)?,
-        outer: outer::read(&mut r)?,
-        regions: regions::read(&mut r)?,
-        skin: skin::read(&mut r)?,
-        voxels: region_field::read(&mut r)?,
-        stats: build::read_stats(&mut r)?,
-    };
+    let mut m = HybridModel::default();
+    for s in &SECTIONS {
+        (s.read)(&mut r, &mut m)?;
+    }
     if r.off != payload.len() {
         return Err(r.corrupt(format!("{} unread bytes at the end of the payload", payload.len() - r.off)));
     }
-    let mut m = HybridModel::from_parts(parts);
-    // Each part against the parts it refers to (the voxel grid before the boxes in it).
-    for check in [core::check, outer::check, shell::check, region_field::check, regions::check, skin::check] {
-        check(&m).map_err(|reason| r.corrupt(reason))?;
+    for s in &SECTIONS {
+        (s.check)(&m).map_err(|reason| r.corrupt(reason))?;
     }
     outer::derive(&mut m);
     Ok(m)

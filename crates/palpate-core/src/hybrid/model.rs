@@ -1,16 +1,12 @@
 //! The compiled hybrid model: its fields (one flat struct, as the binding and the runtime read
-//! them), its assembly from the parts of a build or a file, and the wall's section of the file.
-//! The accessors of each part live with the part (regions.rs, skin.rs, region_field.rs).
+//! them; each part's module builds, writes, reads and checks its own fields) and the wall's
+//! section of the model file. The accessors of each part live with the part (regions.rs,
+//! skin.rs, region_field.rs).
 
 use super::build::BuildStats;
-use super::core::{Core, CoreQuality};
+use super::core::CoreQuality;
 use super::file::{Reader, Res, Writer};
 use super::options::HybridOptions;
-use super::outer::Outer;
-use super::region_field::Voxels;
-use super::regions::Regions;
-use super::shell::Shell;
-use super::skin::Skin;
 use super::transmural::VoxelGrid;
 use crate::math::Vec3;
 use crate::mesh::adjacency::SurfaceAdjacency;
@@ -18,7 +14,7 @@ use crate::mesh::signed_volume;
 
 /// The compiled hybrid model: the FEM core, the particle shell, the skin and the activation
 /// regions. Positions in metres, world frame of the input surfaces.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct HybridModel {
     pub options: HybridOptions,
     /// Volume enclosed by the wall's boundary \[m^3\].
@@ -68,50 +64,7 @@ pub struct HybridModel {
     pub stats: BuildStats,
 }
 
-/// The parts a model is assembled from (by [`super::build()`] or from a file).
-pub(super) struct Parts {
-    pub options: HybridOptions,
-    pub wall_volume: f64,
-    pub core: Core,
-    pub shell: Shell,
-    pub outer: Outer,
-    pub regions: Regions,
-    pub skin: Skin,
-    pub voxels: Voxels,
-    pub stats: BuildStats,
-}
-
 impl HybridModel {
-    pub(super) fn from_parts(p: Parts) -> HybridModel {
-        let Parts { options, wall_volume, core, shell, outer, regions, skin, voxels, stats } = p;
-        HybridModel {
-            options,
-            wall_volume,
-            core_points: core.points,
-            core_tets: core.tets,
-            core_faces: core.faces,
-            core_base_nodes: core.base_nodes,
-            core_quality: core.quality,
-            spacing: shell.spacing,
-            particles: shell.particles,
-            particle_mass: shell.particle_mass,
-            particle_outer_tri: shell.particle_outer_tri,
-            particle_core_face: shell.particle_core_face,
-            tri_particle_ptr: shell.tri_particle_ptr,
-            outer_points: outer.points,
-            outer_tris: outer.tris,
-            region_rings: regions.rings,
-            outer_adjacency: outer.adjacency,
-            region_box: regions.boxes,
-            skin_face: skin.face,
-            skin_bary: skin.bary,
-            skin_offset: skin.offset,
-            grid: voxels.grid,
-            voxel_owner: voxels.owner,
-            stats,
-        }
-    }
-
     /// Number of activation regions (one per outer-surface vertex).
     pub fn n_regions(&self) -> usize { self.region_box.len() }
 
@@ -127,4 +80,7 @@ impl HybridModel {
 /// The wall's section: its volume.
 pub(super) fn write_wall(m: &HybridModel, w: &mut Writer) { w.f64(m.wall_volume); }
 
-pub(super) fn read_wall(r: &mut Reader) -> Res<f64> { r.f64("wall volume") }
+pub(super) fn read_wall(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
+    m.wall_volume = r.f64("wall volume")?;
+    Ok(())
+}

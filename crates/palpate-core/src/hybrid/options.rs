@@ -1,6 +1,7 @@
 //! The options of a build, their checks, and their section of the model file.
 
 use super::file::{Reader, Res, Writer};
+use super::model::HybridModel;
 use super::transmural::Projection;
 use crate::error::HybridError;
 
@@ -88,7 +89,8 @@ pub(super) fn check(o: &HybridOptions) -> Result<(), HybridError> {
     Ok(())
 }
 
-pub(super) fn write(o: &HybridOptions, w: &mut Writer) {
+pub(super) fn write(m: &HybridModel, w: &mut Writer) {
+    let o = &m.options;
     w.u8(match o.projection {
         Projection::Transmural => 0,
         Projection::Radial => 1,
@@ -111,7 +113,7 @@ pub(super) fn write(o: &HybridOptions, w: &mut Writer) {
     w.u64(o.field_voxels as u64);
 }
 
-pub(super) fn read(r: &mut Reader) -> Res<HybridOptions> {
+pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     let projection = match r.u8("projection")? {
         0 => Projection::Transmural,
         1 => Projection::Radial,
@@ -125,7 +127,7 @@ pub(super) fn read(r: &mut Reader) -> Res<HybridOptions> {
         1 => Spacing::Count(r.u64("spacing")? as usize),
         x => return Err(r.corrupt(format!("spacing code {x}"))),
     };
-    Ok(HybridOptions {
+    m.options = HybridOptions {
         projection,
         core_fraction,
         core_triangles,
@@ -134,5 +136,6 @@ pub(super) fn read(r: &mut Reader) -> Res<HybridOptions> {
         density: r.f64("density")?,
         min_region_particles: r.u64("min region particles")? as usize,
         field_voxels: r.u64("field voxels")? as usize,
-    })
+    };
+    Ok(())
 }

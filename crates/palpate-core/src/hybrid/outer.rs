@@ -5,32 +5,24 @@ use super::file::{finite, in_range, Reader, Res, Writer};
 use super::model::HybridModel;
 use super::transmural::WallPart;
 use super::wall::Wall;
-use crate::math::Vec3;
 use crate::mesh::adjacency::SurfaceAdjacency;
 use crate::spatial::TriangleGrid;
 
-/// The outer surface: points, triangles and their adjacency.
-pub(super) struct Outer {
-    pub points: Vec<Vec3>,
-    pub tris: Vec<[usize; 3]>,
-    pub adjacency: SurfaceAdjacency,
+/// The outer part of `wall`, with its adjacency.
+pub(super) fn build(m: &mut HybridModel, wall: &Wall) {
+    let part = wall.part(WallPart::Outer);
+    m.outer_adjacency = SurfaceAdjacency::new(part.points.len(), &part.tris);
+    m.outer_points = part.points;
+    m.outer_tris = part.tris;
 }
 
-impl Outer {
-    /// The outer part of `wall`.
-    pub fn of(wall: &Wall) -> Outer {
-        let part = wall.part(WallPart::Outer);
-        let adjacency = SurfaceAdjacency::new(part.points.len(), &part.tris);
-        Outer { points: part.points, tris: part.tris, adjacency }
-    }
-
-    /// A nearest-triangle grid of cells about the mean edge (at least `min_cell` \[m\]).
-    pub fn grid(&self, min_cell: f64) -> TriangleGrid {
-        let (p, tris) = (&self.points, &self.tris);
-        let area: f64 = tris.iter().map(|t| (p[t[1]] - p[t[0]]).cross(&(p[t[2]] - p[t[0]])).norm() * 0.5).sum();
-        let edge = (area / tris.len() as f64 * 2.3).sqrt();
-        TriangleGrid::new(p, tris, edge.max(min_cell))
-    }
+/// A nearest-triangle grid of the outer surface, cells about its mean edge (at least
+/// `min_cell` \[m\]).
+pub(super) fn grid(m: &HybridModel, min_cell: f64) -> TriangleGrid {
+    let (p, tris) = (&m.outer_points, &m.outer_tris);
+    let area: f64 = tris.iter().map(|t| (p[t[1]] - p[t[0]]).cross(&(p[t[2]] - p[t[0]])).norm() * 0.5).sum();
+    let edge = (area / tris.len() as f64 * 2.3).sqrt();
+    TriangleGrid::new(p, tris, edge.max(min_cell))
 }
 
 pub(super) fn write(m: &HybridModel, w: &mut Writer) {
@@ -39,8 +31,10 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
 }
 
 /// The section; the adjacency is filled in by [`derive`] once the model is checked.
-pub(super) fn read(r: &mut Reader) -> Res<Outer> {
-    Ok(Outer { points: r.vec3s("outer points")?, tris: r.idx::<3>("outer triangles")?, adjacency: SurfaceAdjacency::default() })
+pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
+    m.outer_points = r.vec3s("outer points")?;
+    m.outer_tris = r.idx::<3>("outer triangles")?;
+    Ok(())
 }
 
 pub(super) fn check(m: &HybridModel) -> Result<(), String> {

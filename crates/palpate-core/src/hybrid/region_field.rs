@@ -2,7 +2,6 @@
 //! outer triangle its field line reaches; the box of each region, its labels and its gradient
 //! field are computed from it on demand. The voxels' section of the model file.
 
-use super::core::Core;
 use super::file::{Reader, Res, Writer};
 use super::model::HybridModel;
 use super::shell::Projector;
@@ -15,18 +14,13 @@ pub const VOXEL_OUTSIDE: u32 = u32::MAX;
 /// `voxel_owner` of a wall voxel inside the FEM core.
 pub const VOXEL_CORE: u32 = u32::MAX - 1;
 
-/// The shared voxels: the field's grid and the owner of each voxel.
-pub(super) struct Voxels {
-    pub grid: VoxelGrid,
-    pub owner: Vec<u32>,
-}
-
 /// The outer triangle above each wall voxel. Wall voxels in order of decreasing phi: a voxel
 /// takes the owner of the wall voxel one step along the field from its centre when that one has
 /// an owner already (one field line each), and marches to the outer surface itself otherwise
-/// (the outermost layer, and where field lines leave through a base). Returns the voxels and the
-/// marches that fell back to the nearest point.
-pub(super) fn owners(field: &Transmural, core: &Core, core_grid: &TetGrid, project: &Projector) -> (Voxels, usize) {
+/// (the outermost layer, and where field lines leave through a base). Sets the voxel fields of
+/// `m` (its core and outer surface built); returns the marches that fell back to the nearest
+/// point.
+pub(super) fn owners(m: &mut HybridModel, field: &Transmural, core_grid: &TetGrid, project: &Projector) -> usize {
     let grid = field.grid;
     let mut owner = vec![VOXEL_OUTSIDE; grid.len()];
     let mut order: Vec<usize> = (0..grid.len()).filter(|&v| field.wall[v]).collect();
@@ -34,18 +28,20 @@ pub(super) fn owners(field: &Transmural, core: &Core, core_grid: &TetGrid, proje
     let mut fallbacks = 0;
     for &v in &order {
         let c = grid.centre(v);
-        if core_grid.locate(&core.points, &c).is_some() {
+        if core_grid.locate(&m.core_points, &c).is_some() {
             owner[v] = VOXEL_CORE;
             continue;
         }
-        let ahead = c + grid.h * field.dir_at(&c, project.options.projection);
+        let ahead = c + grid.h * field.dir_at(&c, m.options.projection);
         let inherited = grid.cell_of(&ahead).map(|a| owner[grid.index_of(a)]).filter(|&w| w < VOXEL_CORE);
         owner[v] = match inherited {
             Some(w) => w,
-            None => project.outer_of(&c, &mut fallbacks),
+            None => project.outer_of(m, &c, &mut fallbacks),
         };
     }
-    (Voxels { grid, owner }, fallbacks)
+    m.grid = grid;
+    m.voxel_owner = owner;
+    fallbacks
 }
 
 impl HybridModel {
@@ -130,11 +126,13 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
     w.u32s(&m.voxel_owner);
 }
 
-pub(super) fn read(r: &mut Reader) -> Res<Voxels> {
+pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     let origin = r.vec3("voxel grid")?;
     let h = r.f64("voxel grid")?;
     let dims = [r.u64("voxel grid")? as usize, r.u64("voxel grid")? as usize, r.u64("voxel grid")? as usize];
-    Ok(Voxels { grid: VoxelGrid { origin, h, dims }, owner: r.u32s("voxel owners")? })
+    m.grid = VoxelGrid { origin, h, dims };
+    m.voxel_owner = r.u32s("voxel owners")?;
+    Ok(())
 }
 
 pub(super) fn check(m: &HybridModel) -> Result<(), String> {

@@ -7,30 +7,22 @@
 use super::file::{Reader, Res, Writer};
 use super::model::HybridModel;
 use super::options::MAX_RINGS;
-use super::outer::Outer;
-use super::shell::Shell;
-use super::transmural::VoxelGrid;
 use crate::math::Vec3;
 use crate::mesh::adjacency::Marks;
 
-/// The regions as built: per outer vertex, the rings of nv(p_s) and the voxel box B(p_s).
-pub(super) struct Regions {
-    pub rings: Vec<u8>,
-    pub boxes: Vec<[u32; 6]>,
-}
-
 /// nv(p_s) grows by rings of triangles until RV(p_s) holds `min_particles` (at most
 /// [`MAX_RINGS`] rings, further only while empty); B(p_s) is the voxel box of RV(p_s) (of p_s
-/// if RV is empty) with one voxel of margin, clamped to the grid.
-pub(super) fn build(outer: &Outer, shell: &Shell, grid: &VoxelGrid, min_particles: usize) -> Regions {
-    let ptr = &shell.tri_particle_ptr;
+/// if RV is empty) with one voxel of margin, clamped to the grid. Sets the region fields of `m`
+/// (its outer surface, voxels and shell built).
+pub(super) fn build(m: &mut HybridModel) {
+    let (ptr, grid, min_particles) = (&m.tri_particle_ptr, &m.grid, m.options.min_region_particles);
     let count = |t: u32| (ptr[t as usize + 1] - ptr[t as usize]) as usize;
-    let mut in_patch = vec![false; outer.tris.len()];
-    let mut rings = Vec::with_capacity(outer.points.len());
-    let mut boxes = Vec::with_capacity(outer.points.len());
-    for s in 0..outer.points.len() {
+    let mut in_patch = vec![false; m.outer_tris.len()];
+    let mut rings = Vec::with_capacity(m.outer_points.len());
+    let mut boxes = Vec::with_capacity(m.outer_points.len());
+    for s in 0..m.outer_points.len() {
         let mut n = 0;
-        let patch = outer.adjacency.patch(&outer.tris, s, None, Marks::Flags(&mut in_patch), |r, added| {
+        let patch = m.outer_adjacency.patch(&m.outer_tris, s, None, Marks::Flags(&mut in_patch), |r, added| {
             n += added.iter().map(|&t| count(t)).sum::<usize>();
             !(n >= min_particles || (r >= MAX_RINGS && n > 0) || r >= 2 * MAX_RINGS)
         });
@@ -38,7 +30,7 @@ pub(super) fn build(outer: &Outer, shell: &Shell, grid: &VoxelGrid, min_particle
         let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
         for &t in &patch.triangles {
             for q in ptr[t as usize] as usize..ptr[t as usize + 1] as usize {
-                if let Some(c) = grid.cell_of(&shell.particles[q]) {
+                if let Some(c) = grid.cell_of(&m.particles[q]) {
                     for a in 0..3 {
                         lo[a] = lo[a].min(c[a] as u32);
                         hi[a] = hi[a].max(c[a] as u32);
@@ -47,7 +39,7 @@ pub(super) fn build(outer: &Outer, shell: &Shell, grid: &VoxelGrid, min_particle
             }
         }
         if lo[0] == u32::MAX {
-            let c = grid.cell_of(&outer.points[s]).unwrap_or([0, 0, 0]);
+            let c = grid.cell_of(&m.outer_points[s]).unwrap_or([0, 0, 0]);
             lo = [c[0] as u32, c[1] as u32, c[2] as u32];
             hi = lo;
         }
@@ -59,7 +51,8 @@ pub(super) fn build(outer: &Outer, shell: &Shell, grid: &VoxelGrid, min_particle
         }
         boxes.push(b);
     }
-    Regions { rings, boxes }
+    m.region_rings = rings;
+    m.region_box = boxes;
 }
 
 impl HybridModel {
@@ -102,11 +95,12 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
     w.rows(&m.region_box, |w, x| w.u32(x));
 }
 
-pub(super) fn read(r: &mut Reader) -> Res<Regions> {
-    Ok(Regions { rings: r.bytes("region rings")?, boxes: r.rows(4, "region boxes", |r| r.u32("region boxes"))? })
+pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
+    m.region_rings = r.bytes("region rings")?;
+    m.region_box = r.rows(4, "region boxes", |r| r.u32("region boxes"))?;
+    Ok(())
 }
 
-/// Run after the voxels' check (the boxes lie in the voxel grid).
 pub(super) fn check(m: &HybridModel) -> Result<(), String> {
     if let Some(s) = m.region_rings.iter().position(|&r| r == 0) {
         return Err(format!("region {s}: zero rings"));

@@ -3,30 +3,16 @@
 //! sorted by that outer triangle; the projections along field lines; the shell's section of the
 //! model file.
 
-use super::core::Core;
 use super::file::{finite, in_range, Reader, Res, Writer};
 use super::model::HybridModel;
 use super::options::{HybridOptions, Spacing};
-use super::outer::Outer;
-use super::region_field::{Voxels, VOXEL_CORE};
+use super::region_field::VOXEL_CORE;
 use super::transmural::Transmural;
 use super::wall::Wall;
 use crate::error::HybridError;
 use crate::math::Vec3;
 use crate::mesh::sample_inside;
 use crate::spatial::{csr, Nearest, TetGrid, TriangleGrid};
-
-/// The shell as built: the lattice spacing \[m\], particles sorted by the outer triangle above
-/// them, their masses, outer triangles and core faces, and the particles of each outer triangle
-/// (`tri_particle_ptr[t]..tri_particle_ptr[t + 1]`).
-pub(super) struct Shell {
-    pub spacing: f64,
-    pub particles: Vec<Vec3>,
-    pub particle_mass: Vec<f64>,
-    pub particle_outer_tri: Vec<u32>,
-    pub particle_core_face: Vec<u32>,
-    pub tri_particle_ptr: Vec<u32>,
-}
 
 /// Lattice spacing \[m\] of the options, given the wall's and the core's volume \[m^3\].
 pub(super) fn spacing(o: &HybridOptions, wall_volume: f64, core_volume: f64) -> f64 {
@@ -37,11 +23,11 @@ pub(super) fn spacing(o: &HybridOptions, wall_volume: f64, core_volume: f64) -> 
 }
 
 /// The lattice points of spacing `spacing` inside the wall and outside the core.
-pub(super) fn lattice(wall: &Wall, core: &Core, core_grid: &TetGrid, spacing: f64, density: f64) -> Result<Vec<Vec3>, HybridError> {
+pub(super) fn lattice(wall: &Wall, core_points: &[Vec3], core_grid: &TetGrid, spacing: f64, density: f64) -> Result<Vec<Vec3>, HybridError> {
     let fill = sample_inside(&wall.surface, spacing, density)?;
     let mut particles = Vec::with_capacity(fill.len());
     for p in &fill.positions {
-        if core_grid.locate(&core.points, p).is_none() {
+        if core_grid.locate(core_points, p).is_none() {
             particles.push(*p);
         }
     }
@@ -59,35 +45,34 @@ pub(super) struct CoreHit {
     pub bary: [f64; 3],
 }
 
-/// Projections along the field lines (or radial lines) to the outer surface and to the core;
-/// where the line cannot be followed, the nearest point is taken and a fallback counted.
+/// Projections along the field lines (or radial lines) to the outer surface and to the core of
+/// a model (its options, core and outer surface); where the line cannot be followed, the nearest
+/// point is taken and a fallback counted.
 pub(super) struct Projector<'a> {
     pub field: &'a Transmural,
-    pub options: &'a HybridOptions,
-    pub outer: &'a Outer,
+    /// Nearest-triangle grids of the outer surface and of the core's faces.
     pub outer_grid: TriangleGrid,
-    pub core: &'a Core,
     pub core_face_grid: TriangleGrid,
 }
 
 impl Projector<'_> {
     /// The outer triangle above `p`.
-    pub fn outer_of(&self, p: &Vec3, fallbacks: &mut usize) -> u32 {
+    pub fn outer_of(&self, m: &HybridModel, p: &Vec3, fallbacks: &mut usize) -> u32 {
         let top = 1.0 - 1e-6;
-        let q = self.field.march_to_level(p, top, true, self.options.projection).unwrap_or_else(|| {
+        let q = self.field.march_to_level(p, top, true, m.options.projection).unwrap_or_else(|| {
             *fallbacks += 1;
             *p
         });
-        self.outer_grid.nearest(&self.outer.points, &self.outer.tris, &q, |_| true).map(|r| r.triangle as u32).unwrap_or(0)
+        self.outer_grid.nearest(&m.outer_points, &m.outer_tris, &q, |_| true).map(|r| r.triangle as u32).unwrap_or(0)
     }
 
     /// The core face below `p`.
-    pub fn core_of(&self, p: &Vec3, fallbacks: &mut usize) -> CoreHit {
-        let q = self.field.march_to_level(p, self.options.core_fraction, false, self.options.projection).unwrap_or_else(|| {
+    pub fn core_of(&self, m: &HybridModel, p: &Vec3, fallbacks: &mut usize) -> CoreHit {
+        let q = self.field.march_to_level(p, m.options.core_fraction, false, m.options.projection).unwrap_or_else(|| {
             *fallbacks += 1;
             *p
         });
-        let Nearest { triangle, point, bary, .. } = self.core_face_grid.nearest(&self.core.points, &self.core.faces, &q, |_| true).expect("the core has faces");
+        let Nearest { triangle, point, bary, .. } = self.core_face_grid.nearest(&m.core_points, &m.core_faces, &q, |_| true).expect("the core has faces");
         CoreHit { face: triangle as u32, point, bary }
     }
 }
@@ -98,31 +83,32 @@ pub(super) struct Fallbacks {
     pub core: usize,
 }
 
-/// The shell of `particles`: each takes its voxel's owner as its outer triangle (so that RV(p_s)
-/// and the inside voxels of B(p_s) agree), or marches when its voxel is not a wall voxel.
-pub(super) fn assign(particles: Vec<Vec3>, spacing: f64, voxels: &Voxels, project: &Projector) -> (Shell, Fallbacks) {
-    let grid = &voxels.grid;
+/// The shell fields of `m` from `particles` at `spacing` \[m\], sorted by the outer triangle
+/// above them: each takes its voxel's owner (so that RV(p_s) and the inside voxels of B(p_s)
+/// agree; the voxels are built first), or marches when its voxel is not a wall voxel.
+pub(super) fn assign(m: &mut HybridModel, particles: Vec<Vec3>, spacing: f64, project: &Projector) -> Fallbacks {
+    let grid = &m.grid;
     let mut fo = 0;
     let mut fc = 0;
     let mut keyed: Vec<(u32, u32, Vec3)> = particles
         .iter()
         .map(|p| {
-            let from_voxel = grid.cell_of(p).map(|a| voxels.owner[grid.index_of(a)]).filter(|&w| w < VOXEL_CORE);
+            let from_voxel = grid.cell_of(p).map(|a| m.voxel_owner[grid.index_of(a)]).filter(|&w| w < VOXEL_CORE);
             let t = match from_voxel {
                 Some(w) => w,
-                None => project.outer_of(p, &mut fo),
+                None => project.outer_of(m, p, &mut fo),
             };
-            (t, project.core_of(p, &mut fc).face, *p)
+            (t, project.core_of(m, p, &mut fc).face, *p)
         })
         .collect();
     keyed.sort_by(|a, b| a.0.cmp(&b.0).then(a.2.x.total_cmp(&b.2.x)).then(a.2.y.total_cmp(&b.2.y)).then(a.2.z.total_cmp(&b.2.z)));
-    let particles: Vec<Vec3> = keyed.iter().map(|k| k.2).collect();
-    let particle_outer_tri: Vec<u32> = keyed.iter().map(|k| k.0).collect();
-    let particle_core_face: Vec<u32> = keyed.iter().map(|k| k.1).collect();
-    let tri_particle_ptr = csr::offsets(project.outer.tris.len(), particle_outer_tri.iter().map(|&t| t as usize));
-    let particle_mass = vec![project.options.density * spacing.powi(3); particles.len()];
-    let shell = Shell { spacing, particles, particle_mass, particle_outer_tri, particle_core_face, tri_particle_ptr };
-    (shell, Fallbacks { outer: fo, core: fc })
+    m.spacing = spacing;
+    m.particles = keyed.iter().map(|k| k.2).collect();
+    m.particle_outer_tri = keyed.iter().map(|k| k.0).collect();
+    m.particle_core_face = keyed.iter().map(|k| k.1).collect();
+    m.tri_particle_ptr = csr::offsets(m.outer_tris.len(), m.particle_outer_tri.iter().map(|&t| t as usize));
+    m.particle_mass = vec![m.options.density * spacing.powi(3); m.particles.len()];
+    Fallbacks { outer: fo, core: fc }
 }
 
 pub(super) fn write(m: &HybridModel, w: &mut Writer) {
@@ -134,15 +120,14 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
     w.u32s(&m.tri_particle_ptr);
 }
 
-pub(super) fn read(r: &mut Reader) -> Res<Shell> {
-    Ok(Shell {
-        spacing: r.f64("spacing")?,
-        particles: r.vec3s("particles")?,
-        particle_mass: r.f64s("particle masses")?,
-        particle_outer_tri: r.u32s("particle outer triangles")?,
-        particle_core_face: r.u32s("particle core faces")?,
-        tri_particle_ptr: r.u32s("particles per outer triangle")?,
-    })
+pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
+    m.spacing = r.f64("spacing")?;
+    m.particles = r.vec3s("particles")?;
+    m.particle_mass = r.f64s("particle masses")?;
+    m.particle_outer_tri = r.u32s("particle outer triangles")?;
+    m.particle_core_face = r.u32s("particle core faces")?;
+    m.tri_particle_ptr = r.u32s("particles per outer triangle")?;
+    Ok(())
 }
 
 pub(super) fn check(m: &HybridModel) -> Result<(), String> {

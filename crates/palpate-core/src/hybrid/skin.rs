@@ -7,25 +7,15 @@ use super::model::HybridModel;
 use super::shell::{CoreHit, Projector};
 use crate::math::Vec3;
 
-/// The skin as built, per outer vertex.
-pub(super) struct Skin {
-    pub face: Vec<u32>,
-    pub bary: Vec<[f64; 3]>,
-    pub offset: Vec<Vec3>,
-}
-
-/// The skin of the outer vertices, and how many projections fell back to the nearest point.
-pub(super) fn build(project: &Projector) -> (Skin, usize) {
-    let n = project.outer.points.len();
+/// The skin fields of `m` (its core and outer surface built); returns how many projections
+/// fell back to the nearest point.
+pub(super) fn build(m: &mut HybridModel, project: &Projector) -> usize {
     let mut fallbacks = 0;
-    let mut skin = Skin { face: Vec::with_capacity(n), bary: Vec::with_capacity(n), offset: Vec::with_capacity(n) };
-    for p in &project.outer.points {
-        let CoreHit { face, point, bary } = project.core_of(p, &mut fallbacks);
-        skin.face.push(face);
-        skin.bary.push(bary);
-        skin.offset.push(p - point);
-    }
-    (skin, fallbacks)
+    let hits: Vec<CoreHit> = m.outer_points.iter().map(|p| project.core_of(m, p, &mut fallbacks)).collect();
+    m.skin_face = hits.iter().map(|h| h.face).collect();
+    m.skin_bary = hits.iter().map(|h| h.bary).collect();
+    m.skin_offset = m.outer_points.iter().zip(&hits).map(|(p, h)| p - h.point).collect();
+    fallbacks
 }
 
 impl HybridModel {
@@ -43,12 +33,11 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
     w.vec3s(&m.skin_offset);
 }
 
-pub(super) fn read(r: &mut Reader) -> Res<Skin> {
-    Ok(Skin {
-        face: r.u32s("skin faces")?,
-        bary: r.rows(8, "skin barycentric coordinates", |r| r.f64("skin barycentric coordinates"))?,
-        offset: r.vec3s("skin offsets")?,
-    })
+pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
+    m.skin_face = r.u32s("skin faces")?;
+    m.skin_bary = r.rows(8, "skin barycentric coordinates", |r| r.f64("skin barycentric coordinates"))?;
+    m.skin_offset = r.vec3s("skin offsets")?;
+    Ok(())
 }
 
 pub(super) fn check(m: &HybridModel) -> Result<(), String> {

@@ -29,7 +29,7 @@ use std::collections::HashMap;
 
 use thiserror::Error;
 
-use crate::math::{is_finite3, Vec3};
+use crate::math::Vec3;
 use crate::spatial::Buckets;
 
 /// A triangle whose `area / (longest edge)^2` is below this is refused as degenerate.
@@ -128,14 +128,10 @@ impl TriSurface {
             return Err(SurfaceError::Empty { what: "no triangles" });
         }
         let n = points.len();
-        let mut pts = Vec::with_capacity(n);
-        for (i, p) in points.iter().enumerate() {
-            let v = Vec3::new(p[0], p[1], p[2]);
-            if !is_finite3(&v) {
-                return Err(SurfaceError::NonFiniteVertex { vertex: i, x: p[0], y: p[1], z: p[2] });
-            }
-            pts.push(v);
-        }
+        let pts = super::finite_points(points).map_err(|i| {
+            let p = points[i];
+            SurfaceError::NonFiniteVertex { vertex: i, x: p[0], y: p[1], z: p[2] }
+        })?;
         let mut tris = Vec::with_capacity(triangles.len());
         let mut seen: HashMap<[usize; 3], usize> = HashMap::with_capacity(triangles.len());
         for (t, tri) in triangles.iter().enumerate() {

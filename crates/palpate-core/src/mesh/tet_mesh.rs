@@ -3,7 +3,7 @@
 use std::collections::HashMap;
 
 use crate::error::MeshError;
-use crate::math::{is_finite3, Vec3};
+use crate::math::Vec3;
 
 /// A tet whose `|volume| / (longest edge)^3` is below this is refused as degenerate.
 /// (A regular tet has 0.118; the benchmark meshes' worst is above 1e-2.)
@@ -54,14 +54,10 @@ impl TetMesh {
             return Err(MeshError::Empty { what: "no tetrahedra" });
         }
         let n = points.len();
-        let mut pts = Vec::with_capacity(n);
-        for (i, p) in points.iter().enumerate() {
-            let v = Vec3::new(p[0], p[1], p[2]);
-            if !is_finite3(&v) {
-                return Err(MeshError::NonFiniteNode { node: i, x: p[0], y: p[1], z: p[2] });
-            }
-            pts.push(v);
-        }
+        let pts = super::finite_points(points).map_err(|i| {
+            let p = points[i];
+            MeshError::NonFiniteNode { node: i, x: p[0], y: p[1], z: p[2] }
+        })?;
         let mut out = Vec::with_capacity(tets.len());
         let mut reoriented = Vec::new();
         let mut used = vec![false; n];

@@ -4,7 +4,7 @@
 use crate::math::Vec3;
 
 /// A uniform grid of `dims` cubic cells of edge `h` from the corner `origin`.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Grid3 {
     /// Corner of cell (0, 0, 0) \[m\].
     pub origin: Vec3,
