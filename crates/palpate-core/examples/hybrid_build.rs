@@ -47,7 +47,7 @@ fn diagnose(m: &palpate_core::hybrid::HybridModel, wall: &palpate_core::hybrid::
             n += 1; if wall.surface.contains_parity(&x) { ni += 1; } }}}
         inside += vol * ni as f64 / n as f64; total += vol;
     }
-    let bnd = palpate_core::hybrid::shapes::oriented_boundary(&palpate_core::TetMesh::from_arrays(&m.core_points.iter().map(|p| [p.x,p.y,p.z]).collect::<Vec<_>>(), &m.core_tets.iter().map(|t| [t[0] as i64,t[1] as i64,t[2] as i64,t[3] as i64]).collect::<Vec<_>>()).unwrap().0);
+    let bnd = palpate_core::mesh::boundary_faces(&m.core_points, &m.core_tets);
     let bv: f64 = bnd.iter().map(|f| m.core_points[f[0]].dot(&m.core_points[f[1]].cross(&m.core_points[f[2]])) / 6.0).sum();
     println!("core volume {:.3} mL, inside wall {:.3} mL ({:.1}%), boundary-enclosed {:.3} mL", total*1e6, inside*1e6, 100.0*inside/total, bv*1e6);
 }

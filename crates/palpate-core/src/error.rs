@@ -126,8 +126,19 @@ pub enum HybridError {
     Parts(String),
     #[error("FEM core: {0}")]
     Core(String),
+    /// A prism of the core stays twisted after its offsets are smoothed (the builder retries
+    /// with more core triangles when they were chosen automatically).
+    #[error("FEM core: prism {prism} (coarse inner triangle {triangle}) stays twisted after smoothing its offsets; try more core triangles or a smaller core fraction{}", radial_hint(.radial))]
+    TwistedCore { prism: usize, triangle: usize, radial: bool },
     #[error("particles: {0}")]
     Particles(String),
+}
+
+fn radial_hint(radial: &bool) -> &'static str {
+    match radial {
+        true => "; the radial projection cannot serve this wall (it is not star-shaped about its mass centre): use the transmural projection",
+        false => "",
+    }
 }
 
 /// A compiled-model file that cannot be read.

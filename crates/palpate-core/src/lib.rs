@@ -32,6 +32,7 @@ pub mod mesh;
 pub mod meshfree;
 pub mod probe;
 pub mod scene;
+pub mod spatial;
 
 pub use error::{HybridError, LoadError, MaterialError, MeshError, ModelError, ModelFileError, SolveError, StepError};
 pub use integrate::{step, Integrator, StepReport};

@@ -10,10 +10,10 @@
 //! bit-identical after a round trip; a reader that trusts lengths and indices panics or hangs on
 //! damaged or mutated files instead of naming the file and the reason.
 use palpate_core::hybrid::file::{from_bytes, to_bytes, FORMAT_VERSION};
-use palpate_core::hybrid::geometry::TetGrid;
 use palpate_core::hybrid::{build, shapes, HybridModel, HybridOptions, Projection, Spacing, VoxelLabel, Wall, WallPart};
 use palpate_core::mesh::generate::TruncatedEllipsoidWall;
 use palpate_core::mesh::{ellipsoid_surface, TriSurface};
+use palpate_core::spatial::{TetGrid, TriangleGrid};
 use palpate_core::{HybridError, ModelFileError, Vec3};
 use std::sync::OnceLock;
 
@@ -134,7 +134,7 @@ fn transmural_directions_are_radial_for_concentric_spheres() {
     let r = [0.02, 0.02, 0.02];
     let wall = Wall::nested(&ellipsoid_surface(r, 5), &ellipsoid_surface([0.03; 3], 5)).unwrap();
     let s = &wall.surface;
-    let grid = palpate_core::hybrid::geometry::TriangleGrid::new(s.points(), s.triangles(), 0.004);
+    let grid = TriangleGrid::new(s.points(), s.triangles(), 0.004);
     let f = palpate_core::hybrid::transmural::solve(s, &wall.parts, 0.0008, &grid);
     let mut worst: f64 = 0.0;
     for k in 0..200 {
@@ -273,4 +273,17 @@ fn mutated_model_files_never_panic() {
         }
     }
     assert!(ok > 0 && refused > 0, "ok {ok}, refused {refused}");
+}
+
+/// A file of another format version names the file and says to rebuild the model; a twisted
+/// core is a typed error (the builder retries on it) whose message still says what to try.
+#[test]
+fn version_and_twisted_core_errors_say_what_to_do() {
+    let mut b = to_bytes(&ellipsoids().1);
+    b[16..20].copy_from_slice(&(FORMAT_VERSION + 7).to_le_bytes());
+    let e = from_bytes(&b, "old.palpate").unwrap_err().to_string();
+    assert!(e.contains("old.palpate") && e.contains("rebuild the model"), "{e}");
+    let twisted = HybridError::TwistedCore { prism: 7, triangle: 3, radial: true }.to_string();
+    assert!(twisted.starts_with("FEM core: prism 7 (coarse inner triangle 3) stays twisted") && twisted.contains("try more core triangles") && twisted.contains("use the transmural projection"), "{twisted}");
+    assert!(!HybridError::TwistedCore { prism: 7, triangle: 3, radial: false }.to_string().contains("radial"));
 }

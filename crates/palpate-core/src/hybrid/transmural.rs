@@ -14,9 +14,10 @@
 //! of the nearest boundary triangle (inner or outer) or dropped (Neumann) when it is a base
 //! triangle, is solved by Jacobi-preconditioned conjugate gradients.
 
-use super::geometry::TriangleGrid;
+use crate::linalg::cg::{self, CgStop, CgWork};
 use crate::math::Vec3;
 use crate::mesh::surface::TriSurface;
+use crate::spatial::{Grid3, Nearest, TriangleGrid};
 use std::collections::VecDeque;
 
 /// Which part of a wall's closed boundary a triangle belongs to.
@@ -41,47 +42,8 @@ pub enum Projection {
 }
 
 /// A cell-centred voxel grid: voxel `(i, j, k)` has its centre at `origin + (i + 1/2, j + 1/2,
-/// k + 1/2) h`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct VoxelGrid {
-    /// Corner of voxel (0, 0, 0) \[m\].
-    pub origin: Vec3,
-    /// Voxel edge \[m\].
-    pub h: f64,
-    /// Voxels per axis.
-    pub dims: [usize; 3],
-}
-
-impl VoxelGrid {
-    /// Number of voxels.
-    pub fn len(&self) -> usize { self.dims[0] * self.dims[1] * self.dims[2] }
-    /// No voxels?
-    pub fn is_empty(&self) -> bool { self.len() == 0 }
-    /// Linear index of `(i, j, k)`.
-    pub fn index(&self, i: usize, j: usize, k: usize) -> usize { i + self.dims[0] * (j + self.dims[1] * k) }
-    /// `(i, j, k)` of a linear index.
-    pub fn ijk(&self, v: usize) -> [usize; 3] {
-        let (nx, ny) = (self.dims[0], self.dims[1]);
-        [v % nx, (v / nx) % ny, v / (nx * ny)]
-    }
-    /// Centre of voxel `v` \[m\].
-    pub fn centre(&self, v: usize) -> Vec3 {
-        let c = self.ijk(v);
-        self.origin + Vec3::new(c[0] as f64 + 0.5, c[1] as f64 + 0.5, c[2] as f64 + 0.5) * self.h
-    }
-    /// The voxel containing `p`, if inside the grid.
-    pub fn voxel_of(&self, p: &Vec3) -> Option<[usize; 3]> {
-        let mut c = [0; 3];
-        for a in 0..3 {
-            let x = ((p[a] - self.origin[a]) / self.h).floor();
-            if !(x >= 0.0 && x < self.dims[a] as f64) {
-                return None;
-            }
-            c[a] = x as usize;
-        }
-        Some(c)
-    }
-}
+/// k + 1/2) h` (the crate's one uniform grid, [`Grid3`]).
+pub type VoxelGrid = Grid3;
 
 /// The wall voxels and the transmural field on them.
 #[derive(Debug, Clone)]
@@ -139,34 +101,17 @@ pub fn solve(surface: &TriSurface, parts: &[WallPart], h: f64, tri_grid: &Triang
     // Boundary values of the exterior voxels that touch the wall.
     let pts = surface.points();
     let tris = surface.triangles();
-    let nbr6 = |v: usize| -> [Option<usize>; 6] {
-        let c = grid.ijk(v);
-        let mut out = [None; 6];
-        let mut m = 0;
-        for a in 0..3 {
-            for s in [-1isize, 1] {
-                let x = c[a] as isize + s;
-                if x >= 0 && x < dims[a] as isize {
-                    let mut cc = c;
-                    cc[a] = x as usize;
-                    out[m] = Some(grid.index(cc[0], cc[1], cc[2]));
-                }
-                m += 1;
-            }
-        }
-        out
-    };
     // Exterior classification: 0 inner, 1 outer, 2 base (Neumann), 3 not adjacent.
     let mut ext_kind = vec![3u8; n];
     for v in 0..n {
         if !wall[v] {
             continue;
         }
-        for w in nbr6(v).into_iter().flatten() {
+        for w in grid.face_neighbours(v).into_iter().flatten() {
             if !wall[w] && ext_kind[w] == 3 {
                 let c = grid.centre(w);
                 ext_kind[w] = match tri_grid.nearest(pts, tris, &c, |_| true) {
-                    Some((t, ..)) => parts[t] as u8,
+                    Some(Nearest { triangle, .. }) => parts[triangle] as u8,
                     None => 1,
                 };
             }
@@ -185,7 +130,7 @@ pub fn solve(surface: &TriSurface, parts: &[WallPart], h: f64, tri_grid: &Triang
     let mut diag = vec![0.0; m];
     let mut b = vec![0.0; m];
     for (r, &v) in cells.iter().enumerate() {
-        for w in nbr6(v).into_iter().flatten() {
+        for w in grid.face_neighbours(v).into_iter().flatten() {
             if wall[w] {
                 diag[r] += 1.0;
             } else {
@@ -208,7 +153,7 @@ pub fn solve(surface: &TriSurface, parts: &[WallPart], h: f64, tri_grid: &Triang
         .iter()
         .map(|&v| {
             let mut l = [u32::MAX; 6];
-            for (k, w) in nbr6(v).into_iter().enumerate() {
+            for (k, w) in grid.face_neighbours(v).into_iter().enumerate() {
                 if let Some(w) = w {
                     if wall[w] {
                         l[k] = id[w];
@@ -231,42 +176,10 @@ pub fn solve(surface: &TriSurface, parts: &[WallPart], h: f64, tri_grid: &Triang
     };
     // Initial guess: 1/2 everywhere.
     let mut x = vec![0.5; m];
-    let mut r = vec![0.0; m];
-    apply(&x, &mut r);
-    for i in 0..m {
-        r[i] = b[i] - r[i];
-    }
-    let bnorm = b.iter().map(|v| v * v).sum::<f64>().sqrt().max(1e-300);
-    let mut z: Vec<f64> = (0..m).map(|i| r[i] / diag[i]).collect();
-    let mut p = z.clone();
-    let mut rz: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
-    let mut ap = vec![0.0; m];
-    let mut iterations = 0;
-    let mut residual = r.iter().map(|v| v * v).sum::<f64>().sqrt() / bnorm;
-    let max_it = 20 * (m as f64).cbrt() as usize + 500;
-    while residual > 1e-8 && iterations < max_it {
-        apply(&p, &mut ap);
-        let pap: f64 = p.iter().zip(&ap).map(|(a, b)| a * b).sum();
-        if !(pap > 0.0) {
-            break;
-        }
-        let alpha = rz / pap;
-        for i in 0..m {
-            x[i] += alpha * p[i];
-            r[i] -= alpha * ap[i];
-        }
-        for i in 0..m {
-            z[i] = r[i] / diag[i];
-        }
-        let rz_new: f64 = r.iter().zip(&z).map(|(a, b)| a * b).sum();
-        let beta = rz_new / rz;
-        rz = rz_new;
-        for i in 0..m {
-            p[i] = z[i] + beta * p[i];
-        }
-        iterations += 1;
-        residual = r.iter().map(|v| v * v).sum::<f64>().sqrt() / bnorm;
-    }
+    let max_iterations = 20 * (m as f64).cbrt() as usize + 500;
+    let jacobi = |r: &[f64], z: &mut [f64]| z.iter_mut().zip(r).zip(&diag).for_each(|((z, r), d)| *z = r / d);
+    let report = cg::solve(apply, jacobi, &b, &mut x, &mut CgWork::new(m), CgStop { tolerance: 1e-8, max_iterations });
+    let (iterations, residual) = (report.iterations, report.residual);
     // Extend phi: exterior voxels by their part, then nearest-wall BFS for the rest.
     let mut phi = vec![f64::NAN; n];
     for (r, &v) in cells.iter().enumerate() {
@@ -279,7 +192,7 @@ pub fn solve(surface: &TriSurface, parts: &[WallPart], h: f64, tri_grid: &Triang
         queue.push_back(v);
     }
     while let Some(v) = queue.pop_front() {
-        for w in nbr6(v).into_iter().flatten() {
+        for w in grid.face_neighbours(v).into_iter().flatten() {
             if nearest[w] == u32::MAX {
                 nearest[w] = nearest[v];
                 queue.push_back(w);
@@ -381,7 +294,7 @@ impl Transmural {
 
     /// Is `p` in a wall voxel?
     pub fn in_wall(&self, p: &Vec3) -> bool {
-        self.grid.voxel_of(p).is_some_and(|c| self.wall[self.grid.index(c[0], c[1], c[2])])
+        self.grid.cell_of(p).is_some_and(|c| self.wall[self.grid.index_of(c)])
     }
 
     /// March from `p` along the direction field (`outward`: towards the outer surface) until
@@ -409,7 +322,7 @@ impl Transmural {
             let d2 = self.dir_at(&mid, mode);
             let d = if d2.norm() > 0.0 { d2 } else { d1 };
             let y = x + step * sign * d;
-            g.voxel_of(&y)?;
+            g.cell_of(&y)?;
             let fy = self.phi_at(&y);
             if reached(fy) {
                 // Linear interpolation of the crossing.

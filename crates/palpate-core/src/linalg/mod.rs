@@ -7,6 +7,7 @@
 //! numeric factorisation and solves that allocate nothing ([`ldl`]).
 
 pub mod block;
+pub mod cg;
 pub mod ldl;
 pub mod ordering;
 

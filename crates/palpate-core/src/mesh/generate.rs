@@ -24,14 +24,10 @@
 //! surface vertex `v` has index `l V + v`); each surface triangle between layers `l` and `l+1`
 //! spans a prism, which is cut into 3 tets.
 //!
-//! The cut of each prism side (a quad) must agree between the two prisms sharing it. With the
-//! triangle's vertices sorted by surface index, `v0 < v1 < v2`, and `'` marking the upper layer,
-//! the tets `(v0 v1 v2 v2')`, `(v0 v1 v2' v1')`, `(v0 v0' v1' v2')` cut the side over edge
-//! `(vi, vj)`, `vi < vj`, by the diagonal `vi -- vj'`: a rule that depends on the edge alone, so
-//! neighbouring prisms agree. Triangles are kept outward-oriented (counter-clockwise seen from
-//! outside); those three tets are then positive when `(v0 v1 v2)` is an even permutation of the
-//! triangle, and have their last two nodes swapped when it is odd. `3 layers T` tets,
-//! `(layers + 1) V` nodes.
+//! Each prism is cut by the conforming rule of [`super::prism`] (the diagonal of each side through
+//! its smallest-index vertex), with the tets' vertex order [`TetOrder::SmallestFirst`].
+//! Triangles are kept outward-oriented (counter-clockwise seen from outside), which makes the
+//! three tets positive. `3 layers T` tets, `(layers + 1) V` nodes.
 //!
 //! # Closed ellipsoid wall: [`ellipsoid_wall`]
 //!
@@ -63,6 +59,7 @@
 use std::collections::HashMap;
 use std::f64::consts::PI;
 
+use super::prism::{split_prism, TetOrder};
 use super::TetMesh;
 use crate::math::Vec3;
 
@@ -176,31 +173,10 @@ fn extrude_shell(inner: &[Vec3], outer: &[Vec3], triangles: &[[usize; 3]], layer
     for l in 0..layers {
         let (lo, hi) = (l * nv, (l + 1) * nv);
         for tri in triangles {
-            let (v, even) = sort3(*tri);
-            let [b0, b1, b2] = v.map(|i| lo + i);
-            let [t0, t1, t2] = v.map(|i| hi + i);
-            for mut tet in [[b0, b1, b2, t2], [b0, b1, t2, t1], [b0, t0, t1, t2]] {
-                if !even {
-                    tet.swap(2, 3);
-                }
-                tets.push(tet);
-            }
+            tets.extend(split_prism(tri.map(|i| lo + i), hi - lo, TetOrder::SmallestFirst));
         }
     }
     (points, tets)
-}
-
-/// `tri` sorted ascending, and whether the sort was an even permutation (the sorted triangle
-/// keeps the orientation of `tri`).
-fn sort3(mut tri: [usize; 3]) -> ([usize; 3], bool) {
-    let mut even = true;
-    for (a, b) in [(0, 1), (1, 2), (0, 1)] {
-        if tri[a] > tri[b] {
-            tri.swap(a, b);
-            even = !even;
-        }
-    }
-    (tri, even)
 }
 
 /// The point where the ray from the centre along `d` meets the ellipsoid of semi-axes `axes`.

@@ -3,7 +3,7 @@
 use std::collections::HashMap;
 
 use crate::error::MeshError;
-use crate::math::{is_finite3, Vec3};
+use crate::math::Vec3;
 
 /// A tet whose `|volume| / (longest edge)^3` is below this is refused as degenerate.
 /// (A regular tet has 0.118; the benchmark meshes' worst is above 1e-2.)
@@ -54,14 +54,10 @@ impl TetMesh {
             return Err(MeshError::Empty { what: "no tetrahedra" });
         }
         let n = points.len();
-        let mut pts = Vec::with_capacity(n);
-        for (i, p) in points.iter().enumerate() {
-            let v = Vec3::new(p[0], p[1], p[2]);
-            if !is_finite3(&v) {
-                return Err(MeshError::NonFiniteNode { node: i, x: p[0], y: p[1], z: p[2] });
-            }
-            pts.push(v);
-        }
+        let pts = super::finite_points(points).map_err(|i| {
+            let p = points[i];
+            MeshError::NonFiniteNode { node: i, x: p[0], y: p[1], z: p[2] }
+        })?;
         let mut out = Vec::with_capacity(tets.len());
         let mut reoriented = Vec::new();
         let mut used = vec![false; n];
@@ -129,23 +125,9 @@ impl TetMesh {
         }).sum()
     }
 
-    /// Boundary faces (triangles used by exactly one tet), oriented outward, `(n_faces, 3)`.
-    pub fn boundary_faces(&self) -> Vec<[usize; 3]> {
-        // Faces of a positively oriented tet (0,1,2,3), each listed with its outward orientation.
-        const FACES: [[usize; 3]; 4] = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
-        let mut count: HashMap<[usize; 3], (usize, [usize; 3])> = HashMap::new();
-        for t in &self.tets {
-            for f in FACES {
-                let tri = [t[f[0]], t[f[1]], t[f[2]]];
-                let mut key = tri;
-                key.sort_unstable();
-                count.entry(key).and_modify(|e| e.0 += 1).or_insert((1, tri));
-            }
-        }
-        let mut faces: Vec<[usize; 3]> = count.into_values().filter(|(c, _)| *c == 1).map(|(_, tri)| tri).collect();
-        faces.sort_unstable();
-        faces
-    }
+    /// Boundary faces (triangles used by exactly one tet), oriented outward, `(n_faces, 3)`,
+    /// sorted ([`boundary_faces`]).
+    pub fn boundary_faces(&self) -> Vec<[usize; 3]> { boundary_faces(&self.points, &self.tets) }
 
     /// Minimum dihedral angle over all tets \[degrees\]: a quality measure.
     pub fn min_dihedral_deg(&self) -> f64 {
@@ -165,6 +147,27 @@ impl TetMesh {
         }
         best
     }
+}
+
+/// The boundary faces of tets over `points` (triangles used by exactly one tet), each oriented
+/// outward from its tet whichever the tet's own orientation, sorted.
+pub fn boundary_faces(points: &[Vec3], tets: &[[usize; 4]]) -> Vec<[usize; 3]> {
+    // Faces of a positively oriented tet (0,1,2,3), each listed with its outward orientation;
+    // a negative tet's faces are listed reversed.
+    const FACES: [[usize; 3]; 4] = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]];
+    let mut count: HashMap<[usize; 3], (usize, [usize; 3])> = HashMap::new();
+    for t in tets {
+        let positive = signed_volume(&points[t[0]], &points[t[1]], &points[t[2]], &points[t[3]]) > 0.0;
+        for f in FACES {
+            let tri = if positive { [t[f[0]], t[f[1]], t[f[2]]] } else { [t[f[0]], t[f[2]], t[f[1]]] };
+            let mut key = tri;
+            key.sort_unstable();
+            count.entry(key).and_modify(|e| e.0 += 1).or_insert((1, tri));
+        }
+    }
+    let mut faces: Vec<[usize; 3]> = count.into_values().filter(|(c, _)| *c == 1).map(|(_, tri)| tri).collect();
+    faces.sort_unstable();
+    faces
 }
 
 #[cfg(test)]

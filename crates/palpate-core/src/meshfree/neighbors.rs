@@ -3,6 +3,7 @@
 //! 27 surrounding cells. `O(n)` to build and query for quasi-uniform particle sets, no dependency.
 
 use crate::math::Vec3;
+use crate::spatial::{Buckets, Grid3};
 
 /// Neighbours of every point within `radius` (excluding itself), as compressed rows:
 /// the neighbours of `i` are `idx[ptr[i]..ptr[i+1]]`, sorted.
@@ -20,39 +21,23 @@ pub fn neighbours_within(points: &[Vec3], radius: f64) -> (Vec<usize>, Vec<usize
         lo = lo.inf(p);
         hi = hi.sup(p);
     }
-    let dims: [usize; 3] = std::array::from_fn(|a| (((hi[a] - lo[a]) / radius).floor() as usize + 1).max(1));
-    let cell_of = |p: &Vec3| -> [usize; 3] { std::array::from_fn(|a| (((p[a] - lo[a]) / radius) as usize).min(dims[a] - 1)) };
-    let linear = |c: [usize; 3]| c[0] + dims[0] * (c[1] + dims[1] * c[2]);
+    let grid = Grid3 { origin: lo, h: radius, dims: std::array::from_fn(|a| (((hi[a] - lo[a]) / radius).floor() as usize + 1).max(1)) };
     // Counting sort of the points by cell.
-    let ncell = dims[0] * dims[1] * dims[2];
-    let mut start = vec![0usize; ncell + 1];
-    let cells: Vec<usize> = points.iter().map(|p| linear(cell_of(p))).collect();
-    for &c in &cells {
-        start[c + 1] += 1;
-    }
-    for c in 0..ncell {
-        start[c + 1] += start[c];
-    }
-    let mut fill = start.clone();
-    let mut sorted = vec![0usize; n];
-    for (i, &c) in cells.iter().enumerate() {
-        sorted[fill[c]] = i;
-        fill[c] += 1;
-    }
+    let cells = Buckets::build(grid.len(), n, |i| [grid.index_of(grid.cell_clamped(&points[i]))]);
     let r2 = radius * radius;
     let mut row = Vec::new();
     for (i, p) in points.iter().enumerate() {
         row.clear();
-        let c = cell_of(p);
+        let c = grid.cell_clamped(p);
         for dz in -1i64..=1 {
             for dy in -1i64..=1 {
                 for dx in -1i64..=1 {
                     let q = [c[0] as i64 + dx, c[1] as i64 + dy, c[2] as i64 + dz];
-                    if (0..3).any(|a| q[a] < 0 || q[a] >= dims[a] as i64) {
+                    if (0..3).any(|a| q[a] < 0 || q[a] >= grid.dims[a] as i64) {
                         continue;
                     }
-                    let cell = linear([q[0] as usize, q[1] as usize, q[2] as usize]);
-                    for &j in &sorted[start[cell]..start[cell + 1]] {
+                    for &j in cells.get(grid.index(q[0] as usize, q[1] as usize, q[2] as usize)) {
+                        let j = j as usize;
                         if j != i && (points[j] - p).norm_squared() < r2 {
                             row.push(j);
                         }

@@ -1,0 +1,145 @@
+//! The input of a build: the wall's closed boundary with a part (inner, outer, base) per triangle.
+
+use super::transmural::WallPart;
+use crate::error::HybridError;
+use crate::math::Vec3;
+use crate::mesh::TriSurface;
+use std::collections::HashMap;
+
+/// The input: the wall's closed boundary with a part per triangle.
+#[derive(Debug, Clone)]
+pub struct Wall {
+    pub surface: TriSurface,
+    pub parts: Vec<WallPart>,
+    /// Tiny closed pieces dropped from a tagged surface.
+    pub dropped_pieces: usize,
+}
+
+/// Smallest volume of a closed piece of a tagged wall surface, relative to the largest piece.
+pub const MIN_PIECE_VOLUME: f64 = 1e-3;
+
+/// The pieces of a surface kept by [`drop_specks`].
+struct Kept {
+    surface: TriSurface,
+    parts: Vec<WallPart>,
+    /// Pieces dropped.
+    dropped: usize,
+}
+
+/// One part of a wall as a surface of its own ([`Wall::part`]).
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct PartSurface {
+    pub points: Vec<Vec3>,
+    pub tris: Vec<[usize; 3]>,
+}
+
+/// Split a closed surface into edge-connected pieces and keep those enclosing at least
+/// [`MIN_PIECE_VOLUME`] of the largest.
+fn drop_specks(surface: TriSurface, parts: Vec<WallPart>) -> Result<Kept, HybridError> {
+    let tris = surface.triangles();
+    let n = surface.n_vertices();
+    // Union-find over vertices through triangles.
+    let mut up: Vec<usize> = (0..n).collect();
+    fn find(up: &mut [usize], mut x: usize) -> usize {
+        while up[x] != x {
+            up[x] = up[up[x]];
+            x = up[x];
+        }
+        x
+    }
+    for t in tris {
+        let a = find(&mut up, t[0]);
+        for &v in &t[1..] {
+            let b = find(&mut up, v);
+            up[b] = a;
+        }
+    }
+    let pts = surface.points();
+    let mut vol: HashMap<usize, f64> = HashMap::new();
+    for t in tris {
+        let r = find(&mut up, t[0]);
+        *vol.entry(r).or_insert(0.0) += pts[t[0]].dot(&pts[t[1]].cross(&pts[t[2]])) / 6.0;
+    }
+    if vol.len() == 1 {
+        return Ok(Kept { surface, parts, dropped: 0 });
+    }
+    let largest = vol.values().copied().fold(0.0, f64::max);
+    let keep: Vec<bool> = tris.iter().map(|t| vol[&find(&mut up, t[0])] >= MIN_PIECE_VOLUME * largest).collect();
+    let dropped = vol.values().filter(|&&v| v < MIN_PIECE_VOLUME * largest).count();
+    let arr: Vec<[f64; 3]> = pts.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let mut used = vec![false; n];
+    let kept: Vec<usize> = (0..tris.len()).filter(|&t| keep[t]).collect();
+    kept.iter().for_each(|&t| tris[t].iter().for_each(|&v| used[v] = true));
+    let mut map = vec![0i64; n];
+    let mut new_pts = Vec::new();
+    for v in 0..n {
+        if used[v] {
+            map[v] = new_pts.len() as i64;
+            new_pts.push(arr[v]);
+        }
+    }
+    let new_tris: Vec<[i64; 3]> = kept.iter().map(|&t| [map[tris[t][0]], map[tris[t][1]], map[tris[t][2]]]).collect();
+    let new_parts: Vec<WallPart> = kept.iter().map(|&t| parts[t]).collect();
+    let (surface, _) = TriSurface::from_arrays(&new_pts, &new_tris)?;
+    Ok(Kept { surface, parts: new_parts, dropped })
+}
+
+impl Wall {
+    /// Two nested closed surfaces: the wall is the region inside `outer` and outside `inner`.
+    pub fn nested(inner: &TriSurface, outer: &TriSurface) -> Result<Wall, HybridError> {
+        for (v, p) in inner.points().iter().enumerate() {
+            if !outer.contains_parity(p) {
+                return Err(crate::mesh::SurfaceError::NotNested { vertex: v, x: p.x, y: p.y, z: p.z }.into());
+            }
+        }
+        if outer.volume() <= inner.volume() {
+            return Err(HybridError::Parts(format!("the inner surface encloses {:e} m^3, not less than the outer's {:e} m^3", inner.volume(), outer.volume())));
+        }
+        let n = outer.n_vertices();
+        let mut pts: Vec<[f64; 3]> = outer.points().iter().map(|p| [p.x, p.y, p.z]).collect();
+        pts.extend(inner.points().iter().map(|p| [p.x, p.y, p.z]));
+        let mut tris: Vec<[i64; 3]> = outer.triangles().iter().map(|t| [t[0] as i64, t[1] as i64, t[2] as i64]).collect();
+        // Inner triangles flipped: the wall's boundary faces away from the wall.
+        tris.extend(inner.triangles().iter().map(|t| [(t[0] + n) as i64, (t[2] + n) as i64, (t[1] + n) as i64]));
+        let mut parts = vec![WallPart::Outer; outer.n_triangles()];
+        parts.extend(std::iter::repeat_n(WallPart::Inner, inner.n_triangles()));
+        let (surface, _) = TriSurface::from_arrays(&pts, &tris)?;
+        Ok(Wall { surface, parts, dropped_pieces: 0 })
+    }
+
+    /// One closed surface with a part per triangle (a truncated ventricle: inner, outer, base).
+    /// Closed pieces enclosing less than [`MIN_PIECE_VOLUME`] of the largest (specks left by a
+    /// surface repair) are dropped; [`Wall::dropped_pieces`] counts them.
+    pub fn tagged(surface: TriSurface, parts: Vec<WallPart>) -> Result<Wall, HybridError> {
+        if parts.len() != surface.n_triangles() {
+            return Err(HybridError::Parts(format!("{} part tags for {} triangles", parts.len(), surface.n_triangles())));
+        }
+        let Kept { surface, parts, dropped } = drop_specks(surface, parts)?;
+        for need in [WallPart::Inner, WallPart::Outer] {
+            if !parts.contains(&need) {
+                return Err(HybridError::Parts(format!("no {need:?} triangles")));
+            }
+        }
+        Ok(Wall { surface, parts, dropped_pieces: dropped })
+    }
+
+    /// The triangles of one part as a surface of its own.
+    pub(super) fn part(&self, which: WallPart) -> PartSurface {
+        let mut map = HashMap::new();
+        let (mut points, mut tris) = (vec![], vec![]);
+        for (t, tri) in self.surface.triangles().iter().enumerate() {
+            if self.parts[t] != which {
+                continue;
+            }
+            let mut nt = [0; 3];
+            for (k, &v) in tri.iter().enumerate() {
+                nt[k] = *map.entry(v).or_insert_with(|| {
+                    points.push(self.surface.points()[v]);
+                    points.len() - 1
+                });
+            }
+            tris.push(nt);
+        }
+        PartSurface { points, tris }
+    }
+}
