@@ -30,11 +30,10 @@ pub mod material;
 pub mod math;
 pub mod mesh;
 pub mod meshfree;
-pub mod scene;
 
 pub use error::{HybridError, MaterialError, MeshError, ModelError, ModelFileError, SolveError, StepError};
 pub use integrate::{step, Integrator, StepReport};
 pub use material::{Law, Material};
 pub use math::{Mat3, Real, Vec3};
 pub use mesh::TetMesh;
-pub use scene::{Model, ModelBuilder, State, Workspace};
+pub use fem::{Model, ModelBuilder, State, Workspace};

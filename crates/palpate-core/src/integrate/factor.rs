@@ -7,8 +7,8 @@
 use crate::error::StepError;
 use crate::fem::tangent;
 use crate::math::{Mat3, Vec3};
-use crate::scene::model::NONE;
-use crate::scene::{Model, Workspace};
+use crate::fem::model::NONE;
+use crate::fem::{Model, Workspace};
 
 /// A factorisation's cost in quasi-Newton iterations per unit of `Ldl::factor_to_solve_ratio`
 /// (an iteration is one solve plus about 1.5 force evaluations; measured: BENCHMARKS.md).

@@ -29,7 +29,7 @@ pub use statics::{static_solve, StaticOptions, StaticSolution};
 
 use crate::error::StepError;
 use crate::math::is_finite3;
-use crate::scene::{Model, State, Workspace};
+use crate::fem::{Model, State, Workspace};
 
 /// The filter of the paper's semi-implicit scheme (eq. 34).
 #[derive(Debug, Clone, Copy, PartialEq)]

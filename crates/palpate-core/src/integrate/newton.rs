@@ -19,8 +19,8 @@ use super::potential::{self, dot, Progress, StepProblem};
 use crate::error::StepError;
 use crate::fem::{tet4, viscous};
 use crate::math::{Mat3, Vec3};
-use crate::scene::model::NONE;
-use crate::scene::{Model, State, Workspace};
+use crate::fem::model::NONE;
+use crate::fem::{Model, State, Workspace};
 use crate::StepReport;
 
 /// Conjugate-gradient iterations per Newton iteration, at most.

@@ -23,7 +23,7 @@
 
 use crate::fem::{tet4, viscous};
 use crate::math::Vec3;
-use crate::scene::Model;
+use crate::fem::Model;
 
 /// Multiple of `eps` times the magnitude of the gradient's terms taken as its round-off level.
 const ROUND_OFF_FACTOR: f64 = 64.0;

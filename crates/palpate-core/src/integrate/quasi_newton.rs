@@ -41,7 +41,7 @@ use super::factor;
 use super::potential::{self, dot, Progress, StepProblem};
 use crate::error::StepError;
 use crate::math::Vec3;
-use crate::scene::{Model, State, Workspace};
+use crate::fem::{Model, State, Workspace};
 use crate::StepReport;
 
 /// Iterations a step must take for the initial Hessian to be refreshed at its end state.

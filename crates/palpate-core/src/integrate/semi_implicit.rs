@@ -37,7 +37,7 @@
 
 use crate::linalg::BlockPattern;
 use crate::math::{Mat3, Vec3};
-use crate::scene::{Model, State, Workspace};
+use crate::fem::{Model, State, Workspace};
 
 /// Safety margin on the power iteration's estimate of `lambda_max` (it approaches from below).
 const LAMBDA_MARGIN: f64 = 1.02;

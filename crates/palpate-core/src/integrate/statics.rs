@@ -6,7 +6,7 @@
 use crate::error::SolveError;
 use crate::fem::tet4;
 use crate::math::{is_finite3, Vec3};
-use crate::scene::{Model, Workspace};
+use crate::fem::{Model, Workspace};
 
 /// Options of [`static_solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
