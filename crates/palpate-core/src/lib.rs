@@ -17,7 +17,7 @@
 //!      step(&Model, &mut State, &mut Workspace, dt) -> Result<StepReport, StepError>
 //! ```
 // No unsafe code, except in one audited place: the AVX2 + FMA copy of the particle hot loop
-// (`meshfree/pair_loop.rs`), which needs `unsafe` to call a `target_feature` function after
+// (`meshfree/pair_loop/avx2.rs`), which needs `unsafe` to call a `target_feature` function after
 // run-time detection and skips bounds checks on neighbour indices validated at compile time.
 #![deny(unsafe_code)]
 
