@@ -180,6 +180,14 @@ pub fn stress(m: &Material, e: &Mat3) -> Mat3 {
     mat(&elastic.stress(&rows(e), None))
 }
 
+/// Elastic energy density `psi(E) = mu E:E + lambda/2 tr(E)^2` \[J/m^3\] of the law whose
+/// stress is [`stress`] (`S = dpsi/dE`).
+#[inline]
+pub fn energy_density(m: &Material, e: &Mat3) -> f64 {
+    let tr = e.trace();
+    m.mu() * e.norm_squared() + 0.5 * m.lambda() * tr * tr
+}
+
 /// Viscous stress `S_v = phi tr(nu) I + 2 psi nu` \[Pa\] (eq. 11).
 #[inline]
 pub fn viscous_stress(m: &Material, nu: &Mat3) -> Mat3 {

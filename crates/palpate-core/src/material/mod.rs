@@ -17,7 +17,7 @@
 pub(crate) mod linear;
 pub mod neo_hookean;
 
-pub use linear::{green_strain, strain_rate, stress, viscous_stress};
+pub use linear::{energy_density, green_strain, strain_rate, stress, viscous_stress};
 
 use crate::error::MaterialError;
 

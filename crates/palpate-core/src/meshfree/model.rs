@@ -96,10 +96,8 @@ impl ParticleModel {
     /// The force on a particle is minus the gradient of the sum of these over the *active*
     /// particles (frozen ones carry no stress).
     pub fn particle_energy(&self, i: usize, x: &[Vec3]) -> f64 {
-        let (lam, mu) = (self.material.lambda(), self.material.mu());
         let f = self.deformation_gradient(i, x);
-        let e = material::green_strain(&f);
-        let mut total = self.volume[i] * (mu * e.norm_squared() + 0.5 * lam * e.trace() * e.trace());
+        let mut total = self.volume[i] * material::energy_density(&self.material, &material::green_strain(&f));
         let ui = x[i] - self.rest[i];
         let hmat = f - Mat3::identity();
         for p in self.ptr[i]..self.ptr[i + 1] {
