@@ -221,7 +221,7 @@ fn momentum_is_conserved_to_round_off() {
 
 /// Leapfrog's conserved ("shadow") energy: U(x_n) + 1/2 sum m v_{n-1/2} . v_{n+1/2}; the naive
 /// kinetic energy of half-step velocities oscillates by O((omega dt)^2) near the stability limit.
-/// One value per caller step of 1 ms, taken with the sub-steps `ParticleModel::step` would use.
+/// One value per caller step of 1 ms, taken with the sub-steps `meshfree::step` would use.
 fn shadow_energies(model: &ParticleModel, st: &mut ParticleState, ws: &mut ParticleWorkspace, steps: usize) -> Vec<f64> {
     let substeps = model.substeps(1e-3);
     let dt_sub = 1e-3 / substeps as f64;

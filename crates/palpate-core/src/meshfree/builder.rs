@@ -72,7 +72,7 @@ impl ParticleModelBuilder {
     /// parameters, fixed indices or gravity.
     pub fn build(self) -> Result<ParticleModel, ModelError> {
         let ParticleModelBuilder { positions: rest, masses, material, support: h, kernel, fixed, gravity, hourglass, min_weight } = self;
-        // The pair loop (pair_loop.rs, with its AVX2 copy) evaluates the St. Venant-Kirchhoff
+        // The pair loop (pair_loop/, with its AVX2 copy) evaluates the St. Venant-Kirchhoff
         // stress only: refuse any other law rather than silently simulate SVK.
         if material.law() != Law::StVenantKirchhoff {
             return Err(MaterialError::UnsupportedLaw { law: material.law(), solver: "the particle solid (meshfree)" }.into());

@@ -72,7 +72,7 @@ impl ParticleModel {
     pub fn stable_dt(&self) -> f64 { self.stable_dt }
     /// Largest angular eigenfrequency of the rest-linearised, undamped system \[rad/s\].
     pub fn omega_max(&self) -> f64 { self.omega_max }
-    /// Sub-steps that [`ParticleModel::step`] takes for a caller step `dt` \[s\].
+    /// Sub-steps that [`super::step`] takes for a caller step `dt` \[s\].
     pub fn substeps(&self, dt: f64) -> usize { (dt / self.stable_dt).ceil().max(1.0) as usize }
 
     /// Deformation gradient of particle `i` at positions `x` (the MLS fit).

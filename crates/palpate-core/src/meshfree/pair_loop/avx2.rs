@@ -172,8 +172,8 @@ unsafe fn gather_cols(nbr: &[u32], q: &[P4], w: &[P4], wi: &P4) -> [__m256d; 3] 
 /// [`b_matrix`]) from displacements `u` (velocities `v` when damped).
 ///
 /// # Safety
-/// The CPU has AVX2 and FMA; `u`, `v` and `b` have `m.n_particles()` entries and every `idx`
-/// entry is smaller.
+/// The CPU has AVX2 and FMA; `u`, `v` and `b` have `m.n_particles()` entries (`idx` entries
+/// are used with checked indexing).
 #[target_feature(enable = "avx2,fma")]
 unsafe fn stress_pass(m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4]>, linear: bool, b: &mut [Cols]) {
     let law = Svk::of(&m.material);

@@ -139,6 +139,7 @@ pub(super) fn particle_force(m: &ParticleModel, i: usize, u: &[P4], b: &[Cols], 
 /// Forces of every particle (all active) into `out`: `linear` selects the rest-linearised
 /// operator. `b`, `gamma` are scratch of length `n`.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 pub(super) fn all_forces_impl<C: LoopCopy>(c: C, m: &ParticleModel, u: &[P4], v: Option<&[P4]>, linear: bool, b: &mut [Cols], gamma: &mut [f64], out: &mut [P4]) {
     let n = m.n_particles();
     let all: Vec<usize> = (0..n).collect();
