@@ -17,7 +17,7 @@
 //!      step(&Model, &mut State, &mut Workspace, dt) -> Result<StepReport, StepError>
 //! ```
 // No unsafe code, except in one audited place: the AVX2 + FMA copy of the particle hot loop
-// (`meshfree/pair_loop.rs`), which needs `unsafe` to call a `target_feature` function after
+// (`meshfree/pair_loop/avx2.rs`), which needs `unsafe` to call a `target_feature` function after
 // run-time detection and skips bounds checks on neighbour indices validated at compile time.
 #![deny(unsafe_code)]
 
@@ -31,7 +31,6 @@ pub mod math;
 pub mod mesh;
 pub mod meshfree;
 pub mod probe;
-pub mod scene;
 pub mod spatial;
 
 pub use error::{HybridError, LoadError, MaterialError, MeshError, ModelError, ModelFileError, SolveError, StepError};
@@ -39,4 +38,4 @@ pub use integrate::{step, Integrator, StepReport};
 pub use material::{Law, Material};
 pub use math::{Mat3, Real, Vec3};
 pub use mesh::TetMesh;
-pub use scene::{Model, ModelBuilder, State, Workspace};
+pub use fem::{Model, ModelBuilder, State, Workspace};

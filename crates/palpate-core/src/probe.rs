@@ -16,7 +16,7 @@
 use crate::error::LoadError;
 use crate::integrate::{step, StepReport};
 use crate::math::Vec3;
-use crate::scene::{Model, State, Workspace};
+use crate::fem::{Model, State, Workspace};
 
 /// A linear ramp from zero at `start` to one at `start + duration` \[s\], one after.
 /// A zero `duration` applies the load at once.

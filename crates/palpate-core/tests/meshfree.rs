@@ -9,7 +9,7 @@
 //! energy; hourglass control of the wrong sign lets particles clump; a Neo-Hookean material
 //! silently run as St. Venant-Kirchhoff is refused instead.
 use palpate_core::material::{Damping, Elasticity};
-use palpate_core::meshfree::{ParticleModel, ParticleModelBuilder, ParticleState, ParticleWorkspace};
+use palpate_core::meshfree::{self, ParticleModel, ParticleModelBuilder, ParticleState, ParticleWorkspace};
 use palpate_core::{Mat3, Material, Vec3};
 
 const SPACING: f64 = 1e-3;
@@ -143,7 +143,7 @@ fn forces_with_a_partial_active_set_are_minus_the_active_energy_gradient() {
     let energy = |x: &[Vec3]| active.iter().map(|&k| model.particle_energy(k, x)).sum::<f64>();
     let mut ws = ParticleWorkspace::new(&model);
     let h = 1e-7;
-    model.step_with_substeps(&mut st, &mut ws, h, 1).unwrap();
+    meshfree::step_with_substeps(&model, &mut st, &mut ws, h, 1).unwrap();
     let mut fmax: f64 = 0.0;
     let mut worst: f64 = 0.0;
     for &i in &active {
@@ -186,7 +186,7 @@ fn simd_and_portable_paths_agree() {
         st.active = (0..model.n_particles()).filter(|i| i % 3 != 0).collect();
         let mut ws = ParticleWorkspace::new(&model);
         for _ in 0..5 {
-            model.step(&mut st, &mut ws, 1e-3).unwrap();
+            meshfree::step(&model, &mut st, &mut ws, 1e-3).unwrap();
         }
         palpate_core::meshfree::set_simd_enabled(true);
         (path, f, st.x)
@@ -212,7 +212,7 @@ fn momentum_is_conserved_to_round_off() {
     let p0 = model.momentum(&st.v);
     for _ in 0..200 {
         let before = model.momentum(&st.v);
-        model.step(&mut st, &mut ws, 1e-3).unwrap();
+        meshfree::step(&model, &mut st, &mut ws, 1e-3).unwrap();
         let p = model.momentum(&st.v);
         // Per 1 ms step (several Verlet sub-steps): pairwise antisymmetric forces cancel exactly.
         assert!((p - before).norm() <= 1e-12 * p0.norm(), "{}", (p - before).norm() / p0.norm());
@@ -221,7 +221,7 @@ fn momentum_is_conserved_to_round_off() {
 
 /// Leapfrog's conserved ("shadow") energy: U(x_n) + 1/2 sum m v_{n-1/2} . v_{n+1/2}; the naive
 /// kinetic energy of half-step velocities oscillates by O((omega dt)^2) near the stability limit.
-/// One value per caller step of 1 ms, taken with the sub-steps `ParticleModel::step` would use.
+/// One value per caller step of 1 ms, taken with the sub-steps `meshfree::step` would use.
 fn shadow_energies(model: &ParticleModel, st: &mut ParticleState, ws: &mut ParticleWorkspace, steps: usize) -> Vec<f64> {
     let substeps = model.substeps(1e-3);
     let dt_sub = 1e-3 / substeps as f64;
@@ -231,7 +231,7 @@ fn shadow_energies(model: &ParticleModel, st: &mut ParticleState, ws: &mut Parti
         for s in 0..substeps {
             let v_before = st.v.clone();
             let u = model.strain_energy(&st.x);
-            model.step_with_substeps(st, ws, dt_sub, 1).unwrap();
+            meshfree::step_with_substeps(model, st, ws, dt_sub, 1).unwrap();
             if s == 0 {
                 e = u + 0.5 * (0..model.n_particles()).map(|i| model.masses()[i] * v_before[i].dot(&st.v[i])).sum::<f64>();
             }
@@ -303,7 +303,7 @@ fn hourglass_control_keeps_particles_from_clumping_or_crossing() {
         let mut ws = ParticleWorkspace::new(model);
         st.f_ext[top_centre] = Vec3::new(0.0, 0.0, -2e-3); // 2 mN on one particle: ~10% local strain
         for _ in 0..300 {
-            model.step(&mut st, &mut ws, 1e-3).unwrap();
+            meshfree::step(&model, &mut st, &mut ws, 1e-3).unwrap();
         }
         // Smallest neighbour distance / rest distance, smallest det F, and the non-affine residual.
         let mut min_ratio = f64::INFINITY;
@@ -341,7 +341,7 @@ fn stable_dt_is_tight() {
             *x += Vec3::new(((i * 37) % 11) as f64 - 5.0, 0.0, 0.0) * 1e-9;
         }
         for _ in 0..3000 {
-            if model.step_with_substeps(&mut st, &mut ws, dt, 1).is_err() {
+            if meshfree::step_with_substeps(&model, &mut st, &mut ws, dt, 1).is_err() {
                 return false;
             }
             if st.x.iter().zip(model.rest_positions()).any(|(x, x0)| (x - x0).norm() > 1e-3) {

@@ -1,7 +1,15 @@
-//! Finite elements: the linear tetrahedron of paper §3.1 (eq. 12-22).
+//! Finite elements: the linear tetrahedron of paper §3.1 (eq. 12-22), and the FEM body built of
+//! it: an immutable [`Model`] compiled by [`ModelBuilder`], the mutable [`State`] and the scratch
+//! [`Workspace`] (MuJoCo's `mjModel` / `mjData` split), stepped by [`crate::step`]
+//! (`integrate/`). A model is validated once, by [`ModelBuilder::build`]; stepping then assumes
+//! validity. The particle body ([`crate::meshfree`]) has the same shape.
 
+pub(crate) mod model;
+mod state;
 pub mod tangent;
 pub mod tet4;
 pub mod viscous;
 
+pub use model::{Model, ModelBuilder};
+pub use state::{State, Workspace};
 pub use tet4::TetRest;

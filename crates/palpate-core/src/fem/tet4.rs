@@ -74,9 +74,7 @@ pub fn strain_energy(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> f64 {
     let f = deformation_gradient(x, rest);
     match m.law() {
         Law::StVenantKirchhoff => {
-            let e = material::green_strain(&f);
-            let tr = e.trace();
-            rest.volume * (m.mu() * e.norm_squared() + 0.5 * m.lambda() * tr * tr)
+            rest.volume * material::energy_density(m, &material::green_strain(&f))
         }
         Law::NeoHookean => rest.volume * neo_hookean_energy(m, &f),
     }
@@ -151,8 +149,7 @@ pub fn elastic_energy_forces(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> (f6
     match m.law() {
         Law::StVenantKirchhoff => {
             let e = material::green_strain(&f);
-            let tr = e.trace();
-            let energy = rest.volume * (m.mu() * e.norm_squared() + 0.5 * m.lambda() * tr * tr);
+            let energy = rest.volume * material::energy_density(m, &e);
             let s = material::stress(m, &e);
             (energy, nodal_forces(&(f * s), rest), f.determinant())
         }

@@ -18,8 +18,8 @@
 //! factorisation as their initial Hessian and preconditioner.
 
 use crate::error::StepError;
+use crate::fem::{Model, State, Workspace};
 use crate::math::Vec3;
-use crate::scene::{Model, State, Workspace};
 use crate::StepReport;
 
 pub(super) fn step_linear(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Result<StepReport, StepError> {

@@ -5,10 +5,10 @@
 //! rule that decides when to redo it.
 
 use crate::error::StepError;
+use crate::fem::model::NONE;
 use crate::fem::tangent;
+use crate::fem::{Model, Workspace};
 use crate::math::{Mat3, Vec3};
-use crate::scene::model::NONE;
-use crate::scene::{Model, Workspace};
 
 /// A factorisation's cost in quasi-Newton iterations per unit of `Ldl::factor_to_solve_ratio`
 /// (an iteration is one solve plus about 1.5 force evaluations; measured: BENCHMARKS.md).

@@ -28,8 +28,8 @@ pub(crate) use semi_implicit::stable_filter_factor;
 pub use statics::{static_solve, StaticOptions, StaticSolution};
 
 use crate::error::StepError;
+use crate::fem::{Model, State, Workspace};
 use crate::math::is_finite3;
-use crate::scene::{Model, State, Workspace};
 
 /// The filter of the paper's semi-implicit scheme (eq. 34).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -15,12 +15,11 @@
 //! the quasi-Newton step then guarantees the potential decreases.
 
 use super::factor;
-use super::potential::{self, dot, Progress, StepProblem};
+use super::potential::{self, dot, StepProblem};
 use crate::error::StepError;
-use crate::fem::{tet4, viscous};
+use crate::fem::model::NONE;
+use crate::fem::{tet4, viscous, Model, State, Workspace};
 use crate::math::{Mat3, Vec3};
-use crate::scene::model::NONE;
-use crate::scene::{Model, State, Workspace};
 use crate::StepReport;
 
 /// Conjugate-gradient iterations per Newton iteration, at most.
@@ -127,47 +126,35 @@ pub(super) fn step(
     max_iterations: usize,
     tolerance: f64,
 ) -> Result<StepReport, StepError> {
-    factor::ensure(model, ws, dt)?;
-    let h = dt;
-    let (x_n, v_n) = (std::mem::take(&mut ws.x_save), std::mem::take(&mut ws.v_save));
-    let mut x_trial = std::mem::take(&mut ws.x_trial);
-    let mut cg = std::mem::replace(&mut ws.cg, CgWorkspace::new(0));
-    x_trial.copy_from_slice(&state.x);
-    let p = StepProblem { model, x_n: &x_n, v_n: &v_n, f_ext: &state.f_ext, h };
-
-    let (start, fresh) = potential::evaluate_start(&p, &mut ws.potential);
-    let mut pr = Progress::start(start, fresh, tolerance);
-    let free_body = model.is_free_body();
-    while pr.iterations < max_iterations && (pr.iterations == 0 || !pr.converged()) {
-        let mut blocks = std::mem::take(&mut ws.k);
-        assemble_hessian(&p, &state.x, &mut blocks);
-        ws.k = blocks;
-        let eta = pr.relative_gradient(0.25);
-        let g = std::mem::take(&mut ws.potential.g);
-        pr.solves += newton_direction(model, ws, &mut cg, &g, eta, h);
-        if free_body {
-            potential::exact_translation(model, &g, &mut cg.d, h);
+    potential::minimise(model, state, ws, dt, tolerance, |p, x, x_trial, ws, pr| {
+        let h = p.h;
+        let mut cg = std::mem::replace(&mut ws.cg, CgWorkspace::new(0));
+        let free_body = model.is_free_body();
+        while pr.iterations < max_iterations && (pr.iterations == 0 || !pr.converged()) {
+            let mut blocks = std::mem::take(&mut ws.k);
+            assemble_hessian(p, x, &mut blocks);
+            ws.k = blocks;
+            let eta = pr.relative_gradient(0.25);
+            let g = std::mem::take(&mut ws.potential.g);
+            pr.solves += newton_direction(model, ws, &mut cg, &g, eta, h);
+            if free_body {
+                potential::exact_translation(model, &g, &mut cg.d, h);
+            }
+            let gd = dot(&g, &cg.d);
+            ws.potential.g = g;
+            if !(gd < 0.0) {
+                break;
+            }
+            let Some((e, _)) = potential::line_search(p, &mut ws.potential, x, x_trial, &cg.d, &pr.cur, gd, &mut pr.evaluations) else {
+                break;
+            };
+            pr.accept(e);
         }
-        let gd = dot(&g, &cg.d);
-        ws.potential.g = g;
-        if !(gd < 0.0) {
-            break;
-        }
-        let Some((e, _)) = potential::line_search(&p, &mut ws.potential, &mut state.x, &mut x_trial, &cg.d, &pr.cur, gd, &mut pr.evaluations) else {
-            break;
-        };
-        pr.accept(e);
-    }
-    potential::end_step(&p, &mut ws.potential, &state.x, &mut state.v, &pr.cur);
-    // The preconditioner is refreshed by the quasi-Newton rule: the preconditioner applications
-    // beyond one per Newton iteration count as surplus, and once they have cost a factorisation
-    // the factor is redone with the definite tangent at the end state.
-    let n = pr.iterations.max(1);
-    factor::refresh_if_paid(model, ws, &state.x, dt, pr.solves.saturating_sub(n), pr.solves >= 2 * n)?;
-    let report = pr.report();
-    ws.x_save = x_n;
-    ws.v_save = v_n;
-    ws.x_trial = x_trial;
-    ws.cg = cg;
-    Ok(report)
+        ws.cg = cg;
+        // The preconditioner is refreshed by the quasi-Newton rule: the preconditioner applications
+        // beyond one per Newton iteration count as surplus, and once they have cost a factorisation
+        // the factor is redone with the definite tangent at the end state.
+        let n = pr.iterations.max(1);
+        (pr.solves.saturating_sub(n), pr.solves >= 2 * n)
+    })
 }

@@ -21,9 +21,10 @@
 //! The work term is taken relative to `x_n`, so that `Phi` holds no large constant whose
 //! round-off would hide the small decreases of late iterations.
 
-use crate::fem::{tet4, viscous};
+use super::factor;
+use crate::error::StepError;
+use crate::fem::{tet4, viscous, Model, State, Workspace};
 use crate::math::Vec3;
-use crate::scene::Model;
 
 /// Multiple of `eps` times the magnitude of the gradient's terms taken as its round-off level.
 const ROUND_OFF_FACTOR: f64 = 64.0;
@@ -290,6 +291,37 @@ pub(crate) fn end_step(p: &StepProblem, pw: &mut PotentialWorkspace, x: &[Vec3],
         v[i] = (x[i] - p.x_n[i]) * inv_h;
     }
     store_end(pw, x, cur);
+}
+
+/// The frame of a step that minimises the incremental potential (quasi-Newton, Newton), written
+/// once: factorise the initial Hessian if needed, borrow the start of the step (`x_n`, `v_n`,
+/// saved by [`crate::step`]) and the line search's trial buffer from the workspace, evaluate the
+/// start, run the method's `iterate` (which moves `state.x` from the start and advances the
+/// [`Progress`]; it returns the factor refresh rule's `(surplus, struggled)`), set the end
+/// velocities, return the buffers, then refresh the factor if paid (`factor::refresh_if_paid`).
+pub(crate) fn minimise(
+    model: &Model,
+    state: &mut State,
+    ws: &mut Workspace,
+    dt: f64,
+    tolerance: f64,
+    iterate: impl FnOnce(&StepProblem, &mut [Vec3], &mut [Vec3], &mut Workspace, &mut Progress) -> (usize, bool),
+) -> Result<crate::StepReport, StepError> {
+    factor::ensure(model, ws, dt)?;
+    // The iterate lives in state.x.
+    let (x_n, v_n) = (std::mem::take(&mut ws.x_save), std::mem::take(&mut ws.v_save));
+    let mut x_trial = std::mem::take(&mut ws.x_trial);
+    x_trial.copy_from_slice(&state.x);
+    let p = StepProblem { model, x_n: &x_n, v_n: &v_n, f_ext: &state.f_ext, h: dt };
+    let (start, fresh) = evaluate_start(&p, &mut ws.potential);
+    let mut pr = Progress::start(start, fresh, tolerance);
+    let (surplus, struggled) = iterate(&p, &mut state.x, &mut x_trial, ws, &mut pr);
+    end_step(&p, &mut ws.potential, &state.x, &mut state.v, &pr.cur);
+    ws.x_save = x_n;
+    ws.v_save = v_n;
+    ws.x_trial = x_trial;
+    factor::refresh_if_paid(model, ws, &state.x, dt, surplus, struggled)?;
+    Ok(pr.report())
 }
 
 /// Dot product of two free-node vectors.

@@ -38,10 +38,10 @@
 //!   make the integrator blow up, whatever the load.
 
 use super::factor;
-use super::potential::{self, dot, Progress, StepProblem};
+use super::potential::{self, dot};
 use crate::error::StepError;
+use crate::fem::{Model, State, Workspace};
 use crate::math::Vec3;
-use crate::scene::{Model, State, Workspace};
 use crate::StepReport;
 
 /// Iterations a step must take for the initial Hessian to be refreshed at its end state.
@@ -155,55 +155,42 @@ pub(super) fn step(
     max_iterations: usize,
     tolerance: f64,
 ) -> Result<StepReport, StepError> {
-    factor::ensure(model, ws, dt)?;
-    let h = dt;
-    // `step` saved x_n, v_n into x_save, v_save; the iterate lives in state.x.
-    let (x_n, v_n) = (std::mem::take(&mut ws.x_save), std::mem::take(&mut ws.v_save));
-    let mut x_trial = std::mem::take(&mut ws.x_trial);
-    let mut lb = std::mem::replace(&mut ws.lbfgs, Lbfgs::new(0, 0));
-    x_trial.copy_from_slice(&state.x);
-    let p = StepProblem { model, x_n: &x_n, v_n: &v_n, f_ext: &state.f_ext, h };
-
-    let (start, fresh) = potential::evaluate_start(&p, &mut ws.potential);
-    let mut pr = Progress::start(start, fresh, tolerance);
-    lb.clear();
-    let free_body = model.is_free_body();
-    loop {
-        let g = std::mem::take(&mut ws.potential.g);
-        direction(model, ws, &mut lb, &g, h);
-        pr.solves += 1;
-        let mut gd = dot(&g, &lb.d);
-        if !(gd < 0.0) && lb.len > 0 {
-            lb.clear();
+    potential::minimise(model, state, ws, dt, tolerance, |p, x, x_trial, ws, pr| {
+        let h = p.h;
+        let mut lb = std::mem::replace(&mut ws.lbfgs, Lbfgs::new(0, 0));
+        lb.clear();
+        let free_body = model.is_free_body();
+        loop {
+            let g = std::mem::take(&mut ws.potential.g);
             direction(model, ws, &mut lb, &g, h);
             pr.solves += 1;
-            gd = dot(&g, &lb.d);
+            let mut gd = dot(&g, &lb.d);
+            if !(gd < 0.0) && lb.len > 0 {
+                lb.clear();
+                direction(model, ws, &mut lb, &g, h);
+                pr.solves += 1;
+                gd = dot(&g, &lb.d);
+            }
+            if free_body {
+                // Keep the momentum exact (see the module docs).
+                potential::exact_translation(model, &g, &mut lb.d, h);
+            }
+            ws.potential.g = g;
+            if !(gd < 0.0) {
+                break; // a zero gradient: nothing to do
+            }
+            let Some((e, alpha)) = potential::line_search(p, &mut ws.potential, x, x_trial, &lb.d, &pr.cur, gd, &mut pr.evaluations) else {
+                break;
+            };
+            pr.accept(e);
+            if pr.converged() || pr.iterations >= max_iterations {
+                break;
+            }
+            // After the line search the current gradient is the new one and g_trial the old.
+            lb.push(alpha, &ws.potential.g, &ws.potential.g_trial);
         }
-        if free_body {
-            // Keep the momentum exact (see the module docs).
-            potential::exact_translation(model, &g, &mut lb.d, h);
-        }
-        ws.potential.g = g;
-        if !(gd < 0.0) {
-            break; // a zero gradient: nothing to do
-        }
-        let Some((e, alpha)) = potential::line_search(&p, &mut ws.potential, &mut state.x, &mut x_trial, &lb.d, &pr.cur, gd, &mut pr.evaluations) else {
-            break;
-        };
-        pr.accept(e);
-        if pr.converged() || pr.iterations >= max_iterations {
-            break;
-        }
-        // After the line search the current gradient is the new one and g_trial the old.
-        lb.push(alpha, &ws.potential.g, &ws.potential.g_trial);
-    }
-    potential::end_step(&p, &mut ws.potential, &state.x, &mut state.v, &pr.cur);
-    let it = pr.iterations;
-    factor::refresh_if_paid(model, ws, &state.x, dt, it.saturating_sub(1), it >= REFRESH_MIN_ITERATIONS)?;
-    let report = pr.report();
-    ws.x_save = x_n;
-    ws.v_save = v_n;
-    ws.x_trial = x_trial;
-    ws.lbfgs = lb;
-    Ok(report)
+        ws.lbfgs = lb;
+        let it = pr.iterations;
+        (it.saturating_sub(1), it >= REFRESH_MIN_ITERATIONS)
+    })
 }

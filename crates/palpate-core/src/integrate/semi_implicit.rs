@@ -35,9 +35,9 @@
 //!
 //! Backward Euler has none of these defects; the semi-implicit scheme is kept as the paper's reference.
 
+use crate::fem::{Model, State, Workspace};
 use crate::linalg::BlockPattern;
 use crate::math::{Mat3, Vec3};
-use crate::scene::{Model, State, Workspace};
 
 /// Safety margin on the power iteration's estimate of `lambda_max` (it approaches from below).
 const LAMBDA_MARGIN: f64 = 1.02;

@@ -5,8 +5,8 @@
 
 use crate::error::SolveError;
 use crate::fem::tet4;
+use crate::fem::{Model, Workspace};
 use crate::math::{is_finite3, Vec3};
-use crate::scene::{Model, Workspace};
 
 /// Options of [`static_solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]

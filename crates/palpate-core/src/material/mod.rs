@@ -14,10 +14,10 @@
 //!   With this convention `phi` and `psi` are true viscosities \[Pa s\]: a small uniaxial strain
 //!   rate `e_dot` costs stress `(phi + 2 psi) e_dot`, as `(lambda + 2 mu) e` for the elastic part.
 
-mod linear;
+pub(crate) mod linear;
 pub mod neo_hookean;
 
-pub use linear::{green_strain, strain_rate, stress, viscous_stress};
+pub use linear::{energy_density, green_strain, strain_rate, stress, viscous_stress};
 
 use crate::error::MaterialError;
 

@@ -2,6 +2,12 @@
 //! tetrahedra, usable alone (a particle body) and, in the hybrid issues, as the shell of the
 //! paper's model.
 //!
+//! The particle body has the FEM body's shape: [`ParticleModelBuilder`] (`builder.rs`) compiles
+//! an immutable [`ParticleModel`] (`model.rs`; its stable time step in `stability.rs`),
+//! [`ParticleState`] and [`ParticleWorkspace`] (`state.rs`) hold what changes, and
+//! [`step`]`(&model, &mut state, &mut workspace, dt)` (`step.rs`) advances it with the hot loop
+//! of `pair_loop/`.
+//!
 //! ## Formulation (total Lagrangian, moving least squares)
 //! Particle `i` has rest position `X_i`, mass `m_i`, density `rho_i` and volume `V_i = m_i / rho_i`
 //! (eq. 25; the kernel sum is Shepard-normalised, `rho_i = sum_j m_j W_ij / sum_j (m_j/rho_0) W_ij`,
@@ -37,11 +43,19 @@
 //! affine motions, and it penalises exactly the motions the gradient cannot see. `kappa` (default
 //! [`DEFAULT_HOURGLASS`]) is dimensionless.
 
-mod body;
-mod pair_loop;
+mod builder;
 pub mod kernel;
+mod model;
 pub mod neighbors;
+mod pair_loop;
+mod stability;
+mod state;
+mod step;
 
-pub use body::{ParticleModel, ParticleModelBuilder, ParticleState, ParticleStepReport, ParticleWorkspace, DEFAULT_HOURGLASS, DEFAULT_MIN_WEIGHT, STABILITY_SAFETY};
+pub use builder::{ParticleModelBuilder, DEFAULT_HOURGLASS, DEFAULT_MIN_WEIGHT};
 pub use kernel::Kernel;
+pub use model::ParticleModel;
 pub use pair_loop::{set_simd_enabled, simd_path};
+pub use stability::STABILITY_SAFETY;
+pub use state::{ParticleState, ParticleStepReport, ParticleWorkspace};
+pub use step::{step, step_with_substeps};

@@ -1,0 +1,198 @@
+//! The two passes of a sub-step and the Verlet update, written once for both copies of the loop
+//! (see [`super`]); the portable copy's per-particle gathers, which the AVX2 copy replaces.
+
+use super::{LoopCopy, Cols, P4};
+use crate::material::linear::{green_strain_of, mm, strain_rate_of, sym, Scalar, Svk, M3};
+use crate::math::Vec3;
+use crate::meshfree::{ParticleModel, ParticleState, ParticleWorkspace};
+
+/// `acc += s * x` on 4 lanes.
+#[inline(always)]
+fn axpy(acc: &mut P4, s: f64, x: &P4) {
+    for l in 0..4 {
+        acc[l] += s * x[l];
+    }
+}
+
+#[inline(always)]
+fn add(a: &P4, b: &P4) -> P4 {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3] + b[3]]
+}
+
+#[inline(always)]
+fn sub(a: &P4, b: &P4) -> P4 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2], a[3] - b[3]]
+}
+
+/// `a * b + c`, fused in a copy that has FMA.
+#[inline(always)]
+fn madd<C: LoopCopy>(a: f64, b: f64, c: f64) -> f64 {
+    if C::FMA {
+        a.mul_add(b, c)
+    } else {
+        a * b + c
+    }
+}
+
+/// `B = (F S - gamma K) R` from `K = sum_j u_ij q_ij^T` (and `K_v`, the same of the velocities)
+/// and `R = A^-1`: `H = K R`, `F = I + H`, `E = (F^T F - I)/2` and the stress `S` of the law
+/// ([`Svk::stress`], eq. 9, plus with `L = K_v R` the viscous stress of `nu = (F^T L + L^T F)/2`,
+/// eq. 10-11). `B` is `P A^-1 - gamma H`. `linear`: the small-strain stress with `F = I`
+/// (`E = sym H`, no viscous part). For one particle (`f64`) or several in SIMD lanes.
+#[inline(always)]
+pub(super) fn b_matrix<T: Scalar>(k: &M3<T>, kv: Option<&M3<T>>, r: &M3<T>, gamma: T, law: Svk, linear: bool) -> M3<T> {
+    let h = mm(k, r);
+    let p = if linear {
+        law.stress(&sym(&h), None)
+    } else {
+        let mut f = h;
+        for a in 0..3 {
+            f[a][a] = f[a][a].add(T::splat(1.0));
+        }
+        let nu = match kv {
+            Some(kv) if law.is_damped() => Some(strain_rate_of(&f, &mm(kv, r))),
+            _ => None,
+        };
+        mm(&f, &law.stress(&green_strain_of(&f), nu.as_ref()))
+    };
+    let mut pk = p;
+    let ng = T::splat(0.0).sub(gamma);
+    for a in 0..3 {
+        for b in 0..3 {
+            pk[a][b] = ng.madd(k[a][b], p[a][b]);
+        }
+    }
+    mm(&pk, r)
+}
+
+/// `K = sum_j (w_j - w_i) q_ij^T` (rows) over one particle's pairs, for a padded field `w`.
+#[inline(always)]
+fn gather_rows(nbr: &[u32], q: &[P4], w: &[P4], wi: &P4) -> M3<f64> {
+    let mut r0 = [[0.0f64; 4]; 3];
+    let mut r1 = [[0.0f64; 4]; 3];
+    let pairs = nbr.len() / 2;
+    for k in 0..pairs {
+        let (ja, jb) = (nbr[2 * k] as usize, nbr[2 * k + 1] as usize);
+        let (qa, qb) = (&q[2 * k], &q[2 * k + 1]);
+        let da = sub(&w[ja], wi);
+        let db = sub(&w[jb], wi);
+        for a in 0..3 {
+            axpy(&mut r0[a], da[a], qa);
+            axpy(&mut r1[a], db[a], qb);
+        }
+    }
+    if nbr.len() % 2 == 1 {
+        let last = nbr.len() - 1;
+        let d = sub(&w[nbr[last] as usize], wi);
+        for a in 0..3 {
+            axpy(&mut r0[a], d[a], &q[last]);
+        }
+    }
+    let r = [add(&r0[0], &r1[0]), add(&r0[1], &r1[1]), add(&r0[2], &r1[2])];
+    [[r[0][0], r[0][1], r[0][2]], [r[1][0], r[1][1], r[1][2]], [r[2][0], r[2][1], r[2][2]]]
+}
+
+/// Pass 1 for particle `i` (portable copy, one at a time): its `B_i` as padded columns, from
+/// displacements `u` (and velocities `v` for the viscous stress); see [`b_matrix`].
+#[inline(always)]
+pub(super) fn particle_stress(m: &ParticleModel, i: usize, u: &[P4], v: Option<&[P4]>, linear: bool) -> Cols {
+    let (s, e) = (m.ptr[i], m.ptr[i + 1]);
+    let nbr = &m.nbr32[s..e];
+    let q = &m.q4[s..e];
+    let k = gather_rows(nbr, q, u, &u[i]);
+    let law = Svk::of(&m.material);
+    let kv = match v {
+        Some(v) if law.is_damped() && !linear => Some(gather_rows(nbr, q, v, &v[i])),
+        _ => None,
+    };
+    // A^-1 is stored once, as padded columns (for the SIMD copy): row a is (c0[a], c1[a], c2[a]).
+    let rc = &m.r4[i];
+    let r = [[rc[0][0], rc[1][0], rc[2][0]], [rc[0][1], rc[1][1], rc[2][1]], [rc[0][2], rc[1][2], rc[2][2]]];
+    let b = b_matrix(&k, kv.as_ref(), &r, m.gamma[i], law, linear);
+    [[b[0][0], b[1][0], b[2][0], 0.0], [b[0][1], b[1][1], b[2][1], 0.0], [b[0][2], b[1][2], b[2][2], 0.0]]
+}
+
+/// Pass 2 for particle `i` (portable copy): the internal force it receives,
+/// `V_i [B_i Q_i + sum_j B_j q_ij + sum_j (gamma_i + gamma_j) w_ij (u_j - u_i)]`, from the `B`
+/// of pass 1 and `gamma` (`gamma_j`, zero for frozen particles).
+#[inline(always)]
+pub(super) fn particle_force(m: &ParticleModel, i: usize, u: &[P4], b: &[Cols], gamma: &[f64]) -> P4 {
+    let (s, e) = (m.ptr[i], m.ptr[i + 1]);
+    let (ui, gi, bi, qs) = (&u[i], gamma[i], &b[i], &m.qsum4[i]);
+    let mut acc = [0.0f64; 4];
+    let mut hg = [0.0f64; 4];
+    for c in 0..3 {
+        axpy(&mut acc, qs[c], &bi[c]);
+    }
+    for ((&j, qp), &wp) in m.nbr32[s..e].iter().zip(&m.q4[s..e]).zip(&m.w[s..e]) {
+        let j = j as usize;
+        for c in 0..3 {
+            axpy(&mut acc, qp[c], &b[j][c]);
+        }
+        axpy(&mut hg, (gi + gamma[j]) * wp, &sub(&u[j], ui));
+    }
+    let sum = add(&acc, &hg);
+    let vi = m.volume[i];
+    [vi * sum[0], vi * sum[1], vi * sum[2], 0.0]
+}
+
+/// Forces of every particle (all active) into `out`: `linear` selects the rest-linearised
+/// operator. `b`, `gamma` are scratch of length `n`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+pub(super) fn all_forces_impl<C: LoopCopy>(c: C, m: &ParticleModel, u: &[P4], v: Option<&[P4]>, linear: bool, b: &mut [Cols], gamma: &mut [f64], out: &mut [P4]) {
+    let n = m.n_particles();
+    let all: Vec<usize> = (0..n).collect();
+    c.stress_pass(m, &all, u, v, linear, b);
+    gamma.copy_from_slice(&m.gamma);
+    c.force_pass(m, &all, u, b, gamma, |i, f| out[i] = f);
+}
+
+/// `substeps` Verlet sub-steps of length `h` over the active particles (see
+/// [`crate::meshfree::step_with_substeps`], which validated the state and filled `ws.u`, `ws.v`
+/// and `ws.touched`).
+#[inline(always)]
+pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize) {
+    for &i in &ws.touched {
+        ws.b[i] = [[0.0; 4]; 3];
+        ws.gamma[i] = 0.0;
+        ws.u_next[i] = ws.u[i];
+    }
+    for &i in &state.active {
+        ws.gamma[i] = m.gamma[i];
+    }
+    // The free active particles, their constant acceleration (external force and gravity), and
+    // fixed particles at rest.
+    ws.free.clear();
+    for &i in &state.active {
+        if m.fixed[i] {
+            ws.v[i] = [0.0; 4];
+            state.v[i] = Vec3::zeros();
+        } else {
+            ws.free.push(i);
+            ws.acc_ext[i] = super::p4(&(state.f_ext[i] / m.mass[i] + m.gravity));
+        }
+    }
+    let damped = !m.material.is_undamped();
+    for _ in 0..substeps {
+        c.stress_pass(m, &state.active, &ws.u, if damped { Some(&ws.v) } else { None }, false, &mut ws.b);
+        // Forces and, in the same sweep, Verlet in velocity form (v += h a, u += h v) into the
+        // other displacement buffer: this sweep still reads the current displacements of the
+        // neighbours. (Velocities are read again only by the next sub-step's pass 1.)
+        let (vel, u_next, acc_ext, u_now) = (&mut ws.v, &mut ws.u_next, &ws.acc_ext, &ws.u);
+        c.force_pass(m, &ws.free, &ws.u, &ws.b, &ws.gamma, |i, f| {
+            let (ae, im) = (&acc_ext[i], m.inv_mass[i]);
+            let (v, u, un) = (&mut vel[i], &u_now[i], &mut u_next[i]);
+            for l in 0..3 {
+                v[l] = madd::<C>(h, madd::<C>(f[l], im, ae[l]), v[l]);
+                un[l] = madd::<C>(h, v[l], u[l]);
+            }
+        });
+        std::mem::swap(&mut ws.u, &mut ws.u_next);
+        // Frozen and fixed particles keep their displacement in both buffers.
+    }
+    for &i in &ws.free {
+        state.v[i] = super::v3(&ws.v[i]);
+        state.x[i] = m.rest[i] + super::v3(&ws.u[i]);
+    }
+}
