@@ -125,7 +125,7 @@ impl PyParticleBody {
         }
         let this = &mut *slf;
         let (model, state, ws) = (&this.model, &mut this.state, &mut this.ws);
-        py.detach(|| (0..n).try_for_each(|k| model.step(state, ws, dt).map(|_| ()).map_err(|e| (k, e))))
+        py.detach(|| (0..n).try_for_each(|k| palpate_core::meshfree::step(model, state, ws, dt).map(|_| ()).map_err(|e| (k, e))))
             .map_err(|(k, e)| errors::step_error(e, &format!("in step {} of {n}", k + 1)))?;
         let substeps = this.model.substeps(dt);
         let d = PyDict::new(py);
@@ -153,7 +153,7 @@ impl PyParticleBody {
             let mut total = 0.0;
             for k in 0..ticks {
                 let t0 = Instant::now();
-                let r = model.step(state, ws, dt);
+                let r = palpate_core::meshfree::step(model, state, ws, dt);
                 let w = t0.elapsed().as_secs_f64();
                 match r {
                     Ok(rep) => {

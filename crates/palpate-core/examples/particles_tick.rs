@@ -1,6 +1,6 @@
 //! Time one 1 ms tick of a particle block: `cargo run --release --example particles_tick -- 600`.
 use palpate_core::material::{Damping, Elasticity};
-use palpate_core::meshfree::{ParticleModelBuilder, ParticleState, ParticleWorkspace};
+use palpate_core::meshfree::{self, ParticleModelBuilder, ParticleState, ParticleWorkspace};
 use palpate_core::{Material, Vec3};
 use std::time::Instant;
 
@@ -32,12 +32,12 @@ fn main() {
     let top = model.n_particles() - 1;
     st.f_ext[top] = Vec3::new(0.0, 0.0, -1e-4);
     let sub = model.substeps(1e-3);
-    model.step(&mut st, &mut ws, 1e-3).unwrap();
+    meshfree::step(&model, &mut st, &mut ws, 1e-3).unwrap();
     let ticks = 2000;
     let mut times = Vec::with_capacity(ticks);
     for _ in 0..ticks {
         let t = Instant::now();
-        model.step(&mut st, &mut ws, 1e-3).unwrap();
+        meshfree::step(&model, &mut st, &mut ws, 1e-3).unwrap();
         times.push(t.elapsed().as_secs_f64());
     }
     times.sort_by(|a, b| a.total_cmp(b));

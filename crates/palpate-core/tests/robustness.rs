@@ -12,6 +12,7 @@ mod common;
 
 use common::*;
 use palpate_core::mesh::generate::{base_nodes, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
+use palpate_core::meshfree;
 use palpate_core::{step, Integrator, Model, ModelBuilder, ModelError, SolveError, State, StepError, Vec3, Workspace};
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -297,14 +298,14 @@ fn particle_step_allocates_nothing_after_the_first_step() {
         set_simd_enabled(simd);
         let mut st = ParticleState::rest(&model);
         let mut ws = ParticleWorkspace::new(&model);
-        model.step(&mut st, &mut ws, 1e-3).unwrap(); // warm-up
+        meshfree::step(&model, &mut st, &mut ws, 1e-3).unwrap(); // warm-up
         let before = allocations();
         for k in 0..50 {
             st.f_ext[149] = Vec3::new(0.0, 1e-4 * (k as f64).sin(), -1e-4);
             if k == 25 {
                 st.active.retain(|&i| i % 2 == 0 || i >= 100);
             }
-            model.step(&mut st, &mut ws, 1e-3).unwrap();
+            meshfree::step(&model, &mut st, &mut ws, 1e-3).unwrap();
         }
         let n = allocations() - before;
         assert_eq!(n, 0, "simd {simd}: the particle step allocated {n} times in 50 steps");

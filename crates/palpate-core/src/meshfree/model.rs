@@ -3,8 +3,8 @@
 
 use super::kernel::Kernel;
 use super::pair_loop::{self, p4, v3, Cols, P4};
-use super::state::{ParticleState, ParticleStepReport, ParticleWorkspace};
-use crate::error::{SolveError, StepError};
+use crate::error::SolveError;
+use crate::linalg::cg::{self, CgStop, CgWork};
 use crate::material::{self, Material};
 use crate::math::{is_finite3, Mat3, Vec3};
 
@@ -158,54 +158,28 @@ impl ParticleModel {
         }
         let free = |i: usize| !self.fixed[i];
         let b: Vec<Vec3> = (0..n).map(|i| if free(i) { f_ext[i] + self.mass[i] * self.gravity } else { Vec3::zeros() }).collect();
-        let dot = |a: &[Vec3], c: &[Vec3]| a.iter().zip(c).map(|(a, c)| a.dot(c)).sum::<f64>();
-        let bnorm = dot(&b, &b).sqrt();
-        let mut u = vec![Vec3::zeros(); n];
-        if bnorm == 0.0 {
+        if b.iter().all(|f| *f == Vec3::zeros()) {
             return Ok(self.rest.clone());
         }
-        let mut r = b.clone();
-        let mut p = r.clone();
-        let mut ap = vec![Vec3::zeros(); n];
-        let mut rr = dot(&r, &r);
-        for it in 0..max_iterations {
-            // ap = K0 p = -f_lin(p)
-            self.linearised_forces(&p, &mut ap);
-            for i in 0..n {
-                ap[i] = if free(i) { -ap[i] } else { Vec3::zeros() };
+        let mut u = vec![Vec3::zeros(); n];
+        // K0 p = -f_lin(p) on the free particles, zero on the fixed ones.
+        let apply = |p: &[Vec3], ap: &mut [Vec3]| {
+            self.linearised_forces(p, ap);
+            for (i, a) in ap.iter_mut().enumerate() {
+                *a = if free(i) { -*a } else { Vec3::zeros() };
             }
-            let pap = dot(&p, &ap);
-            if !(pap > 0.0) {
-                return Err(SolveError::Invalid(format!(
-                    "the linearised stiffness is not positive definite on the free particles (CG iteration {it}); fix some particles"
-                )));
-            }
-            let alpha = rr / pap;
-            for i in 0..n {
-                u[i] += alpha * p[i];
-                r[i] -= alpha * ap[i];
-            }
-            let rr_new = dot(&r, &r);
-            if rr_new.sqrt() <= tolerance * bnorm {
-                return Ok((0..n).map(|i| self.rest[i] + u[i]).collect());
-            }
-            let beta = rr_new / rr;
-            rr = rr_new;
-            for i in 0..n {
-                p[i] = r[i] + beta * p[i];
-            }
+        };
+        let rep = cg::solve(apply, cg::identity, &b, &mut u, &mut CgWork::new(n), CgStop { tolerance, max_iterations });
+        if rep.breakdown {
+            return Err(SolveError::Invalid(format!(
+                "the linearised stiffness is not positive definite on the free particles (CG iteration {}); fix some particles",
+                rep.iterations
+            )));
         }
-        Err(SolveError::NoConvergence { iterations: max_iterations, residual: rr.sqrt(), tolerance: tolerance * bnorm })
-    }
-
-    /// Forwards to [`super::step`] (kept while callers move to the free function).
-    pub fn step(&self, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64) -> Result<ParticleStepReport, StepError> {
-        super::step(self, state, ws, dt)
-    }
-
-    /// Forwards to [`super::step_with_substeps`] (kept while callers move to the free function).
-    pub fn step_with_substeps(&self, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize) -> Result<ParticleStepReport, StepError> {
-        super::step_with_substeps(self, state, ws, dt, substeps)
+        if !rep.converged {
+            return Err(SolveError::NoConvergence { iterations: max_iterations, residual: rep.residual_norm, tolerance: tolerance * rep.rhs_norm });
+        }
+        Ok((0..n).map(|i| self.rest[i] + u[i]).collect())
     }
 }
 
