@@ -17,6 +17,7 @@
 use super::factor;
 use super::potential::{self, dot, StepProblem};
 use crate::error::StepError;
+use crate::linalg::cg::{self, CgStop, CgWork};
 use crate::fem::model::NONE;
 use crate::fem::{tet4, viscous, Model, State, Workspace};
 use crate::math::{Mat3, Vec3};
@@ -25,21 +26,19 @@ use crate::StepReport;
 /// Conjugate-gradient iterations per Newton iteration, at most.
 const MAX_CG: usize = 200;
 
-/// Free-node vectors of the preconditioned conjugate gradients.
+/// Free-node vectors of the preconditioned conjugate gradients, the right-hand side and the
+/// Newton direction.
 #[derive(Debug, Clone)]
 pub(crate) struct CgWorkspace {
-    r: Vec<Vec3>,
-    z: Vec<Vec3>,
-    p: Vec<Vec3>,
-    hp: Vec<Vec3>,
+    work: CgWork<Vec3>,
+    rhs: Vec<Vec3>,
     /// The Newton direction.
     d: Vec<Vec3>,
 }
 
 impl CgWorkspace {
     pub fn new(nf: usize) -> CgWorkspace {
-        let z = || vec![Vec3::zeros(); nf];
-        CgWorkspace { r: z(), z: z(), p: z(), hp: z(), d: z() }
+        CgWorkspace { work: CgWork::new(nf), rhs: vec![Vec3::zeros(); nf], d: vec![Vec3::zeros(); nf] }
     }
 }
 
@@ -76,44 +75,34 @@ fn hess_mul(model: &Model, blocks: &[Mat3], inv_h2: f64, v: &[Vec3], y: &mut [Ve
     }
 }
 
-/// Truncated preconditioned CG for `H d = -g` into `cg.d`; returns the preconditioner applications.
+/// Truncated preconditioned CG (`linalg::cg`) for `H d = -g` into `cg.d`, to a relative
+/// residual `eta`; returns the preconditioner applications. At a direction of non-positive
+/// curvature the iterate so far is kept, or, at the first, the preconditioned gradient.
 fn newton_direction(model: &Model, ws: &mut Workspace, cg: &mut CgWorkspace, g: &[Vec3], eta: f64, h: f64) -> usize {
     let inv_h2 = 1.0 / (h * h);
-    let CgWorkspace { r, z, p, hp, d } = cg;
-    for (ri, gi) in r.iter_mut().zip(g) {
-        *ri = -gi;
+    let CgWorkspace { work, rhs, d } = cg;
+    for (bi, gi) in rhs.iter_mut().zip(g) {
+        *bi = -gi;
     }
     d.iter_mut().for_each(|v| *v = Vec3::zeros());
-    let r0 = dot(r, r).sqrt();
-    factor::apply_inverse(model, ws, r, z, h);
-    let mut solves = 1;
-    p.copy_from_slice(z);
-    let mut rz = dot(r, z);
-    for it in 0..MAX_CG {
-        hess_mul(model, &ws.k, inv_h2, p, hp);
-        let php = dot(p, hp);
-        if !(php > 0.0) {
-            if it == 0 {
-                d.copy_from_slice(z); // preconditioned steepest descent
-            }
-            break;
-        }
-        let a = rz / php;
-        for k in 0..d.len() {
-            d[k] += a * p[k];
-            r[k] -= a * hp[k];
-        }
-        if dot(r, r).sqrt() <= eta * r0 {
-            break;
-        }
-        factor::apply_inverse(model, ws, r, z, h);
-        solves += 1;
-        let rz_new = dot(r, z);
-        let b = rz_new / rz;
-        rz = rz_new;
-        for k in 0..p.len() {
-            p[k] = z[k] + b * p[k];
-        }
+    // The Hessian blocks are read by the operator while the preconditioner refreshes nothing
+    // but needs the workspace's factor: take the blocks out for the solve (no allocation).
+    let blocks = std::mem::take(&mut ws.k);
+    let mut solves = 0;
+    let rep = cg::solve(
+        |v, y| hess_mul(model, &blocks, inv_h2, v, y),
+        |r, z| {
+            factor::apply_inverse(model, ws, r, z, h);
+            solves += 1;
+        },
+        rhs,
+        d,
+        work,
+        CgStop { tolerance: eta, max_iterations: MAX_CG },
+    );
+    ws.k = blocks;
+    if rep.breakdown && rep.iterations == 0 {
+        d.copy_from_slice(&work.z); // preconditioned steepest descent
     }
     solves
 }

@@ -100,16 +100,21 @@ pub fn solve<T: CgEntry>(mut apply: impl FnMut(&[T], &mut [T]), mut precondition
     }
     let rhs_norm = dot(b, b).sqrt();
     let bnorm = rhs_norm.max(1e-300);
-    precondition(r, z);
-    p.copy_from_slice(z);
-    let mut rz = dot(r, z);
     let mut iterations = 0;
     let mut residual_norm = dot(r, r).sqrt();
     let mut breakdown = false;
+    let mut rz = 0.0;
+    if residual_norm / bnorm > stop.tolerance {
+        precondition(r, z);
+        p.copy_from_slice(z);
+        rz = dot(r, z);
+    }
     while residual_norm / bnorm > stop.tolerance && iterations < stop.max_iterations {
         apply(p, ap);
         let pap = dot(p, ap);
         if !(pap > 0.0) {
+            // `z` still holds the preconditioned residual of the current iterate: a caller may
+            // use it as a descent direction (truncated CG, Steihaug 1983).
             breakdown = true;
             break;
         }
@@ -118,6 +123,13 @@ pub fn solve<T: CgEntry>(mut apply: impl FnMut(&[T], &mut [T]), mut precondition
             x[i] = x[i].add_scaled(alpha, p[i]);
             r[i] = r[i].add_scaled(-alpha, ap[i]);
         }
+        iterations += 1;
+        residual_norm = dot(r, r).sqrt();
+        // Stop before preconditioning a residual that will not be used (with a factorised
+        // preconditioner, an application costs as much as the operator).
+        if residual_norm / bnorm <= stop.tolerance || iterations >= stop.max_iterations {
+            break;
+        }
         precondition(r, z);
         let rz_new = dot(r, z);
         let beta = rz_new / rz;
@@ -125,8 +137,6 @@ pub fn solve<T: CgEntry>(mut apply: impl FnMut(&[T], &mut [T]), mut precondition
         for i in 0..n {
             p[i] = z[i].add_scaled(beta, p[i]);
         }
-        iterations += 1;
-        residual_norm = dot(r, r).sqrt();
     }
     let residual = residual_norm / bnorm;
     CgReport { iterations, residual, residual_norm, rhs_norm, converged: !(residual > stop.tolerance), breakdown }
