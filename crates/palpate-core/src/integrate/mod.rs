@@ -189,10 +189,13 @@ pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Re
     let result = match model.integrator {
         Integrator::SemiImplicit { .. } => Ok(semi_implicit::step(model, state, ws, dt)),
         Integrator::BackwardEulerLinear => backward_euler::step_linear(model, state, ws, dt),
+        // The minimising schemes share the frame (potential::minimise) and differ in their iterations.
         Integrator::BackwardEulerQuasiNewton { max_iterations, tolerance, .. } => {
-            quasi_newton::step(model, state, ws, dt, max_iterations, tolerance)
+            potential::minimise(model, state, ws, dt, tolerance, |p, x, xt, ws, pr| quasi_newton::iterate(p, x, xt, ws, pr, max_iterations))
         }
-        Integrator::BackwardEulerNewton { max_iterations, tolerance } => newton::step(model, state, ws, dt, max_iterations, tolerance),
+        Integrator::BackwardEulerNewton { max_iterations, tolerance } => {
+            potential::minimise(model, state, ws, dt, tolerance, |p, x, xt, ws, pr| newton::iterate(p, x, xt, ws, pr, max_iterations))
+        }
     };
     let bad = match &result {
         Ok(_) => state

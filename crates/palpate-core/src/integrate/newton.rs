@@ -15,13 +15,11 @@
 //! the quasi-Newton step then guarantees the potential decreases.
 
 use super::factor;
-use super::potential::{self, dot, StepProblem};
-use crate::error::StepError;
+use super::potential::{self, dot, Progress, StepProblem};
 use crate::linalg::cg::{self, CgStop, CgWork};
 use crate::fem::model::NONE;
-use crate::fem::{tet4, viscous, Model, State, Workspace};
+use crate::fem::{tet4, viscous, Model, Workspace};
 use crate::math::{Mat3, Vec3};
-use crate::StepReport;
 
 /// Conjugate-gradient iterations per Newton iteration, at most.
 const MAX_CG: usize = 200;
@@ -107,43 +105,37 @@ fn newton_direction(model: &Model, ws: &mut Workspace, cg: &mut CgWorkspace, g: 
     solves
 }
 
-pub(super) fn step(
-    model: &Model,
-    state: &mut State,
-    ws: &mut Workspace,
-    dt: f64,
-    max_iterations: usize,
-    tolerance: f64,
-) -> Result<StepReport, StepError> {
-    potential::minimise(model, state, ws, dt, tolerance, |p, x, x_trial, ws, pr| {
-        let h = p.h;
-        let mut cg = std::mem::replace(&mut ws.cg, CgWorkspace::new(0));
-        let free_body = model.is_free_body();
-        while pr.iterations < max_iterations && (pr.iterations == 0 || !pr.converged()) {
-            let mut blocks = std::mem::take(&mut ws.k);
-            assemble_hessian(p, x, &mut blocks);
-            ws.k = blocks;
-            let eta = pr.relative_gradient(0.25);
-            let g = std::mem::take(&mut ws.potential.g);
-            pr.solves += newton_direction(model, ws, &mut cg, &g, eta, h);
-            if free_body {
-                potential::exact_translation(model, &g, &mut cg.d, h);
-            }
-            let gd = dot(&g, &cg.d);
-            ws.potential.g = g;
-            if !(gd < 0.0) {
-                break;
-            }
-            let Some((e, _)) = potential::line_search(p, &mut ws.potential, x, x_trial, &cg.d, &pr.cur, gd, &mut pr.evaluations) else {
-                break;
-            };
-            pr.accept(e);
+/// One step's Newton iterations (run inside [`potential::minimise`]); returns the surplus
+/// preconditioner applications and whether the step struggled, for the refresh rule (`factor.rs`).
+pub(super) fn iterate(p: &StepProblem, x: &mut [Vec3], x_trial: &mut [Vec3], ws: &mut Workspace, pr: &mut Progress, max_iterations: usize) -> (usize, bool) {
+    let model = p.model;
+    let h = p.h;
+    let mut cg = std::mem::replace(&mut ws.cg, CgWorkspace::new(0));
+    let free_body = model.is_free_body();
+    while pr.iterations < max_iterations && (pr.iterations == 0 || !pr.converged()) {
+        let mut blocks = std::mem::take(&mut ws.k);
+        assemble_hessian(p, x, &mut blocks);
+        ws.k = blocks;
+        let eta = pr.relative_gradient(0.25);
+        let g = std::mem::take(&mut ws.potential.g);
+        pr.solves += newton_direction(model, ws, &mut cg, &g, eta, h);
+        if free_body {
+            potential::exact_translation(model, &g, &mut cg.d, h);
         }
-        ws.cg = cg;
-        // The preconditioner is refreshed by the quasi-Newton rule: the preconditioner applications
-        // beyond one per Newton iteration count as surplus, and once they have cost a factorisation
-        // the factor is redone with the definite tangent at the end state.
-        let n = pr.iterations.max(1);
-        (pr.solves.saturating_sub(n), pr.solves >= 2 * n)
-    })
+        let gd = dot(&g, &cg.d);
+        ws.potential.g = g;
+        if !(gd < 0.0) {
+            break;
+        }
+        let Some((e, _)) = potential::line_search(p, &mut ws.potential, x, x_trial, &cg.d, &pr.cur, gd, &mut pr.evaluations) else {
+            break;
+        };
+        pr.accept(e);
+    }
+    ws.cg = cg;
+    // The preconditioner is refreshed by the quasi-Newton rule: the preconditioner applications
+    // beyond one per Newton iteration count as surplus, and once they have cost a factorisation
+    // the factor is redone with the definite tangent at the end state.
+    let n = pr.iterations.max(1);
+    (pr.solves.saturating_sub(n), pr.solves >= 2 * n)
 }

@@ -38,11 +38,9 @@
 //!   make the integrator blow up, whatever the load.
 
 use super::factor;
-use super::potential::{self, dot};
-use crate::error::StepError;
-use crate::fem::{Model, State, Workspace};
+use super::potential::{self, dot, Progress, StepProblem};
+use crate::fem::{Model, Workspace};
 use crate::math::Vec3;
-use crate::StepReport;
 
 /// Iterations a step must take for the initial Hessian to be refreshed at its end state.
 pub const REFRESH_MIN_ITERATIONS: usize = 3;
@@ -147,50 +145,44 @@ fn direction(model: &Model, ws: &mut Workspace, lb: &mut Lbfgs, g: &[Vec3], h: f
     lb.d.iter_mut().for_each(|d| *d = -*d);
 }
 
-pub(super) fn step(
-    model: &Model,
-    state: &mut State,
-    ws: &mut Workspace,
-    dt: f64,
-    max_iterations: usize,
-    tolerance: f64,
-) -> Result<StepReport, StepError> {
-    potential::minimise(model, state, ws, dt, tolerance, |p, x, x_trial, ws, pr| {
-        let h = p.h;
-        let mut lb = std::mem::replace(&mut ws.lbfgs, Lbfgs::new(0, 0));
-        lb.clear();
-        let free_body = model.is_free_body();
-        loop {
-            let g = std::mem::take(&mut ws.potential.g);
+/// One step's L-BFGS iterations (run inside [`potential::minimise`]); returns the surplus
+/// iterations and whether the step struggled, for the refresh rule (`factor.rs`).
+pub(super) fn iterate(p: &StepProblem, x: &mut [Vec3], x_trial: &mut [Vec3], ws: &mut Workspace, pr: &mut Progress, max_iterations: usize) -> (usize, bool) {
+    let model = p.model;
+    let h = p.h;
+    let mut lb = std::mem::replace(&mut ws.lbfgs, Lbfgs::new(0, 0));
+    lb.clear();
+    let free_body = model.is_free_body();
+    loop {
+        let g = std::mem::take(&mut ws.potential.g);
+        direction(model, ws, &mut lb, &g, h);
+        pr.solves += 1;
+        let mut gd = dot(&g, &lb.d);
+        if !(gd < 0.0) && lb.len > 0 {
+            lb.clear();
             direction(model, ws, &mut lb, &g, h);
             pr.solves += 1;
-            let mut gd = dot(&g, &lb.d);
-            if !(gd < 0.0) && lb.len > 0 {
-                lb.clear();
-                direction(model, ws, &mut lb, &g, h);
-                pr.solves += 1;
-                gd = dot(&g, &lb.d);
-            }
-            if free_body {
-                // Keep the momentum exact (see the module docs).
-                potential::exact_translation(model, &g, &mut lb.d, h);
-            }
-            ws.potential.g = g;
-            if !(gd < 0.0) {
-                break; // a zero gradient: nothing to do
-            }
-            let Some((e, alpha)) = potential::line_search(p, &mut ws.potential, x, x_trial, &lb.d, &pr.cur, gd, &mut pr.evaluations) else {
-                break;
-            };
-            pr.accept(e);
-            if pr.converged() || pr.iterations >= max_iterations {
-                break;
-            }
-            // After the line search the current gradient is the new one and g_trial the old.
-            lb.push(alpha, &ws.potential.g, &ws.potential.g_trial);
+            gd = dot(&g, &lb.d);
         }
-        ws.lbfgs = lb;
-        let it = pr.iterations;
-        (it.saturating_sub(1), it >= REFRESH_MIN_ITERATIONS)
-    })
+        if free_body {
+            // Keep the momentum exact (see the module docs).
+            potential::exact_translation(model, &g, &mut lb.d, h);
+        }
+        ws.potential.g = g;
+        if !(gd < 0.0) {
+            break; // a zero gradient: nothing to do
+        }
+        let Some((e, alpha)) = potential::line_search(p, &mut ws.potential, x, x_trial, &lb.d, &pr.cur, gd, &mut pr.evaluations) else {
+            break;
+        };
+        pr.accept(e);
+        if pr.converged() || pr.iterations >= max_iterations {
+            break;
+        }
+        // After the line search the current gradient is the new one and g_trial the old.
+        lb.push(alpha, &ws.potential.g, &ws.potential.g_trial);
+    }
+    ws.lbfgs = lb;
+    let it = pr.iterations;
+    (it.saturating_sub(1), it >= REFRESH_MIN_ITERATIONS)
 }
