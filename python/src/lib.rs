@@ -9,7 +9,7 @@
 //! | `surface.rs` | `TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between` (`palpate_core::mesh::{surface, sample}`) |
 //! | `material.rs` | `Law`, `Material` (`palpate_core::material`) |
 //! | `integrator.rs` | `SemiImplicit`, `BackwardEuler`, `Filter`, `Solver` (`palpate_core::integrate`) |
-//! | `body.rs` | `Body`: the FEM body (model + state + workspace; stepping releases the GIL) |
+//! | `body.rs` | `Body`: the FEM body (model + state + workspace; stepping, `run_probe` and `run_loads` (`palpate_core::probe`) release the GIL) |
 //! | `meshfree.rs` | `Kernel`, `kernel_value`, `neighbours`, `simd_path`, `set_simd_enabled` (`palpate_core::meshfree::{kernel, neighbors}`) |
 //! | `particles.rs` | `ParticleBody`: the meshfree body (`palpate_core::meshfree`) |
 //! | `hybrid.rs` | `HybridModel`, `Projection`, `ventricle_surface` (`palpate_core::hybrid`) |
