@@ -1,0 +1,83 @@
+//! The compiled hybrid simulation ([`Sim`]): everything the tick reads and never writes, built once
+//! from a [`HybridModel`] and a [`Material`] (as [`crate::Model`] is for the FEM body).
+
+use super::embed::Embedding;
+use crate::error::ModelError;
+use crate::fem::{Model, ModelBuilder};
+use crate::hybrid::HybridModel;
+use crate::material::Material;
+use crate::math::Vec3;
+use crate::mesh::TetMesh;
+use crate::meshfree::{ParticleModel, ParticleModelBuilder};
+use crate::Integrator;
+
+/// Options of [`Sim::new`]. Lengths in metres; `Default` gives the values documented per field.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimOptions {
+    /// Particle kernel support radius in lattice spacings (default 1.8, as the particle bench).
+    pub support_spacings: f64,
+    /// Active particles within this many lattice spacings of their core face at rest are tied
+    /// to it by the coupling springs (default 1.5: the first lattice layer over the core).
+    pub coupling_depth_spacings: f64,
+    /// The core's integrator (default: the quasi-Newton backward Euler, stable at any press).
+    pub integrator: Integrator,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions { support_spacings: 1.8, coupling_depth_spacings: 1.5, integrator: Integrator::quasi_newton() }
+    }
+}
+
+/// The compiled hybrid simulation: the FEM core body, a particle body over every shell particle,
+/// the ties of the particles and of the skin to the core faces, and the model it came from.
+#[derive(Debug, Clone)]
+pub struct Sim {
+    /// The hybrid model (regions, voxels, surfaces).
+    pub hybrid: HybridModel,
+    /// The FEM core (Omega_e): base nodes fixed (or, for a closed wall, see [`Sim::new`]).
+    pub core: Model,
+    /// The particle shell (Omega_p), every particle; a tick steps only the active ones.
+    pub particles: ParticleModel,
+    /// Each particle tied to its core face: where an inactive particle is.
+    pub particle_tie: Embedding,
+    /// Each outer vertex tied to its core face (the skin, §4).
+    pub skin: Embedding,
+    /// Particles tied to the core by a coupling spring while active.
+    pub coupled: Vec<bool>,
+    pub options: SimOptions,
+}
+
+impl Sim {
+    /// Compiles `hybrid` with `material` (the same law and constants in the core and the shell).
+    /// The core is held at its base nodes; a closed wall (no base) is held at its core nodes
+    /// within 10% of the core's height from its lowest point, so that a press cannot push the
+    /// organ away.
+    pub fn new(hybrid: HybridModel, material: Material, options: SimOptions) -> Result<Sim, ModelError> {
+        let pts: Vec<[f64; 3]> = hybrid.core_points.iter().map(|p| [p.x, p.y, p.z]).collect();
+        let tets: Vec<[i64; 4]> = hybrid.core_tets.iter().map(|t| t.map(|i| i as i64)).collect();
+        let (mesh, _) = TetMesh::from_arrays(&pts, &tets)?;
+        let fixed = if hybrid.core_base_nodes.is_empty() { lowest_nodes(&hybrid.core_points, 0.1) } else { hybrid.core_base_nodes.clone() };
+        let core = ModelBuilder::new(mesh, material).fixed_nodes(fixed).integrator(options.integrator).build()?;
+        let h = hybrid.spacing;
+        let particles = ParticleModelBuilder::new(hybrid.particles.clone(), hybrid.particle_mass.clone(), material, options.support_spacings * h).build()?;
+        let particle_tie = Embedding::project(&hybrid.core_points, &hybrid.core_faces, &hybrid.particle_core_face, &hybrid.particles);
+        let skin = Embedding::from_parts(&hybrid.core_faces, &hybrid.skin_face, &hybrid.skin_bary, &hybrid.skin_offset);
+        let depth = options.coupling_depth_spacings * h;
+        let coupled = particle_tie.offsets().iter().map(|o| o.norm() <= depth).collect();
+        Ok(Sim { hybrid, core, particles, particle_tie, skin, coupled, options })
+    }
+
+    /// Number of shell particles.
+    pub fn n_particles(&self) -> usize {
+        self.hybrid.particles.len()
+    }
+}
+
+/// Nodes within `fraction` of the height above the lowest point.
+fn lowest_nodes(points: &[Vec3], fraction: f64) -> Vec<usize> {
+    let lo = points.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
+    let hi = points.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
+    let cut = lo + fraction * (hi - lo);
+    (0..points.len()).filter(|&i| points[i].z <= cut).collect()
+}
