@@ -8,30 +8,12 @@
 //! padded column differs from the portable one; a stability bound that is too loose grows the
 //! energy; hourglass control of the wrong sign lets particles clump; a Neo-Hookean material
 //! silently run as St. Venant-Kirchhoff is refused instead.
-use palpate_core::material::{Damping, Elasticity};
 use palpate_core::meshfree::{self, ParticleModel, ParticleModelBuilder, ParticleState, ParticleWorkspace};
-use palpate_core::{Mat3, Material, Vec3};
+use palpate_core::{Mat3, Vec3};
 
-const SPACING: f64 = 1e-3;
-
-fn material(damped: bool) -> Material {
-    let d = if damped { Damping { phi: 0.5, psi: 0.5 } } else { Damping::NONE };
-    Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, d).unwrap()
-}
-
-/// Cubic lattice points of spacing 1 mm, `n` per side (x fastest) and their masses.
-fn lattice(n: [usize; 3]) -> (Vec<Vec3>, Vec<f64>) {
-    let mut pts = Vec::new();
-    for k in 0..n[2] {
-        for j in 0..n[1] {
-            for i in 0..n[0] {
-                pts.push(Vec3::new(i as f64, j as f64, k as f64) * SPACING);
-            }
-        }
-    }
-    let m = vec![1000.0 * SPACING.powi(3); pts.len()];
-    (pts, m)
-}
+#[path = "support/particles.rs"]
+mod particles;
+use particles::{lattice, material, SPACING};
 
 /// A cubic lattice block of `n` particles per side, spacing 1 mm, support 1.8 spacings.
 fn block(n: [usize; 3], damped: bool) -> ParticleModel {

@@ -42,6 +42,21 @@
 //! opposite on `i` (`e_ij = x_ij - F_i X_ij`): energy-consistent, momentum-conserving, zero for
 //! affine motions, and it penalises exactly the motions the gradient cannot see. `kappa` (default
 //! [`DEFAULT_HOURGLASS`]) is dimensionless.
+//!
+//! **Active set and ring.** A step moves only `state.active` (the paper's active particles, §6);
+//! the others are frozen and shape their active neighbours' `F` without carrying stress. The
+//! pair forces being equal and opposite, the forces the active particles' stresses and
+//! hourglass terms exert on the particles the step does not move (the *ring*: their inactive
+//! neighbours and the fixed active particles) are exactly the momentum that leaves the active
+//! set. With [`ParticleWorkspace::set_ring_forces`] on, a step reports them, averaged over its
+//! sub-steps ([`ParticleWorkspace::ring`], [`ParticleWorkspace::ring_forces`]), for the hybrid
+//! runtime to hand to the FEM core that moves the frozen particles; then
+//! `sum_free m (v' - v) + dt sum_ring f_r = dt sum_free (f_ext + m g)` holds to round-off.
+//!
+//! **Sub-steps.** A step runs `k` leapfrog sub-steps (eq. 33 in velocity form). Forces that
+//! depend on the state at each sub-step (tool contact, coupling springs, confinement) go through
+//! [`step_with`]'s callback, which equals running the sub-steps one per call except for round-off
+//! and the per-call overhead (see [`step_with_substeps`]).
 
 mod builder;
 pub mod kernel;
@@ -57,5 +72,5 @@ pub use kernel::Kernel;
 pub use model::ParticleModel;
 pub use pair_loop::{set_simd_enabled, simd_path};
 pub use stability::STABILITY_SAFETY;
-pub use state::{ParticleState, ParticleStepReport, ParticleWorkspace};
-pub use step::{step, step_with_substeps};
+pub use state::{ParticleState, ParticleStepReport, ParticleWorkspace, SubStep};
+pub use step::{step, step_with, step_with_substeps};

@@ -2,10 +2,10 @@
 //! the rollback of a failed step; the same shape as the FEM's [`crate::step`].
 
 use super::model::ParticleModel;
-use super::pair_loop::{self, p4};
-use super::state::{ParticleState, ParticleStepReport, ParticleWorkspace};
+use super::pair_loop::{self, p4, ExtForce};
+use super::state::{ParticleState, ParticleStepReport, ParticleWorkspace, SubStep};
 use crate::error::StepError;
-use crate::math::is_finite3;
+use crate::math::{is_finite3, Vec3};
 
 /// Advance by `dt` \[s\] with the position-Verlet scheme of eq. (33), in as many equal
 /// sub-steps as stability needs ([`ParticleModel::substeps`]), only over the active particles.
@@ -13,10 +13,14 @@ use crate::math::is_finite3;
 /// Eq. (33), `x+ = 2x - x- + dt^2 F/m`, is run in its velocity form (`v+1/2 = v-1/2 + dt F/m`,
 /// `x+ = x + dt v+1/2`: algebraically the same sequence of positions), which lets the sub-step
 /// size change between calls and gives the viscous stress a velocity. Inactive particles are
-/// frozen: they shape their active neighbours' deformation gradients but do not move.
-/// Errors leave the state unchanged.
+/// frozen: they shape their active neighbours' deformation gradients but do not move; the
+/// forces the active particles exert on them (and on fixed active particles) are reported in
+/// [`ParticleWorkspace::ring_forces`] when the workspace asks for them. Errors leave the state
+/// unchanged.
 pub fn step(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64) -> Result<ParticleStepReport, StepError> {
     if !(dt > 0.0 && dt.is_finite()) {
+        ws.ring.clear();
+        ws.ring_force.clear();
         return Err(StepError::BadTimeStep(dt));
     }
     step_with_substeps(model, state, ws, dt, model.substeps(dt))
@@ -24,7 +28,44 @@ pub fn step(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleW
 
 /// [`step`] with a caller-chosen number of sub-steps (for stability studies
 /// and benchmarks; fewer than [`ParticleModel::substeps`] may be unstable).
+///
+/// After a successful step with the ring turned on ([`ParticleWorkspace::set_ring_forces`]),
+/// [`ParticleWorkspace::ring`] and [`ParticleWorkspace::ring_forces`] give the forces the active
+/// particles exerted on the particles the step does not move.
+///
+/// **Sub-stepping from outside.** `k` calls with `(h, 1)` run the same leapfrog sequence as one
+/// call with `(k h, k)`, but are equal only to round-off, not bitwise: each call re-derives the
+/// displacements `u = x - X` from positions stored as `X + u` (one rounding per particle per call),
+/// and adds `h` to `t` `k` times. They also repeat the per-call work (validation, the neighbour
+/// scan of the active set, the ring set-up) `k` times. A caller whose forces depend on the state
+/// at every sub-step should use [`step_with`], which is exactly this function's loop.
 pub fn step_with_substeps(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize) -> Result<ParticleStepReport, StepError> {
+    advance(model, state, ws, dt, substeps, None)
+}
+
+/// [`step_with_substeps`] with external forces that the caller recomputes before each sub-step
+/// (tool contact, coupling springs, confinement: forces of the current positions and velocities).
+///
+/// Before sub-step `s`, `external(&sub, f)` is called with the state at its start ([`SubStep`]:
+/// positions, leapfrog velocities `v_{s-1/2}`, the active list, `t` and `h`) and `f`
+/// `(n_particles)` holding `state.f_ext` on the active particles; the sub-step applies `f` (plus
+/// gravity) to the free active particles, as `state.f_ext` in [`step_with_substeps`]. Entries
+/// of inactive or fixed particles are ignored; `state.f_ext` itself is not changed. A callback
+/// that leaves `f` as it found it gives bitwise the result of [`step_with_substeps`].
+///
+/// The callback must not allocate for the step to stay allocation-free. Non-finite forces it
+/// returns make the step fail (non-finite state) and leave the state unchanged.
+pub fn step_with<E>(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize, mut external: E) -> Result<ParticleStepReport, StepError>
+where
+    E: FnMut(&SubStep<'_>, &mut [Vec3]),
+{
+    advance(model, state, ws, dt, substeps, Some(&mut external))
+}
+
+fn advance(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize, external: Option<ExtForce<'_>>) -> Result<ParticleStepReport, StepError> {
+    // A ring left from an earlier step must not be mistaken for this one's if this one fails.
+    ws.ring.clear();
+    ws.ring_force.clear();
     if !(dt > 0.0 && dt.is_finite()) || substeps == 0 {
         return Err(StepError::BadTimeStep(dt));
     }
@@ -45,29 +86,78 @@ pub fn step_with_substeps(model: &ParticleModel, state: &mut ParticleState, ws: 
     }
     ws.save.clear();
     ws.save.extend(state.active.iter().map(|&i| (state.x[i], state.v[i])));
-    // Displacements of the active particles and their (possibly frozen) neighbours, and the
-    // list of those particles (each once: `mark` holds a per-call stamp).
-    ws.stamp = ws.stamp.wrapping_add(1);
-    ws.touched.clear();
-    for &i in &state.active {
-        for &j in std::iter::once(&i).chain(model.neighbours(i)) {
-            if ws.mark[j] != ws.stamp {
-                ws.mark[j] = ws.stamp;
-                ws.touched.push(j);
-                ws.u[j] = p4(&(state.x[j] - model.rest[j]));
-                ws.v[j] = p4(&state.v[j]);
-            }
-        }
-    }
+    touch(model, state, ws);
     let h = dt / substeps as f64;
-    pair_loop::run_substeps(model, state, ws, h, substeps);
+    pair_loop::run_substeps(model, state, ws, h, substeps, external);
     let bad = state.active.iter().copied().find(|&i| !is_finite3(&state.x[i]) || !is_finite3(&state.v[i]));
     if let Some(node) = bad {
         for (k, &i) in state.active.iter().enumerate() {
             (state.x[i], state.v[i]) = ws.save[k];
         }
+        ws.ring.clear();
+        ws.ring_force.clear();
         return Err(StepError::NonFinite { what: "particle position or velocity", node, time: state.t });
     }
     state.t += dt;
     Ok(ParticleStepReport { substeps, substep_dt: h })
+}
+
+/// The particles a call reads, each once (`ws.touched`), with their displacements and
+/// velocities loaded: the active particles, the ring (`ws.ring`: their inactive neighbours, then
+/// the fixed active particles), the ring's other inactive neighbours (which the ring's gather
+/// reads: they must carry `B = 0`, `gamma = 0` and a current displacement, not a stale one), and
+/// the rim (`ws.rim`: the active particles that gather reads); the last three only when the
+/// ring is on. `mark` holds per-call stamps, so nothing is cleared per particle: with the ring
+/// off, or empty, the extra cost over the old scan is one or two passes over the active list.
+fn touch(model: &ParticleModel, state: &ParticleState, ws: &mut ParticleWorkspace) {
+    let base = ws.stamp;
+    let (active, rim, ring, outer) = (base.wrapping_add(1), base.wrapping_add(2), base.wrapping_add(3), base.wrapping_add(4));
+    ws.stamp = outer;
+    ws.touched.clear();
+    ws.rim.clear();
+    let load = |ws: &mut ParticleWorkspace, j: usize| {
+        ws.touched.push(j);
+        ws.u[j] = p4(&(state.x[j] - model.rest[j]));
+        ws.v[j] = p4(&state.v[j]);
+    };
+    for &i in &state.active {
+        if ws.mark[i] != active {
+            ws.mark[i] = active;
+            load(ws, i);
+        }
+    }
+    for &i in &state.active {
+        for &j in model.neighbours(i) {
+            if ws.mark[j] != active && ws.mark[j] != ring && ws.mark[j] != rim {
+                ws.mark[j] = ring;
+                load(ws, j);
+                if ws.ring_on {
+                    ws.ring.push(j);
+                }
+            }
+        }
+    }
+    if !ws.ring_on {
+        return;
+    }
+    for &i in &state.active {
+        if model.fixed[i] && ws.mark[i] == active {
+            ws.mark[i] = rim;
+            ws.rim.push(i);
+            ws.ring.push(i);
+        }
+    }
+    for r in 0..ws.ring.len() {
+        let r = ws.ring[r];
+        for &j in model.neighbours(r) {
+            let mj = ws.mark[j];
+            if mj == active {
+                ws.mark[j] = rim;
+                ws.rim.push(j);
+            } else if mj != rim && mj != ring && mj != outer {
+                ws.mark[j] = outer;
+                load(ws, j);
+            }
+        }
+    }
 }

@@ -8,7 +8,7 @@
 //! every per-particle array has that length.
 
 use super::passes::{self, b_matrix};
-use super::{Cols, LoopCopy, P4};
+use super::{Cols, ExtForce, LoopCopy, P4};
 use crate::material::linear::{Scalar, Svk, M3};
 use crate::meshfree::{ParticleModel, ParticleState, ParticleWorkspace};
 use std::arch::x86_64::*;
@@ -29,10 +29,10 @@ impl Avx2 {
     }
 
     /// `substeps` Verlet sub-steps (see [`passes::substeps_impl`]) in this copy.
-    pub(super) fn run_substeps(self, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize) {
+    pub(super) fn run_substeps(self, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>) {
         // SAFETY: a `target_feature` function needs only that the CPU has the features, which
         // an `Avx2` proves.
-        unsafe { substeps_avx2(self, m, state, ws, h, substeps) }
+        unsafe { substeps_avx2(self, m, state, ws, h, substeps, ext) }
     }
 
     /// Forces of every particle (see [`passes::all_forces_impl`]) in this copy.
@@ -44,8 +44,8 @@ impl Avx2 {
 }
 
 #[target_feature(enable = "avx2,fma")]
-fn substeps_avx2(c: Avx2, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize) {
-    passes::substeps_impl(c, m, state, ws, h, substeps)
+fn substeps_avx2(c: Avx2, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>) {
+    passes::substeps_impl(c, m, state, ws, h, substeps, ext)
 }
 
 #[target_feature(enable = "avx2,fma")]

@@ -16,7 +16,17 @@
 //! stress and `B_i`) and pass 2 (per free active particle: gather `B_j q_ij` and the hourglass
 //! term), then the Verlet update. Both passes only read neighbour data. Frozen (inactive)
 //! neighbours have `B_j = 0`, `gamma_j = 0`: as in the scatter form, only active particles'
-//! stresses act (the paper's active set). The two forms are equal up to round-off; pairwise the
+//! stresses act (the paper's active set).
+//!
+//! ## The ring's reaction
+//! For a particle `r` that does not move (frozen, or fixed and active), pass 2's gather with
+//! `B_r = 0`, `gamma_r = 0` (frozen) or its own `B_r`, `gamma_r` (fixed) is exactly the force the
+//! active particles exert on it, the reaction that keeps the momentum balance. It is linear in
+//! the `B_j` and `u_j` of its neighbours, and `u_r` is constant over the call, so its average
+//! over the `k` sub-steps is the same gather applied to the sub-step averages of `B_j` and `u_j`:
+//! the loop adds up `B_j` and `u_j` of the rim (the active particles the ring reads: a few
+//! adds per rim particle per sub-step) and gathers the ring once per call, instead of running
+//! pass 2 on the ring at every sub-step. The two forms are equal up to round-off; pairwise the
 //! terms of `i <- j` and `j <- i` are equal and opposite, so momentum is conserved to round-off.
 //!
 //! ## SIMD
@@ -34,9 +44,12 @@
 mod avx2;
 mod passes;
 
-use super::{ParticleModel, ParticleState, ParticleWorkspace};
+use super::{ParticleModel, ParticleState, ParticleWorkspace, SubStep};
 use crate::math::Vec3;
 use std::sync::atomic::{AtomicBool, Ordering};
+
+/// The per-sub-step external-force callback of [`super::step_with`].
+pub(crate) type ExtForce<'f> = &'f mut dyn FnMut(&SubStep<'_>, &mut [Vec3]);
 
 /// A 3-vector padded to 4 lanes (the 4th lane is 0 on input and ignored on output).
 pub(crate) type P4 = [f64; 4];
@@ -62,7 +75,8 @@ pub(crate) trait LoopCopy: Copy {
     /// displacements `u` (and velocities `v` when damped); `linear`: the rest-linearised stress.
     fn stress_pass(self, m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4]>, linear: bool, b: &mut [Cols]);
     /// Pass 2 over the particles `idx`: `sink(i, f_i)` with the internal force `f_i` particle `i`
-    /// receives, from the `B` of pass 1 and `gamma` (`gamma_j`, zero for frozen particles).
+    /// receives, from the `B` of pass 1 and `gamma` (`gamma_j`, zero for frozen particles);
+    /// `sink` is called once per entry of `idx`, in its order.
     fn force_pass(self, m: &ParticleModel, idx: &[usize], u: &[P4], b: &[Cols], gamma: &[f64], sink: impl FnMut(usize, P4));
 }
 
@@ -115,7 +129,7 @@ fn avx2_copy() -> Option<avx2::Avx2> {
 }
 
 /// Run the sub-steps with the best copy this CPU supports.
-pub(crate) fn run_substeps(m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize) {
+pub(crate) fn run_substeps(m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>) {
     let n = m.n_particles();
     // The caller has already returned an error for a mismatched workspace or an out-of-range
     // active index; the passes check the lengths again (their unchecked reads rely on them).
@@ -123,9 +137,9 @@ pub(crate) fn run_substeps(m: &ParticleModel, state: &mut ParticleState, ws: &mu
     assert!(state.active.iter().all(|&i| i < n));
     #[cfg(target_arch = "x86_64")]
     if let Some(simd) = avx2_copy() {
-        return simd.run_substeps(m, state, ws, h, substeps);
+        return simd.run_substeps(m, state, ws, h, substeps, ext);
     }
-    passes::substeps_impl(Baseline, m, state, ws, h, substeps)
+    passes::substeps_impl(Baseline, m, state, ws, h, substeps, ext)
 }
 
 /// Forces of every particle with the best copy this CPU supports.

@@ -1,7 +1,7 @@
 //! The two passes of a sub-step and the Verlet update, written once for both copies of the loop
 //! (see [`super`]); the portable copy's per-particle gathers, which the AVX2 copy replaces.
 
-use super::{LoopCopy, Cols, P4};
+use super::{Cols, ExtForce, LoopCopy, P4};
 use crate::material::linear::{green_strain_of, mm, strain_rate_of, sym, Scalar, Svk, M3};
 use crate::math::Vec3;
 use crate::meshfree::{ParticleModel, ParticleState, ParticleWorkspace};
@@ -149,10 +149,11 @@ pub(super) fn all_forces_impl<C: LoopCopy>(c: C, m: &ParticleModel, u: &[P4], v:
 }
 
 /// `substeps` Verlet sub-steps of length `h` over the active particles (see
-/// [`crate::meshfree::step_with_substeps`], which validated the state and filled `ws.u`, `ws.v`
-/// and `ws.touched`).
+/// [`crate::meshfree::step_with_substeps`], which validated the state and filled `ws.u`, `ws.v`,
+/// `ws.touched`, `ws.ring` and `ws.rim`), then the ring's averaged forces into `ws.ring_force`.
+/// `ext`: the caller's per-sub-step external forces ([`crate::meshfree::step_with`]).
 #[inline(always)]
-pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize) {
+pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, mut ext: Option<ExtForce<'_>>) {
     for &i in &ws.touched {
         ws.b[i] = [[0.0; 4]; 3];
         ws.gamma[i] = 0.0;
@@ -173,9 +174,18 @@ pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut Pa
             ws.acc_ext[i] = super::p4(&(state.f_ext[i] / m.mass[i] + m.gravity));
         }
     }
+    // Sums over the sub-steps of the rim's B and displacement (for the ring's gather).
+    ws.rim_sum.clear();
+    ws.rim_sum.resize(ws.rim.len(), [[0.0; 4]; 4]);
     let damped = !m.material.is_undamped();
-    for _ in 0..substeps {
+    for s in 0..substeps {
+        if let Some(ext) = ext.as_mut() {
+            external_forces(m, state, ws, *ext, s, h);
+        }
         c.stress_pass(m, &state.active, &ws.u, if damped { Some(&ws.v) } else { None }, false, &mut ws.b);
+        if !ws.rim.is_empty() {
+            accumulate_rim(&ws.rim, &ws.b, &ws.u, &mut ws.rim_sum);
+        }
         // Forces and, in the same sweep, Verlet in velocity form (v += h a, u += h v) into the
         // other displacement buffer: this sweep still reads the current displacements of the
         // neighbours. (Velocities are read again only by the next sub-step's pass 1.)
@@ -194,5 +204,58 @@ pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut Pa
     for &i in &ws.free {
         state.v[i] = super::v3(&ws.v[i]);
         state.x[i] = m.rest[i] + super::v3(&ws.u[i]);
+    }
+    if ws.ring.is_empty() {
+        return;
+    }
+    // The ring's gather on the sub-step averages (module docs), in the scratch buffers `b` and
+    // `u_next`, which the sub-steps no longer need: the rim gets its averages; the ring and its
+    // other neighbours are frozen or fixed, with B = 0 (frozen) and a constant displacement in
+    // both buffers. (A fixed particle's displacement is constant too: it is averaged like the
+    // rest, equal to round-off.)
+    let inv = 1.0 / substeps as f64;
+    for (&i, sum) in ws.rim.iter().zip(&ws.rim_sum) {
+        let scaled = |c: &P4| [inv * c[0], inv * c[1], inv * c[2], 0.0];
+        ws.b[i] = [scaled(&sum[0]), scaled(&sum[1]), scaled(&sum[2])];
+        ws.u_next[i] = scaled(&sum[3]);
+    }
+    let out = &mut ws.ring_force;
+    out.clear();
+    c.force_pass(m, &ws.ring, &ws.u_next, &ws.b, &ws.gamma, |_, f| out.push(super::v3(&f)));
+}
+
+/// Add the rim's `B` and displacement of this sub-step to their sums (kept out of line: inlined,
+/// it slowed the whole sub-step by more than its own work, by crowding the hot passes).
+#[inline(never)]
+fn accumulate_rim(rim: &[usize], b: &[Cols], u: &[P4], sums: &mut [[P4; 4]]) {
+    for (&i, sum) in rim.iter().zip(sums) {
+        let (b, u) = (&b[i], &u[i]);
+        for l in 0..4 {
+            sum[0][l] += b[0][l];
+            sum[1][l] += b[1][l];
+            sum[2][l] += b[2][l];
+            sum[3][l] += u[l];
+        }
+    }
+}
+
+/// Before sub-step `s`: write the free active particles' positions and velocities back to the
+/// state (the callback reads them there; the first sub-step's are the state's own), ask the
+/// caller for this sub-step's external forces, and turn them into accelerations.
+#[inline(never)]
+fn external_forces(m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, ext: &mut dyn FnMut(&crate::meshfree::SubStep<'_>, &mut [Vec3]), s: usize, h: f64) {
+    if s > 0 {
+        for &i in &ws.free {
+            state.v[i] = super::v3(&ws.v[i]);
+            state.x[i] = m.rest[i] + super::v3(&ws.u[i]);
+        }
+    }
+    for &i in &state.active {
+        ws.f_sub[i] = state.f_ext[i];
+    }
+    let sub = crate::meshfree::SubStep { index: s, t: state.t + s as f64 * h, h, x: &state.x, v: &state.v, active: &state.active };
+    ext(&sub, &mut ws.f_sub);
+    for &i in &ws.free {
+        ws.acc_ext[i] = super::p4(&(ws.f_sub[i] / m.mass[i] + m.gravity));
     }
 }
