@@ -31,6 +31,7 @@ pub mod math;
 pub mod mesh;
 pub mod meshfree;
 pub mod probe;
+pub mod runtime;
 pub mod spatial;
 
 pub use error::{HybridError, LoadError, MaterialError, MeshError, ModelError, ModelFileError, SolveError, StepError};
