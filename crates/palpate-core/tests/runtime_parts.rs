@@ -178,6 +178,7 @@ fn stiffness_and_damping_helpers() {
     // test model (see default_stiffness_against_the_test_model for the measurement).
     let t = Tool::default();
     assert_eq!((t.radius, t.stiffness), (5e-3, 60.0));
+    assert_eq!(Confinement::default(), Confinement { stiffness: 60.0, reach: 3 });
 }
 
 /// The numbers behind DEFAULT_STIFFNESS (tool.rs docs): the model's particle mass, the stable

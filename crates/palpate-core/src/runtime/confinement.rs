@@ -45,6 +45,17 @@ use crate::math::Vec3;
 /// Default reach of the search \[voxels\]: a particle up to ~2 voxels outside its region finds the
 /// wall; farther ones fall back to their anchor.
 pub const DEFAULT_REACH: usize = 3;
+/// Default wall stiffness per particle \[N/m\]: twice the stiffness of one lattice cell of the
+/// tissue (`E s`: 30 kPa x 0.9 mm = 27 N/m on the synthetic ventricle), so a particle pressed
+/// outward by its neighbours' elastic forces crosses the wall by about a third of its own
+/// displacement; and, like the tool's contact spring, inside the explicit sub-step's spare
+/// stability budget `0.76 m / h^2` (63 N/m there: see [`super::tool`]). A particle pressed by
+/// the tool against the wall feels both springs (`omega h ~ 1.2` for 60 + 60 N/m): with its
+/// internal forces at their own limit too, that would exceed central differences' bound
+/// (`sqrt(1.8^2 + 1.2^2) = 2.2 > 2`); surface particles, with fewer neighbours, are far below
+/// that limit, but a tick that can press a particle against the wall should keep the sum of the
+/// two within `Tool::stiffness_for(lightest mass, sub-step)`.
+pub const DEFAULT_STIFFNESS: f64 = 60.0;
 /// Largest reach the search takes \[voxels\] (a larger `reach` is capped).
 pub const MAX_REACH: usize = 8;
 
@@ -102,6 +113,10 @@ pub struct ConfinementSum {
 /// Is voxel owner `o` an active outer triangle under the per-triangle counts `tri_count`?
 #[inline]
 fn allowed(o: u32, tri_count: &[u32]) -> bool { o < VOXEL_CORE && tri_count.get(o as usize).is_some_and(|&c| c > 0) }
+
+impl Default for Confinement {
+    fn default() -> Self { Confinement::new(DEFAULT_STIFFNESS) }
+}
 
 impl Confinement {
     /// A wall of stiffness `stiffness` \[N/m\] with the default reach.
