@@ -1,0 +1,171 @@
+//! The tool: a rigid sphere whose centre the caller sets each tick, and its penalty contact with
+//! points (active particles, skin vertices).
+//!
+//! # Penalty, not constraints
+//! A point at `x` inside the sphere of centre `c` and radius `R` has the depth
+//! `d = R - |x - c| > 0` and the outward normal `n = (x - c) / |x - c|`; the contact is the
+//! potential `U = k d^2 / 2`, whose force on the point is `-dU/dx = k d n`, plus a damping term
+//! `c_d max(0, -(v - v_tool) . n) n` that resists approach only (it is zero while the point
+//! separates, so the normal force `k d + ...` is never negative: the tool never pulls). The tool
+//! receives the equal and opposite force.
+//!
+//! Why penalty rather than constraints (the haptic choice):
+//! - **Smooth in the tool position.** The force is a continuous function of the tool centre
+//!   (`k d`, with `d` continuous); a constraint's force is a Lagrange multiplier that jumps when
+//!   the active set of constrained points changes (a point touching or leaving), and a haptic
+//!   device renders every jump as a buzz.
+//! - **Bounded rendered stiffness.** The stiffness the device must render is the tissue's in
+//!   series with the contact springs, `1 / (1 / k_tissue + 1 / (n k))` with `n` points in
+//!   contact: never above `n k`, so `k` bounds what the device must render (a constraint is an
+//!   infinitely stiff spring in that series; the device then renders the tissue's stiffness
+//!   plus whatever the solver's tolerance makes of it).
+//! - **Explicit and local.** The particles are stepped explicitly (Verlet sub-steps); a penalty
+//!   is one more force per point, allocation-free, with a known stability limit (below), while
+//!   constraints need a projection or a solve coupled across the contact set every sub-step.
+//!
+//! The cost is a small interpenetration, `d = f / (n k)` at force `f`.
+//!
+//! # Choosing the stiffness
+//! Two bounds meet:
+//! - **Stability** of an explicit sub-step `h` on the lightest contacted particle of mass `m`:
+//!   central differences are stable while the largest `omega^2 = k_total / m` satisfies
+//!   `omega h < 2`. The particle's internal forces already take `omega_int h <= 2 S`
+//!   (`S` = [`STABILITY_SAFETY`] = 0.9: the particle body's sub-step is that fraction of its
+//!   critical step), so in the worst case (the stiffest internal mode at the contacted particle,
+//!   along the normal) the contact spring may add `k <= (4 - (2 S)^2) m / h^2 = 0.76 m / h^2`:
+//!   [`Tool::stiffness_for`].
+//! - **Fidelity**: the contact springs in series with the tissue should be stiffer than the
+//!   tissue under the sphere, `k_tissue ~ 2 E* a` (Hertz: `E* = E / (1 - nu^2)`, contact radius
+//!   `a = sqrt(R d)`), about `E* R` at `d ~ R / 4`, shared by the surface particles under the
+//!   contact patch (area `~ pi R d`).
+//!
+//! Measured on the synthetic truncated ventricle of the tests (28,000 particles, 0.90 mm
+//! lattice, 7.2e-7 kg particles; tests/runtime_parts.rs prints them): myocardium (30 kPa,
+//! `nu = 0.4`) gives a stable particle sub-step of 9.3e-5 s, so `0.76 m / h^2 = 63 N/m`; and
+//! `E* R = 179 N/m` for the 5 mm sphere, over ~24 surface particles at 1.25 mm depth: ~7 N/m
+//! per point. The default [`DEFAULT_STIFFNESS`] = 60 N/m is ~8x the tissue's per point (the
+//! contact springs add ~12% compliance in series with the tissue, and the penetration is ~12% of
+//! the indentation) and inside the worst-case stability bound (`omega h = 0.85` for the contact
+//! spring alone). The bound scales with `m / h^2 ~ rho spacing^3 / h^2`, and `h ~ spacing / c`,
+//! so `~ rho c^2 spacing = (lambda + 2 mu) spacing`: stiffer tissue or a coarser lattice allows
+//! a stiffer contact. Other models and materials should take
+//! `DEFAULT_STIFFNESS.min(Tool::stiffness_for(lightest mass, sub-step))`.
+
+use crate::math::Vec3;
+use crate::meshfree::STABILITY_SAFETY;
+
+/// Default tool radius \[m\] (the 5 mm sphere).
+pub const DEFAULT_RADIUS: f64 = 5.0e-3;
+/// Default penalty stiffness per contact point \[N/m\] (see the module docs for the reason).
+pub const DEFAULT_STIFFNESS: f64 = 60.0;
+/// Default contact damping per contact point \[N s/m\]: half the critical damping
+/// `2 sqrt(k m)` of [`DEFAULT_STIFFNESS`] on a 7.2e-7 kg particle (`sqrt(60 * 7.2e-7) ~ 0.0066`;
+/// `c h / m ~ 0.85` at the 9.3e-5 s sub-step, inside explicit damping's limit of 2).
+pub const DEFAULT_DAMPING: f64 = 0.0065;
+
+/// A rigid sphere tool: radius \[m\], penalty stiffness \[N/m\] and approach damping \[N s/m\], each
+/// per contact point. Its centre and velocity are the caller's, per tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tool {
+    /// Sphere radius \[m\].
+    pub radius: f64,
+    /// Penalty stiffness per contact point \[N/m\].
+    pub stiffness: f64,
+    /// Damping against approach per contact point \[N s/m\].
+    pub damping: f64,
+}
+
+impl Default for Tool {
+    fn default() -> Self { Tool { radius: DEFAULT_RADIUS, stiffness: DEFAULT_STIFFNESS, damping: DEFAULT_DAMPING } }
+}
+
+/// The contact of one point with the tool.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointContact {
+    /// Depth `R - |x - c|` \[m\], > 0.
+    pub depth: f64,
+    /// Unit normal from the centre to the point.
+    pub normal: Vec3,
+    /// Force on the point \[N\] (the tool receives its opposite); along `normal`, never against it.
+    pub force: Vec3,
+    /// Penalty energy `k d^2 / 2` \[J\].
+    pub energy: f64,
+}
+
+/// Sums over many points ([`Tool::apply`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ContactSum {
+    /// Force on the tool \[N\] (minus the sum of the forces on the points).
+    pub force_on_tool: Vec3,
+    /// Points in contact.
+    pub count: usize,
+    /// Total penalty energy \[J\].
+    pub energy: f64,
+    /// Deepest depth \[m\] (0 without contact).
+    pub max_depth: f64,
+}
+
+impl Tool {
+    /// The largest penalty stiffness \[N/m\] an explicit sub-step `substep` \[s\] keeps stable on
+    /// a particle of mass `mass` \[kg\] whose internal forces already use the sub-step's budget
+    /// up to [`STABILITY_SAFETY`]: `(4 - (2 S)^2) mass / substep^2` (0.76 m / h^2; 0 for
+    /// non-positive or non-finite input). See the module docs.
+    pub fn stiffness_for(mass: f64, substep: f64) -> f64 {
+        let k = (4.0 - (2.0 * STABILITY_SAFETY).powi(2)) * mass / (substep * substep);
+        if mass > 0.0 && substep > 0.0 && k.is_finite() { k } else { 0.0 }
+    }
+
+    /// Damping \[N s/m\] of ratio `ratio` (1: critical) for stiffness `k` \[N/m\] on mass `mass`
+    /// \[kg\]: `2 ratio sqrt(k m)` (0 for negative or non-finite input).
+    pub fn damping_for(stiffness: f64, mass: f64, ratio: f64) -> f64 {
+        let c = 2.0 * ratio * (stiffness * mass).sqrt();
+        if c.is_finite() && c > 0.0 { c } else { 0.0 }
+    }
+
+    /// The penalty potential `k d^2 / 2` \[J\] of a point at `x` \[m\] against the tool centred at
+    /// `centre` \[m\] (0 outside contact or for non-finite input).
+    pub fn potential(&self, centre: &Vec3, x: &Vec3) -> f64 {
+        let d = self.radius - (x - centre).norm();
+        if d > 0.0 && d.is_finite() { 0.5 * self.stiffness * d * d } else { 0.0 }
+    }
+
+    /// The contact of a point at `x` \[m\] with velocity `v` \[m/s\] against the tool at `centre`
+    /// \[m\] moving with `tool_velocity` \[m/s\]; `None` outside contact, at the exact centre (no
+    /// normal) or for non-finite input.
+    #[inline]
+    pub fn contact(&self, centre: &Vec3, tool_velocity: &Vec3, x: &Vec3, v: &Vec3) -> Option<PointContact> {
+        let r = x - centre;
+        let dist = r.norm();
+        let depth = self.radius - dist;
+        if !(depth > 0.0 && dist > 0.0 && depth.is_finite()) {
+            return None;
+        }
+        let normal = r / dist;
+        let approach = -(v - tool_velocity).dot(&normal);
+        let damping = if approach > 0.0 && approach.is_finite() { self.damping * approach } else { 0.0 };
+        // Both terms are >= 0: the normal force never pulls.
+        let fn_ = self.stiffness * depth + damping;
+        Some(PointContact { depth, normal, force: fn_ * normal, energy: 0.5 * self.stiffness * depth * depth })
+    }
+
+    /// Add the contact forces of the points `which` (indices into `x`, `v` and `forces`; out of
+    /// range ones skipped) to `forces` \[N\], and return their sums (the force on the tool is
+    /// the opposite of what the points received). Allocation-free.
+    pub fn apply(&self, centre: &Vec3, tool_velocity: &Vec3, x: &[Vec3], v: &[Vec3], which: &[usize], forces: &mut [Vec3]) -> ContactSum {
+        let mut sum = ContactSum::default();
+        let n = x.len().min(v.len()).min(forces.len());
+        for &i in which {
+            if i >= n {
+                continue;
+            }
+            if let Some(c) = self.contact(centre, tool_velocity, &x[i], &v[i]) {
+                forces[i] += c.force;
+                sum.force_on_tool -= c.force;
+                sum.count += 1;
+                sum.energy += c.energy;
+                sum.max_depth = sum.max_depth.max(c.depth);
+            }
+        }
+        sum
+    }
+}
