@@ -108,6 +108,8 @@ pub enum StepError {
     ActiveOutOfRange { index: usize, n: usize },
     #[error("external force at node {node} is not finite")]
     NonFiniteForce { node: usize },
+    #[error("the tool's position is not finite")]
+    NonFiniteTool,
     #[error(transparent)]
     Solve(#[from] SolveError),
 }

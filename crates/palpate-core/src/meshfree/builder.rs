@@ -29,13 +29,14 @@ pub struct ParticleModelBuilder {
     gravity: Vec3,
     hourglass: f64,
     min_weight: f64,
+    fix_unsupported: bool,
 }
 
 impl ParticleModelBuilder {
     /// Particles at rest positions `positions` \[m\] with masses `masses` \[kg\], of `material`,
     /// interacting within the kernel support radius `support` \[m\] (typically 1.5 - 2 particle spacings).
     pub fn new(positions: Vec<Vec3>, masses: Vec<f64>, material: Material, support: f64) -> Self {
-        ParticleModelBuilder { positions, masses, material, support, kernel: Kernel::default(), fixed: vec![], gravity: Vec3::zeros(), hourglass: DEFAULT_HOURGLASS, min_weight: DEFAULT_MIN_WEIGHT }
+        ParticleModelBuilder { positions, masses, material, support, kernel: Kernel::default(), fixed: vec![], gravity: Vec3::zeros(), hourglass: DEFAULT_HOURGLASS, min_weight: DEFAULT_MIN_WEIGHT, fix_unsupported: false }
     }
     /// Kernel (default Wendland C2).
     pub fn kernel(mut self, k: Kernel) -> Self {
@@ -58,6 +59,14 @@ impl ParticleModelBuilder {
         self.min_weight = w;
         self
     }
+    /// Hold, instead of refusing, the particles whose neighbours do not span 3D (a lattice's
+    /// lone corners in a thin part of a shell): they get no stress and no hourglass term (their
+    /// deformation gradient is undefined) and are fixed, so the step never moves them
+    /// ([`ParticleModel::unsupported`] lists them). Off by default: a standalone body refuses them.
+    pub fn fix_unsupported(mut self, on: bool) -> Self {
+        self.fix_unsupported = on;
+        self
+    }
     /// Hourglass-control stiffness `kappa` \[-\] (0 disables the safeguard).
     pub fn hourglass(mut self, kappa: f64) -> Self {
         self.hourglass = kappa;
@@ -71,7 +80,7 @@ impl ParticleModelBuilder {
     /// not St. Venant-Kirchhoff (the only law of the particle hot loop for now); invalid particles,
     /// parameters, fixed indices or gravity.
     pub fn build(self) -> Result<ParticleModel, ModelError> {
-        let ParticleModelBuilder { positions: rest, masses, material, support: h, kernel, fixed, gravity, hourglass, min_weight } = self;
+        let ParticleModelBuilder { positions: rest, masses, material, support: h, kernel, fixed, gravity, hourglass, min_weight, fix_unsupported } = self;
         // The pair loop (pair_loop/, with its AVX2 copy) evaluates the St. Venant-Kirchhoff
         // stress only: refuse any other law rather than silently simulate SVK.
         if material.law() != Law::StVenantKirchhoff {
@@ -159,6 +168,7 @@ impl ParticleModelBuilder {
         let mut qsum = vec![Vec3::zeros(); n];
         let mut r_inv = vec![Mat3::zeros(); n];
         let mut hg_c = vec![0.0; n];
+        let mut unsupported = Vec::new();
         for i in 0..n {
             let (s, e) = (ptr[i], ptr[i + 1]);
             let mut a = Mat3::zeros();
@@ -174,6 +184,16 @@ impl ParticleModelBuilder {
             }
             let eig = a.symmetric_eigenvalues();
             let (lo, hi) = (eig.min(), eig.max());
+            if (e - s < 3 || !(lo > MIN_MOMENT_CONDITION * hi)) && fix_unsupported {
+                // No gradient, no stress, no hourglass term: r_inv, hg_c, g stay zero.
+                is_fixed[i] = true;
+                unsupported.push(i);
+                for p in s..e {
+                    q[p] = hw[p] * xr[p];
+                    qsum[i] += q[p];
+                }
+                continue;
+            }
             if e - s < 3 || !(lo > MIN_MOMENT_CONDITION * hi) {
                 return Err(ModelError::Particle {
                     particle: i,
@@ -216,6 +236,7 @@ impl ParticleModelBuilder {
             hg_c,
             gamma,
             fixed: is_fixed,
+            unsupported,
             gravity,
             material,
             kernel,

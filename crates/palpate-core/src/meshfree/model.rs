@@ -33,6 +33,8 @@ pub struct ParticleModel {
     pub(crate) hg_c: Vec<f64>,
     pub(crate) gamma: Vec<f64>,
     pub(crate) fixed: Vec<bool>,
+    /// Particles held because their neighbours do not span 3D (`fix_unsupported`).
+    pub(crate) unsupported: Vec<usize>,
     pub(crate) gravity: Vec3,
     pub(crate) material: Material,
     pub(crate) kernel: Kernel,
@@ -57,6 +59,11 @@ impl ParticleModel {
     pub fn neighbours(&self, i: usize) -> &[usize] { &self.nbr[self.ptr[i]..self.ptr[i + 1]] }
     /// Total number of (directed) neighbour pairs.
     pub fn n_pairs(&self) -> usize { self.nbr.len() }
+    /// Particles the builder held because their neighbours do not span 3D (empty unless
+    /// [`super::ParticleModelBuilder::fix_unsupported`]).
+    pub fn unsupported(&self) -> &[usize] {
+        &self.unsupported
+    }
     /// Fixed flags.
     pub fn fixed(&self) -> &[bool] { &self.fixed }
     /// The material.

@@ -1,7 +1,11 @@
 //! The compiled hybrid simulation ([`Sim`]): everything the tick reads and never writes, built once
 //! from a [`HybridModel`] and a [`Material`] (as [`crate::Model`] is for the FEM body).
 
+use super::confinement::Confinement;
+use super::coupling::Coupling;
 use super::embed::Embedding;
+use super::state::SimState;
+use super::tool::Tool;
 use crate::error::ModelError;
 use crate::fem::{Model, ModelBuilder};
 use crate::hybrid::HybridModel;
@@ -21,11 +25,37 @@ pub struct SimOptions {
     pub coupling_depth_spacings: f64,
     /// The core's integrator (default: the quasi-Newton backward Euler, stable at any press).
     pub integrator: Integrator,
+    /// The tool (default: a 5 mm sphere, see [`super::tool`] for the stiffness).
+    pub tool: Tool,
+    /// Ticks a region stays active after its last contact (default 100: 0.1 s at 1 kHz, so a
+    /// slide does not toggle particles every tick).
+    pub linger_ticks: u64,
+    /// Regions within the tool's radius plus this \[m\] become active (default 5 mm: a region
+    /// enters before the tool reaches it, up to a slide of 5 m/s at 1 kHz).
+    pub activation_margin: f64,
+    /// Coupling springs; `None`: [`Coupling::for_tissue`] with the material's Young's modulus,
+    /// the lattice spacing, the mean particle mass and half-critical damping.
+    pub coupling: Option<Coupling>,
+    /// Confinement wall stiffness \[N/m\] per particle; `None`: the coupling's stiffness.
+    pub confinement_stiffness: Option<f64>,
+    /// Hold the core (default true: at its base, or, for a closed wall, at its lowest nodes);
+    /// false leaves the organ free (momentum studies).
+    pub hold: bool,
 }
 
 impl Default for SimOptions {
     fn default() -> Self {
-        SimOptions { support_spacings: 1.8, coupling_depth_spacings: 1.5, integrator: Integrator::quasi_newton() }
+        SimOptions {
+            support_spacings: 1.8,
+            coupling_depth_spacings: 1.5,
+            integrator: Integrator::quasi_newton(),
+            tool: Tool::default(),
+            linger_ticks: 100,
+            activation_margin: 5e-3,
+            coupling: None,
+            confinement_stiffness: None,
+            hold: true,
+        }
     }
 }
 
@@ -45,6 +75,9 @@ pub struct Sim {
     pub skin: Embedding,
     /// Particles tied to the core by a coupling spring while active.
     pub coupled: Vec<bool>,
+    /// The coupling springs and the confinement wall, resolved from the options.
+    pub coupling: Coupling,
+    pub confinement: Confinement,
     pub options: SimOptions,
 }
 
@@ -57,20 +90,37 @@ impl Sim {
         let pts: Vec<[f64; 3]> = hybrid.core_points.iter().map(|p| [p.x, p.y, p.z]).collect();
         let tets: Vec<[i64; 4]> = hybrid.core_tets.iter().map(|t| t.map(|i| i as i64)).collect();
         let (mesh, _) = TetMesh::from_arrays(&pts, &tets)?;
-        let fixed = if hybrid.core_base_nodes.is_empty() { lowest_nodes(&hybrid.core_points, 0.1) } else { hybrid.core_base_nodes.clone() };
+        let fixed = if !options.hold {
+            vec![]
+        } else if hybrid.core_base_nodes.is_empty() { lowest_nodes(&hybrid.core_points, 0.1) } else { hybrid.core_base_nodes.clone() };
         let core = ModelBuilder::new(mesh, material).fixed_nodes(fixed).integrator(options.integrator).build()?;
         let h = hybrid.spacing;
-        let particles = ParticleModelBuilder::new(hybrid.particles.clone(), hybrid.particle_mass.clone(), material, options.support_spacings * h).build()?;
+        // A lattice leaves a few lone particles in thin parts of a shell (a base's rim); they are held
+        // (and, active, carried to the core by the ring) rather than refusing the model.
+        let particles = ParticleModelBuilder::new(hybrid.particles.clone(), hybrid.particle_mass.clone(), material, options.support_spacings * h)
+            .fix_unsupported(true)
+            .build()?;
         let particle_tie = Embedding::project(&hybrid.core_points, &hybrid.core_faces, &hybrid.particle_core_face, &hybrid.particles);
         let skin = Embedding::from_parts(&hybrid.core_faces, &hybrid.skin_face, &hybrid.skin_bary, &hybrid.skin_offset);
         let depth = options.coupling_depth_spacings * h;
-        let coupled = particle_tie.offsets().iter().map(|o| o.norm() <= depth).collect();
-        Ok(Sim { hybrid, core, particles, particle_tie, skin, coupled, options })
+        let coupled = particle_tie.offsets().iter().zip(particles.fixed()).map(|(o, &held)| o.norm() <= depth && !held).collect();
+        let mean_mass = hybrid.particle_mass.iter().sum::<f64>() / hybrid.particle_mass.len().max(1) as f64;
+        let coupling = options.coupling.unwrap_or_else(|| Coupling::for_tissue(material.young(), h, mean_mass, 0.5));
+        let confinement = Confinement::new(options.confinement_stiffness.unwrap_or(coupling.stiffness));
+        Ok(Sim { hybrid, core, particles, particle_tie, skin, coupled, coupling, confinement, options })
     }
 
     /// Number of shell particles.
     pub fn n_particles(&self) -> usize {
         self.hybrid.particles.len()
+    }
+
+    /// Every particle's position \[m\] into `out` `(n_particles)`: the active ones as simulated,
+    /// the others at their ties to the core (where they are drawn).
+    pub fn particle_positions(&self, state: &SimState, out: &mut [Vec3]) {
+        for (p, o) in out.iter_mut().enumerate() {
+            *o = if state.is_active[p] { state.particles.x[p] } else { self.particle_tie.position(p, &state.core.x) };
+        }
     }
 }
 

@@ -1,0 +1,92 @@
+//! A scripted press and slide on a built hybrid model, tick by tick:
+//! `cargo run --release --example touch -- [ventricle|ellipsoids] [depth_mm] [slide_mm]`.
+//! Prints, every 50 ticks, the tool depth, the force on the tool, the active particles and the
+//! tick time; then the tick-time percentiles.
+use palpate_core::hybrid::{build, shapes, HybridOptions};
+use palpate_core::material::{Damping, Elasticity};
+use palpate_core::mesh::generate::TruncatedEllipsoidWall;
+use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace};
+use palpate_core::{Material, Vec3};
+use std::time::Instant;
+
+fn main() {
+    let arg = |k: usize| std::env::args().nth(k);
+    let env = |k: &str| std::env::var(k).ok().and_then(|s| s.parse::<f64>().ok());
+    let which = arg(1).unwrap_or_else(|| "ventricle".into());
+    let depth_max = arg(2).and_then(|s| s.parse::<f64>().ok()).unwrap_or(5.0) * 1e-3;
+    let slide = arg(3).and_then(|s| s.parse::<f64>().ok()).unwrap_or(10.0) * 1e-3;
+    let wall = if which == "ellipsoids" {
+        shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap()
+    } else {
+        shapes::truncated_ventricle(&TruncatedEllipsoidWall { circumferential: 96, longitudinal: 24, ..Default::default() }).unwrap()
+    };
+    let m = build(&wall, &HybridOptions::default()).unwrap();
+    let mat = Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, if env("UNDAMPED").is_some() { Damping::NONE } else { Damping::from_paper(0.5, 0.5) }).unwrap();
+    let mut opts = SimOptions::default();
+    if let Some(k) = env("COUPLING_K") {
+        opts.coupling = Some(palpate_core::runtime::Coupling { stiffness: k, damping: env("COUPLING_C").unwrap_or(0.0) });
+    }
+    if let Some(m) = env("MARGIN") {
+        opts.activation_margin = m * 1e-3;
+    }
+    let sim = Sim::new(m, mat, opts).unwrap();
+    let mut st = SimState::rest(&sim);
+    let mut ws = SimWorkspace::new(&sim);
+    // The probe point: the outer vertex nearest to (x_max, 0, 20 mm); normal: radial from the axis.
+    let outer = &sim.hybrid.outer_points;
+    let target = Vec3::new(1.0, 0.0, 0.02);
+    let p = *outer.iter().filter(|q| q.x > 0.0).min_by(|a, b| ((*a - target).component_mul(&Vec3::new(0.0, 1.0, 1.0))).norm().total_cmp(&((*b - target).component_mul(&Vec3::new(0.0, 1.0, 1.0))).norm())).unwrap();
+    let n = Vec3::new(p.x, p.y, 0.0).normalize();
+    let tangent = Vec3::new(0.0, 0.0, 1.0);
+    let r = sim.options.tool.radius;
+    let dt = 1e-3;
+    let (t_press, t_hold, t_slide, t_release) = (500, 200, 1000, 300);
+    let total = t_press + t_hold + t_slide + t_release;
+    let mut times = Vec::with_capacity(total);
+    let mut actives = Vec::with_capacity(total);
+    let mut fmax: f64 = 0.0;
+    for k in 0..total {
+        let (depth, s) = if k < t_press {
+            (-2e-3 + (depth_max + 2e-3) * k as f64 / t_press as f64, 0.0)
+        } else if k < t_press + t_hold {
+            (depth_max, 0.0)
+        } else if k < t_press + t_hold + t_slide {
+            (depth_max, slide * (k - t_press - t_hold) as f64 / t_slide as f64)
+        } else {
+            (depth_max - (depth_max + 2e-3) * (k - t_press - t_hold - t_slide) as f64 / t_release as f64, slide)
+        };
+        let c = p + n * (r - depth) + tangent * s;
+        let t0 = Instant::now();
+        let rep = match tick(&sim, &mut st, &mut ws, c, dt) {
+            Ok(r) => r,
+            Err(e) => {
+                println!("tick {k}: {e}");
+                return;
+            }
+        };
+        times.push(t0.elapsed().as_secs_f64() * 1e3);
+        if rep.active > 0 {
+            actives.push(rep.active);
+        }
+        fmax = fmax.max(rep.force.norm());
+        if std::env::var("DEBUG").is_ok() && k % 5 == 0 {
+            let umax = st.particles.active.iter().map(|&i| (st.particles.x[i] - sim.hybrid.particles[i]).norm()).fold(0.0, f64::max);
+            let vmax = st.particles.active.iter().map(|&i| st.particles.v[i].norm()).fold(0.0, f64::max);
+            let ucore = st.core.x.iter().zip(&sim.hybrid.core_points).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+            let fcore = st.core.f_ext.iter().map(|f| f.norm()).fold(0.0, f64::max);
+            eprintln!("dbg {k}: active umax {umax:.3e} vmax {vmax:.3e} core umax {ucore:.3e} fcore max {fcore:.3e} confined {}", rep.confined);
+        }
+        if k % 50 == 0 || k + 1 == total {
+            println!(
+                "tick {k:5}: depth {:5.2} mm slide {:5.2} mm | force {:7.4} N (normal {:7.4}) | contacts {:3} + skin {:2} | active {:4} (+{} -{}) substeps {:2} confined {:3} | core it {} | {:.3} ms",
+                depth * 1e3, s * 1e3, rep.force.norm(), -rep.force.dot(&n), rep.particle_contacts, rep.skin_contacts, rep.active, rep.entered, rep.left, rep.substeps, rep.confined, rep.core.iterations, times[k]
+            );
+        }
+    }
+    let mut sorted = times.clone();
+    sorted.sort_by(f64::total_cmp);
+    let pct = |q: f64| sorted[((q * (sorted.len() - 1) as f64).round() as usize).min(sorted.len() - 1)];
+    let (amean, amax) = if actives.is_empty() { (0.0, 0) } else { (actives.iter().sum::<usize>() as f64 / actives.len() as f64, *actives.iter().max().unwrap()) };
+    println!("{which}: {} core tets, {} particles | tick ms mean {:.3} p50 {:.3} p99 {:.3} max {:.3} | active mean {amean:.0} max {amax} | max force {fmax:.3} N",
+        sim.core.n_tets(), sim.n_particles(), times.iter().sum::<f64>() / times.len() as f64, pct(0.5), pct(0.99), sorted[sorted.len() - 1]);
+}

@@ -1,0 +1,90 @@
+//! The mutable state of a hybrid simulation ([`SimState`]) and the scratch space of its tick
+//! ([`SimWorkspace`]), sized once so that a tick allocates nothing (as [`crate::State`] and
+//! [`crate::Workspace`] for the FEM body).
+
+use super::activation::Activation;
+use super::sim::Sim;
+use crate::fem::{State, Workspace};
+use crate::math::Vec3;
+use crate::meshfree::{ParticleState, ParticleWorkspace};
+
+/// What changes in a hybrid simulation. Positions \[m\], velocities \[m/s\], world frame.
+#[derive(Debug, Clone)]
+pub struct SimState {
+    /// The FEM core.
+    pub core: State,
+    /// Every shell particle; `particles.active` is the active set. Inactive particles' positions
+    /// are current only where the tick reads them (the ring around the active set); use
+    /// [`Sim::particle_positions`] for all of them.
+    pub particles: ParticleState,
+    /// The outer surface's vertices (the skin), after the last tick.
+    pub skin: Vec<Vec3>,
+    /// The tool's centre at the last tick \[m\] (`None` before the first).
+    pub tool: Option<Vec3>,
+    /// The active regions, with their hysteresis.
+    pub activation: Activation,
+    /// Ticks taken.
+    pub ticks: u64,
+    /// Per particle: in the active set?
+    pub(crate) is_active: Vec<bool>,
+}
+
+impl SimState {
+    /// At rest: the core and the shell at their rest positions, no particle active.
+    pub fn rest(sim: &Sim) -> SimState {
+        let mut particles = ParticleState::rest(&sim.particles);
+        particles.active.clear();
+        SimState {
+            core: State::rest(&sim.core),
+            particles,
+            skin: sim.hybrid.outer_points.clone(),
+            tool: None,
+            activation: Activation::new(&sim.hybrid, sim.options.linger_ticks),
+            ticks: 0,
+            is_active: vec![false; sim.n_particles()],
+        }
+    }
+
+    /// Simulated time \[s\].
+    pub fn time(&self) -> f64 {
+        self.core.t
+    }
+}
+
+/// Scratch space of [`super::tick`].
+#[derive(Debug, Clone)]
+pub struct SimWorkspace {
+    pub(crate) core: Workspace,
+    pub(crate) particles: ParticleWorkspace,
+    /// Forces on the core nodes summed over the sub-steps \[N\] (divided by their count).
+    pub(crate) f_core: Vec<Vec3>,
+    /// Each active particle's tie displacement this tick \[m\] (confinement's frame).
+    pub(crate) anchors: Vec<Vec3>,
+    /// Active particles' positions less their tie displacement \[m\] (per sub-step).
+    pub(crate) x_rest: Vec<Vec3>,
+    /// The confinement wall's force on each active particle (per sub-step) \[N\].
+    pub(crate) f_wall: Vec<Vec3>,
+    /// Confinement slack of each active particle this tick \[m\] (see [`super::confinement`]).
+    pub(crate) slacks: Vec<f64>,
+    /// Start-of-tick positions and velocities of the active particles (rollback).
+    pub(crate) save: Vec<(Vec3, Vec3)>,
+}
+
+impl SimWorkspace {
+    /// Scratch space for `sim`.
+    pub fn new(sim: &Sim) -> SimWorkspace {
+        let n = sim.n_particles();
+        let mut particles = ParticleWorkspace::new(&sim.particles);
+        particles.set_ring_forces(true); // the ring's reactions go to the core (momentum)
+        SimWorkspace {
+            core: Workspace::new(&sim.core),
+            particles,
+            f_core: vec![Vec3::zeros(); sim.core.n_nodes()],
+            anchors: vec![Vec3::zeros(); n],
+            x_rest: vec![Vec3::zeros(); n],
+            f_wall: vec![Vec3::zeros(); n],
+            slacks: vec![0.0; n],
+            save: Vec::with_capacity(n),
+        }
+    }
+}

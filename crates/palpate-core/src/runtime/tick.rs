@@ -1,0 +1,229 @@
+//! The one ordered tick of the hybrid model (paper §5-§7): tool in, force out.
+//!
+//! 1. **Activation** (§6): the outer vertices within the tool's radius plus a margin touch their
+//!    regions; the active set is the union of RV(p_s) over the touched regions, each lingering
+//!    a while after its last contact ([`super::activation`]). A particle that enters starts at
+//!    its tie's position and velocity (where the core and skin carried it); one that leaves
+//!    returns to its tie. The margin makes regions enter before the tool reaches them, so the
+//!    particles under the tool are already simulated when it arrives (no force jump).
+//! 2. **The ring follows the core**: the inactive neighbours of the active particles are put at
+//!    their ties; they bound the active region (their positions shape its deformation
+//!    gradients) and take its reactions.
+//! 3. **Particle sub-steps** (Verlet, as many as the shell's stability needs): before each,
+//!    the tool's penalty contact ([`super::tool`]), the coupling springs to the core faces
+//!    ([`super::coupling`]) and the confinement wall ([`super::confinement`]) on the active
+//!    particles. The tool's centre moves linearly over the tick's sub-steps.
+//! 4. **Skin contact** where no particle is active: the tool presses the skin vertices, and
+//!    their ties carry the force to the core.
+//! 5. **The core step** (the default integrator, stable at any press) under the sub-step average
+//!    of every reaction: the coupling springs', the ring's (the active particles' stresses on
+//!    their frozen neighbours, spread by the ties' weights), the skin's.
+//! 6. **The skin** follows its core faces, and over active triangles also the particles under it.
+//!
+//! Every force between two bodies is one of an equal and opposite pair and every tie spreads
+//! with weights that sum to one, so with the tool away (and no confinement push) the total
+//! linear momentum of the core and the active particles is conserved to round-off, and with the
+//! tool its change is the tool's impulse (tests/runtime.rs). A failed tick leaves the state as it
+//! was (the core and particle steps restore themselves; the tick restores what it moved).
+
+use super::sim::Sim;
+use super::state::{SimState, SimWorkspace};
+use crate::error::StepError;
+use crate::integrate::{step, StepReport};
+use crate::math::{is_finite3, Vec3};
+use crate::meshfree;
+
+/// What a tick did.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TickReport {
+    /// Force on the tool \[N\], world frame: the reaction it must render (the tissue received the
+    /// opposite), averaged over the tick.
+    pub force: Vec3,
+    /// Active particles in contact with the tool (most over the sub-steps) and skin vertices in
+    /// contact.
+    pub particle_contacts: usize,
+    pub skin_contacts: usize,
+    /// Deepest penetration of the tool \[m\].
+    pub max_depth: f64,
+    /// Active particles, and how many entered and left this tick.
+    pub active: usize,
+    pub entered: usize,
+    pub left: usize,
+    /// Particle sub-steps taken.
+    pub substeps: usize,
+    /// Particles the confinement wall pushed (most over the sub-steps).
+    pub confined: usize,
+    /// The core's step.
+    pub core: StepReport,
+}
+
+/// Advance the hybrid model by one tick of `dt` \[s\] with the tool's centre at `tool` \[m\]
+/// (world frame). Allocates nothing. Errors (a bad `dt` or tool position, a failed or
+/// non-finite step) leave `state` as it was.
+pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, dt: f64) -> Result<TickReport, StepError> {
+    if !(dt > 0.0 && dt.is_finite()) {
+        return Err(StepError::BadTimeStep(dt));
+    }
+    if !is_finite3(&tool) {
+        return Err(StepError::NonFiniteTool);
+    }
+    let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active } = state;
+    let (tie, o) = (&sim.particle_tie, &sim.options);
+    let prev = last_tool.unwrap_or(tool);
+    let tool_v = (tool - prev) / dt;
+    let mut report = TickReport::default();
+
+    // 1. Activation.
+    activation.touch_sphere(&tool, o.tool.radius, o.activation_margin, skin);
+    let sets = activation.update(*ticks);
+    for &p in sets.entered {
+        is_active[p] = true;
+    }
+    for &p in sets.left {
+        is_active[p] = false;
+    }
+    for &p in sets.entered.iter().chain(sets.left) {
+        particles.x[p] = tie.position(p, &core.x);
+        particles.v[p] = tie.interpolate(p, &core.v);
+    }
+    (report.active, report.entered, report.left) = (sets.active.len(), sets.entered.len(), sets.left.len());
+    particles.active.clear();
+    particles.active.extend_from_slice(sets.active);
+
+    // 2. The ring follows the core; the active particles' anchors for confinement.
+    for &p in &particles.active {
+        for &j in sim.particles.neighbours(p) {
+            if !is_active[j] {
+                particles.x[j] = tie.position(j, &core.x);
+                particles.v[j] = tie.interpolate(j, &core.v);
+            }
+        }
+        // The tie's displacement: confinement measures a particle in the rest frame of the
+        // core around it (the voxels are the rest configuration's).
+        ws.anchors[p] = tie.position(p, &core.x) - sim.hybrid.particles[p];
+    }
+    ws.save.clear();
+    ws.save.extend(particles.active.iter().map(|&p| (particles.x[p], particles.v[p])));
+
+    // 3. Particle sub-steps.
+    ws.f_core.iter_mut().for_each(|f| *f = Vec3::zeros());
+    let k = if particles.active.is_empty() { 1 } else { sim.particles.substeps(dt) };
+    let mut tool_force = Vec3::zeros();
+    if !particles.active.is_empty() {
+        let tri_count = activation.triangle_counts();
+        let rest = &sim.hybrid.particles;
+        sim.confinement.slacks(&sim.hybrid.grid, &sim.hybrid.voxel_owner, tri_count, rest, &particles.active, &mut ws.slacks);
+        let (f_core, shift, slacks, x_rest, f_wall) = (&mut ws.f_core, &ws.anchors, &ws.slacks, &mut ws.x_rest, &mut ws.f_wall);
+        let (hybrid, core_x, core_v, held) = (&sim.hybrid, &core.x, &core.v, sim.particles.fixed());
+        let external = |sub: &meshfree::SubStep<'_>, f: &mut [Vec3]| {
+            let c = prev + ((sub.index + 1) as f64 / k as f64) * (tool - prev);
+            for &p in sub.active {
+                f[p] = Vec3::zeros();
+            }
+            let contact = o.tool.apply(&c, &tool_v, sub.x, sub.v, sub.active, f);
+            tool_force += contact.force_on_tool;
+            report.particle_contacts = report.particle_contacts.max(contact.count);
+            report.max_depth = report.max_depth.max(contact.max_depth);
+            sim.coupling.add_forces(tie, &sim.coupled, sub.active, sub.x, sub.v, core_x, core_v, f, f_core);
+            // The wall belongs to the core's regions: its reaction goes to the core through the
+            // particle's tie (momentum stays exact).
+            for &p in sub.active {
+                x_rest[p] = sub.x[p] - shift[p];
+                f_wall[p] = Vec3::zeros();
+            }
+            let wall = sim.confinement.apply(&hybrid.grid, &hybrid.voxel_owner, tri_count, x_rest, rest, Some(slacks), sub.active, f_wall);
+            report.confined = report.confined.max(wall.pushed);
+            if wall.pushed > 0 {
+                for &p in sub.active {
+                    f[p] += f_wall[p];
+                    tie.spread(p, -f_wall[p], f_core);
+                }
+            }
+            // Held particles (lone lattice particles, see Sim::new) do not move: what acts on
+            // them is carried by the core, through their ties.
+            for &p in sub.active {
+                if held[p] {
+                    tie.spread(p, f[p], f_core);
+                }
+            }
+        };
+        meshfree::step_with(&sim.particles, particles, &mut ws.particles, dt, k, external)?;
+        report.substeps = k;
+        let inv_k = 1.0 / k as f64;
+        ws.f_core.iter_mut().for_each(|f| *f *= inv_k);
+        tool_force *= inv_k;
+        // The ring: frozen neighbours (at their ties) and held active particles (lone lattice
+        // particles, see Sim::new): both carried by the core.
+        for (&j, &f) in ws.particles.ring().iter().zip(ws.particles.ring_forces()) {
+            tie.spread(j, f, &mut ws.f_core);
+        }
+    }
+
+    // 4. Skin contact where no particle is active under the tool.
+    let reach = o.tool.radius;
+    for (v, x) in skin.iter().enumerate() {
+        if (x - tool).norm_squared() >= reach * reach || over_active(sim, activation, v) {
+            continue;
+        }
+        let vel = sim.skin.interpolate(v, &core.v);
+        if let Some(c) = o.tool.contact(&tool, &tool_v, x, &vel) {
+            sim.skin.spread(v, c.force, &mut ws.f_core);
+            tool_force -= c.force;
+            report.skin_contacts += 1;
+            report.max_depth = report.max_depth.max(c.depth);
+        }
+    }
+
+    // 5. The core.
+    core.f_ext.copy_from_slice(&ws.f_core);
+    report.core = match step(&sim.core, core, &mut ws.core, dt) {
+        Ok(r) => r,
+        Err(e) => {
+            for (&p, &(x, v)) in particles.active.iter().zip(&ws.save) {
+                (particles.x[p], particles.v[p]) = (x, v);
+            }
+            particles.t -= dt;
+            return Err(e);
+        }
+    };
+
+    // 6. The skin.
+    update_skin(sim, activation, particles, &core.x, skin);
+    report.force = tool_force;
+    *last_tool = Some(tool);
+    *ticks += 1;
+    Ok(report)
+}
+
+/// Is outer vertex `v` on a triangle with active particles?
+fn over_active(sim: &Sim, activation: &super::activation::Activation, v: usize) -> bool {
+    sim.hybrid.outer_adjacency.vertex_tris.get(v).iter().any(|&t| activation.is_triangle_active(t))
+}
+
+/// Skin vertices at their ties; over active triangles, moved by the mean displacement of the
+/// active particles under their triangles from those particles' ties (the particles' surface).
+fn update_skin(sim: &Sim, activation: &super::activation::Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], skin: &mut [Vec3]) {
+    let h = &sim.hybrid;
+    for (v, s) in skin.iter_mut().enumerate() {
+        *s = sim.skin.position(v, core_x);
+        if !over_active(sim, activation, v) {
+            continue;
+        }
+        // Weighted by the squared depth of each particle's tie (its distance from the core face):
+        // the outermost particles, those just under the skin, count most.
+        let (mut d, mut wsum) = (Vec3::zeros(), 0.0);
+        for &t in h.outer_adjacency.vertex_tris.get(v) {
+            if !activation.is_triangle_active(t) {
+                continue;
+            }
+            for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
+                let w = sim.particle_tie.offsets()[p].norm_squared();
+                d += w * (particles.x[p] - sim.particle_tie.position(p, core_x));
+                wsum += w;
+            }
+        }
+        if wsum > 0.0 {
+            *s += d / wsum;
+        }
+    }
+}
