@@ -312,3 +312,35 @@ fn particle_step_allocates_nothing_after_the_first_step() {
     }
     set_simd_enabled(true);
 }
+
+/// The hybrid tick allocates nothing either: a press on the ellipsoid model with particles
+/// entering, in contact and confined (what a wrong implementation would do: grow a list of
+/// active particles, of ring forces or of touched regions inside the tick).
+#[test]
+fn the_hybrid_tick_allocates_nothing() {
+    use palpate_core::hybrid::{build, shapes, HybridOptions};
+    use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace};
+    let m = build(&shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap(), &HybridOptions::default()).unwrap();
+    let mat = palpate_core::Material::new(palpate_core::material::Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, palpate_core::material::Damping::NONE).unwrap();
+    let sim = Sim::new(m, mat, SimOptions::default()).unwrap();
+    let mut st = SimState::rest(&sim);
+    let mut ws = SimWorkspace::new(&sim);
+    let outer = &sim.hybrid.outer_points;
+    let centroid = outer.iter().sum::<Vec3>() / outer.len() as f64;
+    let p0 = outer[outer.len() / 3];
+    let n = (p0 - centroid).normalize();
+    let r = sim.options.tool.radius;
+    let (mut active, mut contacts, mut entered) = (0, 0, 0);
+    // Warm-up: the first tick at a dt factorises the core.
+    tick(&sim, &mut st, &mut ws, p0 + n * (r + 2e-3), 1e-3).unwrap();
+    let before = allocations();
+    for k in 0..30 {
+        let rep = tick(&sim, &mut st, &mut ws, p0 + n * (r + 1e-3 - 1e-4 * k as f64), 1e-3).unwrap();
+        active = active.max(rep.active);
+        contacts += rep.particle_contacts;
+        entered += rep.entered;
+    }
+    let during = allocations() - before;
+    assert!(active > 0 && contacts > 0 && entered > 0, "the press did not exercise the tick (active {active}, contacts {contacts}, entered {entered})");
+    assert_eq!(during, 0, "the hybrid tick allocated {during} times");
+}

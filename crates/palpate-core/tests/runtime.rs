@@ -103,7 +103,8 @@ fn an_idle_shell_leaves_the_core_as_the_core_alone() {
     let tets: Vec<[i64; 4]> = sim.hybrid.core_tets.iter().map(|t| t.map(|i| i as i64)).collect();
     let (mesh, _) = TetMesh::from_arrays(&pts, &tets).unwrap();
     let fixed: Vec<usize> = (0..sim.core.n_nodes()).filter(|&i| sim.core.fixed()[i]).collect();
-    let alone = ModelBuilder::new(mesh, material()).fixed_nodes(fixed).build().unwrap();
+    // The same core, carrying the same shell mass (the idle shell rides on it).
+    let alone = ModelBuilder::new(mesh, material()).fixed_nodes(fixed).attached_masses(sim.shell_mass.clone()).build().unwrap();
     let mut s = State::rest(&alone);
     let mut w = Workspace::new(&alone);
     for ((a, b), x) in st.core.v.iter_mut().zip(s.v.iter_mut()).zip(sim.core.mesh().points()) {

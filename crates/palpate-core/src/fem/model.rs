@@ -18,13 +18,14 @@ pub struct ModelBuilder {
     fixed: Vec<usize>,
     gravity: Vec3,
     integrator: Integrator,
+    attached: Vec<f64>,
 }
 
 impl ModelBuilder {
     /// A body of `mesh` (positions in \[m\]) made of `material`; no fixed nodes, no gravity,
     /// the default integrator (quasi-Newton backward Euler).
     pub fn new(mesh: TetMesh, material: Material) -> ModelBuilder {
-        ModelBuilder { mesh, material, fixed: Vec::new(), gravity: Vec3::zeros(), integrator: Integrator::default() }
+        ModelBuilder { mesh, material, fixed: Vec::new(), gravity: Vec3::zeros(), integrator: Integrator::default(), attached: Vec::new() }
     }
     /// Nodes held at their rest position (indices into the mesh's nodes).
     pub fn fixed_nodes(mut self, nodes: Vec<usize>) -> Self {
@@ -34,6 +35,12 @@ impl ModelBuilder {
     /// Gravitational acceleration \[m/s^2\], world frame (default zero).
     pub fn gravity(mut self, g: Vec3) -> Self {
         self.gravity = g;
+        self
+    }
+    /// Masses \[kg\] `(n_nodes)` carried by the nodes besides the elements' own (e.g. a shell of
+    /// particles tied to the body, in the hybrid model); empty: none.
+    pub fn attached_masses(mut self, masses: Vec<f64>) -> Self {
+        self.attached = masses;
         self
     }
     /// Time integrator used by [`crate::step`].
@@ -46,7 +53,7 @@ impl ModelBuilder {
     /// pattern over the free nodes, the rest Jacobians, a fill-reducing order and the symbolic
     /// factorisation used by the implicit integrators and the static solve.
     pub fn build(self) -> Result<Model, ModelError> {
-        let ModelBuilder { mesh, material, fixed, gravity, integrator } = self;
+        let ModelBuilder { mesh, material, fixed, gravity, integrator, attached } = self;
         let n = mesh.n_nodes();
         if !is_finite3(&gravity) {
             return Err(ModelError::Gravity(gravity.x, gravity.y, gravity.z));
@@ -68,6 +75,15 @@ impl ModelBuilder {
             for &i in t {
                 mass[i] += 0.25 * material.density() * r.volume;
             }
+        }
+        if !attached.is_empty() {
+            if attached.len() != n {
+                return Err(ModelError::Parameter { name: "attached masses (count)", value: attached.len() as f64, reason: "one mass per node is needed" });
+            }
+            if let Some(i) = attached.iter().position(|m| !(*m >= 0.0 && m.is_finite())) {
+                return Err(ModelError::Parameter { name: "attached mass", value: attached[i], reason: "must be finite and >= 0 (kg)" });
+            }
+            mass.iter_mut().zip(&attached).for_each(|(m, a)| *m += a);
         }
 
         // Free nodes and their adjacency (through shared tets).

@@ -17,6 +17,11 @@ pub const DEFAULT_MIN_WEIGHT: f64 = 1e-3;
 /// Smallest accepted ratio of the moment matrix's eigenvalues (its conditioning).
 const MIN_MOMENT_CONDITION: f64 = 1e-4;
 
+/// With [`ParticleModelBuilder::fix_unsupported`], particles with fewer neighbours than this are
+/// held (a least-squares gradient over fewer than 6 neighbours fits them almost exactly: little
+/// stiffness against their own motion).
+pub const HELD_BELOW_NEIGHBOURS: usize = 6;
+
 /// Describes a particle body before compilation.
 #[derive(Debug, Clone)]
 pub struct ParticleModelBuilder {
@@ -184,7 +189,10 @@ impl ParticleModelBuilder {
             }
             let eig = a.symmetric_eigenvalues();
             let (lo, hi) = (eig.min(), eig.max());
-            if (e - s < 3 || !(lo > MIN_MOMENT_CONDITION * hi)) && fix_unsupported {
+            // Held when asked: too few neighbours to span 3D, or so few (under
+            // HELD_BELOW_NEIGHBOURS) that the fit passes through them exactly and the particle is
+            // barely constrained (it drifts and, pressed, diverges; seen on lattice corners).
+            if (e - s < HELD_BELOW_NEIGHBOURS || !(lo > MIN_MOMENT_CONDITION * hi)) && fix_unsupported {
                 // No gradient, no stress, no hourglass term: r_inv, hg_c, g stay zero.
                 is_fixed[i] = true;
                 unsupported.push(i);

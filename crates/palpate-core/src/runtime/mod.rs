@@ -15,16 +15,16 @@
 //!
 //! **Status (issue 12, in progress).** Each exchange is exact: the tick conserves linear
 //! momentum to round-off with the tool away and changes it by the tool's impulse with the tool
-//! (tests/runtime.rs), and an idle shell leaves the core bit-identical to the core alone. It is
-//! not yet stable under a sustained press: the core receives the shell's reactions explicitly,
-//! once per 1 ms tick, and the coupling springs of the ~50 first-layer particles over one coarse
-//! core node (`50 x E s`, ~1,300 N/m on the synthetic ventricle) exceed what a core node of
-//! ~2e-4 kg takes explicitly at 1 ms (`k dt^2 / m` ~ 7 > 4): measured, a press diverges within
-//! 0.1-0.4 s with the default springs, holds 1.8 s with springs 10x softer, and runs a whole press
-//! and slide without them (but the shell then sags). The fix is an implicit interface (the
-//! springs in the core's incremental potential, anchored at the particles' end-of-tick
-//! positions), with the inactive shell's mass added to the core nodes it rides on. Not yet
-//! exposed to Python.
+//! (tests/runtime.rs), and an idle shell leaves the core bit-identical to the same core alone.
+//! The core takes the shell's reactions explicitly, once a tick, so the coupling springs are
+//! capped by the core nodes' masses (which carry the shell's, see [`sim`]) and particles with
+//! fewer than 6 neighbours are held (~2% of a lattice shell): with these, a 5 mm press, hold,
+//! 10 mm slide and release on the synthetic ventricle runs stably (`examples/touch.rs`: 1.9 ms
+//! mean tick, 690 active particles mean). Not yet: presses deeper than ~8 mm diverge within tens
+//! of milliseconds (particles pushed through the first layer), the tick is 4x over its 0.5 ms
+//! target, the active sets exceed 600, and nothing is exposed to Python. The next step is an
+//! implicit interface (the springs in the core's incremental potential) and a contact that
+//! cannot push particles through one another.
 
 pub mod activation;
 pub mod confinement;

@@ -15,6 +15,9 @@ use crate::mesh::TetMesh;
 use crate::meshfree::{ParticleModel, ParticleModelBuilder};
 use crate::Integrator;
 
+/// The haptic tick the default coupling stiffness is chosen for \[s\].
+pub const TICK: f64 = 1e-3;
+
 /// Options of [`Sim::new`]. Lengths in metres; `Default` gives the values documented per field.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimOptions {
@@ -78,6 +81,8 @@ pub struct Sim {
     /// The coupling springs and the confinement wall, resolved from the options.
     pub coupling: Coupling,
     pub confinement: Confinement,
+    /// The shell's mass carried by each core node \[kg\] `(n_core_nodes)` (in `core`'s masses).
+    pub shell_mass: Vec<f64>,
     pub options: SimOptions,
 }
 
@@ -93,21 +98,47 @@ impl Sim {
         let fixed = if !options.hold {
             vec![]
         } else if hybrid.core_base_nodes.is_empty() { lowest_nodes(&hybrid.core_points, 0.1) } else { hybrid.core_base_nodes.clone() };
-        let core = ModelBuilder::new(mesh, material).fixed_nodes(fixed).integrator(options.integrator).build()?;
         let h = hybrid.spacing;
+        let particle_tie = Embedding::project(&hybrid.core_points, &hybrid.core_faces, &hybrid.particle_core_face, &hybrid.particles);
+        // The shell rides on the core where it is not simulated: its mass belongs to the core's
+        // inertia (spread by the ties' weights). The few active particles then count twice (a
+        // few percent of the shell), which the momentum bookkeeping does not mind: each body's
+        // momentum changes by the impulses it receives.
+        let mut attached = vec![0.0; hybrid.core_points.len()];
+        for (p, &m) in hybrid.particle_mass.iter().enumerate() {
+            let (nodes, w) = particle_tie.tie(p);
+            for k in 0..3 {
+                attached[nodes[k] as usize] += w[k] * m;
+            }
+        }
+        let core = ModelBuilder::new(mesh, material).fixed_nodes(fixed).integrator(options.integrator).attached_masses(attached.clone()).build()?;
         // A lattice leaves a few lone particles in thin parts of a shell (a base's rim); they are held
         // (and, active, carried to the core by the ring) rather than refusing the model.
         let particles = ParticleModelBuilder::new(hybrid.particles.clone(), hybrid.particle_mass.clone(), material, options.support_spacings * h)
             .fix_unsupported(true)
             .build()?;
-        let particle_tie = Embedding::project(&hybrid.core_points, &hybrid.core_faces, &hybrid.particle_core_face, &hybrid.particles);
         let skin = Embedding::from_parts(&hybrid.core_faces, &hybrid.skin_face, &hybrid.skin_bary, &hybrid.skin_offset);
         let depth = options.coupling_depth_spacings * h;
-        let coupled = particle_tie.offsets().iter().zip(particles.fixed()).map(|(o, &held)| o.norm() <= depth && !held).collect();
+        let coupled: Vec<bool> = particle_tie.offsets().iter().zip(particles.fixed()).map(|(o, &held)| o.norm() <= depth && !held).collect();
         let mean_mass = hybrid.particle_mass.iter().sum::<f64>() / hybrid.particle_mass.len().max(1) as f64;
-        let coupling = options.coupling.unwrap_or_else(|| Coupling::for_tissue(material.young(), h, mean_mass, 0.5));
+        let coupling = options.coupling.unwrap_or_else(|| {
+            // The core takes the springs' reactions explicitly, once a tick: the springs on a
+            // core node, `k sum_p w_p`, must stay below its mass over dt^2 (half of it, at the
+            // 1 ms haptic tick) or the exchange diverges; within that, as stiff as the tissue.
+            let mut weight = vec![0.0; core.n_nodes()];
+            for p in (0..coupled.len()).filter(|&p| coupled[p]) {
+                let (nodes, w) = particle_tie.tie(p);
+                (0..3).for_each(|k| weight[nodes[k] as usize] += w[k]);
+            }
+            let limit = (0..core.n_nodes())
+                .filter(|&a| weight[a] > 0.0 && !core.fixed()[a])
+                .map(|a| 0.5 * core.masses()[a] / (TICK * TICK * weight[a]))
+                .fold(f64::INFINITY, f64::min);
+            let c = Coupling::for_tissue(material.young(), h, mean_mass, 0.5);
+            if c.stiffness > limit { Coupling::for_tissue(limit / h, h, mean_mass, 0.5) } else { c }
+        });
         let confinement = Confinement::new(options.confinement_stiffness.unwrap_or(coupling.stiffness));
-        Ok(Sim { hybrid, core, particles, particle_tie, skin, coupled, coupling, confinement, options })
+        Ok(Sim { hybrid, core, particles, particle_tie, skin, coupled, coupling, confinement, shell_mass: attached, options })
     }
 
     /// Number of shell particles.
