@@ -78,8 +78,8 @@ fn main() {
         }
         if k % 50 == 0 || k + 1 == total {
             println!(
-                "tick {k:5}: depth {:5.2} mm slide {:5.2} mm | force {:7.4} N (normal {:7.4}) | contacts {:3} + skin {:2} | active {:4} (+{} -{}) substeps {:2} confined {:3} | core it {} | {:.3} ms",
-                depth * 1e3, s * 1e3, rep.force.norm(), -rep.force.dot(&n), rep.particle_contacts, rep.skin_contacts, rep.active, rep.entered, rep.left, rep.substeps, rep.confined, rep.core.iterations, times[k]
+                "tick {k:5}: depth {:5.2} mm slide {:5.2} mm | force {:7.4} N (normal {:7.4}) | contacts {:3} + skin {:2} + core {} | active {:4} (+{} -{}) substeps {:2} confined {:3} | core it {} | {:.3} ms",
+                depth * 1e3, s * 1e3, rep.force.norm(), -rep.force.dot(&n), rep.particle_contacts, rep.skin_contacts, rep.core_contacts, rep.active, rep.entered, rep.left, rep.substeps, rep.confined, rep.core.iterations, times[k]
             );
         }
     }

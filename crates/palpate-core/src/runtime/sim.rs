@@ -81,6 +81,9 @@ pub struct Sim {
     /// The coupling springs and the confinement wall, resolved from the options.
     pub coupling: Coupling,
     pub confinement: Confinement,
+    /// The core's nodes on its outer faces (where the tool meets the core once it has pushed
+    /// the shell aside).
+    pub core_surface: Vec<usize>,
     /// The shell's mass carried by each core node \[kg\] `(n_core_nodes)` (in `core`'s masses).
     pub shell_mass: Vec<f64>,
     pub options: SimOptions,
@@ -138,7 +141,10 @@ impl Sim {
             if c.stiffness > limit { Coupling::for_tissue(limit / h, h, mean_mass, 0.5) } else { c }
         });
         let confinement = Confinement::new(options.confinement_stiffness.unwrap_or(coupling.stiffness));
-        Ok(Sim { hybrid, core, particles, particle_tie, skin, coupled, coupling, confinement, shell_mass: attached, options })
+        let mut core_surface: Vec<usize> = hybrid.core_faces.iter().flatten().copied().collect();
+        core_surface.sort_unstable();
+        core_surface.dedup();
+        Ok(Sim { hybrid, core, particles, particle_tie, skin, coupled, coupling, confinement, core_surface, shell_mass: attached, options })
     }
 
     /// Number of shell particles.

@@ -43,6 +43,8 @@ pub struct TickReport {
     /// contact.
     pub particle_contacts: usize,
     pub skin_contacts: usize,
+    /// Core surface nodes in contact (a press deeper than the shell).
+    pub core_contacts: usize,
     /// Deepest penetration of the tool \[m\].
     pub max_depth: f64,
     /// Active particles, and how many entered and left this tick.
@@ -170,6 +172,16 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
             sim.skin.spread(v, c.force, &mut ws.f_core);
             tool_force -= c.force;
             report.skin_contacts += 1;
+            report.max_depth = report.max_depth.max(c.depth);
+        }
+    }
+
+    // The core's surface, where the tool has pushed the shell aside (a deep press).
+    for &a in &sim.core_surface {
+        if let Some(c) = o.tool.contact(&tool, &tool_v, &core.x[a], &core.v[a]) {
+            ws.f_core[a] += c.force;
+            tool_force -= c.force;
+            report.core_contacts += 1;
             report.max_depth = report.max_depth.max(c.depth);
         }
     }
