@@ -24,10 +24,10 @@ fn main() {
             for p in list.split(',').filter_map(|s| s.parse::<usize>().ok()).filter(|&p| p < sim.n_particles()) {
                 let ms = &sim.hybrid.particle_mass;
                 let mean = ms.iter().sum::<f64>() / ms.len() as f64;
-                println!("  particle {p}: mass {:.3e} (mean {mean:.3e}, min {:.3e}), neighbours {}, coupled {}, tie offset {:.3e} m, fixed {}",
-                    ms[p], ms.iter().cloned().fold(f64::INFINITY, f64::min), sim.particles.neighbours(p).len(), sim.coupled[p], sim.particle_tie.offsets()[p].norm(), sim.particles.fixed()[p]);
+                println!("  particle {p} at {:?}: mass {:.3e} (mean {mean:.3e}, min {:.3e}), neighbours {}, coupled {}, tie offset {:.3e} m, fixed {}",
+                    sim.hybrid.particles[p].as_slice(), ms[p], ms.iter().cloned().fold(f64::INFINITY, f64::min), sim.particles.neighbours(p).len(), sim.coupled[p], sim.particle_tie.offsets()[p].norm(), sim.particles.fixed()[p]);
             }
-            println!("  unsupported: {:?}", sim.particles.unsupported());
+            println!("  held: {}", sim.particles.unsupported().len());
         }
         let worst = (0..sim.n_particles()).map(|i| (sim.particle_tie.position(i, &sim.hybrid.core_points) - sim.hybrid.particles[i]).norm()).fold(0.0, f64::max);
         println!("{name}: build {tb:.2} s, sim {ts:.2} s: core {} tets ({} fixed), {} particles ({} coupled), stable dt {:.3e} s, substeps at 1 ms {}, regions {}, tie error {worst:.1e} m",

@@ -66,6 +66,8 @@ pub struct SimWorkspace {
     pub(crate) f_wall: Vec<Vec3>,
     /// Confinement slack of each active particle this tick \[m\] (see [`super::confinement`]).
     pub(crate) slacks: Vec<f64>,
+    /// Skin vertices over active triangles within the tool's reach this tick.
+    pub(crate) near: Vec<usize>,
     /// Start-of-tick positions and velocities of the active particles (rollback).
     pub(crate) save: Vec<(Vec3, Vec3)>,
 }
@@ -85,6 +87,7 @@ impl SimWorkspace {
             f_wall: vec![Vec3::zeros(); n],
             slacks: vec![0.0; n],
             save: Vec::with_capacity(n),
+            near: Vec::with_capacity(sim.hybrid.outer_points.len()),
         }
     }
 }

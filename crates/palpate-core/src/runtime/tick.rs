@@ -26,6 +26,7 @@
 //! tool its change is the tool's impulse (tests/runtime.rs). A failed tick leaves the state as it
 //! was (the core and particle steps restore themselves; the tick restores what it moved).
 
+use super::activation::Activation;
 use super::sim::Sim;
 use super::state::{SimState, SimWorkspace};
 use crate::error::StepError;
@@ -107,6 +108,15 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     ws.save.clear();
     ws.save.extend(particles.active.iter().map(|&p| (particles.x[p], particles.v[p])));
 
+    // The skin vertices over active triangles that the tool may reach this tick.
+    ws.near.clear();
+    let reach = o.tool.radius + (tool - prev).norm() + o.activation_margin;
+    for (v, x) in skin.iter().enumerate() {
+        if (x - tool).norm_squared() < reach * reach && over_active(sim, activation, v) {
+            ws.near.push(v);
+        }
+    }
+
     // 3. Particle sub-steps.
     ws.f_core.iter_mut().for_each(|f| *f = Vec3::zeros());
     let k = if particles.active.is_empty() { 1 } else { sim.particles.substeps(dt) };
@@ -115,17 +125,27 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         let tri_count = activation.triangle_counts();
         let rest = &sim.hybrid.particles;
         sim.confinement.slacks(&sim.hybrid.grid, &sim.hybrid.voxel_owner, tri_count, rest, &particles.active, &mut ws.slacks);
-        let (f_core, shift, slacks, x_rest, f_wall) = (&mut ws.f_core, &ws.anchors, &ws.slacks, &mut ws.x_rest, &mut ws.f_wall);
+        let (f_core, shift, slacks, x_rest, f_wall, near) = (&mut ws.f_core, &ws.anchors, &ws.slacks, &mut ws.x_rest, &mut ws.f_wall, &ws.near);
+        let act: &Activation = activation;
         let (hybrid, core_x, core_v, held) = (&sim.hybrid, &core.x, &core.v, sim.particles.fixed());
         let external = |sub: &meshfree::SubStep<'_>, f: &mut [Vec3]| {
             let c = prev + ((sub.index + 1) as f64 / k as f64) * (tool - prev);
             for &p in sub.active {
                 f[p] = Vec3::zeros();
             }
-            let contact = o.tool.apply(&c, &tool_v, sub.x, sub.v, sub.active, f);
-            tool_force += contact.force_on_tool;
-            report.particle_contacts = report.particle_contacts.max(contact.count);
-            report.max_depth = report.max_depth.max(contact.max_depth);
+            // The tool meets the skin over the active particles, and the skin carries the force
+            // to the particles under it: a surface, so the tool cannot slip between particles.
+            let mut count = 0;
+            for &v in near {
+                let Some((xs, vs, wsum)) = skin_over_particles(sim, act, v, sub.x, sub.v, core_x, core_v) else { continue };
+                if let Some(contact) = o.tool.contact(&c, &tool_v, &xs, &vs) {
+                    spread_skin_force(sim, act, v, contact.force, wsum, f, f_core);
+                    tool_force -= contact.force;
+                    count += 1;
+                    report.max_depth = report.max_depth.max(contact.depth);
+                }
+            }
+            report.particle_contacts = report.particle_contacts.max(count);
             sim.coupling.add_forces(tie, &sim.coupled, sub.active, sub.x, sub.v, core_x, core_v, f, f_core);
             // The wall belongs to the core's regions: its reaction goes to the core through the
             // particle's tie (momentum stays exact).
@@ -200,7 +220,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     };
 
     // 6. The skin.
-    update_skin(sim, activation, particles, &core.x, skin);
+    update_skin(sim, activation, particles, &core.x, &core.v, skin);
     report.force = tool_force;
     *last_tool = Some(tool);
     *ticks += 1;
@@ -208,34 +228,58 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
 }
 
 /// Is outer vertex `v` on a triangle with active particles?
-fn over_active(sim: &Sim, activation: &super::activation::Activation, v: usize) -> bool {
+fn over_active(sim: &Sim, activation: &Activation, v: usize) -> bool {
     sim.hybrid.outer_adjacency.vertex_tris.get(v).iter().any(|&t| activation.is_triangle_active(t))
 }
 
-/// Skin vertices at their ties; over active triangles, moved by the mean displacement of the
-/// active particles under their triangles from those particles' ties (the particles' surface).
-fn update_skin(sim: &Sim, activation: &super::activation::Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], skin: &mut [Vec3]) {
+/// Where outer vertex `v` is, over active triangles: its tie to the core moved by the weighted
+/// mean displacement of the active particles under its triangles from their own ties (each
+/// weighted by its tie's squared depth over the core face, so that the outermost particles, just
+/// under the skin, count most); and its velocity likewise. `None` over no active triangle.
+/// Returns the position, the velocity and the sum of the weights.
+fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], vel: &[Vec3], core_x: &[Vec3], core_v: &[Vec3]) -> Option<(Vec3, Vec3, f64)> {
     let h = &sim.hybrid;
-    for (v, s) in skin.iter_mut().enumerate() {
-        *s = sim.skin.position(v, core_x);
-        if !over_active(sim, activation, v) {
+    let tie = &sim.particle_tie;
+    let (mut d, mut dv, mut wsum) = (Vec3::zeros(), Vec3::zeros(), 0.0);
+    for &t in h.outer_adjacency.vertex_tris.get(v) {
+        if !activation.is_triangle_active(t) {
             continue;
         }
-        // Weighted by the squared depth of each particle's tie (its distance from the core face):
-        // the outermost particles, those just under the skin, count most.
-        let (mut d, mut wsum) = (Vec3::zeros(), 0.0);
-        for &t in h.outer_adjacency.vertex_tris.get(v) {
-            if !activation.is_triangle_active(t) {
-                continue;
-            }
-            for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
-                let w = sim.particle_tie.offsets()[p].norm_squared();
-                d += w * (particles.x[p] - sim.particle_tie.position(p, core_x));
-                wsum += w;
-            }
+        for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
+            let w = tie.offsets()[p].norm_squared();
+            d += w * (x[p] - tie.position(p, core_x));
+            dv += w * (vel[p] - tie.interpolate(p, core_v));
+            wsum += w;
         }
-        if wsum > 0.0 {
-            *s += d / wsum;
+    }
+    (wsum > 0.0).then(|| (sim.skin.position(v, core_x) + d / wsum, sim.skin.interpolate(v, core_v) + dv / wsum, wsum))
+}
+
+/// A force `f` on outer vertex `v` placed by [`skin_over_particles`], carried by what places it
+/// (the exact transpose): `w_p / W` of it to each particle under, the skin tie's share to the core
+/// nodes less the particles' ties' shares. The particles receive `f`, the core nothing net.
+fn spread_skin_force(sim: &Sim, activation: &Activation, v: usize, f: Vec3, wsum: f64, f_particles: &mut [Vec3], f_core: &mut [Vec3]) {
+    let h = &sim.hybrid;
+    let tie = &sim.particle_tie;
+    sim.skin.spread(v, f, f_core);
+    for &t in h.outer_adjacency.vertex_tris.get(v) {
+        if !activation.is_triangle_active(t) {
+            continue;
         }
+        for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
+            let share = (tie.offsets()[p].norm_squared() / wsum) * f;
+            f_particles[p] += share;
+            tie.spread(p, -share, f_core);
+        }
+    }
+}
+
+/// Skin vertices at their ties, or, over active triangles, carried by the particles under them.
+fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], core_v: &[Vec3], skin: &mut [Vec3]) {
+    for (v, s) in skin.iter_mut().enumerate() {
+        *s = match skin_over_particles(sim, activation, v, &particles.x, &particles.v, core_x, core_v) {
+            Some((x, _, _)) => x,
+            None => sim.skin.position(v, core_x),
+        };
     }
 }
