@@ -16,15 +16,15 @@
 //! **Status (issue 12, in progress).** Each exchange is exact: the tick conserves linear
 //! momentum to round-off with the tool away and changes it by the tool's impulse with the tool
 //! (tests/runtime.rs), and an idle shell leaves the core bit-identical to the same core alone.
-//! The core takes the shell's reactions explicitly, once a tick, so the coupling springs are
-//! capped by the core nodes' masses (which carry the shell's, see [`sim`]) and particles with
-//! fewer than 6 neighbours are held (~2% of a lattice shell): with these, a 5 mm press, hold,
-//! 10 mm slide and release on the synthetic ventricle runs stably (`examples/touch.rs`: 1.9 ms
-//! mean tick, 690 active particles mean). Not yet: presses deeper than ~8 mm diverge within tens
-//! of milliseconds (particles pushed through the first layer), the tick is 4x over its 0.5 ms
-//! target, the active sets exceed 600, and nothing is exposed to Python. The next step is an
-//! implicit interface (the springs in the core's incremental potential) and a contact that
-//! cannot push particles through one another.
+//! The tool meets the skin, which carries the force to the particles under it (a surface: the
+//! tool cannot slip between particles), and the core's surface. The core takes the shell's
+//! reactions explicitly, once a tick, so the coupling springs are capped by the core nodes'
+//! masses (which carry the shell's, see [`sim`]); particles with fewer than 6 neighbours are held
+//! (~2% of a lattice shell). Measured (`examples/touch.rs`, synthetic ventricle): 5, 10 and
+//! 15 mm presses with a 10 mm slide run stably, 1.8-3.6 ms a tick with 630-1,100 active
+//! particles. Not yet: the closed ellipsoid diverges after a 3-4 mm press (the organ, held at
+//! its lower part, tilts away and the ties' unrotated offsets distort the shell); the tick is
+//! 4-7x over its 0.5 ms target; the active sets exceed 600; nothing is exposed to Python.
 
 pub mod activation;
 pub mod confinement;

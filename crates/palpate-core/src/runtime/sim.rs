@@ -92,7 +92,7 @@ pub struct Sim {
 impl Sim {
     /// Compiles `hybrid` with `material` (the same law and constants in the core and the shell).
     /// The core is held at its base nodes; a closed wall (no base) is held at its core nodes
-    /// within 10% of the core's height from its lowest point, so that a press cannot push the
+    /// within 30% of the core's height from its lowest point, so that a press cannot push the
     /// organ away.
     pub fn new(hybrid: HybridModel, material: Material, options: SimOptions) -> Result<Sim, ModelError> {
         let pts: Vec<[f64; 3]> = hybrid.core_points.iter().map(|p| [p.x, p.y, p.z]).collect();
@@ -100,7 +100,7 @@ impl Sim {
         let (mesh, _) = TetMesh::from_arrays(&pts, &tets)?;
         let fixed = if !options.hold {
             vec![]
-        } else if hybrid.core_base_nodes.is_empty() { lowest_nodes(&hybrid.core_points, 0.1) } else { hybrid.core_base_nodes.clone() };
+        } else if hybrid.core_base_nodes.is_empty() { lowest_nodes(&hybrid.core_points, 0.3) } else { hybrid.core_base_nodes.clone() };
         let h = hybrid.spacing;
         let particle_tie = Embedding::project(&hybrid.core_points, &hybrid.core_faces, &hybrid.particle_core_face, &hybrid.particles);
         // The shell rides on the core where it is not simulated: its mass belongs to the core's
