@@ -2,7 +2,7 @@
 //! state left exactly as it was when a step fails.
 //!
 //! What a wrong implementation would do: a `Vec` built inside `step` (a scratch buffer, a
-//! `collect`, a cloned factor) is counted by the allocator below; a step that writes the state
+//! `collect`, a cloned factor) is counted by the allocator of support/alloc.rs; a step that writes the state
 //! before detecting a NaN leaves a half-updated state (caught by the bitwise comparison); an
 //! unchecked `dt` or force panics or silently produces NaN; a builder that accepts an
 //! out-of-range fixed node panics later, inside `step`.
@@ -14,48 +14,12 @@ use common::*;
 use palpate_core::mesh::generate::{base_nodes, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
 use palpate_core::meshfree;
 use palpate_core::{step, Integrator, Model, ModelBuilder, ModelError, SolveError, State, StepError, Vec3, Workspace};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 
-// ---------------------------------------------------------------------------------------------
-// A counting allocator. The count is per thread, so tests running in parallel do not disturb
-// each other (const-initialised `Cell`: no allocation and no destructor in the TLS access).
-// ---------------------------------------------------------------------------------------------
-
-struct Counting;
-
-thread_local! {
-    static ALLOCS: Cell<usize> = const { Cell::new(0) };
-}
-
-fn bump() {
-    let _ = ALLOCS.try_with(|c| c.set(c.get() + 1));
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        bump();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        bump();
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        bump();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
-fn allocations() -> usize {
-    ALLOCS.with(|c| c.get())
-}
+#[path = "support/alloc.rs"]
+mod alloc;
+#[path = "support/press.rs"]
+mod press;
+use alloc::allocations;
 
 /// A small clamped wall with damping and gravity, so every code path of the step is exercised.
 fn model(integ: Integrator) -> Model {
@@ -325,10 +289,7 @@ fn the_hybrid_tick_allocates_nothing() {
     let sim = Sim::new(m, mat, SimOptions::default()).unwrap();
     let mut st = SimState::rest(&sim);
     let mut ws = SimWorkspace::new(&sim);
-    let outer = &sim.hybrid.outer_points;
-    let centroid = outer.iter().sum::<Vec3>() / outer.len() as f64;
-    let p0 = outer[outer.len() / 3];
-    let n = (p0 - centroid).normalize();
+    let (p0, n) = press::press_point(&sim.hybrid.outer_points);
     let r = sim.options.tool.radius;
     let (mut active, mut contacts, mut entered) = (0, 0, 0);
     // Warm-up: the first tick at a dt factorises the core.

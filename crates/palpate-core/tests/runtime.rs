@@ -7,6 +7,9 @@
 //! opposite to the core; let an idle shell (no region active) push on the core (the core would
 //! no longer move as the same core simulated alone); allocate in the tick.
 
+#[path = "support/press.rs"]
+mod press;
+
 use palpate_core::hybrid::{build, shapes, HybridModel, HybridOptions};
 use palpate_core::material::{Damping, Elasticity};
 use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace};
@@ -70,10 +73,7 @@ fn with_the_tool_the_momentum_changes_by_its_impulse() {
     let sim = Sim::new(model().clone(), material(), SimOptions { hold: false, ..Default::default() }).unwrap();
     let mut st = SimState::rest(&sim);
     let mut ws = SimWorkspace::new(&sim);
-    let outer = &sim.hybrid.outer_points;
-    let centroid = outer.iter().sum::<Vec3>() / outer.len() as f64;
-    let p0 = outer[outer.len() / 3];
-    let n = (p0 - centroid).normalize();
+    let (p0, n) = press::press_point(&sim.hybrid.outer_points);
     let r = sim.options.tool.radius;
     let (mut contacts, mut checked) = (0, 0);
     for k in 0..20 {
