@@ -13,6 +13,7 @@
 //! | `meshfree.rs` | `Kernel`, `kernel_value`, `neighbours`, `simd_path`, `set_simd_enabled` (`palpate_core::meshfree::{kernel, neighbors}`) |
 //! | `particles.rs` | `ParticleBody`: the meshfree body (`palpate_core::meshfree`) |
 //! | `hybrid.rs` | `HybridModel`, `Projection`, `ventricle_surface` (`palpate_core::hybrid`) |
+//! | `hybrid_sim.rs` | `HybridSim`: the hybrid model you can touch (`palpate_core::runtime`; ticks release the GIL) |
 //!
 //! The Pythonic layer (file IO, CLI, benchmarks, `palpate.defaults`) lives in `python/palpate/`.
 
@@ -21,6 +22,7 @@ mod conv;
 mod defaults;
 mod errors;
 mod hybrid;
+mod hybrid_sim;
 mod integrator;
 mod material;
 mod mesh;
@@ -43,6 +45,7 @@ fn _palpate(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<integrator::PySolver>()?;
     m.add_class::<body::PyBody>()?;
     m.add_class::<particles::PyParticleBody>()?;
+    m.add_class::<hybrid_sim::PyHybridSim>()?;
     m.add_function(wrap_pyfunction!(mesh::ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::truncated_ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::box_mesh, m)?)?;

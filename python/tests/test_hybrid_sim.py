@@ -1,0 +1,90 @@
+"""palpate.HybridSim: the hybrid model you can touch (issue 12, in progress).
+
+What a wrong implementation would do: return a force with the tool away from the tissue, or one
+that pulls the tool in (the tissue must push back along the outward normal); leave particles
+active with no contact ever made; hold the GIL through a tick; accept a non-finite tool position
+or tool parameters.
+"""
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import palpate
+
+
+@pytest.fixture(scope="module")
+def ventricle():
+    return palpate.build_shape("ventricle")
+
+
+@pytest.fixture(scope="module")
+def material():
+    return palpate.Material(young=3e4, poisson=0.4, density=1000.0)
+
+
+def _press_point(sim):
+    s = sim.surface
+    # The outer vertex nearest to (x_max, 0, 20 mm) and its direction from the axis.
+    target = np.array([s[:, 0].max(), 0.0, 0.02])
+    p = s[np.argmin(np.linalg.norm((s - target)[:, 1:], axis=1) + 10 * (s[:, 0] < 0))]
+    n = np.array([p[0], p[1], 0.0])
+    return p, n / np.linalg.norm(n)
+
+
+def test_press_pushes_back_and_release_lets_go(ventricle, material):
+    sim = palpate.HybridSim(ventricle, material)
+    assert sim.n_particles == len(ventricle.particles) and sim.active.size == 0
+    p, n = _press_point(sim)
+    r = 0.005
+    far = sim.step(p + n * (r + 0.01))
+    assert np.all(far == 0.0) and sim.last["active"] == 0
+    forces = []
+    for k in range(300):          # 3 mm deep over 0.3 s
+        depth = 3e-3 * (k + 1) / 300
+        forces.append(sim.step(p + n * (r - depth)))
+    f = forces[-1]
+    assert np.all(np.isfinite(f))
+    assert f @ n > 0.01, f"the tissue should push the tool out along the normal, got {f} N"
+    assert 0 < sim.last["active"] <= sim.n_particles and sim.last["particle_contacts"] > 0
+    assert sim.surface.shape == (len(ventricle.outer_points), 3) and np.all(np.isfinite(sim.surface))
+    assert sim.particle_positions().shape == (sim.n_particles, 3)
+    for _ in range(300):
+        sim.step(p + n * (r + 0.01))
+    assert np.all(sim.step(p + n * (r + 0.01)) == 0.0)
+    assert sim.active.size == 0, "regions must leave once the tool is gone for longer than they linger"
+    assert sim.time == pytest.approx(0.602) and sim.ticks == 602
+
+
+def test_bad_input_is_refused(ventricle, material):
+    with pytest.raises(ValueError, match="tool_radius"):
+        palpate.HybridSim(ventricle, material, tool_radius=-1.0)
+    with pytest.raises(ValueError, match="tool_stiffness"):
+        palpate.HybridSim(ventricle, material, tool_stiffness=float("nan"))
+    sim = palpate.HybridSim(ventricle, material)
+    with pytest.raises(ValueError, match="tool_centre"):
+        sim.step([np.nan, 0.0, 0.0])
+    with pytest.raises(palpate.StepError):
+        sim.step([0.0, 0.0, 0.0], dt=0.0)
+    assert sim.ticks == 0
+
+
+def test_ticks_release_the_gil(ventricle, material):
+    sim = palpate.HybridSim(ventricle, material)
+    p, n = _press_point(sim)
+    counter = [0]
+    stop = threading.Event()
+
+    def spin():
+        while not stop.is_set():
+            counter[0] += 1
+
+    t = threading.Thread(target=spin)
+    t.start()
+    t0 = time.perf_counter()
+    for k in range(100):
+        sim.step(p + n * (0.005 - 2e-3 * k / 100))
+    stop.set()
+    t.join()
+    assert counter[0] > 1000 and time.perf_counter() > t0
