@@ -33,8 +33,9 @@ pub struct SimOptions {
     /// Ticks a region stays active after its last contact (default 100: 0.1 s at 1 kHz, so a
     /// slide does not toggle particles every tick).
     pub linger_ticks: u64,
-    /// Regions within the tool's radius plus this \[m\] become active (default 5 mm: a region
-    /// enters before the tool reaches it, up to a slide of 5 m/s at 1 kHz).
+    /// Regions within the tool's radius plus this \[m\] become active (default 1 mm: a region
+    /// enters before the tool reaches it for slides up to 1 m/s at 1 kHz, above a hand's usual
+    /// 0.5 m/s; a wider margin activates more particles: 5 mm doubled them on the ventricle).
     pub activation_margin: f64,
     /// Coupling springs; `None`: [`Coupling::for_tissue`] with the material's Young's modulus,
     /// the lattice spacing, the mean particle mass and half-critical damping.
@@ -54,7 +55,7 @@ impl Default for SimOptions {
             integrator: Integrator::quasi_newton(),
             tool: Tool::default(),
             linger_ticks: 100,
-            activation_margin: 5e-3,
+            activation_margin: 1e-3,
             coupling: None,
             confinement_stiffness: None,
             hold: true,
