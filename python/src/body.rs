@@ -72,7 +72,7 @@ fn py_load(n: usize, nodes: Vec<usize>, total_force: &Bound<'_, PyAny>, ramp_tim
     if !(ramp_time >= 0.0 && ramp_time.is_finite()) {
         return Err(PyValueError::new_err(format!("ramp_time = {ramp_time} s must be finite and >= 0")));
     }
-    ProbeLoad::new(n, nodes, total, Ramp { start, duration: ramp_time }).map_err(|e| PyValueError::new_err(e.to_string()))
+    ProbeLoad::new(n, nodes, total, Ramp { start, duration: ramp_time }).map_err(|e| PyValueError::new_err(format!("nodes: {e}")))
 }
 
 impl PyBody {
@@ -346,9 +346,6 @@ impl PyBody {
         let this = &mut *slf;
         let n = this.model.n_nodes();
         let loaded = conv::node_indices(nodes, "nodes", n)?;
-        if loaded.is_empty() {
-            return Err(PyValueError::new_err("nodes: at least one loaded node is needed"));
-        }
         let load = py_load(n, loaded, total_force, ramp_time, this.state.t)?;
         this.run_timed(py, &[load], steps, dt, stable_limit, max_wall_s)
     }

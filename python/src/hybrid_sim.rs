@@ -68,8 +68,10 @@ impl PyHybridSim {
     }
 
     /// One tick of ``dt`` [s] with the tool's centre at ``tool_centre`` (3,) [m]; returns the
-    /// force on the tool (3,) [N] (what a device renders). Raises ``StepError`` on a bad input
-    /// or a failed tick (the state is then left as it was).
+    /// force on the tool (3,) [N] (what a device renders). Raises ``ValueError`` for a
+    /// malformed or non-finite position and ``StepError`` for a bad ``dt`` or a failed tick (the
+    /// core and particles' motion are then left as they were; the activation keeps the tick's
+    /// update).
     #[pyo3(signature = (tool_centre, dt = 1e-3))]
     fn step<'py>(&mut self, py: Python<'py>, tool_centre: &Bound<'py, PyAny>, dt: f64) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let c = conv::vec3(tool_centre, "tool_centre")?;
@@ -79,8 +81,8 @@ impl PyHybridSim {
         Ok(conv::vec3_to_py(py, r.force))
     }
 
-    /// The last tick's statistics: ``force`` (3,) [N], ``particle_contacts``, ``skin_contacts``,
-    /// ``core_contacts``, ``max_depth_m``, ``active``, ``entered``, ``left``, ``substeps``,
+    /// The last tick's statistics: ``force`` (3,) [N], ``particle_contacts`` (skin vertices in
+    /// contact over active particles), ``skin_contacts`` (over the core alone), ``core_contacts``, ``max_depth_m``, ``active``, ``entered``, ``left``, ``substeps``,
     /// ``confined``, ``core_iterations``.
     #[getter]
     fn last<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {

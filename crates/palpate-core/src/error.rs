@@ -165,7 +165,7 @@ pub enum ModelFileError {
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
 pub enum LoadError {
-    #[error("a load needs at least one node")]
+    #[error("at least one loaded node is needed")]
     NoNodes,
     #[error("loaded node {index}: index {node} out of range (body has {n_nodes} nodes)")]
     NodeOutOfRange { index: usize, node: usize, n_nodes: usize },

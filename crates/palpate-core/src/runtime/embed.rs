@@ -91,6 +91,16 @@ impl Embedding {
         }
     }
 
+    /// Adds a scalar `s` carried by point `i` (a mass, a spring's weight) to the core nodes'
+    /// `out`, shared by the tie's weights.
+    #[inline]
+    pub fn spread_scalar(&self, i: usize, s: f64, out: &mut [f64]) {
+        let (n, w) = (self.nodes[i], self.weights[i]);
+        for k in 0..3 {
+            out[n[k] as usize] += w[k] * s;
+        }
+    }
+
     /// The rest offsets \[m\].
     pub fn offsets(&self) -> &[Vec3] {
         &self.offset

@@ -110,10 +110,7 @@ impl Sim {
         // momentum changes by the impulses it receives.
         let mut attached = vec![0.0; hybrid.core_points.len()];
         for (p, &m) in hybrid.particle_mass.iter().enumerate() {
-            let (nodes, w) = particle_tie.tie(p);
-            for k in 0..3 {
-                attached[nodes[k] as usize] += w[k] * m;
-            }
+            particle_tie.spread_scalar(p, m, &mut attached);
         }
         let core = ModelBuilder::new(mesh, material).fixed_nodes(fixed).integrator(options.integrator).attached_masses(attached.clone()).build()?;
         // A lattice leaves a few lone particles in thin parts of a shell (a base's rim); they are held
@@ -131,8 +128,7 @@ impl Sim {
             // 1 ms haptic tick) or the exchange diverges; within that, as stiff as the tissue.
             let mut weight = vec![0.0; core.n_nodes()];
             for p in (0..coupled.len()).filter(|&p| coupled[p]) {
-                let (nodes, w) = particle_tie.tie(p);
-                (0..3).for_each(|k| weight[nodes[k] as usize] += w[k]);
+                particle_tie.spread_scalar(p, 1.0, &mut weight);
             }
             let limit = (0..core.n_nodes())
                 .filter(|&a| weight[a] > 0.0 && !core.fixed()[a])

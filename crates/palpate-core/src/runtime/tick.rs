@@ -23,8 +23,8 @@
 //! Every force between two bodies is one of an equal and opposite pair and every tie spreads
 //! with weights that sum to one, so with the tool away (and no confinement push) the total
 //! linear momentum of the core and the active particles is conserved to round-off, and with the
-//! tool its change is the tool's impulse (tests/runtime.rs). A failed tick leaves the state as it
-//! was (the core and particle steps restore themselves; the tick restores what it moved).
+//! tool its change is the tool's impulse (tests/runtime.rs). A failed tick leaves the core and the
+//! particles' motion as they were (see [`tick`]).
 
 use super::activation::Activation;
 use super::sim::Sim;
@@ -40,8 +40,8 @@ pub struct TickReport {
     /// Force on the tool \[N\], world frame: the reaction it must render (the tissue received the
     /// opposite), averaged over the tick.
     pub force: Vec3,
-    /// Active particles in contact with the tool (most over the sub-steps) and skin vertices in
-    /// contact.
+    /// Skin vertices in contact over active particles (most over the sub-steps; the particles
+    /// under them carry the force), and over the core alone.
     pub particle_contacts: usize,
     pub skin_contacts: usize,
     /// Core surface nodes in contact (a press deeper than the shell).
@@ -61,8 +61,10 @@ pub struct TickReport {
 }
 
 /// Advance the hybrid model by one tick of `dt` \[s\] with the tool's centre at `tool` \[m\]
-/// (world frame). Allocates nothing. Errors (a bad `dt` or tool position, a failed or
-/// non-finite step) leave `state` as it was.
+/// (world frame). Allocates nothing. A bad `dt` or tool position changes nothing; a failed or
+/// non-finite particle or core step leaves the core and the particles' motion as they were at
+/// the start of the tick, but the activation keeps this tick's update (the regions the tool
+/// touched stay active, their particles at their ties).
 pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, dt: f64) -> Result<TickReport, StepError> {
     if !(dt > 0.0 && dt.is_finite()) {
         return Err(StepError::BadTimeStep(dt));
@@ -119,9 +121,9 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
 
     // 3. Particle sub-steps.
     ws.f_core.iter_mut().for_each(|f| *f = Vec3::zeros());
-    let k = if particles.active.is_empty() { 1 } else { sim.particles.substeps(dt) };
     let mut tool_force = Vec3::zeros();
     if !particles.active.is_empty() {
+        let k = sim.particles.substeps(dt);
         let tri_count = activation.triangle_counts();
         let rest = &sim.hybrid.particles;
         sim.confinement.slacks(&sim.hybrid.grid, &sim.hybrid.voxel_owner, tri_count, rest, &particles.active, &mut ws.slacks);
