@@ -42,6 +42,11 @@ pub struct SimOptions {
     pub coupling: Option<Coupling>,
     /// Confinement wall stiffness \[N/m\] per particle; `None`: the coupling's stiffness.
     pub confinement_stiffness: Option<f64>,
+    /// The most the simulated tool moves in one tick \[m\] (default 0.5 mm: 0.5 m/s at 1 kHz). A
+    /// device that jumps (a dropped packet, a stall and a resume, a jab) is followed over several
+    /// ticks by the simulated tool, whose force the device renders: the shell's explicit
+    /// sub-steps cannot take a sphere appearing millimetres deep in one tick.
+    pub max_tool_step: f64,
     /// Hold the core (default true: at its base, or, for a closed wall, at its lowest nodes);
     /// false leaves the organ free (momentum studies).
     pub hold: bool,
@@ -58,6 +63,7 @@ impl Default for SimOptions {
             activation_margin: 1e-3,
             coupling: None,
             confinement_stiffness: None,
+            max_tool_step: 5e-4,
             hold: true,
         }
     }

@@ -19,7 +19,8 @@ pub struct SimState {
     pub particles: ParticleState,
     /// The outer surface's vertices (the skin), after the last tick.
     pub skin: Vec<Vec3>,
-    /// The tool's centre at the last tick \[m\] (`None` before the first).
+    /// The simulated tool's centre after the last tick \[m\] (`None` before the first): the
+    /// device's position, followed at a bounded speed ([`super::SimOptions::max_tool_step`]).
     pub tool: Option<Vec3>,
     /// The active regions, with their hysteresis.
     pub activation: Activation,

@@ -60,8 +60,9 @@ pub struct TickReport {
     pub core: StepReport,
 }
 
-/// Advance the hybrid model by one tick of `dt` \[s\] with the tool's centre at `tool` \[m\]
-/// (world frame). Allocates nothing. A bad `dt` or tool position changes nothing; a failed or
+/// Advance the hybrid model by one tick of `dt` \[s\] with the device's tool centre at `tool`
+/// \[m\] (world frame; the simulated tool moves toward it by at most
+/// [`super::SimOptions::max_tool_step`], and [`SimState::tool`] says where it is). Allocates nothing. A bad `dt` or tool position changes nothing; a failed or
 /// non-finite particle or core step leaves the core and the particles' motion as they were at
 /// the start of the tick, but the activation keeps this tick's update (the regions the tool
 /// touched stay active, their particles at their ties).
@@ -75,6 +76,8 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active } = state;
     let (tie, o) = (&sim.particle_tie, &sim.options);
     let prev = last_tool.unwrap_or(tool);
+    // The simulated tool follows the device at most `max_tool_step` a tick (SimOptions).
+    let tool = prev + (tool - prev).cap_magnitude(o.max_tool_step);
     let tool_v = (tool - prev) / dt;
     let mut report = TickReport::default();
 

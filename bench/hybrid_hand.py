@@ -1,0 +1,48 @@
+"""The hybrid tick under the worst a hand gives (issue 12, in progress): a fast slide, a device
+that stalls then jumps, a jab, and presses to 10 mm at falling speeds, on the synthetic ventricle
+(undamped material, 5 mm tool). Prints, per scenario, whether every tick stayed finite, the
+largest force and the p99 tick time, or the tick where it stopped and why.
+
+    .venv/bin/python bench/hybrid_hand.py
+"""
+import time
+
+import numpy as np
+
+import palpate
+
+
+def main():
+    m = palpate.build_shape("ventricle")
+    mat = palpate.Material(young=3e4, poisson=0.4, density=1000.0)
+
+    def run(name, path):
+        sim = palpate.HybridSim(m, mat)
+        s = sim.surface
+        target = np.array([s[:, 0].max(), 0.0, 0.02])
+        p = s[np.argmin(np.linalg.norm((s - target)[:, 1:], axis=1) + 10 * (s[:, 0] < 0))]
+        n = np.array([p[0], p[1], 0.0])
+        n /= np.linalg.norm(n)
+        t = np.cross(n, [0, 0, 1.0])
+        fmax, times = 0.0, []
+        for k, (depth, slide) in enumerate(path):
+            t0 = time.perf_counter()
+            try:
+                f = sim.step(p + n * (0.005 - depth) + t * slide)
+            except palpate.StepError as e:
+                print(f"{name}: stopped at tick {k}: {e}")
+                return
+            times.append(time.perf_counter() - t0)
+            fmax = max(fmax, float(np.linalg.norm(f)))
+        print(f"{name}: {len(path)} ticks finite, max force {fmax:.3f} N, tick p99 {np.percentile(times, 99) * 1e3:.2f} ms")
+
+    ramp = [(3e-3 * min(1, (k + 1) / 200), 0.0) for k in range(300)]
+    run("fast slide 0.5 m/s at 3 mm", ramp + [(3e-3, 5e-4 * (k + 1)) for k in range(40)] + [(3e-3, 0.02)] * 100)
+    run("stall 50 ticks then a 5 mm jump", ramp + [(3e-3, 0.0)] * 50 + [(8e-3, 0.0)] * 200)
+    run("jab 10 mm in 10 ms", [(1e-3 * (k + 1), 0.0) for k in range(10)] + [(10e-3, 0.0)] * 300)
+    for v in [0.2e-3, 0.05e-3]:
+        run(f"press to 10 mm at {v * 1e3:.2f} m/s", [(v * (k + 1), 0.0) for k in range(int(10e-3 / v))] + [(10e-3, 0.0)] * 100)
+
+
+if __name__ == "__main__":
+    main()
