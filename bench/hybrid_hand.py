@@ -5,6 +5,7 @@ largest force and the p99 tick time, or the tick where it stopped and why.
 
     .venv/bin/python bench/hybrid_hand.py
 """
+import os
 import time
 
 import numpy as np
@@ -14,7 +15,9 @@ import palpate
 
 def main():
     m = palpate.build_shape("ventricle")
-    mat = palpate.Material(young=3e4, poisson=0.4, density=1000.0)
+    # PHI=0.5 python bench/hybrid_hand.py: the same with the paper's viscosity (phi = psi [Pa s]).
+    damp = float(os.environ.get("PHI", "0"))
+    mat = palpate.Material(young=3e4, poisson=0.4, density=1000.0, phi=damp, psi=damp)
 
     def run(name, path):
         sim = palpate.HybridSim(m, mat)

@@ -26,6 +26,12 @@ fn main() {
     if let Some(k) = env("COUPLING_K") {
         opts.coupling = Some(palpate_core::runtime::Coupling { stiffness: k, damping: env("COUPLING_C").unwrap_or(0.0) });
     }
+    if let Some(k) = env("TOOL_K") {
+        opts.tool.stiffness = k;
+    }
+    if let Some(c) = env("TOOL_C") {
+        opts.tool.damping = c;
+    }
     if let Some(m) = env("MARGIN") {
         opts.activation_margin = m * 1e-3;
     }
@@ -74,6 +80,9 @@ fn main() {
             let vmax = st.particles.active.iter().map(|&i| st.particles.v[i].norm()).fold(0.0, f64::max);
             let ucore = st.core.x.iter().zip(&sim.hybrid.core_points).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
             let fcore = st.core.f_ext.iter().map(|f| f.norm()).fold(0.0, f64::max);
+            let (iv, _) = st.particles.active.iter().map(|&i| (i, st.particles.v[i].norm())).fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
+            let off = (st.particles.x[iv] - sim.particle_tie.position(iv, &st.core.x)).norm();
+            eprintln!("   vmax particle {iv}: coupled {} held {} nbrs {} tool dist {:.2e} tie off {:.2e} depth {:.2e}", sim.coupled[iv], sim.particles.fixed()[iv], sim.particles.neighbours(iv).len(), (st.particles.x[iv]-c).norm(), off, sim.particle_tie.offsets()[iv].norm());
             eprintln!("dbg {k}: active umax {umax:.3e} vmax {vmax:.3e} core umax {ucore:.3e} fcore max {fcore:.3e} confined {}", rep.confined);
         }
         if k % 50 == 0 || k + 1 == total {

@@ -252,6 +252,7 @@ impl ParticleModelBuilder {
             hourglass,
             stable_dt: 0.0,
             omega_max: 0.0,
+            damping_max: 0.0,
         };
         model.compute_stable_dt();
         Ok(model)

@@ -42,6 +42,7 @@ pub struct ParticleModel {
     pub(crate) hourglass: f64,
     pub(crate) stable_dt: f64,
     pub(crate) omega_max: f64,
+    pub(crate) damping_max: f64,
 }
 
 impl ParticleModel {
@@ -79,6 +80,9 @@ impl ParticleModel {
     pub fn stable_dt(&self) -> f64 { self.stable_dt }
     /// Largest angular eigenfrequency of the rest-linearised, undamped system \[rad/s\].
     pub fn omega_max(&self) -> f64 { self.omega_max }
+    /// Largest eigenvalue of the rest-linearised `M^-1 D` (the viscous stress's rate) \[1/s\]; 0
+    /// for an undamped material.
+    pub fn damping_max(&self) -> f64 { self.damping_max }
     /// Sub-steps that [`super::step`] takes for a caller step `dt` \[s\].
     pub fn substeps(&self, dt: f64) -> usize { (dt / self.stable_dt).ceil().max(1.0) as usize }
 

@@ -65,6 +65,7 @@ impl ParticleModel {
         let k_max = 1.02 * self.max_eigenvalue(false);
         let d_max = if self.material.is_undamped() { 0.0 } else { 1.02 * self.max_eigenvalue(true) };
         self.omega_max = k_max.sqrt();
+        self.damping_max = d_max;
         // Central differences with damping: dt <= 2/omega (sqrt(1 + zeta^2) - zeta), zeta = d/(2 omega);
         // with velocity-lagged damping alone, dt <= 2/d.
         let dt = if self.omega_max > 0.0 {

@@ -10,6 +10,7 @@
 //!   regions (the paper's B(p_s) gradient field, computed locally);
 //! - [`coupling`]: damped springs between the first-layer active particles and their core faces,
 //!   momentum-exact (where and why this departs from the paper: see the module);
+//! - [`stability`]: how many particle sub-steps a tick needs (stretch, springs, contact);
 //! - [`sim`], [`state`]: the compiled simulation, its state and workspace;
 //! - [`tick`]: the one ordered tick, tool in, force out.
 //!
@@ -31,6 +32,7 @@ pub mod confinement;
 pub mod coupling;
 pub mod embed;
 pub mod sim;
+pub mod stability;
 pub mod state;
 pub mod tick;
 pub mod tool;
@@ -40,6 +42,7 @@ pub use confinement::{Confinement, ConfinementSum, Placement, Push};
 pub use coupling::Coupling;
 pub use embed::Embedding;
 pub use sim::{Sim, SimOptions};
+pub use stability::Shell;
 pub use state::{SimState, SimWorkspace};
 pub use tick::{tick, TickReport};
 pub use tool::{ContactSum, PointContact, Tool};

@@ -4,6 +4,7 @@
 use super::confinement::Confinement;
 use super::coupling::Coupling;
 use super::embed::Embedding;
+use super::stability::Shell;
 use super::state::SimState;
 use super::tool::Tool;
 use crate::error::ModelError;
@@ -47,6 +48,10 @@ pub struct SimOptions {
     /// ticks by the simulated tool, whose force the device renders: the shell's explicit
     /// sub-steps cannot take a sphere appearing millimetres deep in one tick.
     pub max_tool_step: f64,
+    /// The most particle sub-steps a tick takes (default 64; [`super::stability`] sets the count
+    /// from the shell's stretch and springs, ~12 at rest on the ventricle: a tick that needs more
+    /// runs late rather than diverge).
+    pub max_substeps: usize,
     /// Hold the core (default true: at its base, or, for a closed wall, at its lowest nodes);
     /// false leaves the organ free (momentum studies).
     pub hold: bool,
@@ -64,6 +69,7 @@ impl Default for SimOptions {
             coupling: None,
             confinement_stiffness: None,
             max_tool_step: 5e-4,
+            max_substeps: 64,
             hold: true,
         }
     }
@@ -88,6 +94,8 @@ pub struct Sim {
     /// The coupling springs and the confinement wall, resolved from the options.
     pub coupling: Coupling,
     pub confinement: Confinement,
+    /// The shell's stability data (the sub-step count of a tick, see [`super::stability`]).
+    pub shell: Shell,
     /// The core's nodes on its outer faces (where the tool meets the core once it has pushed
     /// the shell aside).
     pub core_surface: Vec<usize>,
@@ -144,10 +152,11 @@ impl Sim {
             if c.stiffness > limit { Coupling::for_tissue(limit / h, h, mean_mass, 0.5) } else { c }
         });
         let confinement = Confinement::new(options.confinement_stiffness.unwrap_or(coupling.stiffness));
+        let shell = Shell::new(&particles, &coupled, &coupling, &confinement);
         let mut core_surface: Vec<usize> = hybrid.core_faces.iter().flatten().copied().collect();
         core_surface.sort_unstable();
         core_surface.dedup();
-        Ok(Sim { hybrid, core, particles, particle_tie, skin, coupled, coupling, confinement, core_surface, shell_mass: attached, options })
+        Ok(Sim { hybrid, core, particles, particle_tie, skin, coupled, coupling, confinement, shell, core_surface, shell_mass: attached, options })
     }
 
     /// Number of shell particles.

@@ -71,6 +71,9 @@ pub struct SimWorkspace {
     pub(crate) near: Vec<usize>,
     /// Start-of-tick positions and velocities of the active particles (rollback).
     pub(crate) save: Vec<(Vec3, Vec3)>,
+    /// Per particle, the tool contact's Gershgorin row sum `sum_v w_p / (W_v m_p)` \[1/kg\]
+    /// (zero outside a tick).
+    pub(crate) contact_share: Vec<f64>,
 }
 
 impl SimWorkspace {
@@ -89,6 +92,7 @@ impl SimWorkspace {
             slacks: vec![0.0; n],
             save: Vec::with_capacity(n),
             near: Vec::with_capacity(sim.hybrid.outer_points.len()),
+            contact_share: vec![0.0; n],
         }
     }
 }

@@ -33,6 +33,7 @@ use crate::error::StepError;
 use crate::integrate::{step, StepReport};
 use crate::math::{is_finite3, Vec3};
 use crate::meshfree;
+use super::stability::stretch_bound;
 
 /// What a tick did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -126,7 +127,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     ws.f_core.iter_mut().for_each(|f| *f = Vec3::zeros());
     let mut tool_force = Vec3::zeros();
     if !particles.active.is_empty() {
-        let k = sim.particles.substeps(dt);
+        let k = substeps(sim, activation, particles, ws, dt);
         let tri_count = activation.triangle_counts();
         let rest = &sim.hybrid.particles;
         sim.confinement.slacks(&sim.hybrid.grid, &sim.hybrid.voxel_owner, tri_count, rest, &particles.active, &mut ws.slacks);
@@ -230,6 +231,35 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     *last_tool = Some(tool);
     *ticks += 1;
     Ok(report)
+}
+
+/// The sub-steps this tick needs ([`super::stability`]): the active particles' largest stretch at
+/// the start of the tick, and the tool's largest share of a particle over the skin vertices
+/// within its reach (`ws.near`).
+fn substeps(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, ws: &mut SimWorkspace, dt: f64) -> usize {
+    let held = sim.particles.fixed();
+    let stretch2 = particles.active.iter().filter(|&&p| !held[p]).map(|&p| stretch_bound(&sim.particles.deformation_gradient(p, &particles.x))).fold(1.0, f64::max);
+    let (h, tie, mass) = (&sim.hybrid, &sim.particle_tie, sim.particles.masses());
+    let mut top = 0.0f64;
+    for pass in 0..2 {
+        for &v in &ws.near {
+            let tris = h.outer_adjacency.vertex_tris.get(v).iter().filter(|&&t| activation.is_triangle_active(t));
+            let under = tris.flat_map(|&t| h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize);
+            if pass == 1 {
+                under.for_each(|p| ws.contact_share[p] = 0.0);
+                continue;
+            }
+            let wsum: f64 = under.clone().map(|p| tie.offsets()[p].norm_squared()).sum();
+            if wsum > 0.0 {
+                for p in under {
+                    ws.contact_share[p] += tie.offsets()[p].norm_squared() / (wsum * mass[p]);
+                    top = top.max(ws.contact_share[p]);
+                }
+            }
+        }
+    }
+    let tool = &sim.options.tool;
+    sim.shell.substeps(dt, stretch2, tool.stiffness * top, tool.damping * top, sim.options.max_substeps)
 }
 
 /// Is outer vertex `v` on a triangle with active particles?

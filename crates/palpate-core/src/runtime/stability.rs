@@ -1,0 +1,132 @@
+//! How many particle sub-steps a tick needs: the shell's explicit Verlet (eq. 33) is stable while
+//! every mode satisfies the central-difference limit `h <= 2 / omega (sqrt(1 + zeta^2) - zeta)`,
+//! and a touched shell has stiffer modes than the rest-linearised one the particle body's own
+//! step count ([`crate::meshfree::ParticleModel::substeps`]) is computed from.
+//!
+//! Three things stiffen it, each bounded here, once a tick, allocation-free:
+//! - **Stretch.** St. Venant-Kirchhoff stiffens in tension: in a uniaxial stretch `s`,
+//!   `P = M s (s^2 - 1) / 2` (`M = lambda + 2 mu`), whose slope `M (3 s^2 - 1) / 2` is the rest
+//!   modulus times [`stiffening`]`(s^2)`. A 5 mm sphere pressed 10 mm into the ventricle
+//!   stretches the shell at its rim by ~30%, doubling `omega^2`: with the rest count the
+//!   particles there diverged (measured: `examples/touch.rs`, undamped, 9 mm into a press). The
+//!   largest `s^2` over the active particles is bounded by Gershgorin's row sums of
+//!   `C = F^T F` ([`stretch_bound`]), taken at the start of the tick.
+//! - **The runtime's springs** on a particle: the tool's penalty (through the skin, see
+//!   [`super::tick`]), the coupling spring and the confinement wall, each explicit. Their rates
+//!   `k / m` (and `c / m` for the damping) add to the internal `omega^2` (Weyl's inequality for
+//!   a sum of symmetric stiffnesses in the mass metric). The coupling and the wall are bounded
+//!   once, at [`Shell::new`]; the tool's share of each particle is the Gershgorin row sum of the
+//!   skin's spread (`sum_v k w_p / (W_v m_p)` over the skin vertices within reach), per tick.
+//! - **Viscosity**: the material's rate scales with the stretch like the stiffness (`F^T L`
+//!   under `F`), plus the springs' dampers.
+//!
+//! The count is capped ([`super::SimOptions::max_substeps`]): past it a tick costs more than a
+//! haptic tick has, and a tick that still diverges is contained (restored and reported).
+
+use super::confinement::Confinement;
+use super::coupling::Coupling;
+use crate::math::Mat3;
+use crate::meshfree::{ParticleModel, STABILITY_SAFETY};
+
+/// The shell's stability data, resolved once from the compiled particle body and the springs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shell {
+    /// Rest-linearised `omega_max^2` of the particle body \[1/s^2\].
+    pub omega2: f64,
+    /// Rest-linearised viscous rate \[1/s\].
+    pub damping: f64,
+    /// Largest `(k_coupling + k_wall) / m` over the particles \[1/s^2\].
+    pub spring_rate: f64,
+    /// Largest `c_coupling / m` over the particles \[1/s\].
+    pub spring_damping: f64,
+}
+
+impl Shell {
+    /// From the particle body and the springs; `coupled[p]`: particle `p` has a coupling spring.
+    pub fn new(particles: &ParticleModel, coupled: &[bool], coupling: &Coupling, wall: &Confinement) -> Shell {
+        let (mut spring_rate, mut spring_damping) = (0.0f64, 0.0f64);
+        for (p, &m) in particles.masses().iter().enumerate() {
+            let (k, c) = if coupled[p] { (coupling.stiffness, coupling.damping) } else { (0.0, 0.0) };
+            spring_rate = spring_rate.max((k + wall.stiffness) / m);
+            spring_damping = spring_damping.max(c / m);
+        }
+        Shell { omega2: particles.omega_max().powi(2), damping: particles.damping_max(), spring_rate, spring_damping }
+    }
+
+    /// Sub-steps for a tick of `dt` \[s\] when the active particles' largest `s^2` is at most
+    /// `stretch2` and the tool adds at most `contact_rate` \[1/s^2\] and `contact_damping` \[1/s\]
+    /// to a particle; at least the rest count, at most `cap`.
+    pub fn substeps(&self, dt: f64, stretch2: f64, contact_rate: f64, contact_damping: f64, cap: usize) -> usize {
+        let s = stiffening(stretch2);
+        let omega2 = self.omega2 * s + self.spring_rate + contact_rate;
+        let d = self.damping * stretch2.max(1.0) + self.spring_damping + contact_damping;
+        let h = critical_step(omega2, d) * STABILITY_SAFETY;
+        let k = if h.is_finite() && h > 0.0 { (dt / h).ceil() } else { cap as f64 };
+        (k as usize).clamp(1, cap.max(1))
+    }
+}
+
+/// Central differences' critical step for `omega^2` and a velocity-lagged damping rate `d`.
+fn critical_step(omega2: f64, d: f64) -> f64 {
+    let omega = omega2.max(0.0).sqrt();
+    if omega > 0.0 {
+        let zeta = d / (2.0 * omega);
+        2.0 / omega * ((1.0 + zeta * zeta).sqrt() - zeta)
+    } else if d > 0.0 {
+        2.0 / d
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// St. Venant-Kirchhoff's tangent over its rest value in a stretch with `s^2 = stretch2`:
+/// `(3 s^2 - 1) / 2`, never below 1 (compression softens it).
+pub fn stiffening(stretch2: f64) -> f64 {
+    (1.5 * stretch2 - 0.5).max(1.0)
+}
+
+/// An upper bound of the largest eigenvalue of `F^T F` (the squared largest principal stretch):
+/// the largest absolute row sum (Gershgorin). Exact for a diagonal `F`.
+pub fn stretch_bound(f: &Mat3) -> f64 {
+    let c = f.transpose() * f;
+    (0..3).map(|i| c[(i, 0)].abs() + c[(i, 1)].abs() + c[(i, 2)].abs()).fold(0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stretch_bound_is_exact_on_diagonals_and_bounds_rotations() {
+        let f = Mat3::from_diagonal(&crate::math::Vec3::new(1.3, 0.9, 1.0));
+        assert!((stretch_bound(&f) - 1.69).abs() < 1e-12);
+        // A rotation has every stretch 1: the bound is exactly 1 (C = I).
+        let r = nalgebra::Rotation3::from_euler_angles(0.3, -0.7, 1.1).into_inner();
+        assert!((stretch_bound(&r) - 1.0).abs() < 1e-12);
+        // A shear: the bound is at least the true largest eigenvalue.
+        let mut s = Mat3::identity();
+        s[(0, 1)] = 0.4;
+        let c = s.transpose() * s;
+        let top = c.symmetric_eigenvalues().max();
+        assert!(stretch_bound(&s) >= top - 1e-12);
+    }
+
+    #[test]
+    fn uniaxial_svk_slope_matches_the_stiffening() {
+        // P(s) = M s (s^2 - 1) / 2 for M = 1: its slope by central differences.
+        let p = |s: f64| s * (s * s - 1.0) / 2.0;
+        for s in [1.0, 1.1, 1.3, 1.6] {
+            let slope = (p(s + 1e-6) - p(s - 1e-6)) / 2e-6;
+            assert!((slope - stiffening(s * s)).abs() < 1e-6, "s = {s}");
+        }
+    }
+
+    #[test]
+    fn the_critical_step_matches_the_particle_bodys_rule() {
+        // No damping: 2 / omega. Damping alone: 2 / d.
+        assert!((critical_step(4.0e8, 0.0) - 2.0 / 2.0e4).abs() < 1e-15);
+        assert!((critical_step(0.0, 100.0) - 0.02).abs() < 1e-15);
+        // Stiffer or more damped: a shorter step.
+        assert!(critical_step(4.0e8, 1e3) < critical_step(4.0e8, 0.0));
+    }
+}
