@@ -12,7 +12,9 @@ outer surface, shared by the outer nodes within 5 mm (the nearest one if none), 
 Each integrator runs 1000 steps of 1 ms (timed in Rust, stepping only) and the steps/s are printed
 beside the paper's Table 1 (Pentium IV, 2006): 980 frames/s for 188 tets, 35 frames/s for the
 1352-tet full-FEM ventricle. A plot of the probe displacement against time is written to
-``out/demo_probe.png``.
+``out/demo_probe.png``. Then the hybrid models of the shipped walls are built, and the Rodero et al.
+ventricle (the synthetic one offline) is touched by a scripted press, hold, slide and release
+(:mod:`palpate.touch`), logged to ``out/touch_rodero/`` (force.csv, force.png, touch.pvd).
 """
 from __future__ import annotations
 
@@ -42,8 +44,9 @@ def bodies():
             ("ventricle", bench.setup("ventricle", lv.points / s, lv.tets))]
 
 
-def _hybrid_summary() -> None:
-    """Build the hybrid models of the shipped walls (paper §4, §6) and print what they hold."""
+def _hybrid_summary() -> dict:
+    """Build the hybrid models of the shipped walls (paper §4, §6), print what they hold and
+    return them by shape name."""
     import warnings
 
     from . import hybrid, data
@@ -59,14 +62,38 @@ def _hybrid_summary() -> None:
         print(f"  (Rodero et al. left ventricle not available: {e})")
     names = {"ellipsoids": "paper's ellipsoids", "ventricle": "synthetic truncated ventricle",
              "rodero": "Rodero et al. 2021 left ventricle"}
+    models = {}
     for shape in shapes:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            m = hybrid.build_shape(shape)
+            m = models[shape] = hybrid.build_shape(shape)
         i = m.info()
         ratio = (i["core_volume_m3"] + i["shell_volume_m3"]) / i["wall_volume_m3"]
         print(f"{names[shape]:<34}{i['core_tets']:>10}{i['particles']:>10}{i['spacing_m'] * 1e3:>11.3f}"
               f"{i['regions']:>9}{ratio:>16.4f}{i['build_s']:>9.2f}", flush=True)
+    return models
+
+
+def _touch(models: dict, a) -> None:
+    """A scripted touch of the Rodero et al. ventricle (else the synthetic one): press 4 mm, hold,
+    slide 8 mm, release (:data:`palpate.touch.DEFAULT_SCRIPT`), logged to ``<out>/touch_<shape>/``."""
+    from . import touch
+
+    shape = "rodero" if "rodero" in models else "ventricle"
+    sim = _p.HybridSim(models[shape], _p.Material(young=3e4, poisson=0.4, density=1000.0))
+    out = os.path.join(a.out, f"touch_{shape}")
+    print(f"\nscripted touch of the {shape} model (palpate touch; examples/scripts/press_hold_slide.toml): "
+          f"press 4 mm, hold, slide 8 mm, release, 1 ms ticks:")
+    try:
+        s = touch.run_touch(sim, touch.default_script(), out, tool_radius=0.005, plot=not a.no_plot,
+                            title=f"palpate demo: touch of the {shape} model")
+    except touch.TouchFailed as e:
+        print(f"  failed at {e} (the ticks before it are in {out})")
+        return
+    print(f"  {s['ticks']} ticks, {s['ticks_per_s']:.0f} ticks/s (tick median {s['tick_ms_median']:.2f} ms, "
+          f"p99 {s['tick_ms_p99']:.2f} ms); max |f| {s['max_force_N']:.3f} N, max normal force "
+          f"{s['max_normal_force_N']:.3f} N, up to {s['max_active']} active particles")
+    print(f"  wrote {s['csv']}, {s['frames']} frames: {s['pvd']}")
 
 
 def _firm_press(a) -> None:
@@ -120,7 +147,8 @@ def main(argv=None) -> int:
             curves.append((f"{name}, {iname}", np.arange(1, r["steps"] + 1) * 1e-3, r["probe_disp"] * 1e3))
     print("\nsteps/s: stepping calls only (no set-up, no read-back); paper: frames/s on a Pentium IV.")
     _firm_press(a)
-    _hybrid_summary()
+    models = _hybrid_summary()
+    _touch(models, a)
     if not a.no_plot:
         try:
             import matplotlib

@@ -1,5 +1,5 @@
 """The ``palpate`` command line (also ``python -m palpate``): one module per command (``run``,
-``bench``, ``build``, ``info``), shared helpers in ``_common``.
+``bench``, ``build``, ``info``, ``touch``), shared helpers in ``_common``.
 
     palpate run SCENE.toml [--out DIR] [--steps N]
     palpate bench protocol MESH [--force F] [--steps N] [--json] [--integrator NAME] [--newton auto|on|off]
@@ -15,10 +15,14 @@
                        [--min-region-particles N] [--field-voxels N]
     palpate info MODEL                  (a palpate model file, written by palpate build)
     palpate info MESH [--unit m|cm|mm]  (a tet mesh file)
+    palpate touch MODEL|--shape NAME --script SCRIPT.toml|SCRIPT.csv [--out DIR] [--every K] [--dt S]
+                  [--tool-radius M] [--tool-stiffness K] [--young E] [--poisson NU] [--density RHO]
+                  [--phi P] [--psi P] [--free]
+        (a scripted touch of a hybrid model: force.csv, force.png, touch.pvd; palpate/touch.py)
 
 Exit codes: 0 success, 1 a simulation failed (e.g. a step diverged), a hybrid build failed on
 valid surfaces or an output could not be written, 2 bad input (arguments, scene file, mesh,
-surface or model file), with one line on stderr and no traceback.
+surface, model or touch script file), with one line on stderr and no traceback.
 """
 from __future__ import annotations
 
@@ -27,11 +31,11 @@ import sys
 from typing import List, Optional
 
 from .. import __version__
-from . import bench, build, info, run
+from . import bench, build, info, run, touch
 from ._common import Fail
 
 #: The commands, in the order of ``palpate --help``: each module adds its parser and handler.
-COMMANDS = (run, bench, build, info)
+COMMANDS = (run, bench, build, info, touch)
 
 
 def build_parser() -> argparse.ArgumentParser:
