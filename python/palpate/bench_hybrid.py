@@ -34,8 +34,11 @@ is taken (the smaller on a tie). The count is a step function of ``R``: a region
 vertex) brings its whole patch of particles (``model.info()["region_particles_*"]``; 141 for the
 one region the smallest sphere touches on the synthetic ventricle), so a target below one patch,
 or between two steps, is missed by up to a patch; ``active_particles_calibrated`` says what was
-reached. The timed run's mean is a little below it (the press ramp starts with fewer) and its
-maximum a little above (the slide adds the regions it reaches while those behind linger).
+reached. The timed run's counts differ from it: its press is slower than the calibration's (the
+skin has time to move with the tool), its ramp starts with fewer, and its slide adds the regions
+it reaches while those behind linger (a short script's fast slide leaves a longer trail). On the
+synthetic ventricle, 2,000 ticks: target 200 -> calibrated 201 (R = 1.65 mm), run mean 192,
+max 326; target 600 -> calibrated 616 (R = 3.16 mm), run mean 409, max 584.
 
 Small spheres: below about the skin's edge length (~1.7 mm on the synthetic ventricle) the
 sphere can slip between skin vertices and particles; the run then measures the tick's cost at
