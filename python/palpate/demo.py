@@ -12,8 +12,16 @@ outer surface, shared by the outer nodes within 5 mm (the nearest one if none), 
 Each integrator runs 1000 steps of 1 ms (timed in Rust, stepping only) and the steps/s are printed
 beside the paper's Table 1 (Pentium IV, 2006): 980 frames/s for 188 tets, 35 frames/s for the
 1352-tet full-FEM ventricle. A plot of the probe displacement against time is written to
-``out/demo_probe.png``. Then the hybrid models of the shipped walls are built, and the Rodero et al.
-ventricle (the synthetic one offline) is touched by a scripted press, hold, slide and release
+``out/demo_probe.png``.
+
+Table 1's hybrid rows (:func:`hybrid_rows`): the hybrid synthetic ventricle (FEM core + particle
+shell, :class:`palpate.HybridSim`) pressed 3 mm, held, slid 10 mm and released
+(:mod:`palpate.bench_hybrid`, ``--hybrid-ticks`` ticks of 1 ms, 1000 by default), with the tool
+radius calibrated for about 200 (the paper's average) and 600 (its worst case) active particles;
+ticks/s = 1 / mean tick beside the paper's 330-600 frames/s.
+
+Then the hybrid models of the shipped walls are built, and the Rodero et al. ventricle (the
+synthetic one offline) is touched by a scripted press, hold, slide and release
 (:mod:`palpate.touch`), logged to ``out/touch_rodero/`` (force.csv, force.png, touch.pvd).
 """
 from __future__ import annotations
@@ -28,6 +36,11 @@ from . import _palpate as _p
 from . import bench
 
 PAPER = {"ellipsoid": (188, 980.0), "ventricle": (1352, 35.0)}
+#: The paper's hybrid ventricle: 330-600 frames/s, 200 active particles on average, 600 at worst.
+PAPER_HYBRID_FPS = (330.0, 600.0)
+#: Table 1's hybrid rows: (target active particles, what the paper calls it).
+HYBRID_ROWS = ((200, "average"), (600, "worst case"))
+HYBRID_TICKS = 1000
 INTEGRATORS = [
     ("semi-implicit", _p.SemiImplicit),
     ("backward Euler (quasi-Newton, default)", lambda: _p.BackwardEuler()),
@@ -116,13 +129,60 @@ def _firm_press(a) -> None:
         print(f"  {iname:<40}{sps:>9.1f} steps/s  {what}", flush=True)
 
 
+def hybrid_rows(model=None, shape: str = "ventricle", ticks: int = HYBRID_TICKS, rows=HYBRID_ROWS,
+                quiet: bool = False):
+    """Table 1's hybrid rows: for each ``(target, label)`` of ``rows``, :func:`palpate.bench_hybrid.run`
+    on ``model`` (built from ``shape`` if None) with ``ticks`` ticks; prints one line per row
+    (unless ``quiet``) and returns the reports."""
+    import warnings
+
+    from . import bench_hybrid, hybrid
+
+    if model is None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = hybrid.build_shape(shape)
+    lo, hi = PAPER_HYBRID_FPS
+    if not quiet:
+        i = model.info()
+        print(f"\nTable 1, hybrid rows: {shape} ({i['core_tets']} core tets, {i['particles']} particles), "
+              f"press {bench_hybrid.DEPTH * 1e3:g} mm, hold, slide {bench_hybrid.SLIDE * 1e3:g} mm, release, "
+              f"{ticks} ticks of 1 ms, tool radius calibrated per row (palpate bench hybrid):")
+        print(f"{'active particles':<26}{'radius mm':>10}{'mean':>8}{'max':>6}{'ticks/s':>9}{'mean ms':>9}"
+              f"{'p99 ms':>8}  {'paper (2006)':<28}note")
+    out = []
+    for target, label in rows:
+        r = bench_hybrid.run(model, target, ticks, name=shape)
+        out.append(r)
+        if quiet:
+            continue
+        f = lambda v, fmt: "-" if v is None else format(v, fmt)  # noqa: E731
+        note = "" if r["stable"] else f"failed at tick {r['failed_tick']} ({r['failed_phase']}): {r['error']}"
+        print(f"{f'~{target} ({label})':<26}{r['tool_radius_m'] * 1e3:>10.3f}{f(r['active_particles_mean'], '.0f'):>8}"
+              f"{f(r['active_particles_max'], 'd'):>6}{f(r['ticks_per_s'], '.1f'):>9}{f(r['tick_ms_mean'], '.3f'):>9}"
+              f"{f(r['tick_ms_p99'], '.3f'):>8}  {f'{lo:g}-{hi:g} f/s ({label})':<28}{note}", flush=True)
+    if not quiet:
+        print("ticks/s: 1 / mean tick (HybridSim.step calls only, perf_counter); mean / max: active particles "
+              "over the script.")
+    return out
+
+
+def bench_hybrid_min_ticks() -> int:
+    from .bench_hybrid import MIN_TICKS
+    return MIN_TICKS
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m palpate.demo", description=__doc__.split("\n\n")[0])
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--max-wall", type=float, default=60.0, help="cap per run, seconds of stepping (default 60)")
     ap.add_argument("--out", default="out", help="folder for the plot (default out/)")
     ap.add_argument("--no-plot", action="store_true")
+    ap.add_argument("--hybrid-ticks", type=int, default=HYBRID_TICKS,
+                    help=f"ticks of the hybrid rows' script (default {HYBRID_TICKS}; 0: skip the hybrid rows)")
     a = ap.parse_args(argv)
+    if 0 < a.hybrid_ticks < bench_hybrid_min_ticks() or a.hybrid_ticks < 0:
+        ap.error(f"--hybrid-ticks must be 0 or at least {bench_hybrid_min_ticks()}")
 
     print(f"palpate {_p.__version__} demo: probe load of {bench.FORCE} N ramped over {bench.RAMP} s, "
           f"{a.steps} steps of 1 ms, single thread\n")
@@ -146,6 +206,8 @@ def main(argv=None) -> int:
                   f"{f'{pfps:g} f/s ({ptets} tets)':<22}{probe:>13.4f}  {note}", flush=True)
             curves.append((f"{name}, {iname}", np.arange(1, r["steps"] + 1) * 1e-3, r["probe_disp"] * 1e3))
     print("\nsteps/s: stepping calls only (no set-up, no read-back); paper: frames/s on a Pentium IV.")
+    if a.hybrid_ticks:
+        hybrid_rows(ticks=a.hybrid_ticks)
     _firm_press(a)
     models = _hybrid_summary()
     _touch(models, a)

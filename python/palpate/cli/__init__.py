@@ -6,6 +6,7 @@
     palpate bench protocol --all [--force F] [--steps N] [--json] [--integrator NAME]
     palpate bench particles N [--spacing S] [--kernel wendland|cubic|lj] [--ticks T] [--json]
     palpate bench particles --all [...]
+    palpate bench hybrid MODEL --active N [--ticks T] [--radius M] [--json]
     palpate build INNER OUTER -o MODEL [--unit m|cm|mm] [build options]
     palpate build --tagged SURFACE -o MODEL [--unit m|cm|mm] [--tag-array NAME] [--inner 1,2] [--outer 3]
                   [--base 4,5] [build options]

@@ -1,13 +1,16 @@
-"""``palpate bench protocol|particles``: the shared FEM probe case (:mod:`palpate.bench`) and the
-per-tick cost of a particle body (:mod:`palpate.bench_particles`). The defaults are those modules'
-(the benchmarks' definitions)."""
+"""``palpate bench protocol|particles|hybrid``: the shared FEM probe case (:mod:`palpate.bench`),
+the per-tick cost of a particle body (:mod:`palpate.bench_particles`) and of the hybrid
+simulation at a chosen active count (:mod:`palpate.bench_hybrid`). The defaults are those
+modules' (the benchmarks' definitions)."""
 from __future__ import annotations
 
 import json
 import math
+import sys
 
 from .. import __version__
 from .. import bench
+from .. import bench_hybrid as bh
 from .. import bench_particles as bp
 from ._common import Fail, fmt_mm, num, palpate_errors
 
@@ -53,6 +56,22 @@ def add_parser(sub) -> None:
     q.add_argument("--max-wall", type=float, default=None, metavar="S",
                    help="stop a case after S seconds of ticks (default: no cap)")
     q.set_defaults(func=cmd_bench_particles)
+
+    h = bsub.add_parser("hybrid", help="per-tick cost of the hybrid simulation (HybridSim) with about N particles active",
+                        description="Calibrate the tool radius so that about N particles are active under a held "
+                                    f"{num(bh.DEPTH * 1e3)} mm press at the probe point of MODEL (a palpate model file, "
+                                    "or a shape: ellipsoids, ventricle, rodero), then time each tick of a scripted "
+                                    f"press, hold, {num(bh.SLIDE * 1e3)} mm slide and release (one thread; see "
+                                    "palpate/bench_hybrid.py for the probe point and the calibration rule). "
+                                    "Exit 1 if a tick fails.")
+    h.add_argument("model", metavar="MODEL", help="model file (palpate build) or ellipsoids|ventricle|rodero")
+    h.add_argument("--active", type=int, required=True, metavar="N", help="target number of active particles")
+    h.add_argument("--ticks", type=int, default=bh.TICKS,
+                   help=f"ticks of {num(bh.DT * 1e3)} ms in the timed script (default {bh.TICKS}, at least {bh.MIN_TICKS})")
+    h.add_argument("--radius", type=float, default=None, metavar="M",
+                   help="tool radius [m]: skip the calibration")
+    h.add_argument("--json", action="store_true", help="one JSON object")
+    h.set_defaults(func=cmd_bench_hybrid)
 
 
 def _bench_cases(a):
@@ -157,3 +176,51 @@ def cmd_bench_particles(a) -> int:
         if r["error"]:
             print(f"  note: {r['error']} (median over {r['ticks']} ticks)")
     return 1 if failed else 0
+
+
+def cmd_bench_hybrid(a) -> int:
+    from ..data import DataError
+
+    if a.active <= 0:
+        raise Fail(f"palpate bench hybrid: --active must be a positive number of particles, got {a.active}")
+    if a.ticks < bh.MIN_TICKS:
+        raise Fail(f"palpate bench hybrid: --ticks must be at least {bh.MIN_TICKS}, got {a.ticks}")
+    if a.radius is not None and not (a.radius > 0 and math.isfinite(a.radius)):
+        raise Fail(f"palpate bench hybrid: --radius must be a positive number of metres, got {a.radius}")
+    try:
+        name, model = bh.load_model(a.model)
+    except (ValueError, OSError) as e:
+        raise Fail(f"palpate bench hybrid: {e}") from None
+    except DataError as e:
+        raise Fail(f"palpate bench hybrid: {e}", 1) from None
+    except palpate_errors() as e:
+        raise Fail(f"palpate bench hybrid: {a.model}: {type(e).__name__}: {e}") from None
+    try:
+        r = bh.run(model, a.active, a.ticks, radius=a.radius, name=name)
+    except ValueError as e:
+        raise Fail(f"palpate bench hybrid: {e}") from None
+    except palpate_errors() as e:
+        raise Fail(f"palpate bench hybrid: {type(e).__name__}: {e}", 1) from None
+    if a.json:
+        print(json.dumps(r), flush=True)
+    else:
+        f = lambda v, fmt: "-" if v is None else format(v, fmt)  # noqa: E731
+        print(f"palpate {__version__} bench hybrid: {r['model']} ({r['core_tets']} core tets, {r['particles']} particles, "
+              f"{r['regions']} regions), E = {bh.E:g} Pa, nu = {bh.NU}, rho = {bh.RHO:g} kg/m^3, paper damping; "
+              f"{r['ticks_planned']} ticks of {bh.DT * 1e3:g} ms: press {bh.DEPTH * 1e3:g} mm, hold, slide "
+              f"{bh.SLIDE * 1e3:g} mm, release; one thread")
+        print(f"  {r['cpu_count']} CPUs ({r['cpu_model']}), python {r['python_version']}, {r['date']}")
+        cal = ", ".join(f"{rr * 1e3:.3f} mm: {cc}" for rr, cc in r["calibration"])
+        print(f"  calibration ({r['calibration_s']:.1f} s; tool radius: active at the held press): {cal}")
+        print(f"{'target':>7}{'radius mm':>10}{'at press':>9}{'mean':>8}{'max':>6}{'ticks':>7}{'mean ms':>9}"
+              f"{'p50 ms':>8}{'p99 ms':>8}{'max ms':>8}{'ticks/s':>9}{'stable':>8}{'max F N':>9}")
+        print(f"{r['active_target']:>7}{r['tool_radius_m'] * 1e3:>10.3f}{r['active_particles_calibrated']:>9}"
+              f"{f(r['active_particles_mean'], '.1f'):>8}{f(r['active_particles_max'], 'd'):>6}{r['ticks']:>7}"
+              f"{f(r['tick_ms_mean'], '.3f'):>9}{f(r['tick_ms_p50'], '.3f'):>8}{f(r['tick_ms_p99'], '.3f'):>8}"
+              f"{f(r['tick_ms_max'], '.3f'):>8}{f(r['ticks_per_s'], '.0f'):>9}{str(r['stable']):>8}"
+              f"{r['max_force_n']:>9.4f}", flush=True)
+    if not r["stable"]:
+        print(f"palpate: error: palpate bench hybrid: tick {r['failed_tick']} ({r['failed_phase']}) failed: "
+              f"{r['error']}", file=sys.stderr)
+        return 1
+    return 0
