@@ -61,9 +61,9 @@ impl Coupling {
             if !coupled[p] {
                 continue;
             }
-            let f = self.stiffness * (tie.position(p, x_core) - x[p]) + self.damping * (tie.interpolate(p, v_core) - v[p]);
+            let f = self.stiffness * (tie.position(p, x_core) - x[p]) + self.damping * (tie.velocity(p, x_core, v_core) - v[p]);
             f_particles[p] += f;
-            tie.spread(p, -f, f_core);
+            tie.spread(p, -f, x_core, f_core);
         }
     }
 }

@@ -3,17 +3,21 @@
 //! (paper §4, §6.1).
 //!
 //! A point `p` is tied to a core face `(a, b, c)` by barycentric weights `w` (`w_a + w_b + w_c =
-//! 1`) and a rest offset `o` (world frame): `x_p = w_a x_a + w_b x_b + w_c x_c + o`. The map is
-//! affine in the core positions with Jacobian `w_k I` per face node, so a force `f` on the point
-//! does the virtual work of the forces `w_k f` on the face nodes: spreading by the same weights is
-//! the exact transpose (energy-consistent), and since the weights sum to one the spread forces sum
-//! to `f` (linear momentum exact). The offset is not rotated with the face: a rigid rotation of the
-//! organ would shear the tied points by `|o|` times the angle. The ventricle's base is held, so its
-//! faces rotate little; the exactness of the transpose is worth more here (a rotated offset would
-//! make the spread forces non-conservative by `|o| / face size`, which is not small in a shell of
-//! several lattice spacings).
+//! 1`) and an offset `o` from the weighted face point, held in the face's own frame `(e1, e2, n)`
+//! (`e1` along `b - a`, `n` the face normal): `x_p = w_a x_a + w_b x_b + w_c x_c + R(x) o`, `R`
+//! the face frame's rotation. The offset turns with its face: when the organ bends (a closed wall
+//! held at its lower part, pressed above; the ventricle's wall under a deep press) the tied shell
+//! turns with the core rather than shearing by `|o|` times the angle. (Unrotated world-frame
+//! offsets, the first version, sheared the ellipsoids' shell under a 3-4 mm press until its
+//! particles diverged.)
+//!
+//! A force `f` on the point does the virtual work of forces on the face nodes: `w_k f` from the
+//! weighted point, plus the turning offset's share (`(d(R o)/dx_k)^T f`, [`Embedding::spread`]).
+//! The spread is the exact transpose of the map, so forces derived from an energy of tied points
+//! stay derived from an energy of the core; and since the map is translation-invariant (a shift
+//! of the face shifts the point) the shares sum to `f`: linear momentum is exact.
 
-use crate::math::Vec3;
+use crate::math::{Mat3, Vec3};
 use crate::spatial::closest_on_triangle;
 
 /// Points tied to core faces. All arrays `(n_points)`.
@@ -23,8 +27,24 @@ pub struct Embedding {
     nodes: Vec<[u32; 3]>,
     /// Barycentric weights on them (sum 1).
     weights: Vec<[f64; 3]>,
-    /// Rest offset from the weighted face point to the point \[m\].
+    /// Offset from the weighted face point to the point in the face's frame `(e1, e2, n)` \[m\].
     offset: Vec<Vec3>,
+    /// The same offset in the world frame at rest (where the face's frame is degenerate).
+    rest_offset: Vec<Vec3>,
+}
+
+/// The orthonormal frame `(e1, e2, n)` of face `(a, b, c)` as matrix columns, or `None` for a
+/// degenerate face.
+#[inline]
+fn frame(a: &Vec3, b: &Vec3, c: &Vec3) -> Option<Mat3> {
+    let e = b - a;
+    let m = e.cross(&(c - a));
+    let (le, lm) = (e.norm(), m.norm());
+    if !(le > 0.0 && lm > 1e-30 * le * le && lm.is_finite()) {
+        return None;
+    }
+    let (e1, n) = (e / le, m / lm);
+    Some(Mat3::from_columns(&[e1, n.cross(&e1), n]))
 }
 
 impl Embedding {
@@ -37,20 +57,29 @@ impl Embedding {
             let (a, b, c) = (core[t[0]], core[t[1]], core[t[2]]);
             let (_, w) = closest_on_triangle(p, &a, &b, &c);
             let anchor = w[0] * a + w[1] * b + w[2] * c;
-            e.nodes.push(t.map(|i| i as u32));
-            e.weights.push(w);
-            e.offset.push(p - anchor);
+            e.push(t.map(|i| i as u32), w, p - anchor, core);
         }
         e
     }
 
-    /// Ties with given faces, weights and offsets (the skin of a [`crate::hybrid::HybridModel`]).
-    pub fn from_parts(faces: &[[usize; 3]], face_of: &[u32], weights: &[[f64; 3]], offset: &[Vec3]) -> Embedding {
-        Embedding {
-            nodes: face_of.iter().map(|&f| faces[f as usize].map(|i| i as u32)).collect(),
-            weights: weights.to_vec(),
-            offset: offset.to_vec(),
+    fn push(&mut self, nodes: [u32; 3], w: [f64; 3], world: Vec3, core: &[Vec3]) {
+        let [a, b, c] = nodes.map(|k| core[k as usize]);
+        // A degenerate rest face keeps the world-frame offset (never turned).
+        let local = frame(&a, &b, &c).map_or(world, |r| r.transpose() * world);
+        self.nodes.push(nodes);
+        self.weights.push(w);
+        self.offset.push(local);
+        self.rest_offset.push(world);
+    }
+
+    /// Ties with given faces, weights and rest (world-frame) offsets to the faces of `core` at
+    /// rest (the skin of a [`crate::hybrid::HybridModel`]).
+    pub fn from_parts(core: &[Vec3], faces: &[[usize; 3]], face_of: &[u32], weights: &[[f64; 3]], offset: &[Vec3]) -> Embedding {
+        let mut e = Embedding::default();
+        for ((&f, &w), &o) in face_of.iter().zip(weights).zip(offset) {
+            e.push(faces[f as usize].map(|i| i as u32), w, o, core);
         }
+        e
     }
 
     /// Number of tied points.
@@ -72,7 +101,34 @@ impl Embedding {
     /// Position of point `i` for core positions `x` \[m\].
     #[inline]
     pub fn position(&self, i: usize, x: &[Vec3]) -> Vec3 {
-        self.interpolate(i, x) + self.offset[i]
+        let n = self.nodes[i];
+        let [a, b, c] = n.map(|k| &x[k as usize]);
+        let turned = frame(a, b, c).map_or(self.rest_offset[i], |r| r * self.offset[i]);
+        self.interpolate(i, x) + turned
+    }
+
+    /// Velocity of point `i` for core positions `x` and velocities `v` \[m/s\]: the weighted face
+    /// velocity plus the turning offset's (`dR/dt o`).
+    #[inline]
+    pub fn velocity(&self, i: usize, x: &[Vec3], v: &[Vec3]) -> Vec3 {
+        let n = self.nodes[i];
+        let [a, b, c] = n.map(|k| x[k as usize]);
+        let [va, vb, vc] = n.map(|k| v[k as usize]);
+        let base = self.interpolate(i, v);
+        let (e, f) = (b - a, c - a);
+        let m = e.cross(&f);
+        let (le, lm) = (e.norm(), m.norm());
+        if !(le > 0.0 && lm > 1e-30 * le * le && lm.is_finite()) {
+            return base;
+        }
+        let (de, df) = (vb - va, vc - va);
+        let (e1, nn) = (e / le, m / lm);
+        let de1 = (de - e1 * e1.dot(&de)) / le;
+        let dm = de.cross(&f) + e.cross(&df);
+        let dn = (dm - nn * nn.dot(&dm)) / lm;
+        let de2 = dn.cross(&e1) + nn.cross(&de1);
+        let o = self.offset[i];
+        base + o.x * de1 + o.y * de2 + o.z * dn
     }
 
     /// The weighted face value at point `i` (a velocity, a displacement) of a core field `u`.
@@ -82,13 +138,35 @@ impl Embedding {
         w[0] * u[n[0] as usize] + w[1] * u[n[1] as usize] + w[2] * u[n[2] as usize]
     }
 
-    /// Adds a force `f` on point `i` to the core forces `out` (the transpose of [`Self::position`]).
+    /// Adds a force `f` on point `i` to the core forces `out`, for core positions `x`: the exact
+    /// transpose of [`Self::position`] (virtual work), whose shares sum to `f`.
     #[inline]
-    pub fn spread(&self, i: usize, f: Vec3, out: &mut [Vec3]) {
+    pub fn spread(&self, i: usize, f: Vec3, x: &[Vec3], out: &mut [Vec3]) {
         let (n, w) = (self.nodes[i], self.weights[i]);
+        let [a, b, c] = n.map(|k| x[k as usize]);
+        let (e, g) = (b - a, c - a);
+        let m = e.cross(&g);
+        let (le, lm) = (e.norm(), m.norm());
         for k in 0..3 {
             out[n[k] as usize] += w[k] * f;
         }
+        if !(le > 0.0 && lm > 1e-30 * le * le && lm.is_finite()) {
+            return;
+        }
+        // R o = o1 e1 + o2 e2 + o3 n, with de1 = P1 de / |e|, dn = Pn dm / |m|,
+        // dm = de x g + e x dg, de2 = dn x e1 + n x de1 (P: the projector off the unit vector).
+        // f . d(R o) = u . de + q . dm, and q . dm = de . (g x q) + dg . (q x e).
+        let (e1, nn) = (e / le, m / lm);
+        let o = self.offset[i];
+        let off1 = |v: Vec3| v - e1 * e1.dot(&v);
+        let offn = |v: Vec3| v - nn * nn.dot(&v);
+        let u = off1(o.x * f + o.y * f.cross(&nn)) / le;
+        let q = offn(o.z * f + o.y * e1.cross(&f)) / lm;
+        let gb = u + g.cross(&q);
+        let gc = q.cross(&e);
+        out[n[0] as usize] -= gb + gc;
+        out[n[1] as usize] += gb;
+        out[n[2] as usize] += gc;
     }
 
     /// Adds a scalar `s` carried by point `i` (a mass, a spring's weight) to the core nodes'
@@ -101,7 +179,8 @@ impl Embedding {
         }
     }
 
-    /// The rest offsets \[m\].
+    /// The offsets in their faces' frames \[m\] (their lengths are the points' distances from
+    /// their weighted face points).
     pub fn offsets(&self) -> &[Vec3] {
         &self.offset
     }
@@ -133,17 +212,48 @@ mod tests {
     }
 
     #[test]
+    fn offsets_turn_with_their_face_and_the_velocity_is_the_positions_derivative() {
+        let (core, faces) = tri();
+        let rest = [Vec3::new(0.2, 0.3, 0.5), Vec3::new(0.6, 0.1, -0.2)];
+        let e = Embedding::project(&core, &faces, &[0, 0], &rest);
+        // A rigid rotation and translation of the core carries the tied points rigidly.
+        let r = nalgebra::Rotation3::from_euler_angles(0.4, -0.2, 0.9);
+        let t = Vec3::new(0.1, 0.2, -0.3);
+        let moved: Vec<Vec3> = core.iter().map(|x| r * x + t).collect();
+        for (i, p) in rest.iter().enumerate() {
+            assert!((e.position(i, &moved) - (r * p + t)).norm() < 1e-13);
+        }
+        // velocity = d position / dt along a deforming motion (central differences).
+        let v: Vec<Vec3> = (0..core.len()).map(|k| Vec3::new(0.3 * k as f64 - 0.2, 0.5 - 0.1 * k as f64, 0.2 * k as f64)).collect();
+        let h = 1e-6;
+        let at = |s: f64| -> Vec<Vec3> { moved.iter().zip(&v).map(|(x, v)| x + s * v).collect() };
+        for i in 0..rest.len() {
+            let fd = (e.position(i, &at(h)) - e.position(i, &at(-h))) / (2.0 * h);
+            assert!((e.velocity(i, &moved, &v) - fd).norm() < 1e-7, "{i}: {} vs {}", e.velocity(i, &moved, &v), fd);
+        }
+        // A degenerate face keeps the rest offset: the point stays finite.
+        let flat = vec![Vec3::zeros(); core.len()];
+        assert!(e.position(0, &flat).iter().all(|c| c.is_finite()));
+    }
+
+    #[test]
     fn spreading_is_the_transpose_and_keeps_the_total() {
         let (core, faces) = tri();
         let e = Embedding::project(&core, &faces, &[0], &[Vec3::new(0.25, 0.25, 0.1)]);
         let f = Vec3::new(1.0, -2.0, 0.5);
-        let mut out = vec![Vec3::zeros(); core.len()];
-        e.spread(0, f, &mut out);
-        assert!((out.iter().sum::<Vec3>() - f).norm() < 1e-15);
-        // Virtual work: f . dx_p = sum_k out_k . dx_k for any core motion dx.
-        let dx: Vec<Vec3> = (0..core.len()).map(|k| Vec3::new(0.3 * k as f64, -0.1, 0.7 - k as f64)).collect();
-        let lhs = f.dot(&e.interpolate(0, &dx));
-        let rhs: f64 = out.iter().zip(&dx).map(|(a, b)| a.dot(b)).sum();
-        assert!((lhs - rhs).abs() < 1e-14);
+        // At rest and at a deformed, turned configuration.
+        let r = nalgebra::Rotation3::from_euler_angles(0.3, 0.5, -0.4);
+        let bent: Vec<Vec3> = core.iter().enumerate().map(|(k, x)| r * x + Vec3::new(0.05 * k as f64, -0.02 * k as f64, 0.1)).collect();
+        for x in [&core, &bent] {
+            let mut out = vec![Vec3::zeros(); core.len()];
+            e.spread(0, f, x, &mut out);
+            assert!((out.iter().sum::<Vec3>() - f).norm() < 1e-14);
+            // Virtual work: f . dx_p = sum_k out_k . dx_k for any core motion dx (the velocity
+            // is the position's derivative, tested above).
+            let dx: Vec<Vec3> = (0..core.len()).map(|k| Vec3::new(0.3 * k as f64, -0.1, 0.7 - k as f64)).collect();
+            let lhs = f.dot(&e.velocity(0, x, &dx));
+            let rhs: f64 = out.iter().zip(&dx).map(|(a, b)| a.dot(b)).sum();
+            assert!((lhs - rhs).abs() < 1e-13, "{lhs} vs {rhs}");
+        }
     }
 }

@@ -132,7 +132,7 @@ impl Sim {
         let particles = ParticleModelBuilder::new(hybrid.particles.clone(), hybrid.particle_mass.clone(), material, options.support_spacings * h)
             .fix_unsupported(true)
             .build()?;
-        let skin = Embedding::from_parts(&hybrid.core_faces, &hybrid.skin_face, &hybrid.skin_bary, &hybrid.skin_offset);
+        let skin = Embedding::from_parts(&hybrid.core_points, &hybrid.core_faces, &hybrid.skin_face, &hybrid.skin_bary, &hybrid.skin_offset);
         let depth = options.coupling_depth_spacings * h;
         let coupled: Vec<bool> = particle_tie.offsets().iter().zip(particles.fixed()).map(|(o, &held)| o.norm() <= depth && !held).collect();
         let mean_mass = hybrid.particle_mass.iter().sum::<f64>() / hybrid.particle_mass.len().max(1) as f64;

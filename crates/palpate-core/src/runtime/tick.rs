@@ -21,7 +21,7 @@
 //! 6. **The skin** follows its core faces, and over active triangles also the particles under it.
 //!
 //! Every force between two bodies is one of an equal and opposite pair and every tie spreads
-//! with weights that sum to one, so with the tool away (and no confinement push) the total
+//! a force into shares that sum to it, so with the tool away (and no confinement push) the total
 //! linear momentum of the core and the active particles is conserved to round-off, and with the
 //! tool its change is the tool's impulse (tests/runtime.rs). A failed tick leaves the core and the
 //! particles' motion as they were (see [`tick`]).
@@ -93,7 +93,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     }
     for &p in sets.entered.iter().chain(sets.left) {
         particles.x[p] = tie.position(p, &core.x);
-        particles.v[p] = tie.interpolate(p, &core.v);
+        particles.v[p] = tie.velocity(p, &core.x, &core.v);
     }
     (report.active, report.entered, report.left) = (sets.active.len(), sets.entered.len(), sets.left.len());
     particles.active.clear();
@@ -104,7 +104,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         for &j in sim.particles.neighbours(p) {
             if !is_active[j] {
                 particles.x[j] = tie.position(j, &core.x);
-                particles.v[j] = tie.interpolate(j, &core.v);
+                particles.v[j] = tie.velocity(j, &core.x, &core.v);
             }
         }
         // The tie's displacement: confinement measures a particle in the rest frame of the
@@ -145,7 +145,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
             for &v in near {
                 let Some((xs, vs, wsum)) = skin_over_particles(sim, act, v, sub.x, sub.v, core_x, core_v) else { continue };
                 if let Some(contact) = o.tool.contact(&c, &tool_v, &xs, &vs) {
-                    spread_skin_force(sim, act, v, contact.force, wsum, f, f_core);
+                    spread_skin_force(sim, act, v, contact.force, wsum, core_x, f, f_core);
                     tool_force -= contact.force;
                     count += 1;
                     report.max_depth = report.max_depth.max(contact.depth);
@@ -164,14 +164,14 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
             if wall.pushed > 0 {
                 for &p in sub.active {
                     f[p] += f_wall[p];
-                    tie.spread(p, -f_wall[p], f_core);
+                    tie.spread(p, -f_wall[p], core_x, f_core);
                 }
             }
             // Held particles (lone lattice particles, see Sim::new) do not move: what acts on
             // them is carried by the core, through their ties.
             for &p in sub.active {
                 if held[p] {
-                    tie.spread(p, f[p], f_core);
+                    tie.spread(p, f[p], core_x, f_core);
                 }
             }
         };
@@ -183,7 +183,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         // The ring: frozen neighbours (at their ties) and held active particles (lone lattice
         // particles, see Sim::new): both carried by the core.
         for (&j, &f) in ws.particles.ring().iter().zip(ws.particles.ring_forces()) {
-            tie.spread(j, f, &mut ws.f_core);
+            tie.spread(j, f, &core.x, &mut ws.f_core);
         }
     }
 
@@ -193,9 +193,9 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         if (x - tool).norm_squared() >= reach * reach || over_active(sim, activation, v) {
             continue;
         }
-        let vel = sim.skin.interpolate(v, &core.v);
+        let vel = sim.skin.velocity(v, &core.x, &core.v);
         if let Some(c) = o.tool.contact(&tool, &tool_v, x, &vel) {
-            sim.skin.spread(v, c.force, &mut ws.f_core);
+            sim.skin.spread(v, c.force, &core.x, &mut ws.f_core);
             tool_force -= c.force;
             report.skin_contacts += 1;
             report.max_depth = report.max_depth.max(c.depth);
@@ -283,20 +283,20 @@ fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3],
         for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
             let w = tie.offsets()[p].norm_squared();
             d += w * (x[p] - tie.position(p, core_x));
-            dv += w * (vel[p] - tie.interpolate(p, core_v));
+            dv += w * (vel[p] - tie.velocity(p, core_x, core_v));
             wsum += w;
         }
     }
-    (wsum > 0.0).then(|| (sim.skin.position(v, core_x) + d / wsum, sim.skin.interpolate(v, core_v) + dv / wsum, wsum))
+    (wsum > 0.0).then(|| (sim.skin.position(v, core_x) + d / wsum, sim.skin.velocity(v, core_x, core_v) + dv / wsum, wsum))
 }
 
 /// A force `f` on outer vertex `v` placed by [`skin_over_particles`], carried by what places it
 /// (the exact transpose): `w_p / W` of it to each particle under, the skin tie's share to the core
 /// nodes less the particles' ties' shares. The particles receive `f`, the core nothing net.
-fn spread_skin_force(sim: &Sim, activation: &Activation, v: usize, f: Vec3, wsum: f64, f_particles: &mut [Vec3], f_core: &mut [Vec3]) {
+fn spread_skin_force(sim: &Sim, activation: &Activation, v: usize, f: Vec3, wsum: f64, core_x: &[Vec3], f_particles: &mut [Vec3], f_core: &mut [Vec3]) {
     let h = &sim.hybrid;
     let tie = &sim.particle_tie;
-    sim.skin.spread(v, f, f_core);
+    sim.skin.spread(v, f, core_x, f_core);
     for &t in h.outer_adjacency.vertex_tris.get(v) {
         if !activation.is_triangle_active(t) {
             continue;
@@ -304,7 +304,7 @@ fn spread_skin_force(sim: &Sim, activation: &Activation, v: usize, f: Vec3, wsum
         for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
             let share = (tie.offsets()[p].norm_squared() / wsum) * f;
             f_particles[p] += share;
-            tie.spread(p, -share, f_core);
+            tie.spread(p, -share, core_x, f_core);
         }
     }
 }
