@@ -32,6 +32,9 @@ fn main() {
     if let Some(c) = env("TOOL_C") {
         opts.tool.damping = c;
     }
+    if let Some(k) = env("INTERFACE") {
+        opts.interface = k;
+    }
     if let Some(m) = env("MARGIN") {
         opts.activation_margin = m * 1e-3;
     }
@@ -83,6 +86,8 @@ fn main() {
             let (iv, _) = st.particles.active.iter().map(|&i| (i, st.particles.v[i].norm())).fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
             let off = (st.particles.x[iv] - sim.particle_tie.position(iv, &st.core.x)).norm();
             eprintln!("   vmax particle {iv}: coupled {} held {} nbrs {} tool dist {:.2e} tie off {:.2e} depth {:.2e}", sim.coupled[iv], sim.particles.fixed()[iv], sim.particles.neighbours(iv).len(), (st.particles.x[iv]-c).norm(), off, sim.particle_tie.offsets()[iv].norm());
+            let (jm, dm) = st.particles.active.iter().map(|&i| (i, sim.particles.deformation_gradient(i, &st.particles.x).determinant())).fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+            eprintln!("   min det F {dm:.3} at {jm}");
             eprintln!("dbg {k}: active umax {umax:.3e} vmax {vmax:.3e} core umax {ucore:.3e} fcore max {fcore:.3e} confined {}", rep.confined);
         }
         if k % 50 == 0 || k + 1 == total {

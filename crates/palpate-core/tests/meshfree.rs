@@ -389,3 +389,48 @@ fn neo_hookean_material_is_refused_with_a_typed_error() {
     // The same material with the SVK law builds.
     ParticleModelBuilder::new(pts, m, nh.with_law(Law::StVenantKirchhoff), 1.8 * SPACING).build().unwrap();
 }
+
+/// A particle compressed below `COMPRESSION_FLOOR` (and one turned inside out) gets the barrier:
+/// the force stays minus the energy gradient (the barrier is in the energy), both copies of the
+/// loop agree, and the barrier pushes an inverted block back toward positive volume.
+#[test]
+fn compression_barrier_is_an_energy_and_pushes_inverted_particles_out() {
+    let model = block([4, 4, 4], false);
+    let rest: Vec<Vec3> = model.rest_positions().to_vec();
+    let c: Vec3 = rest.iter().sum::<Vec3>() / rest.len() as f64;
+    for squash in [0.3, -0.4] {
+        // x' = c + diag(squash, 1, 1) (x - c): J = squash for the interior.
+        let mut x: Vec<Vec3> = rest.iter().map(|p| c + (p - c).component_mul(&Vec3::new(squash, 1.0, 1.0))).collect();
+        for (i, p) in x.iter_mut().enumerate() {
+            *p += Vec3::new(((i * 37) % 11) as f64 - 5.0, ((i * 17) % 7) as f64 - 3.0, ((i * 5) % 3) as f64 - 1.0) * 2e-6;
+        }
+        let j = model.deformation_gradient(21, &x).determinant();
+        assert!(j < meshfree::COMPRESSION_FLOOR, "the test must reach the barrier: J = {j}");
+        let forces = |simd: bool| {
+            meshfree::set_simd_enabled(simd);
+            let mut f = vec![Vec3::zeros(); model.n_particles()];
+            model.internal_forces(&x, None, &mut f);
+            meshfree::set_simd_enabled(true);
+            f
+        };
+        let (f, f_base) = (forces(true), forces(false));
+        let fmax = f.iter().map(|f| f.norm()).fold(0.0, f64::max);
+        let df = f.iter().zip(&f_base).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        assert!(df <= 1e-12 * fmax, "SIMD and portable differ by {df:e}");
+        let h = 1e-10;
+        for i in [0, 5, 21, 42, 63] {
+            for k in 0..3 {
+                let (mut xp, mut xm) = (x.clone(), x.clone());
+                xp[i][k] += h;
+                xm[i][k] -= h;
+                let fd = -(model.strain_energy(&xp) - model.strain_energy(&xm)) / (2.0 * h);
+                assert!((fd - f[i][k]).abs() <= 1e-5 * fmax, "J {squash}: particle {i} comp {k}: fd {fd} vs {}", f[i][k]);
+            }
+        }
+        // Along the squashed axis the forces spread the block apart again.
+        let push: f64 = (0..x.len()).map(|i| f[i].x * (x[i].x - c.x).signum() * squash.signum()).sum();
+        assert!(push > 0.0, "J {squash}: net push {push}");
+    }
+    // Without the barrier (above the floor) the energy is the paper's alone.
+    assert_eq!(meshfree::barrier_energy_density(&material(false), 0.8), 0.0);
+}

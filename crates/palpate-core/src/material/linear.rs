@@ -124,6 +124,9 @@ impl Svk {
         Svk { lambda: m.lambda(), mu: m.mu(), viscous: if m.is_undamped() { None } else { Some((d.phi, d.psi)) } }
     }
 
+    /// `(lambda, mu)` \[Pa\].
+    pub(crate) fn lame(&self) -> (f64, f64) { (self.lambda, self.mu) }
+
     /// `true` when the viscous stress is not zero.
     pub(crate) fn is_damped(&self) -> bool { self.viscous.is_some() }
 

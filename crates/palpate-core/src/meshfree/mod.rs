@@ -69,7 +69,22 @@ mod step;
 
 pub use builder::{ParticleModelBuilder, DEFAULT_HOURGLASS, DEFAULT_MIN_WEIGHT};
 pub use kernel::Kernel;
-pub use model::ParticleModel;
+pub use model::{barrier_energy_density, ParticleModel};
+
+/// `det F` below which a particle's St. Venant-Kirchhoff stress gets a compression barrier, the
+/// energy density `kappa/2 (J_c - J)^2` (`kappa = lambda + 2 mu`, `J = det F`).
+///
+/// Why: St. Venant-Kirchhoff's resistance to compression peaks and then falls (in a hydrostatic
+/// compression its stress turns back at `J = 0.19`, in a uniaxial one at a stretch of
+/// `1/sqrt(3)`) and an inverted particle (`J < 0`) finds a mirrored equilibrium: the law, written
+/// as the paper has it, lets a pressed particle collapse. The particles under a deep press (the
+/// tool 7 mm into the paper's ellipsoids, a 6 mm wall) inverted and the shell diverged
+/// (`examples/touch.rs`, 15 mm press). The barrier leaves the paper's law untouched above
+/// `J_c = 0.5` (a particle compressed to half its volume), and below it resists further
+/// compression with the tissue's P-wave modulus, through `J = 0` and beyond, so an inverted
+/// particle is pushed back out. The particle force stays minus the gradient of
+/// [`ParticleModel::strain_energy`] (which includes it: tests/meshfree.rs).
+pub const COMPRESSION_FLOOR: f64 = 0.5;
 pub use pair_loop::{set_simd_enabled, simd_path};
 pub use stability::STABILITY_SAFETY;
 pub use state::{ParticleState, ParticleStepReport, ParticleWorkspace, SubStep};

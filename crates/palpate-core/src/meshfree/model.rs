@@ -108,7 +108,7 @@ impl ParticleModel {
     /// particles (frozen ones carry no stress).
     pub fn particle_energy(&self, i: usize, x: &[Vec3]) -> f64 {
         let f = self.deformation_gradient(i, x);
-        let mut total = self.volume[i] * material::energy_density(&self.material, &material::green_strain(&f));
+        let mut total = self.volume[i] * (material::energy_density(&self.material, &material::green_strain(&f)) + barrier_energy_density(&self.material, f.determinant()));
         let ui = x[i] - self.rest[i];
         let hmat = f - Mat3::identity();
         for p in self.ptr[i]..self.ptr[i + 1] {
@@ -196,4 +196,11 @@ impl ParticleModel {
 
 pub(crate) fn to_p4(v: &[Vec3]) -> Vec<P4> {
     v.iter().map(p4).collect()
+}
+
+/// The compression barrier's energy density \[J/m^3\] at `J = det F`:
+/// `kappa/2 (J_c - J)^2` below `J_c` ([`super::COMPRESSION_FLOOR`]), `kappa = lambda + 2 mu`.
+pub fn barrier_energy_density(m: &Material, j: f64) -> f64 {
+    let d = (super::COMPRESSION_FLOOR - j).max(0.0);
+    0.5 * (m.lambda() + 2.0 * m.mu()) * d * d
 }

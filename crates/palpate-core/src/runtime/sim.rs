@@ -48,6 +48,9 @@ pub struct SimOptions {
     /// ticks by the simulated tool, whose force the device renders: the shell's explicit
     /// sub-steps cannot take a sphere appearing millimetres deep in one tick.
     pub max_tool_step: f64,
+    /// Scale of the core-shell interface stiffness the core's step takes implicitly (default 1;
+    /// 0: the exchange is explicit, see `tick.rs`'s `interface_anchors`).
+    pub interface: f64,
     /// The most particle sub-steps a tick takes (default 64; [`super::stability`] sets the count
     /// from the shell's stretch and springs, ~12 at rest on the ventricle: a tick that needs more
     /// runs late rather than diverge).
@@ -70,6 +73,7 @@ impl Default for SimOptions {
             confinement_stiffness: None,
             max_tool_step: 5e-4,
             max_substeps: 64,
+            interface: 1.0,
             hold: true,
         }
     }

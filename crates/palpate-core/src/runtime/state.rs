@@ -74,6 +74,11 @@ pub struct SimWorkspace {
     /// Per particle, the tool contact's Gershgorin row sum `sum_v w_p / (W_v m_p)` \[1/kg\]
     /// (zero outside a tick).
     pub(crate) contact_share: Vec<f64>,
+    /// The interface anchors of the core's step \[N/m\], the active particles' mass tied to each
+    /// core node \[kg\] and the anchors' velocity kick per node \[m/s\] `(n_core_nodes)`.
+    pub(crate) anchor_k: Vec<f64>,
+    pub(crate) anchor_m: Vec<f64>,
+    pub(crate) anchor_impulse: Vec<Vec3>,
 }
 
 impl SimWorkspace {
@@ -93,6 +98,9 @@ impl SimWorkspace {
             save: Vec::with_capacity(n),
             near: Vec::with_capacity(sim.hybrid.outer_points.len()),
             contact_share: vec![0.0; n],
+            anchor_k: vec![0.0; sim.core.n_nodes()],
+            anchor_m: vec![0.0; sim.core.n_nodes()],
+            anchor_impulse: vec![Vec3::zeros(); sim.core.n_nodes()],
         }
     }
 }

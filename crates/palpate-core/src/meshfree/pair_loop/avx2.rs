@@ -204,11 +204,18 @@ unsafe fn stress_pass(m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4
         let kv = if damped { Some(to_lanes(&kvc)) } else { None };
         let r = to_lanes(&rc);
         let gamma = F4(_mm256_set_pd(g[3], g[2], g[1], g[0]));
-        let bm = b_matrix(&k, kv.as_ref(), &r, gamma, law, linear);
+        let (bm, det) = b_matrix(&k, kv.as_ref(), &r, gamma, law, linear);
         for c in 0..3 {
             let t = transpose(bm[0][c].0, bm[1][c].0, bm[2][c].0, z);
             for (l, &i) in chunk.iter().enumerate() {
                 b[i][c] = store(t[l]);
+            }
+        }
+        // A particle compressed past the floor (rare) gets the barrier from the portable copy.
+        let det = store(det.0);
+        for (l, &i) in chunk.iter().enumerate() {
+            if det[l] < crate::meshfree::COMPRESSION_FLOOR {
+                b[i] = passes::particle_stress(m, i, u, v, linear);
             }
         }
     }

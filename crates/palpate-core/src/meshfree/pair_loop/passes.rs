@@ -40,8 +40,12 @@ fn madd<C: LoopCopy>(a: f64, b: f64, c: f64) -> f64 {
 /// eq. 10-11). `B` is `P A^-1 - gamma H`. `linear`: the small-strain stress with `F = I`
 /// (`E = sym H`, no viscous part). For one particle (`f64`) or several in SIMD lanes.
 #[inline(always)]
-pub(super) fn b_matrix<T: Scalar>(k: &M3<T>, kv: Option<&M3<T>>, r: &M3<T>, gamma: T, law: Svk, linear: bool) -> M3<T> {
+///
+/// Also returns `det F` (1 for `linear`): below [`crate::meshfree::COMPRESSION_FLOOR`] the caller
+/// adds the compression barrier ([`barrier_b`]).
+pub(super) fn b_matrix<T: Scalar>(k: &M3<T>, kv: Option<&M3<T>>, r: &M3<T>, gamma: T, law: Svk, linear: bool) -> (M3<T>, T) {
     let h = mm(k, r);
+    let mut det = T::splat(1.0);
     let p = if linear {
         law.stress(&sym(&h), None)
     } else {
@@ -49,6 +53,7 @@ pub(super) fn b_matrix<T: Scalar>(k: &M3<T>, kv: Option<&M3<T>>, r: &M3<T>, gamm
         for a in 0..3 {
             f[a][a] = f[a][a].add(T::splat(1.0));
         }
+        det = det3(&f);
         let nu = match kv {
             Some(kv) if law.is_damped() => Some(strain_rate_of(&f, &mm(kv, r))),
             _ => None,
@@ -62,7 +67,39 @@ pub(super) fn b_matrix<T: Scalar>(k: &M3<T>, kv: Option<&M3<T>>, r: &M3<T>, gamm
             pk[a][b] = ng.madd(k[a][b], p[a][b]);
         }
     }
-    mm(&pk, r)
+    (mm(&pk, r), det)
+}
+
+/// `det f`.
+#[inline(always)]
+fn det3<T: Scalar>(f: &M3<T>) -> T {
+    let c0 = f[1][1].mul(f[2][2]).sub(f[1][2].mul(f[2][1]));
+    let c1 = f[1][2].mul(f[2][0]).sub(f[1][0].mul(f[2][2]));
+    let c2 = f[1][0].mul(f[2][1]).sub(f[1][1].mul(f[2][0]));
+    f[0][0].mul(c0).add(f[0][1].mul(c1)).add(f[0][2].mul(c2))
+}
+
+/// The compression barrier's part of `B` for a particle with `K` and `R = A^-1` whose
+/// `J = det F` is below the floor `J_c` ([`crate::meshfree::COMPRESSION_FLOOR`]): the first
+/// Piola-Kirchhoff stress `kappa (J - J_c) cof F` of the energy density `kappa/2 (J_c - J)^2`
+/// (`kappa = lambda + 2 mu`), times `R`. See [`crate::meshfree::COMPRESSION_FLOOR`] for why.
+pub(super) fn barrier_b(k: &M3<f64>, r: &M3<f64>, law: Svk) -> M3<f64> {
+    let mut f = mm(k, r);
+    for a in 0..3 {
+        f[a][a] += 1.0;
+    }
+    let j = det3(&f);
+    let (lambda, mu) = law.lame();
+    let s = (lambda + 2.0 * mu) * (j - crate::meshfree::COMPRESSION_FLOOR).min(0.0);
+    // cof F: the derivative of det F, row a column b.
+    let mut cof = [[0.0; 3]; 3];
+    for a in 0..3 {
+        for b in 0..3 {
+            let (a1, a2, b1, b2) = ((a + 1) % 3, (a + 2) % 3, (b + 1) % 3, (b + 2) % 3);
+            cof[a][b] = s * (f[a1][b1] * f[a2][b2] - f[a1][b2] * f[a2][b1]);
+        }
+    }
+    mm(&cof, r)
 }
 
 /// `K = sum_j (w_j - w_i) q_ij^T` (rows) over one particle's pairs, for a padded field `w`.
@@ -108,7 +145,15 @@ pub(super) fn particle_stress(m: &ParticleModel, i: usize, u: &[P4], v: Option<&
     // A^-1 is stored once, as padded columns (for the SIMD copy): row a is (c0[a], c1[a], c2[a]).
     let rc = &m.r4[i];
     let r = [[rc[0][0], rc[1][0], rc[2][0]], [rc[0][1], rc[1][1], rc[2][1]], [rc[0][2], rc[1][2], rc[2][2]]];
-    let b = b_matrix(&k, kv.as_ref(), &r, m.gamma[i], law, linear);
+    let (mut b, det) = b_matrix(&k, kv.as_ref(), &r, m.gamma[i], law, linear);
+    if det < crate::meshfree::COMPRESSION_FLOOR {
+        let extra = barrier_b(&k, &r, law);
+        for a in 0..3 {
+            for c in 0..3 {
+                b[a][c] += extra[a][c];
+            }
+        }
+    }
     [[b[0][0], b[1][0], b[2][0], 0.0], [b[0][1], b[1][1], b[2][1], 0.0], [b[0][2], b[1][2], b[2][2], 0.0]]
 }
 
