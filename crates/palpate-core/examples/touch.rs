@@ -54,6 +54,9 @@ fn main() {
     let mut times = Vec::with_capacity(total);
     let mut actives = Vec::with_capacity(total);
     let mut fmax: f64 = 0.0;
+    // FORCE=2: press until the force reaches 2 N (then hold there).
+    let force_target = env("FORCE");
+    let mut frozen: Option<f64> = None;
     for k in 0..total {
         let (depth, s) = if k < t_press {
             (-2e-3 + (depth_max + 2e-3) * k as f64 / t_press as f64, 0.0)
@@ -63,6 +66,10 @@ fn main() {
             (depth_max, slide * (k - t_press - t_hold) as f64 / t_slide as f64)
         } else {
             (depth_max - (depth_max + 2e-3) * (k - t_press - t_hold - t_slide) as f64 / t_release as f64, slide)
+        };
+        let depth = match (force_target, frozen) {
+            (Some(_), Some(d)) => d.min(depth),
+            _ => depth,
         };
         let c = p + n * (r - depth) + tangent * s;
         let t0 = Instant::now();
@@ -78,6 +85,12 @@ fn main() {
             actives.push(rep.active);
         }
         fmax = fmax.max(rep.force.norm());
+        if let Some(ft) = force_target {
+            if frozen.is_none() && rep.force.norm() >= ft {
+                frozen = Some(depth);
+                println!("tick {k}: {ft} N reached at depth {:.2} mm", depth * 1e3);
+            }
+        }
         if std::env::var("DEBUG").is_ok() && k % 5 == 0 {
             let umax = st.particles.active.iter().map(|&i| (st.particles.x[i] - sim.hybrid.particles[i]).norm()).fold(0.0, f64::max);
             let vmax = st.particles.active.iter().map(|&i| st.particles.v[i].norm()).fold(0.0, f64::max);

@@ -41,7 +41,9 @@ pub struct SimOptions {
     /// Coupling springs; `None`: [`Coupling::for_tissue`] with the material's Young's modulus,
     /// the lattice spacing, the mean particle mass and half-critical damping.
     pub coupling: Option<Coupling>,
-    /// Confinement wall stiffness \[N/m\] per particle; `None`: the coupling's stiffness.
+    /// Confinement wall stiffness \[N/m\] per particle; `None`: the tissue's between two lattice
+    /// neighbours, `E * spacing` (the wall's reactions reach the core through the implicit
+    /// interface, see `tick.rs`, so it need not be as soft as the explicit coupling springs).
     pub confinement_stiffness: Option<f64>,
     /// The most the simulated tool moves in one tick \[m\] (default 0.5 mm: 0.5 m/s at 1 kHz). A
     /// device that jumps (a dropped packet, a stall and a resume, a jab) is followed over several
@@ -155,7 +157,7 @@ impl Sim {
             let c = Coupling::for_tissue(material.young(), h, mean_mass, 0.5);
             if c.stiffness > limit { Coupling::for_tissue(limit / h, h, mean_mass, 0.5) } else { c }
         });
-        let confinement = Confinement::new(options.confinement_stiffness.unwrap_or(coupling.stiffness));
+        let confinement = Confinement::new(options.confinement_stiffness.unwrap_or(material.young() * h));
         let shell = Shell::new(&particles, &coupled, &coupling, &confinement);
         let mut core_surface: Vec<usize> = hybrid.core_faces.iter().flatten().copied().collect();
         core_surface.sort_unstable();

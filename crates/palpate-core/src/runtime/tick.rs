@@ -99,8 +99,14 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     particles.active.clear();
     particles.active.extend_from_slice(sets.active);
 
-    // 2. The ring follows the core; the active particles' anchors for confinement.
+    // 2. The ring follows the core, and so do the held active particles (lone lattice particles,
+    // see Sim::new: the step does not move them); the active particles' anchors for confinement.
+    let held = sim.particles.fixed();
     for &p in &particles.active {
+        if held[p] {
+            particles.x[p] = tie.position(p, &core.x);
+            particles.v[p] = tie.velocity(p, &core.x, &core.v);
+        }
         for &j in sim.particles.neighbours(p) {
             if !is_active[j] {
                 particles.x[j] = tie.position(j, &core.x);
@@ -185,7 +191,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         for (&j, &f) in ws.particles.ring().iter().zip(ws.particles.ring_forces()) {
             tie.spread(j, f, &core.x, &mut ws.f_core);
         }
-        interface_anchors(sim, is_active, &particles.active, ws.particles.ring(), &mut ws.anchor_k, &mut ws.anchor_m);
+        interface_anchors(sim, is_active, &particles.active, ws.particles.ring(), &ws.f_wall, &mut ws.anchor_k, &mut ws.anchor_m);
     }
 
     // 4. Skin contact where no particle is active under the tool.
@@ -281,12 +287,13 @@ fn substeps(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleSt
 /// (the frozen neighbours whose reactions it takes) is anchored, for the core's step, with the
 /// stiffness by which the ring resists the node's motion: per ring particle `j`, the tissue's
 /// `(lambda + 2 mu) spacing` times the fraction of `j`'s neighbours that are active, spread by the
-/// tie's weights, times [`super::SimOptions::interface`]. Taken explicitly (the core stepping
+/// tie's weights, plus the confinement wall's stiffness for each particle it pushes, times
+/// [`super::SimOptions::interface`]. Taken explicitly (the core stepping
 /// under the ring's start-of-tick reaction), that stiffness against a light core node exceeds
 /// the node's `m / dt^2`, and the exchange diverged (the paper's ellipsoids at 7 mm). `anchor_m`
 /// receives, per node, the mass of the active particles tied to it (tie weights): the anchors'
 /// impulse goes to them, so a node without any gets no anchor.
-fn interface_anchors(sim: &Sim, is_active: &[bool], active: &[usize], ring: &[usize], anchor_k: &mut [f64], anchor_m: &mut [f64]) {
+fn interface_anchors(sim: &Sim, is_active: &[bool], active: &[usize], ring: &[usize], f_wall: &[Vec3], anchor_k: &mut [f64], anchor_m: &mut [f64]) {
     anchor_k.iter_mut().for_each(|k| *k = 0.0);
     anchor_m.iter_mut().for_each(|m| *m = 0.0);
     let (tie, model, held) = (&sim.particle_tie, &sim.particles, sim.particles.fixed());
@@ -301,6 +308,11 @@ fn interface_anchors(sim: &Sim, is_active: &[bool], active: &[usize], ring: &[us
         if on > 0 {
             tie.spread_scalar(j, k_site * on as f64 / nbrs.len() as f64, anchor_k);
         }
+    }
+    // The particles the wall pushed in the last sub-step: its reaction, too, is the core's.
+    let k_wall = sim.confinement.stiffness * sim.options.interface;
+    for &p in active.iter().filter(|&&p| !held[p] && f_wall[p] != Vec3::zeros()) {
+        tie.spread_scalar(p, k_wall, anchor_k);
     }
     for (k, &m) in anchor_k.iter_mut().zip(anchor_m.iter()) {
         if !(m > 0.0) {
