@@ -73,7 +73,6 @@ SLIDE = 10e-3                  # slide length [m]
 TICKS = 2000                   # default script length
 MIN_TICKS = 40                 # the slide then moves 0.5 mm a tick, the runtime's speed cap
 PHASES = (("press", 0.25), ("hold", 0.10), ("slide", 0.50), ("release", 0.15))
-VENTRICLE_PROBE_Z = 0.020      # [m], the issue's probe height on the synthetic ventricle
 RADIUS_RANGE = (5e-4, 2e-2)    # [m], calibration bounds of the tool radius
 CAL_PRESS_TICKS = 10
 CAL_HOLD_TICKS = 5
@@ -102,29 +101,20 @@ def load_model(spec: str) -> Tuple[str, "_p.HybridModel"]:
     raise ValueError(f"{spec!r} is neither a model file nor a shape ({', '.join(SHAPES)})")
 
 
-def _vertex_normals(points: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    a, b, c = (points[tris[:, k]] for k in range(3))
-    fn = np.cross(b - a, c - a)             # area-weighted
-    vn = np.zeros_like(points)
-    for k in range(3):
-        np.add.at(vn, tris[:, k], fn)
-    return vn
-
-
 def probe(model: "_p.HybridModel", name: str = "") -> Tuple[int, np.ndarray, np.ndarray, np.ndarray]:
-    """``(vertex, point, inward normal, slide direction)`` of the probe (see the module docs)."""
+    """``(vertex, point, inward normal, slide direction)`` of the probe: the vertex of
+    :func:`palpate.touch.probe_point` (the protocol's probe on the synthetic ventricle), its
+    inward area-weighted normal (:func:`palpate.touch.vertex_normals`), and the horizontal
+    tangent there. ``name`` is accepted for compatibility and not used."""
+    from .touch import probe_point, vertex_normals
+
     s = np.asarray(model.outer_points)
-    lo, hi = s.min(axis=0), s.max(axis=0)
-    c = 0.5 * (lo + hi)
-    zref = VENTRICLE_PROBE_Z if name == "ventricle" else c[2]
-    off = np.hypot(s[:, 1] - c[1], s[:, 2] - zref) + 10.0 * (hi - lo).max() * (s[:, 0] < c[0])
-    v = int(np.argmin(off))
-    n = _vertex_normals(s, np.asarray(model.outer_triangles))[v]
+    tris = np.asarray(model.outer_triangles)
+    v = probe_point(s, tris)
+    n = vertex_normals(s, tris)[v]
     if np.linalg.norm(n) == 0:
         n = s[v] - s.mean(axis=0)
     n = n / np.linalg.norm(n)
-    if n @ (s[v] - s.mean(axis=0)) < 0:
-        n = -n
     t = np.cross(n, [0.0, 0.0, 1.0])
     if np.linalg.norm(t) < 1e-6:
         t = np.cross(n, [1.0, 0.0, 0.0])

@@ -80,7 +80,7 @@ def test_active_count_near_target(ellipsoids, report):
 def test_probe_is_on_the_outer_surface_facing_plus_x(ellipsoids):
     v, p, n_in, t = bh.probe(ellipsoids, "ellipsoids")
     assert np.allclose(p, ellipsoids.outer_points[v])
-    assert p[0] > 0.025 and abs(p[2]) < 2e-3          # the equator at +x
+    assert p[0] > 0.025 and abs(p[2]) < 3e-3          # near the equator at +x (palpate.touch.probe_point)
     assert n_in[0] < -0.9 and abs(np.linalg.norm(n_in) - 1) < 1e-12 and abs(t @ n_in) < 1e-12
 
 
