@@ -1,32 +1,34 @@
-"""The hybrid tick under the worst a hand gives (issue 12, in progress): a fast slide, a device
-that stalls then jumps, a jab, and presses to 10 mm at falling speeds, on the synthetic ventricle
-(undamped material, 5 mm tool). Prints, per scenario, whether every tick stayed finite, the
-largest force and the p99 tick time, or the tick where it stopped and why.
+"""The hybrid tick under the worst a hand gives (issue 12): a fast slide, a device that stalls
+then jumps, a jab, presses to 10 and 15 mm, on a shipped model (default the synthetic ventricle;
+undamped material, 5 mm tool, at palpate.touch.probe_point along the inward normal). Prints, per
+scenario, whether every tick stayed finite, the largest force and the p99 tick time, or the tick
+where it stopped and why.
 
-    .venv/bin/python bench/hybrid_hand.py
+    .venv/bin/python bench/hybrid_hand.py [ventricle|ellipsoids|rodero]
+    PHI=0.5 .venv/bin/python bench/hybrid_hand.py   # with the paper's viscosity (phi = psi [Pa s])
 """
 import os
 import time
 
+import sys
+
 import numpy as np
 
 import palpate
+from palpate import bench_hybrid
 
 
 def main():
-    m = palpate.build_shape("ventricle")
-    # PHI=0.5 python bench/hybrid_hand.py: the same with the paper's viscosity (phi = psi [Pa s]).
+    shape = sys.argv[1] if len(sys.argv) > 1 else "ventricle"
+    m = palpate.build_shape(shape)
+    _, p, n_in, t = bench_hybrid.probe(m)
+    n = -n_in
+    print(f"{shape}: probe {np.round(p * 1e3, 2)} mm, inward normal {np.round(n_in, 3)}")
     damp = float(os.environ.get("PHI", "0"))
     mat = palpate.Material(young=3e4, poisson=0.4, density=1000.0, phi=damp, psi=damp)
 
     def run(name, path):
         sim = palpate.HybridSim(m, mat)
-        s = sim.surface
-        target = np.array([s[:, 0].max(), 0.0, 0.02])
-        p = s[np.argmin(np.linalg.norm((s - target)[:, 1:], axis=1) + 10 * (s[:, 0] < 0))]
-        n = np.array([p[0], p[1], 0.0])
-        n /= np.linalg.norm(n)
-        t = np.cross(n, [0, 0, 1.0])
         fmax, times = 0.0, []
         for k, (depth, slide) in enumerate(path):
             t0 = time.perf_counter()
@@ -45,6 +47,8 @@ def main():
     run("jab 10 mm in 10 ms", [(1e-3 * (k + 1), 0.0) for k in range(10)] + [(10e-3, 0.0)] * 300)
     for v in [0.2e-3, 0.05e-3]:
         run(f"press to 10 mm at {v * 1e3:.2f} m/s", [(v * (k + 1), 0.0) for k in range(int(10e-3 / v))] + [(10e-3, 0.0)] * 100)
+    run("press to 15 mm at 0.05 m/s, hold, slide 10 mm", [(5e-5 * (k + 1), 0.0) for k in range(300)] + [(15e-3, 0.0)] * 100
+        + [(15e-3, 1e-5 * (k + 1)) for k in range(1000)])
 
 
 if __name__ == "__main__":

@@ -424,7 +424,7 @@ class _HybridOptions(TypedDict, total=False):
     field_voxels: int
 
 class HybridSim:
-    """The hybrid model you can touch: tool position in, force out (in progress, issue 12)."""
+    """The hybrid model you can touch: tool position in, force out (issue 12)."""
     def __init__(
         self,
         model: HybridModel,
@@ -433,8 +433,19 @@ class HybridSim:
         tool_radius: Optional[float] = None,
         tool_stiffness: Optional[float] = None,
         hold: bool = True,
+        activation_margin: Optional[float] = None,
+        max_tool_step: Optional[float] = None,
+        linger_ticks: Optional[int] = None,
+        max_substeps: Optional[int] = None,
     ) -> None: ...
     def step(self, tool_centre: _Vec3, dt: float = 1e-3) -> _FloatArray: ...
+    def reset(self) -> None: ...
+    @property
+    def tool_radius(self) -> float: ...
+    @property
+    def tool_position(self) -> Optional[_FloatArray]: ...
+    @property
+    def options(self) -> Dict[str, Any]: ...
     @property
     def last(self) -> Dict[str, Any]: ...
     @property

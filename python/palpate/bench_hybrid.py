@@ -257,7 +257,7 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
 
     r: Dict[str, Any] = {
         "model": name, "core_tets": info["core_tets"], "particles": info["particles"], "regions": info["regions"],
-        "active_target": int(active), "tool_radius_m": radius, "activation_margin_m": 1e-3,
+        "active_target": int(active), "tool_radius_m": radius, "activation_margin_m": sim.options["activation_margin"],
         "active_particles_calibrated": calibrated,
         "active_particles_mean": float(np.mean(act)) if act else None,
         "active_particles_max": max(act) if act else None,

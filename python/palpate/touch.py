@@ -76,8 +76,6 @@ import numpy as np
 
 PathLike = Union[str, "os.PathLike[str]"]
 
-#: The simulated tool's largest move a tick [m] (``palpate_core::runtime::SimOptions::max_tool_step``).
-MAX_TOOL_STEP = 5e-4
 #: The tool's default start clearance from the surface [m] (``[probe] gap``).
 DEFAULT_GAP = 0.002
 #: The default probe height, as a fraction of the outer surface's z extent: on the synthetic
@@ -553,7 +551,7 @@ def run_touch(sim, script: Union[Script, "Trajectory"], out_dir: PathLike, *, dt
     writing ``force.csv``, ``force.png`` and the VTU series (a frame at t = 0 and every ``every``
     ticks, default :func:`default_every`; the last tick's too) to ``out_dir``.
 
-    ``tool_radius`` [m] is the radius ``sim`` was made with (default: read from ``repr(sim)``; the
+    ``tool_radius`` [m] is the radius ``sim`` was made with (default: ``sim.tool_radius``; the
     binding has no getter) and defines the depth. ``on_tick(k, t, tool (3,), force (3,))`` is called after each tick ``k`` (1-based). Returns a
     summary: ``ticks``, ``duration_s``, ``wall_s`` (stepping only), ``ticks_per_s``,
     ``tick_ms_median``, ``tick_ms_p99``, ``tick_ms_max``, ``max_force_N``, ``max_normal_force_N``,
@@ -639,11 +637,8 @@ def _fmt(v: float) -> str:
 
 
 def tool_radius_of(sim) -> float:
-    """The tool radius [m] of a HybridSim (parsed from its repr: the binding has no getter)."""
-    m = re.search(r"tool_radius=([0-9.eE+-]+) m", repr(sim))
-    if not m:
-        raise ValueError("cannot tell the simulation's tool radius; pass a Trajectory resolved with it")
-    return float(m.group(1))
+    """The tool radius [m] of a :class:`palpate.HybridSim` (``sim.tool_radius``)."""
+    return float(sim.tool_radius)
 
 
 #: A press, hold, slide and release at the default probe point (``examples/scripts/press_hold_slide.toml``):

@@ -17,7 +17,8 @@ use crate::material::PyMaterial;
 /// tool active, the skin following both. **In progress** (issue 12): stable for presses up to
 /// 15 mm on the synthetic ventricle; see ``palpate_core::runtime`` for what is not yet.
 ///
-/// ``HybridSim(model, material, *, tool_radius=0.005, tool_stiffness=None, hold=True)``
+/// ``HybridSim(model, material, *, tool_radius=0.005, tool_stiffness=None, hold=True,
+/// activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None)``
 ///
 /// Parameters
 /// ----------
@@ -27,10 +28,19 @@ use crate::material::PyMaterial;
 /// tool_radius : float
 ///     The spherical tool's radius [m].
 /// tool_stiffness : float, optional
-///     Penalty stiffness per skin vertex in contact [N/m] (default: the core's, see
+///     Penalty stiffness per skin vertex in contact [N/m] (default 60, see
 ///     ``palpate_core::runtime::tool``).
 /// hold : bool
 ///     Hold the core at its base (or, for a closed wall, its lower 30%).
+/// activation_margin : float, optional
+///     Regions within the tool's radius plus this [m] become active (default 1 mm).
+/// max_tool_step : float, optional
+///     The most the simulated tool moves in a tick [m] (default 0.5 mm): a device that jumps is
+///     followed over several ticks (``tool_position`` says where the simulated tool is).
+/// linger_ticks : int, optional
+///     Ticks a region stays active after its last contact (default 100).
+/// max_substeps : int, optional
+///     Cap of the particle sub-steps a tick takes (default 64).
 ///
 /// Positions in metres, forces in newtons, world frame of the model.
 #[pyclass(module = "palpate", name = "HybridSim")]
@@ -44,8 +54,20 @@ pub struct PyHybridSim {
 #[pymethods]
 impl PyHybridSim {
     #[new]
-    #[pyo3(signature = (model, material, *, tool_radius = None, tool_stiffness = None, hold = true))]
-    fn new(py: Python<'_>, model: &PyHybridModel, material: &PyMaterial, tool_radius: Option<f64>, tool_stiffness: Option<f64>, hold: bool) -> PyResult<Self> {
+    #[pyo3(signature = (model, material, *, tool_radius = None, tool_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        model: &PyHybridModel,
+        material: &PyMaterial,
+        tool_radius: Option<f64>,
+        tool_stiffness: Option<f64>,
+        hold: bool,
+        activation_margin: Option<f64>,
+        max_tool_step: Option<f64>,
+        linger_ticks: Option<u64>,
+        max_substeps: Option<usize>,
+    ) -> PyResult<Self> {
         let mut tool = Tool::default();
         if let Some(r) = tool_radius {
             if !(r > 0.0 && r.is_finite()) {
@@ -59,7 +81,28 @@ impl PyHybridSim {
             }
             tool.stiffness = k;
         }
-        let options = SimOptions { tool, hold, ..Default::default() };
+        let mut options = SimOptions { tool, hold, ..Default::default() };
+        if let Some(m) = activation_margin {
+            if !(m >= 0.0 && m.is_finite()) {
+                return Err(PyValueError::new_err(format!("activation_margin = {m} m must be non-negative and finite")));
+            }
+            options.activation_margin = m;
+        }
+        if let Some(d) = max_tool_step {
+            if !(d > 0.0 && d.is_finite()) {
+                return Err(PyValueError::new_err(format!("max_tool_step = {d} m must be positive and finite")));
+            }
+            options.max_tool_step = d;
+        }
+        if let Some(l) = linger_ticks {
+            options.linger_ticks = l;
+        }
+        if let Some(k) = max_substeps {
+            if k == 0 {
+                return Err(PyValueError::new_err("max_substeps must be at least 1"));
+            }
+            options.max_substeps = k;
+        }
         let (hm, mat) = (model.model.clone(), material.inner);
         let sim = py.detach(|| Sim::new(hm, mat, options)).map_err(errors::model_error)?;
         let state = SimState::rest(&sim);
@@ -156,6 +199,49 @@ impl PyHybridSim {
     #[getter]
     fn n_particles(&self) -> usize {
         self.sim.n_particles()
+    }
+
+    /// The tool's radius [m].
+    #[getter]
+    fn tool_radius(&self) -> f64 {
+        self.sim.options.tool.radius
+    }
+
+    /// Where the simulated tool's centre is [m] (3,), or ``None`` before the first tick: it
+    /// follows the device's ``tool_centre`` by at most ``max_tool_step`` a tick.
+    #[getter]
+    fn tool_position<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
+        self.state.tool.map(|c| conv::vec3_to_py(py, c))
+    }
+
+    /// The options the simulation was made with: ``tool_radius`` [m], ``tool_stiffness`` [N/m],
+    /// ``tool_damping`` [N s/m], ``activation_margin`` [m], ``max_tool_step`` [m],
+    /// ``linger_ticks``, ``max_substeps``, ``hold``, and the resolved ``coupling_stiffness``
+    /// [N/m], ``coupling_damping`` [N s/m] and ``confinement_stiffness`` [N/m].
+    #[getter]
+    fn options<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let o = &self.sim.options;
+        let d = PyDict::new(py);
+        d.set_item("tool_radius", o.tool.radius)?;
+        d.set_item("tool_stiffness", o.tool.stiffness)?;
+        d.set_item("tool_damping", o.tool.damping)?;
+        d.set_item("activation_margin", o.activation_margin)?;
+        d.set_item("max_tool_step", o.max_tool_step)?;
+        d.set_item("linger_ticks", o.linger_ticks)?;
+        d.set_item("max_substeps", o.max_substeps)?;
+        d.set_item("hold", o.hold)?;
+        d.set_item("coupling_stiffness", self.sim.coupling.stiffness)?;
+        d.set_item("coupling_damping", self.sim.coupling.damping)?;
+        d.set_item("confinement_stiffness", self.sim.confinement.stiffness)?;
+        Ok(d)
+    }
+
+    /// Back to rest: the core and the shell undeformed, nothing active, time and ticks zero, no
+    /// tool (the compiled model is kept: cheaper than a new ``HybridSim``).
+    fn reset(&mut self) {
+        self.state = SimState::rest(&self.sim);
+        self.ws = SimWorkspace::new(&self.sim);
+        self.last = TickReport::default();
     }
 
     fn __repr__(&self) -> String {

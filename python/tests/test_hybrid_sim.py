@@ -88,3 +88,23 @@ def test_ticks_release_the_gil(ventricle, material):
     stop.set()
     t.join()
     assert counter[0] > 1000 and time.perf_counter() > t0
+
+
+def test_options_tool_position_and_reset(ventricle, material):
+    sim = palpate.HybridSim(ventricle, material, tool_radius=0.004, activation_margin=5e-4, max_tool_step=2e-4,
+                            linger_ticks=10, max_substeps=40)
+    o = sim.options
+    assert (o["tool_radius"], o["activation_margin"], o["max_tool_step"], o["linger_ticks"], o["max_substeps"]) == \
+        (0.004, 5e-4, 2e-4, 10, 40)
+    assert o["coupling_stiffness"] > 0 and o["confinement_stiffness"] > 0 and sim.tool_radius == 0.004
+    assert sim.tool_position is None
+    far = np.array([1.0, 1.0, 1.0])
+    sim.step(far)
+    # The device jumps 10 mm: the simulated tool follows at most max_tool_step a tick.
+    sim.step(far + [0.01, 0.0, 0.0])
+    assert np.linalg.norm(sim.tool_position - far) == pytest.approx(2e-4)
+    sim.reset()
+    assert sim.ticks == 0 and sim.time == 0.0 and sim.tool_position is None and len(sim.active) == 0
+    for bad in [dict(activation_margin=-1e-3), dict(max_tool_step=0.0), dict(max_substeps=0)]:
+        with pytest.raises(ValueError):
+            palpate.HybridSim(ventricle, material, **bad)

@@ -109,24 +109,22 @@ def cmd_touch(a) -> int:
     try:
         s = run_touch(sim, traj, a.out, dt=a.dt, every=a.every, title=f"palpate touch: {what}, {a.script}")
     except TouchFailed as e:
-        _report(e.summary)
+        _report(e.summary, sim.options["max_tool_step"])
         raise Fail(f"{a.script}: simulation failed at tick {e.tick} (t = {e.summary['t_failed_s']:.4f} s): "
                    f"{e.reason}; wrote the {e.summary['ticks']} ticks before it", 1) from None
     except OSError as e:
         raise Fail(f"palpate touch: cannot write the output: {e}", 1) from None
-    _report(s)
+    _report(s, sim.options["max_tool_step"])
     return 0
 
 
-def _report(s) -> None:
-    from ..touch import MAX_TOOL_STEP
-
+def _report(s, max_tool_step: float) -> None:
     if s["ticks"]:
         print(f"  {s['ticks']} ticks in {s['wall_s']:.3f} s of stepping: {s['ticks_per_s']:.1f} ticks/s; tick median "
               f"{s['tick_ms_median']:.3f} ms, p99 {s['tick_ms_p99']:.3f} ms, max {s['tick_ms_max']:.3f} ms")
         print(f"  max |f| {s['max_force_N']:.4f} N, max normal force {s['max_normal_force_N']:.4f} N, max depth "
               f"{fmt_mm(s['max_depth_m'])} mm, max active particles {s['max_active']}")
-    if s["max_step_m"] > MAX_TOOL_STEP * (1 + 1e-9):
+    if s["max_step_m"] > max_tool_step * (1 + 1e-9):
         print(f"  note: the script moves the tool up to {fmt_mm(s['max_step_m'])} mm a tick; the simulated tool follows "
-              f"at most {fmt_mm(MAX_TOOL_STEP)} mm a tick (force.csv logs the commanded position)")
+              f"at most {fmt_mm(max_tool_step)} mm a tick (force.csv logs the commanded position)")
     print(f"  wrote {s['csv']}" + (f", {s['png']}" if s["png"] else "") + f", {s['frames']} frames: {s['pvd']}")

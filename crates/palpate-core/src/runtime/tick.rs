@@ -75,6 +75,8 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         return Err(StepError::NonFiniteTool);
     }
     let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active } = state;
+    // The shell's clock is the core's (it advances only while particles are active).
+    particles.t = core.t;
     let (tie, o) = (&sim.particle_tie, &sim.options);
     let prev = last_tool.unwrap_or(tool);
     // The simulated tool follows the device at most `max_tool_step` a tick (SimOptions).
