@@ -61,10 +61,17 @@ impl Coupling {
             if !coupled[p] {
                 continue;
             }
-            let f = self.stiffness * (tie.position(p, x_core) - x[p]) + self.damping * (tie.velocity(p, x_core, v_core) - v[p]);
+            let f = self.force(&tie.position(p, x_core), &tie.velocity(p, x_core, v_core), &x[p], &v[p]);
             f_particles[p] += f;
             tie.spread(p, -f, x_core, f_core);
         }
+    }
+
+    /// The spring's force on a particle at `x` with velocity `v` whose tie is at `tie_x` moving
+    /// at `tie_v` \[N\] (the tie receives the opposite).
+    #[inline]
+    pub fn force(&self, tie_x: &Vec3, tie_v: &Vec3, x: &Vec3, v: &Vec3) -> Vec3 {
+        self.stiffness * (tie_x - x) + self.damping * (tie_v - v)
     }
 }
 

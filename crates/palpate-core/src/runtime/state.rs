@@ -79,6 +79,14 @@ pub struct SimWorkspace {
     pub(crate) anchor_k: Vec<f64>,
     pub(crate) anchor_m: Vec<f64>,
     pub(crate) anchor_impulse: Vec<Vec3>,
+    /// Each active particle's tie position \[m\] and velocity \[m/s\] this tick, and each near skin
+    /// vertex's; what the sub-steps send to the core per particle and per skin vertex \[N\]
+    /// (summed over the sub-steps, spread once; zero outside a tick).
+    pub(crate) tie_x: Vec<Vec3>,
+    pub(crate) tie_v: Vec<Vec3>,
+    pub(crate) skin_tie: Vec<(Vec3, Vec3)>,
+    pub(crate) to_core: Vec<Vec3>,
+    pub(crate) skin_to_core: Vec<Vec3>,
 }
 
 impl SimWorkspace {
@@ -101,6 +109,11 @@ impl SimWorkspace {
             anchor_k: vec![0.0; sim.core.n_nodes()],
             anchor_m: vec![0.0; sim.core.n_nodes()],
             anchor_impulse: vec![Vec3::zeros(); sim.core.n_nodes()],
+            tie_x: vec![Vec3::zeros(); n],
+            tie_v: vec![Vec3::zeros(); n],
+            skin_tie: vec![(Vec3::zeros(), Vec3::zeros()); sim.hybrid.outer_points.len()],
+            to_core: vec![Vec3::zeros(); n],
+            skin_to_core: vec![Vec3::zeros(); sim.hybrid.outer_points.len()],
         }
     }
 }

@@ -115,9 +115,12 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
                 particles.v[j] = tie.velocity(j, &core.x, &core.v);
             }
         }
-        // The tie's displacement: confinement measures a particle in the rest frame of the
-        // core around it (the voxels are the rest configuration's).
-        ws.anchors[p] = tie.position(p, &core.x) - sim.hybrid.particles[p];
+        // The tie's place and velocity, fixed over the tick's sub-steps (the core moves once a
+        // tick); its displacement: confinement measures a particle in the rest frame of the core
+        // around it (the voxels are the rest configuration's).
+        ws.tie_x[p] = tie.position(p, &core.x);
+        ws.tie_v[p] = tie.velocity(p, &core.x, &core.v);
+        ws.anchors[p] = ws.tie_x[p] - sim.hybrid.particles[p];
     }
     ws.save.clear();
     ws.save.extend(particles.active.iter().map(|&p| (particles.x[p], particles.v[p])));
@@ -128,6 +131,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     for (v, x) in skin.iter().enumerate() {
         if (x - tool).norm_squared() < reach * reach && over_active(sim, activation, v) {
             ws.near.push(v);
+            ws.skin_tie[v] = (sim.skin.position(v, &core.x), sim.skin.velocity(v, &core.x, &core.v));
         }
     }
 
@@ -139,9 +143,15 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         let tri_count = activation.triangle_counts();
         let rest = &sim.hybrid.particles;
         sim.confinement.slacks(&sim.hybrid.grid, &sim.hybrid.voxel_owner, tri_count, rest, &particles.active, &mut ws.slacks);
-        let (f_core, shift, slacks, x_rest, f_wall, near) = (&mut ws.f_core, &ws.anchors, &ws.slacks, &mut ws.x_rest, &mut ws.f_wall, &ws.near);
+        // What the sub-steps send to the core is gathered per particle (`to_core`, through its
+        // tie) and per skin vertex (`skin_to_core`) and spread once after them: the core does not
+        // move within a tick, so the spread of the sum is the sum of the spreads.
+        let (shift, slacks, x_rest, f_wall, near) = (&ws.anchors, &ws.slacks, &mut ws.x_rest, &mut ws.f_wall, &ws.near);
+        let (tie_x, tie_v, skin_tie, to_core, skin_to_core) = (&ws.tie_x, &ws.tie_v, &ws.skin_tie, &mut ws.to_core, &mut ws.skin_to_core);
         let act: &Activation = activation;
-        let (hybrid, core_x, core_v, held) = (&sim.hybrid, &core.x, &core.v, sim.particles.fixed());
+        let (hybrid, held, active_mask) = (&sim.hybrid, sim.particles.fixed(), &*is_active);
+        let ties = TickTies { x: tie_x, v: tie_v, active: active_mask, skin: skin_tie };
+        let (core_x, core_v) = (&core.x, &core.v);
         let external = |sub: &meshfree::SubStep<'_>, f: &mut [Vec3]| {
             let c = prev + ((sub.index + 1) as f64 / k as f64) * (tool - prev);
             for &p in sub.active {
@@ -151,16 +161,22 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
             // to the particles under it: a surface, so the tool cannot slip between particles.
             let mut count = 0;
             for &v in near {
-                let Some((xs, vs, wsum)) = skin_over_particles(sim, act, v, sub.x, sub.v, core_x, core_v) else { continue };
+                let Some((xs, vs, wsum)) = skin_over_particles(sim, act, v, sub.x, sub.v, Some(&ties), core_x, core_v) else { continue };
                 if let Some(contact) = o.tool.contact(&c, &tool_v, &xs, &vs) {
-                    spread_skin_force(sim, act, v, contact.force, wsum, core_x, f, f_core);
+                    spread_skin_force(sim, act, v, contact.force, wsum, f, to_core, skin_to_core);
                     tool_force -= contact.force;
                     count += 1;
                     report.max_depth = report.max_depth.max(contact.depth);
                 }
             }
             report.particle_contacts = report.particle_contacts.max(count);
-            sim.coupling.add_forces(tie, &sim.coupled, sub.active, sub.x, sub.v, core_x, core_v, f, f_core);
+            for &p in sub.active {
+                if sim.coupled[p] {
+                    let fc = sim.coupling.force(&tie_x[p], &tie_v[p], &sub.x[p], &sub.v[p]);
+                    f[p] += fc;
+                    to_core[p] -= fc;
+                }
+            }
             // The wall belongs to the core's regions: its reaction goes to the core through the
             // particle's tie (momentum stays exact).
             for &p in sub.active {
@@ -172,21 +188,41 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
             if wall.pushed > 0 {
                 for &p in sub.active {
                     f[p] += f_wall[p];
-                    tie.spread(p, -f_wall[p], core_x, f_core);
+                    to_core[p] -= f_wall[p];
                 }
             }
             // Held particles (lone lattice particles, see Sim::new) do not move: what acts on
             // them is carried by the core, through their ties.
             for &p in sub.active {
                 if held[p] {
-                    tie.spread(p, f[p], core_x, f_core);
+                    to_core[p] += f[p];
                 }
             }
         };
-        meshfree::step_with(&sim.particles, particles, &mut ws.particles, dt, k, external)?;
+        if let Err(e) = meshfree::step_with(&sim.particles, particles, &mut ws.particles, dt, k, external) {
+            // Nothing of a failed step reaches the core (the buffers start the next tick empty).
+            for &p in &particles.active {
+                ws.to_core[p] = Vec3::zeros();
+            }
+            for &v in &ws.near {
+                ws.skin_to_core[v] = Vec3::zeros();
+            }
+            return Err(e);
+        }
         report.substeps = k;
         let inv_k = 1.0 / k as f64;
-        ws.f_core.iter_mut().for_each(|f| *f *= inv_k);
+        for &p in &particles.active {
+            let f = std::mem::replace(&mut ws.to_core[p], Vec3::zeros());
+            if f != Vec3::zeros() {
+                tie.spread(p, f * inv_k, &core.x, &mut ws.f_core);
+            }
+        }
+        for &v in &ws.near {
+            let f = std::mem::replace(&mut ws.skin_to_core[v], Vec3::zeros());
+            if f != Vec3::zeros() {
+                sim.skin.spread(v, f * inv_k, &core.x, &mut ws.f_core);
+            }
+        }
         tool_force *= inv_k;
         // The ring: frozen neighbours (at their ties) and held active particles (lone lattice
         // particles, see Sim::new): both carried by the core.
@@ -328,12 +364,23 @@ fn over_active(sim: &Sim, activation: &Activation, v: usize) -> bool {
     sim.hybrid.outer_adjacency.vertex_tris.get(v).iter().any(|&t| activation.is_triangle_active(t))
 }
 
+/// The tick's cached ties: each active particle's tie position and velocity, and each near skin
+/// vertex's (the core does not move within a tick).
+struct TickTies<'a> {
+    x: &'a [Vec3],
+    v: &'a [Vec3],
+    active: &'a [bool],
+    skin: &'a [(Vec3, Vec3)],
+}
+
 /// Where outer vertex `v` is, over active triangles: its tie to the core moved by the weighted
 /// mean displacement of the active particles under its triangles from their own ties (each
 /// weighted by its tie's squared depth over the core face, so that the outermost particles, just
 /// under the skin, count most); and its velocity likewise. `None` over no active triangle.
-/// Returns the position, the velocity and the sum of the weights.
-fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], vel: &[Vec3], core_x: &[Vec3], core_v: &[Vec3]) -> Option<(Vec3, Vec3, f64)> {
+/// Returns the position, the velocity and the sum of the weights. `ties`: the tick's cache (for
+/// the near skin vertices and the active particles), or `None` to compute the ties.
+#[allow(clippy::too_many_arguments)]
+fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], vel: &[Vec3], ties: Option<&TickTies<'_>>, core_x: &[Vec3], core_v: &[Vec3]) -> Option<(Vec3, Vec3, f64)> {
     let h = &sim.hybrid;
     let tie = &sim.particle_tie;
     let (mut d, mut dv, mut wsum) = (Vec3::zeros(), Vec3::zeros(), 0.0);
@@ -343,21 +390,30 @@ fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3],
         }
         for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
             let w = tie.offsets()[p].norm_squared();
-            d += w * (x[p] - tie.position(p, core_x));
-            dv += w * (vel[p] - tie.velocity(p, core_x, core_v));
+            let (tx, tv) = match ties {
+                Some(c) if c.active[p] => (c.x[p], c.v[p]),
+                _ => (tie.position(p, core_x), tie.velocity(p, core_x, core_v)),
+            };
+            d += w * (x[p] - tx);
+            dv += w * (vel[p] - tv);
             wsum += w;
         }
     }
-    (wsum > 0.0).then(|| (sim.skin.position(v, core_x) + d / wsum, sim.skin.velocity(v, core_x, core_v) + dv / wsum, wsum))
+    (wsum > 0.0).then(|| {
+        let (sx, sv) = ties.map_or_else(|| (sim.skin.position(v, core_x), sim.skin.velocity(v, core_x, core_v)), |c| c.skin[v]);
+        (sx + d / wsum, sv + dv / wsum, wsum)
+    })
 }
 
 /// A force `f` on outer vertex `v` placed by [`skin_over_particles`], carried by what places it
 /// (the exact transpose): `w_p / W` of it to each particle under, the skin tie's share to the core
-/// nodes less the particles' ties' shares. The particles receive `f`, the core nothing net.
-fn spread_skin_force(sim: &Sim, activation: &Activation, v: usize, f: Vec3, wsum: f64, core_x: &[Vec3], f_particles: &mut [Vec3], f_core: &mut [Vec3]) {
+/// (into `skin_to_core[v]`) less the particles' ties' shares (into `to_core[p]`). The particles
+/// receive `f`, the core nothing net.
+#[allow(clippy::too_many_arguments)]
+fn spread_skin_force(sim: &Sim, activation: &Activation, v: usize, f: Vec3, wsum: f64, f_particles: &mut [Vec3], to_core: &mut [Vec3], skin_to_core: &mut [Vec3]) {
     let h = &sim.hybrid;
     let tie = &sim.particle_tie;
-    sim.skin.spread(v, f, core_x, f_core);
+    skin_to_core[v] += f;
     for &t in h.outer_adjacency.vertex_tris.get(v) {
         if !activation.is_triangle_active(t) {
             continue;
@@ -365,7 +421,7 @@ fn spread_skin_force(sim: &Sim, activation: &Activation, v: usize, f: Vec3, wsum
         for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
             let share = (tie.offsets()[p].norm_squared() / wsum) * f;
             f_particles[p] += share;
-            tie.spread(p, -share, core_x, f_core);
+            to_core[p] -= share;
         }
     }
 }
@@ -373,7 +429,7 @@ fn spread_skin_force(sim: &Sim, activation: &Activation, v: usize, f: Vec3, wsum
 /// Skin vertices at their ties, or, over active triangles, carried by the particles under them.
 fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], core_v: &[Vec3], skin: &mut [Vec3]) {
     for (v, s) in skin.iter_mut().enumerate() {
-        *s = match skin_over_particles(sim, activation, v, &particles.x, &particles.v, core_x, core_v) {
+        *s = match skin_over_particles(sim, activation, v, &particles.x, &particles.v, None, core_x, core_v) {
             Some((x, _, _)) => x,
             None => sim.skin.position(v, core_x),
         };
