@@ -108,3 +108,32 @@ def test_options_tool_position_and_reset(ventricle, material):
     for bad in [dict(activation_margin=-1e-3), dict(max_tool_step=0.0), dict(max_substeps=0)]:
         with pytest.raises(ValueError):
             palpate.HybridSim(ventricle, material, **bad)
+
+
+def _deep_press(sim, m, depth, ticks, force_cap=None):
+    """Press along the inward normal at the probe point (palpate.touch.probe_point) to ``depth``
+    [m] over ``ticks`` ticks, then hold 100 ticks; with ``force_cap`` [N], stop advancing once the
+    force on the tool reaches it. Returns the largest |force| [N]; a failed tick raises."""
+    from palpate import bench_hybrid
+
+    _, p, n_in, _ = bench_hybrid.probe(m)
+    r, d, fmax = sim.tool_radius, 0.0, 0.0
+    for k in range(ticks + 100):
+        f = np.linalg.norm(sim.step(p - n_in * (r - d)))
+        fmax = max(fmax, f)
+        if force_cap is None or f < force_cap:
+            d = min(depth, d + depth / ticks)
+    return fmax
+
+
+def test_the_rodero_ventricle_survives_a_15_mm_press_and_a_press_toward_2_n(lv_path, material):
+    """Every shipped model stays finite under a 15 mm press and a press toward 2 N (capped at
+    20 mm of travel: 2 N is more than these soft organs give; tests/runtime_hand.rs does the
+    synthetic ventricle and the ellipsoids)."""
+    m = palpate.build_shape("rodero")
+    sim = palpate.HybridSim(m, material)
+    f15 = _deep_press(sim, m, 15e-3, 300)
+    sim.reset()
+    f2 = _deep_press(sim, m, 20e-3, 400, force_cap=2.0)
+    assert 0.05 < f15 < 5.0 and 0.05 < f2 <= 5.0, (f15, f2)
+    assert np.isfinite(sim.surface).all() and np.isfinite(sim.particle_positions()).all()
