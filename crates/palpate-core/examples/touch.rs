@@ -32,9 +32,6 @@ fn main() {
     if let Some(c) = env("TOOL_C") {
         opts.tool.damping = c;
     }
-    if let Some(k) = env("INTERFACE") {
-        opts.interface = k;
-    }
     if let Some(m) = env("MARGIN") {
         opts.activation_margin = m * 1e-3;
     }

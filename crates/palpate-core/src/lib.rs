@@ -35,7 +35,7 @@ pub mod runtime;
 pub mod spatial;
 
 pub use error::{HybridError, LoadError, MaterialError, MeshError, ModelError, ModelFileError, SolveError, StepError};
-pub use integrate::{step, step_anchored, Integrator, StepReport};
+pub use integrate::{step, Integrator, StepReport};
 pub use material::{Law, Material};
 pub use math::{Mat3, Real, Vec3};
 pub use mesh::TetMesh;

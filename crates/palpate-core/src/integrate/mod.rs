@@ -173,18 +173,6 @@ pub struct StepReport {
 /// Errors leave `state` as it was: a non-positive or non-finite `dt`, a non-finite external
 /// force, a failed factorisation, or a non-finite result (reported with the first bad node).
 pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Result<StepReport, StepError> {
-    step_anchored(model, state, ws, dt, None)
-}
-
-/// [`step`] with each node anchored to its start-of-step position by an isotropic spring of
-/// `anchors[i]` \[N/m\] `(n_nodes)`: a linearly implicit interface for a caller that exchanges
-/// forces with another body once a step (see `integrate/potential.rs`). The minimising
-/// integrators (quasi-Newton, Newton) take the anchors in their potential; the semi-implicit and
-/// rest-linearised steps, whose matrices are factorised once, ignore them. A caller keeps linear
-/// momentum exact by giving the other body the anchors' impulse `dt k_i (x_i - x_n,i)`.
-/// Anchors of the wrong length or not finite and non-negative are refused
-/// ([`StepError::StateShape`] / [`StepError::NonFiniteForce`]).
-pub fn step_anchored(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64, anchors: Option<&[f64]>) -> Result<StepReport, StepError> {
     if !(dt > 0.0 && dt.is_finite()) {
         return Err(StepError::BadTimeStep(dt));
     }
@@ -195,14 +183,6 @@ pub fn step_anchored(model: &Model, state: &mut State, ws: &mut Workspace, dt: f
     if let Some(node) = state.f_ext.iter().position(|f| !is_finite3(f)) {
         return Err(StepError::NonFiniteForce { node });
     }
-    if let Some(k) = anchors {
-        if k.len() != n {
-            return Err(StepError::StateShape { nodes: n, x: state.x.len(), v: state.v.len(), f_ext: k.len() });
-        }
-        if let Some(node) = k.iter().position(|k| !(k.is_finite() && *k >= 0.0)) {
-            return Err(StepError::NonFiniteForce { node });
-        }
-    }
     ws.x_save.copy_from_slice(&state.x);
     ws.v_save.copy_from_slice(&state.v);
     let factor_count = ws.factor_count;
@@ -211,10 +191,10 @@ pub fn step_anchored(model: &Model, state: &mut State, ws: &mut Workspace, dt: f
         Integrator::BackwardEulerLinear => backward_euler::step_linear(model, state, ws, dt),
         // The minimising schemes share the frame (potential::minimise) and differ in their iterations.
         Integrator::BackwardEulerQuasiNewton { max_iterations, tolerance, .. } => {
-            potential::minimise(model, state, ws, dt, anchors, tolerance, |p, x, xt, ws, pr| quasi_newton::iterate(p, x, xt, ws, pr, max_iterations))
+            potential::minimise(model, state, ws, dt, tolerance, |p, x, xt, ws, pr| quasi_newton::iterate(p, x, xt, ws, pr, max_iterations))
         }
         Integrator::BackwardEulerNewton { max_iterations, tolerance } => {
-            potential::minimise(model, state, ws, dt, anchors, tolerance, |p, x, xt, ws, pr| newton::iterate(p, x, xt, ws, pr, max_iterations))
+            potential::minimise(model, state, ws, dt, tolerance, |p, x, xt, ws, pr| newton::iterate(p, x, xt, ws, pr, max_iterations))
         }
     };
     let bad = match &result {

@@ -61,11 +61,11 @@ fn assemble_hessian(p: &StepProblem, x: &[Vec3], blocks: &mut [Mat3]) {
     }
 }
 
-/// `y = (M / h^2 + anchors + blocks) v` over the free nodes.
-fn hess_mul(model: &Model, anchors: Option<&[f64]>, blocks: &[Mat3], inv_h2: f64, v: &[Vec3], y: &mut [Vec3]) {
+/// `y = (M / h^2 + blocks) v` over the free nodes.
+fn hess_mul(model: &Model, blocks: &[Mat3], inv_h2: f64, v: &[Vec3], y: &mut [Vec3]) {
     let pat = &model.pattern;
     for (fi, &node) in model.free_nodes.iter().enumerate() {
-        let mut s = (model.mass[node] * inv_h2 + anchors.map_or(0.0, |k| k[node])) * v[fi];
+        let mut s = (model.mass[node] * inv_h2) * v[fi];
         for k in pat.row_ptr[fi]..pat.row_ptr[fi + 1] {
             s += blocks[k] * v[pat.col[k]];
         }
@@ -76,7 +76,7 @@ fn hess_mul(model: &Model, anchors: Option<&[f64]>, blocks: &[Mat3], inv_h2: f64
 /// Truncated preconditioned CG (`linalg::cg`) for `H d = -g` into `cg.d`, to a relative
 /// residual `eta`; returns the preconditioner applications. At a direction of non-positive
 /// curvature the iterate so far is kept, or, at the first, the preconditioned gradient.
-fn newton_direction(model: &Model, anchors: Option<&[f64]>, ws: &mut Workspace, cg: &mut CgWorkspace, g: &[Vec3], eta: f64, h: f64) -> usize {
+fn newton_direction(model: &Model, ws: &mut Workspace, cg: &mut CgWorkspace, g: &[Vec3], eta: f64, h: f64) -> usize {
     let inv_h2 = 1.0 / (h * h);
     let CgWorkspace { work, rhs, d } = cg;
     for (bi, gi) in rhs.iter_mut().zip(g) {
@@ -88,7 +88,7 @@ fn newton_direction(model: &Model, anchors: Option<&[f64]>, ws: &mut Workspace, 
     let blocks = std::mem::take(&mut ws.k);
     let mut solves = 0;
     let rep = cg::solve(
-        |v, y| hess_mul(model, anchors, &blocks, inv_h2, v, y),
+        |v, y| hess_mul(model, &blocks, inv_h2, v, y),
         |r, z| {
             factor::apply_inverse(model, ws, r, z, h);
             solves += 1;
@@ -118,9 +118,9 @@ pub(super) fn iterate(p: &StepProblem, x: &mut [Vec3], x_trial: &mut [Vec3], ws:
         ws.k = blocks;
         let eta = pr.relative_gradient(0.25);
         let g = std::mem::take(&mut ws.potential.g);
-        pr.solves += newton_direction(model, p.anchors, ws, &mut cg, &g, eta, h);
+        pr.solves += newton_direction(model, ws, &mut cg, &g, eta, h);
         if free_body {
-            potential::exact_translation(p, &g, &mut cg.d);
+            potential::exact_translation(model, &g, &mut cg.d, h);
         }
         let gd = dot(&g, &cg.d);
         ws.potential.g = g;

@@ -8,7 +8,6 @@
 //!        + W(x)                                             strain energy (elastic law)
 //!        + D(x; x_n)                                        viscous dissipation potential (fem/viscous.rs)
 //!        - sum_i (f_ext,i + m_i g) . (x_i - x_n,i)          work of the applied forces
-//!        + sum_i k_i / 2 |x_i - x_n,i|^2                    anchors (optional, see below)
 //! ```
 //!
 //! stationary: `grad Phi = M (x - x_n - h v_n) / h^2 - f_int(x) - f_applied = 0` is backward
@@ -18,13 +17,6 @@
 //! iteration cap and still be stable: it never returns to a higher potential than the start of
 //! the step, where `x = x_n`. Liu, Bouaziz and Kavan 2017, "Quasi-Newton methods for real-time
 //! simulation of hyperelastic materials" (ACM TOG 36(3)), describe this formulation.
-//!
-//! **Anchors** ([`crate::step_anchored`]): per-node isotropic springs `k_i` \[N/m\] to the start
-//! of the step. A caller that exchanges forces with another body once a step (the hybrid
-//! runtime's particle shell) passes the stiffness with which that body resists the node's motion
-//! over the step, so that the exchange is taken implicitly in the node's own step (a linearly
-//! implicit interface): the node then moves under `f - k (x - x_n)` instead of `f` alone. The
-//! caller returns the anchors' impulse `h k (x - x_n)` to the other body (momentum stays exact).
 //!
 //! The work term is taken relative to `x_n`, so that `Phi` holds no large constant whose
 //! round-off would hide the small decreases of late iterations.
@@ -48,16 +40,6 @@ pub(crate) struct StepProblem<'a> {
     pub v_n: &'a [Vec3],
     pub f_ext: &'a [Vec3],
     pub h: f64,
-    /// Anchor stiffness per node \[N/m\] `(n_nodes)`, or none.
-    pub anchors: Option<&'a [f64]>,
-}
-
-impl StepProblem<'_> {
-    /// Node `i`'s anchor stiffness \[N/m\] (0 without anchors).
-    #[inline]
-    pub fn anchor(&self, i: usize) -> f64 {
-        self.anchors.map_or(0.0, |k| k[i])
-    }
 }
 
 /// The potential at one point, with what the integrators report of it.
@@ -188,9 +170,7 @@ fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64,
         let wk = fa.dot(&du);
         work += wk;
         work_abs += wk.abs();
-        let k = p.anchor(i);
-        inertia += 0.5 * k * du.norm_squared();
-        let mut gi = (m * inv_h2) * a + k * du - f_el[i] - fa;
+        let mut gi = (m * inv_h2) * a - f_el[i] - fa;
         if let Some(fv) = f_visc {
             gi -= fv[i];
         }
@@ -242,17 +222,15 @@ fn force_scale(e: &Eval) -> f64 {
 
 /// On a body with no fixed node, give the direction `d` `(n_free)` the exact rigid translation of
 /// backward Euler, `-h^2 sum(g) / sum(m)` (mass-weighted): for a translation the Hessian is exactly
-/// `M / h^2` (internal forces are translation invariant; with anchors, `M / h^2 + k`), so after
-/// the step the gradient sums to zero and linear momentum changes by exactly `h` times the applied
-/// forces (and the anchors'), however inexactly the rest of the direction was solved (CG, L-BFGS).
-pub(crate) fn exact_translation(p: &StepProblem, g: &[Vec3], d: &mut [Vec3]) {
-    let (model, h) = (p.model, p.h);
+/// `M / h^2` (internal forces are translation invariant), so after the step the gradient sums to
+/// zero and linear momentum changes by exactly `h` times the applied forces, however inexactly
+/// the rest of the direction was solved (CG, L-BFGS).
+pub(crate) fn exact_translation(model: &Model, g: &[Vec3], d: &mut [Vec3], h: f64) {
     let (mut md, mut sg, mut m) = (Vec3::zeros(), Vec3::zeros(), 0.0);
     for (fi, &i) in model.free_nodes.iter().enumerate() {
-        let mi = model.mass[i] + p.anchor(i) * h * h;
-        md += mi * d[fi];
+        md += model.mass[i] * d[fi];
         sg += g[fi];
-        m += mi;
+        m += model.mass[i];
     }
     let shift = -(h * h) * sg / m - md / m;
     d.iter_mut().for_each(|v| *v += shift);
@@ -321,13 +299,11 @@ pub(crate) fn end_step(p: &StepProblem, pw: &mut PotentialWorkspace, x: &[Vec3],
 /// start, run the method's `iterate` (which moves `state.x` from the start and advances the
 /// [`Progress`]; it returns the factor refresh rule's `(surplus, struggled)`), set the end
 /// velocities, return the buffers, then refresh the factor if paid (`factor::refresh_if_paid`).
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn minimise(
     model: &Model,
     state: &mut State,
     ws: &mut Workspace,
     dt: f64,
-    anchors: Option<&[f64]>,
     tolerance: f64,
     iterate: impl FnOnce(&StepProblem, &mut [Vec3], &mut [Vec3], &mut Workspace, &mut Progress) -> (usize, bool),
 ) -> Result<crate::StepReport, StepError> {
@@ -336,7 +312,7 @@ pub(crate) fn minimise(
     let (x_n, v_n) = (std::mem::take(&mut ws.x_save), std::mem::take(&mut ws.v_save));
     let mut x_trial = std::mem::take(&mut ws.x_trial);
     x_trial.copy_from_slice(&state.x);
-    let p = StepProblem { model, x_n: &x_n, v_n: &v_n, f_ext: &state.f_ext, h: dt, anchors };
+    let p = StepProblem { model, x_n: &x_n, v_n: &v_n, f_ext: &state.f_ext, h: dt };
     let (start, fresh) = evaluate_start(&p, &mut ws.potential);
     let mut pr = Progress::start(start, fresh, tolerance);
     let (surplus, struggled) = iterate(&p, &mut state.x, &mut x_trial, ws, &mut pr);
@@ -439,7 +415,7 @@ pub fn incremental_potential_gradient(model: &Model, x: &[Vec3], x_n: &[Vec3], v
 /// [`evaluate`] with buffers of its own; returns the evaluation and the gradient `(n_free)`.
 fn evaluate_alone(model: &Model, x: &[Vec3], x_n: &[Vec3], v_n: &[Vec3], f_ext: &[Vec3], h: f64) -> (Eval, Vec<Vec3>) {
     let n = model.n_nodes();
-    let p = StepProblem { model, x_n, v_n, f_ext, h, anchors: None };
+    let p = StepProblem { model, x_n, v_n, f_ext, h };
     let (mut f_el, mut f_visc, mut g) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n], vec![Vec3::zeros(); model.free_nodes.len()]);
     let e = evaluate(&p, x, &mut f_el, &mut f_visc, &mut g);
     (e, g)

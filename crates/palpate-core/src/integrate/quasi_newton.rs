@@ -166,7 +166,7 @@ pub(super) fn iterate(p: &StepProblem, x: &mut [Vec3], x_trial: &mut [Vec3], ws:
         }
         if free_body {
             // Keep the momentum exact (see the module docs).
-            potential::exact_translation(p, &g, &mut lb.d);
+            potential::exact_translation(model, &g, &mut lb.d, h);
         }
         ws.potential.g = g;
         if !(gd < 0.0) {

@@ -21,9 +21,8 @@
 //! tool cannot slip between particles), and the core's surface. Stability under a hand's worst
 //! (tests/runtime_hand.rs, `bench/hybrid_hand.py`) rests on four things: the shell's sub-step
 //! count from its current stretch, springs and contact ([`stability`]); ties whose offsets turn
-//! with their faces ([`embed`]); the core taking the shell's reactions through a linearly
-//! implicit interface (`crate::step_anchored`, see `tick.rs`); and a compression barrier in the
-//! particle law (`crate::meshfree::COMPRESSION_FLOOR`). Measured: 15 mm presses, a press toward
+//! with their faces ([`embed`]); held (lone) particles carried by their ties every tick; and a
+//! compression barrier in the particle law (`crate::meshfree::COMPRESSION_FLOOR`). Measured: 15 mm presses, a press toward
 //! 2 N over 20 mm of travel, a 0.5 m/s slide, a 5 mm jump after a stall and a 10 mm jab stay
 //! finite on the synthetic ventricle and the paper's ellipsoids, damped or not; a slow slide over
 //! 50 region changes moves the force by at most 20% of the 0.01 N allowance per tick. Not yet: the

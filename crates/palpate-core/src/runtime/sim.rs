@@ -42,17 +42,14 @@ pub struct SimOptions {
     /// the lattice spacing, the mean particle mass and half-critical damping.
     pub coupling: Option<Coupling>,
     /// Confinement wall stiffness \[N/m\] per particle; `None`: the tissue's between two lattice
-    /// neighbours, `E * spacing` (the wall's reactions reach the core through the implicit
-    /// interface, see `tick.rs`, so it need not be as soft as the explicit coupling springs).
+    /// neighbours, `E * spacing` (a wall as soft as the coupling springs, whose stiffness the
+    /// core's node masses cap, let particles drift a voxel out of their regions under a press).
     pub confinement_stiffness: Option<f64>,
     /// The most the simulated tool moves in one tick \[m\] (default 0.5 mm: 0.5 m/s at 1 kHz). A
     /// device that jumps (a dropped packet, a stall and a resume, a jab) is followed over several
     /// ticks by the simulated tool, whose force the device renders: the shell's explicit
     /// sub-steps cannot take a sphere appearing millimetres deep in one tick.
     pub max_tool_step: f64,
-    /// Scale of the core-shell interface stiffness the core's step takes implicitly (default 1;
-    /// 0: the exchange is explicit, see `tick.rs`'s `interface_anchors`).
-    pub interface: f64,
     /// The most particle sub-steps a tick takes (default 64; [`super::stability`] sets the count
     /// from the shell's stretch and springs, ~12 at rest on the ventricle: a tick that needs more
     /// runs late rather than diverge).
@@ -75,7 +72,6 @@ impl Default for SimOptions {
             confinement_stiffness: None,
             max_tool_step: 5e-4,
             max_substeps: 64,
-            interface: 1.0,
             hold: true,
         }
     }

@@ -74,11 +74,6 @@ pub struct SimWorkspace {
     /// Per particle, the tool contact's Gershgorin row sum `sum_v w_p / (W_v m_p)` \[1/kg\]
     /// (zero outside a tick).
     pub(crate) contact_share: Vec<f64>,
-    /// The interface anchors of the core's step \[N/m\], the active particles' mass tied to each
-    /// core node \[kg\] and the anchors' velocity kick per node \[m/s\] `(n_core_nodes)`.
-    pub(crate) anchor_k: Vec<f64>,
-    pub(crate) anchor_m: Vec<f64>,
-    pub(crate) anchor_impulse: Vec<Vec3>,
     /// Each active particle's tie position \[m\] and velocity \[m/s\] this tick, and each near skin
     /// vertex's; what the sub-steps send to the core per particle and per skin vertex \[N\]
     /// (summed over the sub-steps, spread once; zero outside a tick).
@@ -106,9 +101,6 @@ impl SimWorkspace {
             save: Vec::with_capacity(n),
             near: Vec::with_capacity(sim.hybrid.outer_points.len()),
             contact_share: vec![0.0; n],
-            anchor_k: vec![0.0; sim.core.n_nodes()],
-            anchor_m: vec![0.0; sim.core.n_nodes()],
-            anchor_impulse: vec![Vec3::zeros(); sim.core.n_nodes()],
             tie_x: vec![Vec3::zeros(); n],
             tie_v: vec![Vec3::zeros(); n],
             skin_tie: vec![(Vec3::zeros(), Vec3::zeros()); sim.hybrid.outer_points.len()],

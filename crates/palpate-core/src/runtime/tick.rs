@@ -30,7 +30,7 @@ use super::activation::Activation;
 use super::sim::Sim;
 use super::state::{SimState, SimWorkspace};
 use crate::error::StepError;
-use crate::integrate::{step_anchored, StepReport};
+use crate::integrate::{step, StepReport};
 use crate::math::{is_finite3, Vec3};
 use crate::meshfree;
 use super::stability::stretch_bound;
@@ -229,7 +229,6 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         for (&j, &f) in ws.particles.ring().iter().zip(ws.particles.ring_forces()) {
             tie.spread(j, f, &core.x, &mut ws.f_core);
         }
-        interface_anchors(sim, is_active, &particles.active, ws.particles.ring(), &ws.f_wall, &mut ws.anchor_k, &mut ws.anchor_m);
     }
 
     // 4. Skin contact where no particle is active under the tool.
@@ -259,8 +258,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
 
     // 5. The core.
     core.f_ext.copy_from_slice(&ws.f_core);
-    let anchored = !particles.active.is_empty() && sim.options.interface > 0.0;
-    report.core = match step_anchored(&sim.core, core, &mut ws.core, dt, anchored.then_some(&ws.anchor_k[..])) {
+    report.core = match step(&sim.core, core, &mut ws.core, dt) {
         Ok(r) => r,
         Err(e) => {
             for (&p, &(x, v)) in particles.active.iter().zip(&ws.save) {
@@ -270,19 +268,6 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
             return Err(e);
         }
     };
-
-    if anchored {
-        // The anchors' impulse, `dt k_a (x_a - x_n,a)`, goes to the active particles tied to each
-        // anchored node, shared by mass and tie weight (equal and opposite: momentum exact).
-        let x_n = &ws.core.x_save;
-        for a in 0..core.x.len() {
-            ws.anchor_impulse[a] = if ws.anchor_k[a] > 0.0 { (dt * ws.anchor_k[a] / ws.anchor_m[a]) * (core.x[a] - x_n[a]) } else { Vec3::zeros() };
-        }
-        let held = sim.particles.fixed();
-        for &p in particles.active.iter().filter(|&&p| !held[p]) {
-            particles.v[p] += tie.interpolate(p, &ws.anchor_impulse);
-        }
-    }
 
     // 6. The skin.
     update_skin(sim, activation, particles, &core.x, &core.v, skin);
@@ -319,44 +304,6 @@ fn substeps(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleSt
     }
     let tool = &sim.options.tool;
     sim.shell.substeps(dt, stretch2, tool.stiffness * top, tool.damping * top, sim.options.max_substeps)
-}
-
-/// The linearly implicit interface ([`crate::step_anchored`]): each core node carrying the ring
-/// (the frozen neighbours whose reactions it takes) is anchored, for the core's step, with the
-/// stiffness by which the ring resists the node's motion: per ring particle `j`, the tissue's
-/// `(lambda + 2 mu) spacing` times the fraction of `j`'s neighbours that are active, spread by the
-/// tie's weights, plus the confinement wall's stiffness for each particle it pushes, times
-/// [`super::SimOptions::interface`]. Taken explicitly (the core stepping
-/// under the ring's start-of-tick reaction), that stiffness against a light core node exceeds
-/// the node's `m / dt^2`, and the exchange diverged (the paper's ellipsoids at 7 mm). `anchor_m`
-/// receives, per node, the mass of the active particles tied to it (tie weights): the anchors'
-/// impulse goes to them, so a node without any gets no anchor.
-fn interface_anchors(sim: &Sim, is_active: &[bool], active: &[usize], ring: &[usize], f_wall: &[Vec3], anchor_k: &mut [f64], anchor_m: &mut [f64]) {
-    anchor_k.iter_mut().for_each(|k| *k = 0.0);
-    anchor_m.iter_mut().for_each(|m| *m = 0.0);
-    let (tie, model, held) = (&sim.particle_tie, &sim.particles, sim.particles.fixed());
-    for &p in active.iter().filter(|&&p| !held[p]) {
-        tie.spread_scalar(p, model.masses()[p], anchor_m);
-    }
-    let m = model.material();
-    let k_site = (m.lambda() + 2.0 * m.mu()) * sim.hybrid.spacing * sim.options.interface;
-    for &j in ring {
-        let nbrs = model.neighbours(j);
-        let on = nbrs.iter().filter(|&&i| is_active[i] && !held[i]).count();
-        if on > 0 {
-            tie.spread_scalar(j, k_site * on as f64 / nbrs.len() as f64, anchor_k);
-        }
-    }
-    // The particles the wall pushed in the last sub-step: its reaction, too, is the core's.
-    let k_wall = sim.confinement.stiffness * sim.options.interface;
-    for &p in active.iter().filter(|&&p| !held[p] && f_wall[p] != Vec3::zeros()) {
-        tie.spread_scalar(p, k_wall, anchor_k);
-    }
-    for (k, &m) in anchor_k.iter_mut().zip(anchor_m.iter()) {
-        if !(m > 0.0) {
-            *k = 0.0;
-        }
-    }
 }
 
 /// Is outer vertex `v` on a triangle with active particles?
