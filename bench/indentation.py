@@ -5,8 +5,8 @@ same material (St. Venant-Kirchhoff, E = 30 kPa, nu = 0.4, 1000 kg/m^3; ``--law 
 meshes with the Neo-Hookean law instead), same 5 mm rigid sphere, same probe point P and direction
 n (shared/bench/PROTOCOL.md; mesh units x 0.01 = m).
 
-    cd /work/wt-valid && OMP_NUM_THREADS=1 PYTHONPATH=python PALPATE_SHARED=/work/shared nice -n 10 \\
-        /work/main/.venv/bin/python bench/indentation.py --meshes 190 1350 10k --core-fractions 0.3 0.7
+    OMP_NUM_THREADS=1 PALPATE_SHARED=../shared nice -n 10 \\
+        .venv/bin/python bench/indentation.py --meshes 190 1350 10k --core-fractions 0.3 0.7
     ... bench/indentation.py --meshes 50k --no-hybrid --depths 1 2 3 4          (~10 min)
     ... bench/indentation.py --meshes 190 1350 10k 50k --law nh --no-hybrid      (~5 min)
 

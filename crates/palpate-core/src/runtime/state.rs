@@ -79,7 +79,11 @@ pub struct SimWorkspace {
     /// (summed over the sub-steps, spread once; zero outside a tick).
     pub(crate) tie_x: Vec<Vec3>,
     pub(crate) tie_v: Vec<Vec3>,
-    pub(crate) skin_tie: Vec<(Vec3, Vec3)>,
+    /// The near skin vertices' placement over the particles this tick (see `tick.rs`'s
+    /// `NearLists`): per vertex a range of `(particle, weight)` and a base position and velocity.
+    pub(crate) near_ptr: Vec<usize>,
+    pub(crate) near_items: Vec<(usize, f64)>,
+    pub(crate) near_base: Vec<(Vec3, Vec3)>,
     pub(crate) to_core: Vec<Vec3>,
     pub(crate) skin_to_core: Vec<Vec3>,
 }
@@ -103,7 +107,10 @@ impl SimWorkspace {
             contact_share: vec![0.0; n],
             tie_x: vec![Vec3::zeros(); n],
             tie_v: vec![Vec3::zeros(); n],
-            skin_tie: vec![(Vec3::zeros(), Vec3::zeros()); sim.hybrid.outer_points.len()],
+            // Each particle lies under one outer triangle, whose three vertices may be near.
+            near_ptr: Vec::with_capacity(sim.hybrid.outer_points.len() + 1),
+            near_items: Vec::with_capacity(3 * n),
+            near_base: Vec::with_capacity(sim.hybrid.outer_points.len()),
             to_core: vec![Vec3::zeros(); n],
             skin_to_core: vec![Vec3::zeros(); sim.hybrid.outer_points.len()],
         }

@@ -131,27 +131,25 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     for (v, x) in skin.iter().enumerate() {
         if (x - tool).norm_squared() < reach * reach && over_active(sim, activation, v) {
             ws.near.push(v);
-            ws.skin_tie[v] = (sim.skin.position(v, &core.x), sim.skin.velocity(v, &core.x, &core.v));
         }
     }
+    near_lists(sim, activation, &core.x, &core.v, ws);
 
     // 3. Particle sub-steps.
     ws.f_core.iter_mut().for_each(|f| *f = Vec3::zeros());
     let mut tool_force = Vec3::zeros();
     if !particles.active.is_empty() {
-        let k = substeps(sim, activation, particles, ws, dt);
+        let k = substeps(sim, particles, ws, dt);
         let tri_count = activation.triangle_counts();
         let rest = &sim.hybrid.particles;
         sim.confinement.slacks(&sim.hybrid.grid, &sim.hybrid.voxel_owner, tri_count, rest, &particles.active, &mut ws.slacks);
         // What the sub-steps send to the core is gathered per particle (`to_core`, through its
         // tie) and per skin vertex (`skin_to_core`) and spread once after them: the core does not
         // move within a tick, so the spread of the sum is the sum of the spreads.
-        let (shift, slacks, x_rest, f_wall, near) = (&ws.anchors, &ws.slacks, &mut ws.x_rest, &mut ws.f_wall, &ws.near);
-        let (tie_x, tie_v, skin_tie, to_core, skin_to_core) = (&ws.tie_x, &ws.tie_v, &ws.skin_tie, &mut ws.to_core, &mut ws.skin_to_core);
-        let act: &Activation = activation;
-        let (hybrid, held, active_mask) = (&sim.hybrid, sim.particles.fixed(), &*is_active);
-        let ties = TickTies { x: tie_x, v: tie_v, active: active_mask, skin: skin_tie };
-        let (core_x, core_v) = (&core.x, &core.v);
+        let (shift, slacks, x_rest, f_wall) = (&ws.anchors, &ws.slacks, &mut ws.x_rest, &mut ws.f_wall);
+        let (tie_x, tie_v, to_core, skin_to_core) = (&ws.tie_x, &ws.tie_v, &mut ws.to_core, &mut ws.skin_to_core);
+        let lists = NearLists { near: &ws.near, ptr: &ws.near_ptr, items: &ws.near_items, base: &ws.near_base };
+        let (hybrid, held) = (&sim.hybrid, sim.particles.fixed());
         let external = |sub: &meshfree::SubStep<'_>, f: &mut [Vec3]| {
             let c = prev + ((sub.index + 1) as f64 / k as f64) * (tool - prev);
             for &p in sub.active {
@@ -160,10 +158,21 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
             // The tool meets the skin over the active particles, and the skin carries the force
             // to the particles under it: a surface, so the tool cannot slip between particles.
             let mut count = 0;
-            for &v in near {
-                let Some((xs, vs, wsum)) = skin_over_particles(sim, act, v, sub.x, sub.v, Some(&ties), core_x, core_v) else { continue };
+            for (k, &v) in lists.near.iter().enumerate() {
+                let items = &lists.items[lists.ptr[k]..lists.ptr[k + 1]];
+                let (mut xs, mut vs) = lists.base[k];
+                for &(p, w) in items {
+                    xs += w * sub.x[p];
+                    vs += w * sub.v[p];
+                }
                 if let Some(contact) = o.tool.contact(&c, &tool_v, &xs, &vs) {
-                    spread_skin_force(sim, act, v, contact.force, wsum, f, to_core, skin_to_core);
+                    // The transpose of the placement: `w_p` of the force to each particle under,
+                    // the skin tie's share to the core less the particles' ties' shares.
+                    skin_to_core[v] += contact.force;
+                    for &(p, w) in items {
+                        f[p] += w * contact.force;
+                        to_core[p] -= w * contact.force;
+                    }
                     tool_force -= contact.force;
                     count += 1;
                     report.max_depth = report.max_depth.max(contact.depth);
@@ -279,28 +288,18 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
 
 /// The sub-steps this tick needs ([`super::stability`]): the active particles' largest stretch at
 /// the start of the tick, and the tool's largest share of a particle over the skin vertices
-/// within its reach (`ws.near`).
-fn substeps(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, ws: &mut SimWorkspace, dt: f64) -> usize {
+/// within its reach (`ws.near`, their lists from [`near_lists`]).
+fn substeps(sim: &Sim, particles: &meshfree::ParticleState, ws: &mut SimWorkspace, dt: f64) -> usize {
     let held = sim.particles.fixed();
     let stretch2 = particles.active.iter().filter(|&&p| !held[p]).map(|&p| stretch_bound(&sim.particles.deformation_gradient(p, &particles.x))).fold(1.0, f64::max);
-    let (h, tie, mass) = (&sim.hybrid, &sim.particle_tie, sim.particles.masses());
+    let mass = sim.particles.masses();
     let mut top = 0.0f64;
-    for pass in 0..2 {
-        for &v in &ws.near {
-            let tris = h.outer_adjacency.vertex_tris.get(v).iter().filter(|&&t| activation.is_triangle_active(t));
-            let under = tris.flat_map(|&t| h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize);
-            if pass == 1 {
-                under.for_each(|p| ws.contact_share[p] = 0.0);
-                continue;
-            }
-            let wsum: f64 = under.clone().map(|p| tie.offsets()[p].norm_squared()).sum();
-            if wsum > 0.0 {
-                for p in under {
-                    ws.contact_share[p] += tie.offsets()[p].norm_squared() / (wsum * mass[p]);
-                    top = top.max(ws.contact_share[p]);
-                }
-            }
-        }
+    for &(p, w) in &ws.near_items {
+        ws.contact_share[p] += w / mass[p];
+        top = top.max(ws.contact_share[p]);
+    }
+    for &(p, _) in &ws.near_items {
+        ws.contact_share[p] = 0.0;
     }
     let tool = &sim.options.tool;
     sim.shell.substeps(dt, stretch2, tool.stiffness * top, tool.damping * top, sim.options.max_substeps)
@@ -311,23 +310,57 @@ fn over_active(sim: &Sim, activation: &Activation, v: usize) -> bool {
     sim.hybrid.outer_adjacency.vertex_tris.get(v).iter().any(|&t| activation.is_triangle_active(t))
 }
 
-/// The tick's cached ties: each active particle's tie position and velocity, and each near skin
-/// vertex's (the core does not move within a tick).
-struct TickTies<'a> {
-    x: &'a [Vec3],
-    v: &'a [Vec3],
-    active: &'a [bool],
-    skin: &'a [(Vec3, Vec3)],
+/// The skin vertices within the tool's reach this tick, each placed over the particles under its
+/// active triangles (see [`skin_over_particles`]) by a list of `(particle, w_p / W)` and a base:
+/// the vertex is at `base.0 + sum w_p / W x_p`, moving at `base.1 + sum w_p / W v_p`.
+struct NearLists<'a> {
+    near: &'a [usize],
+    ptr: &'a [usize],
+    items: &'a [(usize, f64)],
+    base: &'a [(Vec3, Vec3)],
+}
+
+/// Fills `ws.near_ptr`, `ws.near_items` and `ws.near_base` for `ws.near` (allocation-free: their
+/// capacities are the model's bounds). The core does not move within a tick, so the ties' part of
+/// each vertex's place is computed once here (`ws.tie_x`, `ws.tie_v` hold the active particles').
+fn near_lists(sim: &Sim, activation: &Activation, core_x: &[Vec3], core_v: &[Vec3], ws: &mut SimWorkspace) {
+    let (h, tie) = (&sim.hybrid, &sim.particle_tie);
+    ws.near_ptr.clear();
+    ws.near_items.clear();
+    ws.near_base.clear();
+    ws.near_ptr.push(0);
+    for &v in &ws.near {
+        let start = ws.near_items.len();
+        let mut wsum = 0.0;
+        for &t in h.outer_adjacency.vertex_tris.get(v) {
+            if !activation.is_triangle_active(t) {
+                continue;
+            }
+            for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
+                let w = tie.offsets()[p].norm_squared();
+                ws.near_items.push((p, w));
+                wsum += w;
+            }
+        }
+        let (mut bx, mut bv) = (sim.skin.position(v, core_x), sim.skin.velocity(v, core_x, core_v));
+        for item in &mut ws.near_items[start..] {
+            item.1 /= wsum;
+            bx -= item.1 * ws.tie_x[item.0];
+            bv -= item.1 * ws.tie_v[item.0];
+        }
+        ws.near_base.push((bx, bv));
+        ws.near_ptr.push(ws.near_items.len());
+    }
 }
 
 /// Where outer vertex `v` is, over active triangles: its tie to the core moved by the weighted
 /// mean displacement of the active particles under its triangles from their own ties (each
 /// weighted by its tie's squared depth over the core face, so that the outermost particles, just
 /// under the skin, count most); and its velocity likewise. `None` over no active triangle.
-/// Returns the position, the velocity and the sum of the weights. `ties`: the tick's cache (for
-/// the near skin vertices and the active particles), or `None` to compute the ties.
+/// Returns the position, the velocity and the sum of the weights. (The sub-steps use the same
+/// placement through [`NearLists`], with the ties computed once a tick.)
 #[allow(clippy::too_many_arguments)]
-fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], vel: &[Vec3], ties: Option<&TickTies<'_>>, core_x: &[Vec3], core_v: &[Vec3]) -> Option<(Vec3, Vec3, f64)> {
+fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], vel: &[Vec3], core_x: &[Vec3], core_v: &[Vec3]) -> Option<(Vec3, Vec3, f64)> {
     let h = &sim.hybrid;
     let tie = &sim.particle_tie;
     let (mut d, mut dv, mut wsum) = (Vec3::zeros(), Vec3::zeros(), 0.0);
@@ -337,46 +370,22 @@ fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3],
         }
         for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
             let w = tie.offsets()[p].norm_squared();
-            let (tx, tv) = match ties {
-                Some(c) if c.active[p] => (c.x[p], c.v[p]),
-                _ => (tie.position(p, core_x), tie.velocity(p, core_x, core_v)),
-            };
+            let (tx, tv) = (tie.position(p, core_x), tie.velocity(p, core_x, core_v));
             d += w * (x[p] - tx);
             dv += w * (vel[p] - tv);
             wsum += w;
         }
     }
     (wsum > 0.0).then(|| {
-        let (sx, sv) = ties.map_or_else(|| (sim.skin.position(v, core_x), sim.skin.velocity(v, core_x, core_v)), |c| c.skin[v]);
+        let (sx, sv) = (sim.skin.position(v, core_x), sim.skin.velocity(v, core_x, core_v));
         (sx + d / wsum, sv + dv / wsum, wsum)
     })
-}
-
-/// A force `f` on outer vertex `v` placed by [`skin_over_particles`], carried by what places it
-/// (the exact transpose): `w_p / W` of it to each particle under, the skin tie's share to the core
-/// (into `skin_to_core[v]`) less the particles' ties' shares (into `to_core[p]`). The particles
-/// receive `f`, the core nothing net.
-#[allow(clippy::too_many_arguments)]
-fn spread_skin_force(sim: &Sim, activation: &Activation, v: usize, f: Vec3, wsum: f64, f_particles: &mut [Vec3], to_core: &mut [Vec3], skin_to_core: &mut [Vec3]) {
-    let h = &sim.hybrid;
-    let tie = &sim.particle_tie;
-    skin_to_core[v] += f;
-    for &t in h.outer_adjacency.vertex_tris.get(v) {
-        if !activation.is_triangle_active(t) {
-            continue;
-        }
-        for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
-            let share = (tie.offsets()[p].norm_squared() / wsum) * f;
-            f_particles[p] += share;
-            to_core[p] -= share;
-        }
-    }
 }
 
 /// Skin vertices at their ties, or, over active triangles, carried by the particles under them.
 fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], core_v: &[Vec3], skin: &mut [Vec3]) {
     for (v, s) in skin.iter_mut().enumerate() {
-        *s = match skin_over_particles(sim, activation, v, &particles.x, &particles.v, None, core_x, core_v) {
+        *s = match skin_over_particles(sim, activation, v, &particles.x, &particles.v, core_x, core_v) {
             Some((x, _, _)) => x,
             None => sim.skin.position(v, core_x),
         };
