@@ -14,8 +14,9 @@ use crate::hybrid::PyHybridModel;
 use crate::material::PyMaterial;
 
 /// The hybrid simulation of a built model (paper §5-§7): an FEM core, the particles under the
-/// tool active, the skin following both. **In progress** (issue 12): stable for presses up to
-/// 15 mm on the synthetic ventricle; see ``palpate_core::runtime`` for what is not yet.
+/// tool active, the skin following both. Stays finite under a hand's worst on the shipped models
+/// (15 mm presses, jumps, jabs, fast slides: tests/runtime_hand.rs, ``bench/hybrid_hand.py``);
+/// not yet at its speed target (BENCHMARKS.md).
 ///
 /// ``HybridSim(model, material, *, tool_radius=0.005, tool_stiffness=None, hold=True,
 /// activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None)``
