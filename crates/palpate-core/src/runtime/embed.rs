@@ -23,14 +23,23 @@ use crate::spatial::closest_on_triangle;
 /// Points tied to core faces. All arrays `(n_points)`.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Embedding {
-    /// The three core nodes of each point's face.
+    /// The three core nodes of each point's face, and the face's index.
     nodes: Vec<[u32; 3]>,
+    face: Vec<u32>,
     /// Barycentric weights on them (sum 1).
     weights: Vec<[f64; 3]>,
     /// Offset from the weighted face point to the point in the face's frame `(e1, e2, n)` \[m\].
     offset: Vec<Vec3>,
     /// The same offset in the world frame at rest (where the face's frame is degenerate).
     rest_offset: Vec<Vec3>,
+}
+
+/// The frames of the core faces `faces` at core positions `x` into `out` `(n_faces)` (see
+/// [`Embedding::position_framed`]: one frame per face, shared by every point on it).
+pub fn face_frames(x: &[Vec3], faces: &[[usize; 3]], out: &mut [Option<Mat3>]) {
+    for (o, f) in out.iter_mut().zip(faces) {
+        *o = frame(&x[f[0]], &x[f[1]], &x[f[2]]);
+    }
 }
 
 /// The orthonormal frame `(e1, e2, n)` of face `(a, b, c)` as matrix columns, or `None` for a
@@ -57,16 +66,17 @@ impl Embedding {
             let (a, b, c) = (core[t[0]], core[t[1]], core[t[2]]);
             let (_, w) = closest_on_triangle(p, &a, &b, &c);
             let anchor = w[0] * a + w[1] * b + w[2] * c;
-            e.push(t.map(|i| i as u32), w, p - anchor, core);
+            e.push(t.map(|i| i as u32), f, w, p - anchor, core);
         }
         e
     }
 
-    fn push(&mut self, nodes: [u32; 3], w: [f64; 3], world: Vec3, core: &[Vec3]) {
+    fn push(&mut self, nodes: [u32; 3], face: u32, w: [f64; 3], world: Vec3, core: &[Vec3]) {
         let [a, b, c] = nodes.map(|k| core[k as usize]);
         // A degenerate rest face keeps the world-frame offset (never turned).
         let local = frame(&a, &b, &c).map_or(world, |r| r.transpose() * world);
         self.nodes.push(nodes);
+        self.face.push(face);
         self.weights.push(w);
         self.offset.push(local);
         self.rest_offset.push(world);
@@ -77,7 +87,7 @@ impl Embedding {
     pub fn from_parts(core: &[Vec3], faces: &[[usize; 3]], face_of: &[u32], weights: &[[f64; 3]], offset: &[Vec3]) -> Embedding {
         let mut e = Embedding::default();
         for ((&f, &w), &o) in face_of.iter().zip(weights).zip(offset) {
-            e.push(faces[f as usize].map(|i| i as u32), w, o, core);
+            e.push(faces[f as usize].map(|i| i as u32), f, w, o, core);
         }
         e
     }
@@ -104,6 +114,14 @@ impl Embedding {
         let n = self.nodes[i];
         let [a, b, c] = n.map(|k| &x[k as usize]);
         let turned = frame(a, b, c).map_or(self.rest_offset[i], |r| r * self.offset[i]);
+        self.interpolate(i, x) + turned
+    }
+
+    /// [`Self::position`] with the face frames given (`frames`, from [`face_frames`] at the same
+    /// `x` over the faces the embedding was made with): one frame per face instead of per point.
+    #[inline]
+    pub fn position_framed(&self, i: usize, x: &[Vec3], frames: &[Option<Mat3>]) -> Vec3 {
+        let turned = frames[self.face[i] as usize].map_or(self.rest_offset[i], |r| r * self.offset[i]);
         self.interpolate(i, x) + turned
     }
 
@@ -220,8 +238,11 @@ mod tests {
         let r = nalgebra::Rotation3::from_euler_angles(0.4, -0.2, 0.9);
         let t = Vec3::new(0.1, 0.2, -0.3);
         let moved: Vec<Vec3> = core.iter().map(|x| r * x + t).collect();
+        let mut frames = vec![None; faces.len()];
+        face_frames(&moved, &faces, &mut frames);
         for (i, p) in rest.iter().enumerate() {
             assert!((e.position(i, &moved) - (r * p + t)).norm() < 1e-13);
+            assert_eq!(e.position_framed(i, &moved, &frames), e.position(i, &moved));
         }
         // velocity = d position / dt along a deforming motion (central differences).
         let v: Vec<Vec3> = (0..core.len()).map(|k| Vec3::new(0.3 * k as f64 - 0.2, 0.5 - 0.1 * k as f64, 0.2 * k as f64)).collect();

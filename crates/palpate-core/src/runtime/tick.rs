@@ -27,11 +27,12 @@
 //! particles' motion as they were (see [`tick`]).
 
 use super::activation::Activation;
+use super::embed;
 use super::sim::Sim;
 use super::state::{SimState, SimWorkspace};
 use crate::error::StepError;
 use crate::integrate::{step, StepReport};
-use crate::math::{is_finite3, Vec3};
+use crate::math::{is_finite3, Mat3, Vec3};
 use crate::meshfree;
 use super::stability::stretch_bound;
 
@@ -279,7 +280,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     };
 
     // 6. The skin.
-    update_skin(sim, activation, particles, &core.x, &core.v, skin);
+    update_skin(sim, activation, particles, &core.x, &core.v, &mut ws.frames, &mut ws.over, *ticks + 1, skin);
     report.force = tool_force;
     *last_tool = Some(tool);
     *ticks += 1;
@@ -383,11 +384,25 @@ fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3],
 }
 
 /// Skin vertices at their ties, or, over active triangles, carried by the particles under them.
-fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], core_v: &[Vec3], skin: &mut [Vec3]) {
+/// The core's face frames are computed once (`frames`), not per vertex, and the vertices over
+/// active triangles are marked from the active regions (`over[v] == stamp`) rather than found by
+/// asking every vertex's triangles (a fine outer surface, the Rodero model's 31,788 vertices, made
+/// those per-vertex costs a third of its tick).
+#[allow(clippy::too_many_arguments)]
+fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], core_v: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, skin: &mut [Vec3]) {
+    embed::face_frames(core_x, &sim.hybrid.core_faces, frames);
+    for &s in activation.active_regions() {
+        for &t in activation.region_triangles(s as usize) {
+            for &v in &sim.hybrid.outer_tris[t as usize] {
+                over[v] = stamp;
+            }
+        }
+    }
     for (v, s) in skin.iter_mut().enumerate() {
-        *s = match skin_over_particles(sim, activation, v, &particles.x, &particles.v, core_x, core_v) {
+        let carried = if over[v] == stamp { skin_over_particles(sim, activation, v, &particles.x, &particles.v, core_x, core_v) } else { None };
+        *s = match carried {
             Some((x, _, _)) => x,
-            None => sim.skin.position(v, core_x),
+            None => sim.skin.position_framed(v, core_x, frames),
         };
     }
 }
