@@ -149,7 +149,9 @@ impl PyHybridSim {
     /// Outer-surface (skin) vertex positions [m], (n_outer, 3).
     #[getter]
     fn surface<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        conv::vec3s_to_py(py, &self.state.skin)
+        let mut out = vec![Vec3::zeros(); self.state.skin.len()];
+        self.sim.skin_positions(&self.state, &mut out);
+        conv::vec3s_to_py(py, &out)
     }
 
     /// Outer-surface triangles, (m, 3) int64.

@@ -124,9 +124,19 @@ fn an_idle_shell_leaves_the_core_as_the_core_alone() {
     }
     assert_eq!(st.core.x, s.x, "the hybrid core moved differently from the core alone");
     assert_eq!(st.core.v, s.v);
-    // The skin follows its core faces.
-    let worst = (0..st.skin.len()).map(|v| (st.skin[v] - sim.skin.position(v, &st.core.x)).norm()).fold(0.0, f64::max);
+    // The skin follows its core faces (the whole skin, fresh: `Sim::skin_positions`; the state's
+    // skin is fresh near the tool, far away here, and as of the last whole update elsewhere).
+    let mut skin = vec![Vec3::zeros(); st.skin.len()];
+    sim.skin_positions(&st, &mut skin);
+    let worst = (0..skin.len()).map(|v| (skin[v] - sim.skin.position(v, &st.core.x)).norm()).fold(0.0, f64::max);
     assert!(worst < 1e-15, "{worst:e}");
+    // After a tick that updates the whole skin, the state's skin is that.
+    while st.ticks % palpate_core::runtime::tick::SKIN_REFRESH_TICKS != 0 {
+        tick(&sim, &mut st, &mut ws, Vec3::new(1.0, 1.0, 1.0), 1e-3).unwrap();
+    }
+    tick(&sim, &mut st, &mut ws, Vec3::new(1.0, 1.0, 1.0), 1e-3).unwrap();
+    sim.skin_positions(&st, &mut skin);
+    assert_eq!(st.skin, skin);
 }
 
 #[test]

@@ -166,6 +166,16 @@ impl Sim {
         self.hybrid.particles.len()
     }
 
+    /// The whole skin \[m\] into `out` `(n_outer)`, fresh: over active triangles carried by the
+    /// particles under it, elsewhere at its ties to the core (`SimState::skin` is fresh only near
+    /// the tool, see [`super::tick::SKIN_LIVE_MARGIN`]).
+    pub fn skin_positions(&self, state: &SimState, out: &mut [Vec3]) {
+        let (x, v) = (&state.core.x, &state.core.v);
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = super::tick::skin_over_particles(self, &state.activation, i, &state.particles.x, &state.particles.v, x, v).map_or_else(|| self.skin.position(i, x), |c| c.0);
+        }
+    }
+
     /// Every particle's position \[m\] into `out` `(n_particles)`: the active ones as simulated,
     /// the others at their ties to the core (where they are drawn).
     pub fn particle_positions(&self, state: &SimState, out: &mut [Vec3]) {

@@ -17,7 +17,10 @@ pub struct SimState {
     /// are current only where the tick reads them (the ring around the active set); use
     /// [`Sim::particle_positions`] for all of them.
     pub particles: ParticleState,
-    /// The outer surface's vertices (the skin), after the last tick.
+    /// The outer surface's vertices (the skin) \[m\]: after the last tick near the tool (within
+    /// [`super::tick::SKIN_LIVE_MARGIN`] of its reach), elsewhere as of the last whole update
+    /// (every [`super::tick::SKIN_REFRESH_TICKS`] ticks); [`super::Sim::skin_positions`] gives the
+    /// whole skin fresh.
     pub skin: Vec<Vec3>,
     /// The simulated tool's centre after the last tick \[m\] (`None` before the first): the
     /// device's position, followed at a bounded speed ([`super::SimOptions::max_tool_step`]).

@@ -280,7 +280,9 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     };
 
     // 6. The skin.
-    update_skin(sim, activation, particles, &core.x, &core.v, &mut ws.frames, &mut ws.over, *ticks + 1, skin);
+    // Near the tool every tick; everywhere every SKIN_REFRESH_TICKS ticks.
+    let live = (*ticks % SKIN_REFRESH_TICKS != 0).then_some((tool, o.tool.radius + o.activation_margin + SKIN_LIVE_MARGIN));
+    update_skin(sim, activation, particles, &core.x, &core.v, &mut ws.frames, &mut ws.over, *ticks + 1, live, skin);
     report.force = tool_force;
     *last_tool = Some(tool);
     *ticks += 1;
@@ -361,7 +363,7 @@ fn near_lists(sim: &Sim, activation: &Activation, core_x: &[Vec3], core_v: &[Vec
 /// Returns the position, the velocity and the sum of the weights. (The sub-steps use the same
 /// placement through [`NearLists`], with the ties computed once a tick.)
 #[allow(clippy::too_many_arguments)]
-fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], vel: &[Vec3], core_x: &[Vec3], core_v: &[Vec3]) -> Option<(Vec3, Vec3, f64)> {
+pub(crate) fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], vel: &[Vec3], core_x: &[Vec3], core_v: &[Vec3]) -> Option<(Vec3, Vec3, f64)> {
     let h = &sim.hybrid;
     let tie = &sim.particle_tie;
     let (mut d, mut dv, mut wsum) = (Vec3::zeros(), Vec3::zeros(), 0.0);
@@ -384,12 +386,20 @@ fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3],
 }
 
 /// Skin vertices at their ties, or, over active triangles, carried by the particles under them.
+/// Skin vertices farther than this beyond the tool's reach \[m\] are updated only every
+/// [`SKIN_REFRESH_TICKS`] ticks: they cannot meet the tool before then unless the organ moves
+/// 20 mm in 32 ms (0.6 m/s) toward it. ([`Sim::skin_positions`] gives the whole skin fresh.)
+pub const SKIN_LIVE_MARGIN: f64 = 0.02;
+/// Ticks between updates of the whole skin (see [`SKIN_LIVE_MARGIN`]).
+pub const SKIN_REFRESH_TICKS: u64 = 32;
+
 /// The core's face frames are computed once (`frames`), not per vertex, and the vertices over
 /// active triangles are marked from the active regions (`over[v] == stamp`) rather than found by
-/// asking every vertex's triangles (a fine outer surface, the Rodero model's 31,788 vertices, made
-/// those per-vertex costs a third of its tick).
+/// asking every vertex's triangles; with `live = Some((tool, radius))` only the vertices within
+/// `radius` of the tool and those over active triangles are updated (a fine outer surface, the
+/// Rodero model's 31,788 vertices, made the whole skin's update a third of its tick).
 #[allow(clippy::too_many_arguments)]
-fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], core_v: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, skin: &mut [Vec3]) {
+fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], core_v: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, live: Option<(Vec3, f64)>, skin: &mut [Vec3]) {
     embed::face_frames(core_x, &sim.hybrid.core_faces, frames);
     for &s in activation.active_regions() {
         for &t in activation.region_triangles(s as usize) {
@@ -399,6 +409,9 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
         }
     }
     for (v, s) in skin.iter_mut().enumerate() {
+        if over[v] != stamp && live.is_some_and(|(c, r)| (*s - c).norm_squared() > r * r) {
+            continue;
+        }
         let carried = if over[v] == stamp { skin_over_particles(sim, activation, v, &particles.x, &particles.v, core_x, core_v) } else { None };
         *s = match carried {
             Some((x, _, _)) => x,
