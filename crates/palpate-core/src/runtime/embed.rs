@@ -42,6 +42,36 @@ pub fn face_frames(x: &[Vec3], faces: &[[usize; 3]], out: &mut [Option<Mat3>]) {
     }
 }
 
+/// [`face_frames`] and each frame's rate `dR/dt` for core velocities `v` into `rates` (see
+/// [`Embedding::velocity_framed`]).
+pub fn face_frames_and_rates(x: &[Vec3], v: &[Vec3], faces: &[[usize; 3]], out: &mut [Option<Mat3>], rates: &mut [Mat3]) {
+    for ((o, r), f) in out.iter_mut().zip(rates.iter_mut()).zip(faces) {
+        let [a, b, c] = f.map(|k| x[k]);
+        let [va, vb, vc] = f.map(|k| v[k]);
+        *o = frame(&a, &b, &c);
+        *r = frame_rate(&a, &b, &c, &va, &vb, &vc).unwrap_or_else(Mat3::zeros);
+    }
+}
+
+/// `dR/dt` of face `(a, b, c)`'s frame for vertex velocities `(va, vb, vc)`: the columns
+/// `(de1, de2, dn)`; `None` for a degenerate face.
+#[inline]
+fn frame_rate(a: &Vec3, b: &Vec3, c: &Vec3, va: &Vec3, vb: &Vec3, vc: &Vec3) -> Option<Mat3> {
+    let (e, f) = (b - a, c - a);
+    let m = e.cross(&f);
+    let (le, lm) = (e.norm(), m.norm());
+    if !(le > 0.0 && lm > 1e-30 * le * le && lm.is_finite()) {
+        return None;
+    }
+    let (de, df) = (vb - va, vc - va);
+    let (e1, nn) = (e / le, m / lm);
+    let de1 = (de - e1 * e1.dot(&de)) / le;
+    let dm = de.cross(&f) + e.cross(&df);
+    let dn = (dm - nn * nn.dot(&dm)) / lm;
+    let de2 = dn.cross(&e1) + nn.cross(&de1);
+    Some(Mat3::from_columns(&[de1, de2, dn]))
+}
+
 /// The orthonormal frame `(e1, e2, n)` of face `(a, b, c)` as matrix columns, or `None` for a
 /// degenerate face.
 #[inline]
@@ -133,20 +163,14 @@ impl Embedding {
         let [a, b, c] = n.map(|k| x[k as usize]);
         let [va, vb, vc] = n.map(|k| v[k as usize]);
         let base = self.interpolate(i, v);
-        let (e, f) = (b - a, c - a);
-        let m = e.cross(&f);
-        let (le, lm) = (e.norm(), m.norm());
-        if !(le > 0.0 && lm > 1e-30 * le * le && lm.is_finite()) {
-            return base;
-        }
-        let (de, df) = (vb - va, vc - va);
-        let (e1, nn) = (e / le, m / lm);
-        let de1 = (de - e1 * e1.dot(&de)) / le;
-        let dm = de.cross(&f) + e.cross(&df);
-        let dn = (dm - nn * nn.dot(&dm)) / lm;
-        let de2 = dn.cross(&e1) + nn.cross(&de1);
-        let o = self.offset[i];
-        base + o.x * de1 + o.y * de2 + o.z * dn
+        frame_rate(&a, &b, &c, &va, &vb, &vc).map_or(base, |r| base + r * self.offset[i])
+    }
+
+    /// [`Self::velocity`] with the face frames' rates given (`rates`, from
+    /// [`face_frames_and_rates`] at the same `x` and `v`).
+    #[inline]
+    pub fn velocity_framed(&self, i: usize, v: &[Vec3], rates: &[Mat3]) -> Vec3 {
+        self.interpolate(i, v) + rates[self.face[i] as usize] * self.offset[i]
     }
 
     /// The weighted face value at point `i` (a velocity, a displacement) of a core field `u`.
@@ -243,6 +267,12 @@ mod tests {
         for (i, p) in rest.iter().enumerate() {
             assert!((e.position(i, &moved) - (r * p + t)).norm() < 1e-13);
             assert_eq!(e.position_framed(i, &moved, &frames), e.position(i, &moved));
+        }
+        let v: Vec<Vec3> = (0..core.len()).map(|k| Vec3::new(0.1 * k as f64, -0.2, 0.05 * k as f64)).collect();
+        let mut rates = vec![Mat3::zeros(); faces.len()];
+        face_frames_and_rates(&moved, &v, &faces, &mut frames, &mut rates);
+        for i in 0..rest.len() {
+            assert!((e.velocity_framed(i, &v, &rates) - e.velocity(i, &moved, &v)).norm() < 1e-15);
         }
         // velocity = d position / dt along a deforming motion (central differences).
         let v: Vec<Vec3> = (0..core.len()).map(|k| Vec3::new(0.3 * k as f64 - 0.2, 0.5 - 0.1 * k as f64, 0.2 * k as f64)).collect();

@@ -88,8 +88,10 @@ pub struct SimWorkspace {
     pub(crate) near_items: Vec<(usize, f64)>,
     pub(crate) near_base: Vec<(Vec3, Vec3)>,
     pub(crate) to_core: Vec<Vec3>,
-    /// The core faces' frames at the end of the tick (the skin's update).
+    /// The core faces' frames and their rates (at the tick's start; the frames again at its end,
+    /// for the skin's update).
     pub(crate) frames: Vec<Option<crate::math::Mat3>>,
+    pub(crate) rates: Vec<crate::math::Mat3>,
     /// Per outer vertex, the last tick (plus one) it was over an active triangle.
     pub(crate) over: Vec<u64>,
     pub(crate) skin_to_core: Vec<Vec3>,
@@ -120,6 +122,7 @@ impl SimWorkspace {
             near_base: Vec::with_capacity(sim.hybrid.outer_points.len()),
             to_core: vec![Vec3::zeros(); n],
             frames: vec![None; sim.hybrid.core_faces.len()],
+            rates: vec![crate::math::Mat3::zeros(); sim.hybrid.core_faces.len()],
             over: vec![0; sim.hybrid.outer_points.len()],
             skin_to_core: vec![Vec3::zeros(); sim.hybrid.outer_points.len()],
         }

@@ -78,6 +78,9 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active } = state;
     // The shell's clock is the core's (it advances only while particles are active).
     particles.t = core.t;
+    // The core's face frames and their rates, once: every tie on a face shares them.
+    embed::face_frames_and_rates(&core.x, &core.v, &sim.hybrid.core_faces, &mut ws.frames, &mut ws.rates);
+    let (frames, rates) = (&ws.frames, &ws.rates);
     let (tie, o) = (&sim.particle_tie, &sim.options);
     let prev = last_tool.unwrap_or(tool);
     // The simulated tool follows the device at most `max_tool_step` a tick (SimOptions).
@@ -95,8 +98,8 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         is_active[p] = false;
     }
     for &p in sets.entered.iter().chain(sets.left) {
-        particles.x[p] = tie.position(p, &core.x);
-        particles.v[p] = tie.velocity(p, &core.x, &core.v);
+        particles.x[p] = tie.position_framed(p, &core.x, frames);
+        particles.v[p] = tie.velocity_framed(p, &core.v, rates);
     }
     (report.active, report.entered, report.left) = (sets.active.len(), sets.entered.len(), sets.left.len());
     particles.active.clear();
@@ -107,20 +110,20 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     let held = sim.particles.fixed();
     for &p in &particles.active {
         if held[p] {
-            particles.x[p] = tie.position(p, &core.x);
-            particles.v[p] = tie.velocity(p, &core.x, &core.v);
+            particles.x[p] = tie.position_framed(p, &core.x, frames);
+            particles.v[p] = tie.velocity_framed(p, &core.v, rates);
         }
         for &j in sim.particles.neighbours(p) {
             if !is_active[j] {
-                particles.x[j] = tie.position(j, &core.x);
-                particles.v[j] = tie.velocity(j, &core.x, &core.v);
+                particles.x[j] = tie.position_framed(j, &core.x, frames);
+                particles.v[j] = tie.velocity_framed(j, &core.v, rates);
             }
         }
         // The tie's place and velocity, fixed over the tick's sub-steps (the core moves once a
         // tick); its displacement: confinement measures a particle in the rest frame of the core
         // around it (the voxels are the rest configuration's).
-        ws.tie_x[p] = tie.position(p, &core.x);
-        ws.tie_v[p] = tie.velocity(p, &core.x, &core.v);
+        ws.tie_x[p] = tie.position_framed(p, &core.x, frames);
+        ws.tie_v[p] = tie.velocity_framed(p, &core.v, rates);
         ws.anchors[p] = ws.tie_x[p] - sim.hybrid.particles[p];
     }
     ws.save.clear();
