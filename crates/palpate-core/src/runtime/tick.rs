@@ -297,15 +297,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
 /// within its reach (`ws.near`, their lists from [`near_lists`]).
 fn substeps(sim: &Sim, particles: &meshfree::ParticleState, ws: &mut SimWorkspace, dt: f64) -> usize {
     let held = sim.particles.fixed();
-    // The largest eigenvalue of C = F^T F over the active particles: Gershgorin's bound first,
-    // the exact value only where that bound could raise the maximum (a handful of particles).
-    let mut stretch2 = 1.0f64;
-    for &p in particles.active.iter().filter(|&&p| !held[p]) {
-        let f = sim.particles.deformation_gradient(p, &particles.x);
-        if stretch_bound(&f) > stretch2 {
-            stretch2 = stretch2.max((f.transpose() * f).symmetric_eigenvalues().max());
-        }
-    }
+    let stretch2 = particles.active.iter().filter(|&&p| !held[p]).map(|&p| stretch_bound(&sim.particles.deformation_gradient(p, &particles.x))).fold(1.0, f64::max);
     let mass = sim.particles.masses();
     let mut top = 0.0f64;
     for &(p, w) in &ws.near_items {
