@@ -10,7 +10,10 @@
 //!   stretches the shell at its rim by ~30%, doubling `omega^2`: with the rest count the
 //!   particles there diverged (measured: `examples/touch.rs`, undamped, 9 mm into a press). The
 //!   largest `s^2` over the active particles is bounded by Gershgorin's row sums of
-//!   `C = F^T F` ([`stretch_bound`]), taken at the start of the tick.
+//!   `C = F^T F` ([`stretch_bound`]), taken at the start of the tick. The bound's slack is needed:
+//!   with the exact largest eigenvalue of `C` instead (one sub-step fewer at a 5 mm press), a press
+//!   toward 2 N diverged at 20 mm on the ventricle (tests/runtime_hand.rs). The uniaxial slope
+//!   does not bound every mode of a strongly deformed shell; a tighter, proven bound is open.
 //! - **The runtime's springs** on a particle: the tool's penalty (through the skin, see
 //!   [`super::tick`]), the coupling spring and the confinement wall, each explicit. Their rates
 //!   `k / m` (and `c / m` for the damping) add to the internal `omega^2` (Weyl's inequality for
