@@ -127,8 +127,7 @@ impl PyHybridSim {
 
     /// The last tick's statistics: ``force`` (3,) [N], ``particle_contacts`` (skin vertices in
     /// contact over active particles), ``skin_contacts`` (over the core alone), ``core_contacts``, ``max_depth_m``, ``active``, ``entered``, ``left``, ``substeps``,
-    /// ``confined``, ``core_iterations``, ``retries`` (times the tick's shell was run again with twice
-    /// the sub-steps because a particle ran away).
+    /// ``confined``, ``core_iterations``.
     #[getter]
     fn last<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let r = &self.last;
@@ -142,7 +141,6 @@ impl PyHybridSim {
         d.set_item("entered", r.entered)?;
         d.set_item("left", r.left)?;
         d.set_item("substeps", r.substeps)?;
-        d.set_item("retries", r.retries)?;
         d.set_item("confined", r.confined)?;
         d.set_item("core_iterations", r.core.iterations)?;
         Ok(d)

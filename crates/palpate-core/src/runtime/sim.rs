@@ -50,10 +50,6 @@ pub struct SimOptions {
     /// ticks by the simulated tool, whose force the device renders: the shell's explicit
     /// sub-steps cannot take a sphere appearing millimetres deep in one tick.
     pub max_tool_step: f64,
-    /// Scale of the sub-step count the stability bound gives (default 1; below 1 only for
-    /// stability studies: the tick's first attempt may then run away and be retried, see
-    /// [`super::tick::RUNAWAY_SPEED`]).
-    pub substep_scale: f64,
     /// The most particle sub-steps a tick takes (default 64; [`super::stability`] sets the count
     /// from the shell's stretch and springs, ~12 at rest on the ventricle: a tick that needs more
     /// runs late rather than diverge).
@@ -76,7 +72,6 @@ impl Default for SimOptions {
             confinement_stiffness: None,
             max_tool_step: 5e-4,
             max_substeps: 64,
-            substep_scale: 1.0,
             hold: true,
         }
     }

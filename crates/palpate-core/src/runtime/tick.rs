@@ -54,10 +54,8 @@ pub struct TickReport {
     pub active: usize,
     pub entered: usize,
     pub left: usize,
-    /// Particle sub-steps taken (of the last attempt), and how many times the tick's shell was run
-    /// again with twice the sub-steps (see [`RUNAWAY_SPEED`]).
+    /// Particle sub-steps taken.
     pub substeps: usize,
-    pub retries: usize,
     /// Particles the confinement wall pushed (most over the sub-steps).
     pub confined: usize,
     /// The core's step.
@@ -145,107 +143,84 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     ws.f_core.iter_mut().for_each(|f| *f = Vec3::zeros());
     let mut tool_force = Vec3::zeros();
     if !particles.active.is_empty() {
-        let mut k = ((substeps(sim, particles, ws, dt) as f64 * sim.options.substep_scale).ceil() as usize).clamp(1, sim.options.max_substeps.max(1));
+        let k = substeps(sim, particles, ws, dt);
         let tri_count = activation.triangle_counts();
         let rest = &sim.hybrid.particles;
         sim.confinement.slacks(&sim.hybrid.grid, &sim.hybrid.voxel_owner, tri_count, rest, &particles.active, &mut ws.slacks);
-        // The sub-step count is a bound's (runtime/stability.rs), and a bound can be short of a
-        // mode it does not model: a tick whose shell fails or runs away (a particle faster than
-        // RUNAWAY_SPEED against its tie) is run again from its start with twice the sub-steps,
-        // up to `max_substeps`; only then does it fail.
-        loop {
-            tool_force = Vec3::zeros();
-            (report.particle_contacts, report.max_depth, report.confined) = (0, 0.0, 0);
-            // What the sub-steps send to the core is gathered per particle (`to_core`, through its
-            // tie) and per skin vertex (`skin_to_core`) and spread once after them: the core does not
-            // move within a tick, so the spread of the sum is the sum of the spreads.
-            let (shift, slacks, x_rest, f_wall) = (&ws.anchors, &ws.slacks, &mut ws.x_rest, &mut ws.f_wall);
-            let (tie_x, tie_v, to_core, skin_to_core) = (&ws.tie_x, &ws.tie_v, &mut ws.to_core, &mut ws.skin_to_core);
-            let lists = NearLists { near: &ws.near, ptr: &ws.near_ptr, items: &ws.near_items, base: &ws.near_base };
-            let (hybrid, held) = (&sim.hybrid, sim.particles.fixed());
-            let external = |sub: &meshfree::SubStep<'_>, f: &mut [Vec3]| {
-                let c = prev + ((sub.index + 1) as f64 / k as f64) * (tool - prev);
-                for &p in sub.active {
-                    f[p] = Vec3::zeros();
-                }
-                // The tool meets the skin over the active particles, and the skin carries the force
-                // to the particles under it: a surface, so the tool cannot slip between particles.
-                let mut count = 0;
-                for (k, &v) in lists.near.iter().enumerate() {
-                    let items = &lists.items[lists.ptr[k]..lists.ptr[k + 1]];
-                    let (mut xs, mut vs) = lists.base[k];
-                    for &(p, w) in items {
-                        xs += w * sub.x[p];
-                        vs += w * sub.v[p];
-                    }
-                    if let Some(contact) = o.tool.contact(&c, &tool_v, &xs, &vs) {
-                        // The transpose of the placement: `w_p` of the force to each particle under,
-                        // the skin tie's share to the core less the particles' ties' shares.
-                        skin_to_core[v] += contact.force;
-                        for &(p, w) in items {
-                            f[p] += w * contact.force;
-                            to_core[p] -= w * contact.force;
-                        }
-                        tool_force -= contact.force;
-                        count += 1;
-                        report.max_depth = report.max_depth.max(contact.depth);
-                    }
-                }
-                report.particle_contacts = report.particle_contacts.max(count);
-                for &p in sub.active {
-                    if sim.coupled[p] {
-                        let fc = sim.coupling.force(&tie_x[p], &tie_v[p], &sub.x[p], &sub.v[p]);
-                        f[p] += fc;
-                        to_core[p] -= fc;
-                    }
-                }
-                // The wall belongs to the core's regions: its reaction goes to the core through the
-                // particle's tie (momentum stays exact).
-                for &p in sub.active {
-                    x_rest[p] = sub.x[p] - shift[p];
-                    f_wall[p] = Vec3::zeros();
-                }
-                let wall = sim.confinement.apply(&hybrid.grid, &hybrid.voxel_owner, tri_count, x_rest, rest, Some(slacks), sub.active, f_wall);
-                report.confined = report.confined.max(wall.pushed);
-                if wall.pushed > 0 {
-                    for &p in sub.active {
-                        f[p] += f_wall[p];
-                        to_core[p] -= f_wall[p];
-                    }
-                }
-                // Held particles (lone lattice particles, see Sim::new) do not move: what acts on
-                // them is carried by the core, through their ties.
-                for &p in sub.active {
-                    if held[p] {
-                        to_core[p] += f[p];
-                    }
-                }
-            };
-            let result = meshfree::step_with(&sim.particles, particles, &mut ws.particles, dt, k, external);
-            let runaway = result.is_ok() && particles.active.iter().any(|&p| (particles.v[p] - ws.tie_v[p]).norm_squared() > RUNAWAY_SPEED * RUNAWAY_SPEED);
-            if result.is_ok() && !runaway {
-                break;
+        // What the sub-steps send to the core is gathered per particle (`to_core`, through its
+        // tie) and per skin vertex (`skin_to_core`) and spread once after them: the core does not
+        // move within a tick, so the spread of the sum is the sum of the spreads.
+        let (shift, slacks, x_rest, f_wall) = (&ws.anchors, &ws.slacks, &mut ws.x_rest, &mut ws.f_wall);
+        let (tie_x, tie_v, to_core, skin_to_core) = (&ws.tie_x, &ws.tie_v, &mut ws.to_core, &mut ws.skin_to_core);
+        let lists = NearLists { near: &ws.near, ptr: &ws.near_ptr, items: &ws.near_items, base: &ws.near_base };
+        let (hybrid, held) = (&sim.hybrid, sim.particles.fixed());
+        let external = |sub: &meshfree::SubStep<'_>, f: &mut [Vec3]| {
+            let c = prev + ((sub.index + 1) as f64 / k as f64) * (tool - prev);
+            for &p in sub.active {
+                f[p] = Vec3::zeros();
             }
-            // Nothing of a failed attempt reaches the core (the buffers start the next one empty).
+            // The tool meets the skin over the active particles, and the skin carries the force
+            // to the particles under it: a surface, so the tool cannot slip between particles.
+            let mut count = 0;
+            for (k, &v) in lists.near.iter().enumerate() {
+                let items = &lists.items[lists.ptr[k]..lists.ptr[k + 1]];
+                let (mut xs, mut vs) = lists.base[k];
+                for &(p, w) in items {
+                    xs += w * sub.x[p];
+                    vs += w * sub.v[p];
+                }
+                if let Some(contact) = o.tool.contact(&c, &tool_v, &xs, &vs) {
+                    // The transpose of the placement: `w_p` of the force to each particle under,
+                    // the skin tie's share to the core less the particles' ties' shares.
+                    skin_to_core[v] += contact.force;
+                    for &(p, w) in items {
+                        f[p] += w * contact.force;
+                        to_core[p] -= w * contact.force;
+                    }
+                    tool_force -= contact.force;
+                    count += 1;
+                    report.max_depth = report.max_depth.max(contact.depth);
+                }
+            }
+            report.particle_contacts = report.particle_contacts.max(count);
+            for &p in sub.active {
+                if sim.coupled[p] {
+                    let fc = sim.coupling.force(&tie_x[p], &tie_v[p], &sub.x[p], &sub.v[p]);
+                    f[p] += fc;
+                    to_core[p] -= fc;
+                }
+            }
+            // The wall belongs to the core's regions: its reaction goes to the core through the
+            // particle's tie (momentum stays exact).
+            for &p in sub.active {
+                x_rest[p] = sub.x[p] - shift[p];
+                f_wall[p] = Vec3::zeros();
+            }
+            let wall = sim.confinement.apply(&hybrid.grid, &hybrid.voxel_owner, tri_count, x_rest, rest, Some(slacks), sub.active, f_wall);
+            report.confined = report.confined.max(wall.pushed);
+            if wall.pushed > 0 {
+                for &p in sub.active {
+                    f[p] += f_wall[p];
+                    to_core[p] -= f_wall[p];
+                }
+            }
+            // Held particles (lone lattice particles, see Sim::new) do not move: what acts on
+            // them is carried by the core, through their ties.
+            for &p in sub.active {
+                if held[p] {
+                    to_core[p] += f[p];
+                }
+            }
+        };
+        if let Err(e) = meshfree::step_with(&sim.particles, particles, &mut ws.particles, dt, k, external) {
+            // Nothing of a failed step reaches the core (the buffers start the next tick empty).
             for &p in &particles.active {
                 ws.to_core[p] = Vec3::zeros();
             }
             for &v in &ws.near {
                 ws.skin_to_core[v] = Vec3::zeros();
             }
-            if 2 * k <= sim.options.max_substeps {
-                for (&p, &(x, v)) in particles.active.iter().zip(&ws.save) {
-                    (particles.x[p], particles.v[p]) = (x, v);
-                }
-                particles.t = core.t;
-                report.retries += 1;
-                k *= 2;
-                continue;
-            }
-            match result {
-                Err(e) => return Err(e),
-                Ok(_) => break, // a runaway at the cap: go on (the count is reported)
-            }
+            return Err(e);
         }
         report.substeps = k;
         let inv_k = 1.0 / k as f64;
@@ -414,11 +389,6 @@ pub(crate) fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, 
 }
 
 /// Skin vertices at their ties, or, over active triangles, carried by the particles under them.
-/// A shell particle moving faster than this against its tie \[m/s\] at the end of a tick is taken
-/// as the start of an instability (a hand moves tissue at most ~1 m/s; a jab of 10 mm in 10 ms
-/// is 1 m/s): the tick is run again with twice the sub-steps.
-pub const RUNAWAY_SPEED: f64 = 5.0;
-
 /// Skin vertices farther than this beyond the tool's reach \[m\] are updated only every
 /// [`SKIN_REFRESH_TICKS`] ticks: they cannot meet the tool before then unless the organ moves
 /// 20 mm in 32 ms (0.6 m/s) toward it. ([`Sim::skin_positions`] gives the whole skin fresh.)
