@@ -14,6 +14,10 @@
 //!   with the exact largest eigenvalue of `C` instead (one sub-step fewer at a 5 mm press), a press
 //!   toward 2 N diverged at 20 mm on the ventricle (tests/runtime_hand.rs). The uniaxial slope
 //!   does not bound every mode of a strongly deformed shell; a tighter, proven bound is open.
+//!   (Measured too: in a 15 mm press a few particles move at 2-5 m/s against their ties, a local
+//!   mode the force does not feel: tick-to-tick force changes stay under 0.02 N. Re-running such a
+//!   tick with twice the sub-steps, tried as a safety net, made the force jump by 0.15-0.5 N
+//!   instead, and was taken out.)
 //! - **The runtime's springs** on a particle: the tool's penalty (through the skin, see
 //!   [`super::tick`]), the coupling spring and the confinement wall, each explicit. Their rates
 //!   `k / m` (and `c / m` for the damping) add to the internal `omega^2` (Weyl's inequality for
