@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Optional, Tuple, Type
 
 import numpy as np
 
@@ -78,24 +78,25 @@ class _Lines:
             raise self.error(f"expected numbers in {context}, got {' '.join(tokens)[:60]!r}") from None
 
 
-def read_text(path: str) -> str:
-    """The file as text; a clear MeshError for a missing, empty or binary file."""
+def read_text(path: str, error: Type[Exception] = MeshError) -> str:
+    """The file as text; a clear ``error`` (a MeshError by default) for a missing, empty or binary
+    file."""
     name = os.path.basename(path)
     try:
         with open(path, "rb") as fh:
             raw = fh.read()
     except FileNotFoundError:
-        raise MeshError(f"{name}: no such file ({path})") from None
+        raise error(f"{name}: no such file ({path})") from None
     except OSError as e:
-        raise MeshError(f"{name}: cannot read: {e.strerror or e}") from None
+        raise error(f"{name}: cannot read: {e.strerror or e}") from None
     if not raw.strip():
-        raise MeshError(f"{name}: empty file")
+        raise error(f"{name}: empty file")
     if b"\x00" in raw:
-        raise MeshError(f"{name}: not a text file (contains NUL bytes: binary or garbage)")
+        raise error(f"{name}: not a text file (contains NUL bytes: binary or garbage)")
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise MeshError(f"{name}: not a text file (invalid UTF-8 at byte {e.start}: binary or garbage)") from None
+        raise error(f"{name}: not a text file (invalid UTF-8 at byte {e.start}: binary or garbage)") from None
 
 
 # ---------------------------------------------------------------------------------------------

@@ -219,11 +219,7 @@ class VtuSeries:
         self.tets = np.asarray(tets, dtype=np.int64)
         self.entries: List[Tuple[float, str]] = []
         os.makedirs(self.outdir, exist_ok=True)
-        # Frames of an earlier run with the same stem would not match the new .pvd: remove them.
-        stale = re.compile(rf"{re.escape(stem)}_\d{{5}}\.vtu")
-        for f in os.listdir(self.outdir):
-            if stale.fullmatch(f):
-                os.remove(os.path.join(self.outdir, f))
+        remove_frames(self.outdir, [stem])
 
     @property
     def pvd_path(self) -> str:
@@ -247,16 +243,33 @@ class VtuSeries:
         return path
 
     def _write_pvd(self) -> None:
-        lines = ['<?xml version="1.0"?>',
-                 '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
-                 "  <Collection>"]
-        for t, f in self.entries:
-            lines.append(f'    <DataSet timestep="{t!r}" group="" part="0" file={quoteattr(f)}/>')
-        lines += ["  </Collection>", "</VTKFile>", ""]
-        tmp = self.pvd_path + ".tmp"
-        with open(tmp, "w") as fh:
-            fh.write("\n".join(lines))
-        os.replace(tmp, self.pvd_path)
+        write_pvd(self.pvd_path, [(t, f, 0, None) for t, f in self.entries])
+
+
+def remove_frames(outdir: PathLike, stems: Sequence[str]) -> None:
+    """Remove ``<stem>_<5 digits>.vtu`` files of an earlier run from ``outdir``: they would not
+    match the new ``.pvd``."""
+    stale = re.compile(rf"({'|'.join(re.escape(s) for s in stems)})_\d{{5}}\.vtu")
+    for f in os.listdir(outdir):
+        if stale.fullmatch(f):
+            os.remove(os.path.join(os.fspath(outdir), f))
+
+
+def write_pvd(path: PathLike, datasets: Sequence[Tuple[float, str, int, Optional[str]]]) -> None:
+    """Write a ParaView collection (``.pvd``) listing ``(time [s], file, part, name)`` (``name``
+    ``None``: no name attribute), replacing the file atomically (a reader never sees half of it)."""
+    lines = ['<?xml version="1.0"?>',
+             '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
+             "  <Collection>"]
+    for t, f, part, name in datasets:
+        named = f" name={quoteattr(name)}" if name is not None else ""
+        lines.append(f'    <DataSet timestep="{t!r}" group="" part="{part}"{named} file={quoteattr(f)}/>')
+    lines += ["  </Collection>", "</VTKFile>", ""]
+    path = os.fspath(path)
+    tmp = path + ".tmp"
+    with open(tmp, "w") as fh:
+        fh.write("\n".join(lines))
+    os.replace(tmp, path)
 
 
 def read_pvd(path: PathLike) -> List[Tuple[float, str]]:

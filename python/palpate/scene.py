@@ -55,7 +55,6 @@ path (``material.young``, ``loads[0].radius``). Unknown keys are errors (a typo 
 """
 from __future__ import annotations
 
-import math
 import os
 import re
 import sys
@@ -66,6 +65,7 @@ from typing import Any, Dict, List, Optional
 import numpy as np
 
 from . import _palpate as _p
+from ._fields import FieldChecker
 from .io import UNITS, VtuSeries, load_mesh
 
 if sys.version_info >= (3, 11):
@@ -117,64 +117,15 @@ class Scene:
     description: Dict[str, Any] = field(default_factory=dict)
 
 
-class _Ctx:
+class _Ctx(FieldChecker):
+    """The scene file's field checks; a section's known keys default to :data:`_SECTION_KEYS`."""
+
     def __init__(self, path: Path):
+        super().__init__(path.name, SceneError)
         self.path = path
 
-    def err(self, key: str, msg: str) -> SceneError:
-        return SceneError(f"{self.path.name}: {key}: {msg}")
-
-    def _lookup(self, table: Dict, section: str, key: str, required: bool):
-        """(label, present, value) of ``key``; a missing required key is an error."""
-        label = f"{section}.{key}" if section else key
-        if key not in table:
-            if required:
-                raise self.err(label, "missing (required)")
-            return label, False, None
-        return label, True, table[key]
-
-    def number(self, table: Dict, section: str, key: str, default=None, positive=False, nonneg=False,
-               integer=False, required=False):
-        label, present, v = self._lookup(table, section, key, required)
-        if not present:
-            return default
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.err(label, f"must be a {'whole ' if integer else ''}number, got {v!r}")
-        if integer and not isinstance(v, int):
-            raise self.err(label, f"must be a whole number, got {v!r}")
-        if not math.isfinite(v):
-            raise self.err(label, f"must be finite, got {v!r}")
-        if positive and not v > 0:
-            raise self.err(label, f"must be positive, got {v!r}")
-        if nonneg and v < 0:
-            raise self.err(label, f"must not be negative, got {v!r}")
-        return v
-
-    def vec3(self, table: Dict, section: str, key: str, default=None, required=False):
-        label, present, v = self._lookup(table, section, key, required)
-        if not present:
-            return default
-        if (not isinstance(v, list) or len(v) != 3
-                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
-            raise self.err(label, f"must be a list of 3 finite numbers [x, y, z], got {v!r}")
-        return np.array(v, dtype=np.float64)
-
-    def table(self, doc: Dict, key: str, required=False) -> Dict:
-        if key not in doc:
-            if required:
-                raise self.err(key, "missing table (required)")
-            return {}
-        v = doc[key]
-        if not isinstance(v, dict):
-            raise self.err(key, f"must be a table, got {v!r}")
-        return v
-
     def known(self, table: Dict, section: str, allowed=None):
-        allowed = allowed if allowed is not None else _SECTION_KEYS[section]
-        for k in table:
-            if k not in allowed:
-                where = f"{section}.{k}" if section else k
-                raise self.err(where, f"unknown key (expected one of: {', '.join(sorted(allowed))})")
+        super().known(table, section, allowed if allowed is not None else _SECTION_KEYS[section])
 
 
 def _expand(text: str) -> str:

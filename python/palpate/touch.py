@@ -65,14 +65,16 @@ from __future__ import annotations
 import csv
 import math
 import os
-import re
 import time
 import tomllib
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Tuple, Union
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
+
+from ._fields import FieldChecker
+from ._readers import read_text
+from .io import remove_frames, write_pvd
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -287,50 +289,6 @@ class Trajectory:
         return float(np.linalg.norm(np.diff(c, axis=0), axis=1).max())
 
 
-class _Checker:
-    def __init__(self, name: str):
-        self.name = name
-
-    def err(self, where: str, msg: str) -> ScriptError:
-        return ScriptError(f"{self.name}: {where}: {msg}")
-
-    def number(self, table: dict, where: str, key: str, *, required=True, positive=False, nonneg=False):
-        label = f"{where}.{key}"
-        if key not in table:
-            if required:
-                raise self.err(label, "missing (required)")
-            return None
-        v = table[key]
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.err(label, f"must be a number, got {v!r}")
-        if not math.isfinite(v):
-            raise self.err(label, f"must be finite, got {v!r}")
-        if positive and not v > 0:
-            raise self.err(label, f"must be positive, got {v!r}")
-        if nonneg and v < 0:
-            raise self.err(label, f"must not be negative, got {v!r}")
-        return float(v)
-
-    def vec3(self, table: dict, where: str, key: str, *, nonzero=False):
-        label = f"{where}.{key}"
-        if key not in table:
-            return None
-        v = table[key]
-        if (not isinstance(v, list) or len(v) != 3
-                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
-            raise self.err(label, f"must be a list of 3 finite numbers [x, y, z], got {v!r}")
-        a = np.array(v, dtype=np.float64)
-        if nonzero and not np.linalg.norm(a) > 0:
-            raise self.err(label, "must not be zero")
-        return a
-
-    def known(self, table: dict, where: str, allowed):
-        for k in table:
-            if k not in allowed:
-                label = f"{where}.{k}" if where else k
-                raise self.err(label, f"unknown key (expected one of: {', '.join(sorted(allowed))})")
-
-
 def parse_script_text(text: str, name: str, fmt: str) -> Script:
     """Parse a touch script held in ``text`` (``fmt``: ``"toml"`` or ``"csv"``); ``name`` is the
     file name its errors carry. See :func:`parse_script`."""
@@ -349,32 +307,20 @@ def parse_script(path: PathLike) -> Script:
     ext = os.path.splitext(name)[1].lower()
     if ext not in (".toml", ".csv"):
         raise ScriptError(f"{name}: a touch script is a .toml (segments) or .csv (t,x,y,z) file")
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read()
-    except FileNotFoundError:
-        raise ScriptError(f"{path}: no such script file") from None
-    except OSError as e:
-        raise ScriptError(f"{path}: cannot read the script: {e.strerror or e}") from None
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise ScriptError(f"{name}: not UTF-8 text (byte {e.start})") from None
+    text = read_text(path, error=ScriptError)
     s = parse_script_text(text, name, ext[1:])
     s.path = path
     return s
 
 
 def _parse_toml(text: str, name: str) -> Script:
-    c = _Checker(name)
+    c = FieldChecker(name, ScriptError)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ScriptError(f"{name}: invalid TOML: {e}") from None
     c.known(doc, "", {"probe", "segment"})
-    probe = doc.get("probe", {})
-    if not isinstance(probe, dict):
-        raise c.err("probe", f"must be a table, got {probe!r}")
+    probe = c.table(doc, "probe")
     c.known(probe, "probe", _PROBE_KEYS)
     if ("point" in probe) == ("vertex" in probe):
         raise c.err("probe", 'give exactly one of point = [x, y, z] or vertex = "probe"')
@@ -384,7 +330,7 @@ def _parse_toml(text: str, name: str) -> Script:
     normal = c.vec3(probe, "probe", "normal", nonzero=True)
     if normal is not None:
         normal = normal / np.linalg.norm(normal)
-    gap = c.number(probe, "probe", "gap", required=False, nonneg=True)
+    gap = c.number(probe, "probe", "gap", nonneg=True)
     segs = doc.get("segment")
     if segs is None or (isinstance(segs, list) and not segs):
         raise c.err("segment", "the script has no [[segment]] (an empty script)")
@@ -397,19 +343,18 @@ def _parse_toml(text: str, name: str) -> Script:
         if kind not in _SEGMENT_KEYS:
             raise c.err(f"{where}.kind", f"must be one of {', '.join(sorted(_SEGMENT_KEYS))}, got {kind!r}")
         c.known(s, where, _SEGMENT_KEYS[kind])
-        seg = Segment(kind, c.number(s, where, "duration", positive=True))
+        seg = Segment(kind, float(c.number(s, where, "duration", positive=True, required=True)))
         if kind == "press":
-            seg.depth = c.number(s, where, "depth")
+            seg.depth = float(c.number(s, where, "depth", required=True))
         elif kind == "slide":
-            seg.direction = c.vec3(s, where, "direction", nonzero=True)
-            if seg.direction is None:
-                raise c.err(f"{where}.direction", "missing (required)")
-            seg.distance = c.number(s, where, "distance", nonneg=True)
+            seg.direction = c.vec3(s, where, "direction", required=True, nonzero=True)
+            seg.distance = float(c.number(s, where, "distance", nonneg=True, required=True))
         elif kind == "release":
-            seg.gap = c.number(s, where, "gap", required=False, nonneg=True)
+            gap_r = c.number(s, where, "gap", nonneg=True)
+            seg.gap = None if gap_r is None else float(gap_r)
         out.append(seg)
     return Script(path=name, kind="toml", point=point, normal=normal,
-                  gap=DEFAULT_GAP if gap is None else gap, segments=out)
+                  gap=DEFAULT_GAP if gap is None else float(gap), segments=out)
 
 
 def _parse_csv(text: str, name: str) -> Script:
@@ -465,10 +410,7 @@ class _Series:
         self.tets = np.asarray(sim.core_tets, dtype=np.int64)
         self.rest_surface = np.array(sim.surface)
         self.rest_core = np.array(sim.core_positions)
-        stale = re.compile(rf"({'|'.join(self.PARTS)})_\d{{5}}\.vtu")
-        for f in os.listdir(out_dir):
-            if stale.fullmatch(f):
-                os.remove(os.path.join(out_dir, f))
+        remove_frames(out_dir, self.PARTS)
 
     @property
     def pvd(self) -> str:
@@ -501,19 +443,8 @@ class _Series:
         self._write_pvd()
 
     def _write_pvd(self) -> None:
-        lines = ['<?xml version="1.0"?>',
-                 '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
-                 "  <Collection>"]
-        for t, names in self.frames:
-            for f in names:
-                part = f.split("_")[0]
-                lines.append(f'    <DataSet timestep="{t!r}" group="" part="{self.PARTS.index(part)}" '
-                             f'name={quoteattr(part)} file={quoteattr(f)}/>')
-        lines += ["  </Collection>", "</VTKFile>", ""]
-        tmp = self.pvd + ".tmp"
-        with open(tmp, "w") as fh:
-            fh.write("\n".join(lines))
-        os.replace(tmp, self.pvd)
+        write_pvd(self.pvd, [(t, f, self.PARTS.index(f.split("_")[0]), f.split("_")[0])
+                             for t, names in self.frames for f in names])
 
 
 def plot_force(rows: np.ndarray, path: str, title: str = "") -> None:
@@ -568,7 +499,7 @@ def run_touch(sim, script: Union[Script, "Trajectory"], out_dir: PathLike, *, dt
     out_dir = os.fspath(out_dir)
     os.makedirs(out_dir, exist_ok=True)
     traj = script if isinstance(script, Trajectory) else script.resolve(
-        sim.surface, sim.surface_triangles, tool_radius_of(sim) if tool_radius is None else tool_radius)
+        sim.surface, sim.surface_triangles, sim.tool_radius if tool_radius is None else tool_radius)
     times, centres = traj.positions(dt)
     n = len(times)
     every = default_every(n) if every is None else int(every)
@@ -636,9 +567,6 @@ def _fmt(v: float) -> str:
     return repr(v) if isinstance(v, int) else f"{v:.9g}"
 
 
-def tool_radius_of(sim) -> float:
-    """The tool radius [m] of a :class:`palpate.HybridSim` (``sim.tool_radius``)."""
-    return float(sim.tool_radius)
 
 
 #: A press, hold, slide and release at the default probe point (``examples/scripts/press_hold_slide.toml``):

@@ -71,7 +71,7 @@ def _model(a):
 
 def cmd_touch(a) -> int:
     from .. import _palpate as _p
-    from ..touch import ScriptError, TouchFailed, tool_radius_of, parse_script, run_touch
+    from ..touch import ScriptError, TouchFailed, parse_script, run_touch
 
     _positive("--dt", a.dt)
     for flag, v in (("--young", a.young), ("--density", a.density), ("--tool-radius", a.tool_radius),
@@ -97,7 +97,7 @@ def cmd_touch(a) -> int:
         raise Fail(f"palpate touch: {e}") from None
     except _p.PalpateError as e:
         raise Fail(f"palpate touch: {what}: cannot simulate the model: {e}", 1) from None
-    radius = tool_radius_of(sim) if a.tool_radius is None else a.tool_radius
+    radius = sim.tool_radius if a.tool_radius is None else a.tool_radius
     try:
         traj = script.resolve(sim.surface, sim.surface_triangles, radius)
     except ScriptError as e:
