@@ -2,6 +2,11 @@
 //! `cargo run --release --example touch -- [ventricle|ellipsoids] [depth_mm] [slide_mm]`.
 //! Prints, every 50 ticks, the tool depth, the force on the tool, the active particles and the
 //! tick time; then the tick-time percentiles.
+//!
+//! Study switches (environment): `UNDAMPED=1` (no viscosity), `FORCE=2` (stop advancing once the
+//! force reaches 2 N), `TOOL_K`, `TOOL_C` (contact stiffness [N/m], damping [N s/m]), `MARGIN`
+//! (activation margin [mm]), `COUPLING_K`, `COUPLING_C`, `DEBUG=1` (every 5 ticks: the fastest
+//! active particle, the smallest det F, the core's displacement).
 use palpate_core::hybrid::{build, shapes, HybridOptions};
 use palpate_core::material::{Damping, Elasticity};
 use palpate_core::mesh::generate::TruncatedEllipsoidWall;

@@ -10,33 +10,14 @@
 //! bit-identical after a round trip; a reader that trusts lengths and indices panics or hangs on
 //! damaged or mutated files instead of naming the file and the reason.
 use palpate_core::hybrid::file::{from_bytes, to_bytes, FORMAT_VERSION};
-use palpate_core::hybrid::{build, shapes, HybridModel, HybridOptions, Projection, Spacing, VoxelLabel, Wall, WallPart};
-use palpate_core::mesh::generate::TruncatedEllipsoidWall;
+use palpate_core::hybrid::{build, HybridModel, HybridOptions, Projection, Spacing, VoxelLabel, Wall, WallPart};
 use palpate_core::mesh::{ellipsoid_surface, TriSurface};
 use palpate_core::spatial::{TetGrid, TriangleGrid};
 use palpate_core::{HybridError, ModelFileError, Vec3};
-use std::sync::OnceLock;
+#[path = "support/walls.rs"]
+mod walls;
 
-const INNER: [f64; 3] = [0.020, 0.020, 0.035];
-const OUTER: [f64; 3] = [0.026, 0.026, 0.042];
-
-fn ellipsoids() -> &'static (Wall, HybridModel) {
-    static M: OnceLock<(Wall, HybridModel)> = OnceLock::new();
-    M.get_or_init(|| {
-        let wall = shapes::ellipsoids(INNER, OUTER, 5).unwrap();
-        let m = build(&wall, &HybridOptions::default()).unwrap();
-        (wall, m)
-    })
-}
-
-fn ventricle() -> &'static (Wall, HybridModel) {
-    static M: OnceLock<(Wall, HybridModel)> = OnceLock::new();
-    M.get_or_init(|| {
-        let wall = shapes::truncated_ventricle(&TruncatedEllipsoidWall { circumferential: 96, longitudinal: 24, ..Default::default() }).unwrap();
-        let m = build(&wall, &HybridOptions::default()).unwrap();
-        (wall, m)
-    })
-}
+use walls::{ellipsoids, ventricle, INNER, OUTER};
 
 fn check_volumes_and_particles(wall: &Wall, m: &HybridModel, what: &str) {
     let (core, shell) = (m.core_volume(), m.shell_volume());

@@ -9,16 +9,16 @@
 
 #[path = "support/press.rs"]
 mod press;
+#[path = "support/walls.rs"]
+mod walls;
 
-use palpate_core::hybrid::{build, shapes, HybridModel, HybridOptions};
+use palpate_core::hybrid::HybridModel;
 use palpate_core::material::{Damping, Elasticity};
 use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace};
 use palpate_core::{step, Material, ModelBuilder, State, TetMesh, Vec3, Workspace};
-use std::sync::OnceLock;
 
 fn model() -> &'static HybridModel {
-    static M: OnceLock<HybridModel> = OnceLock::new();
-    M.get_or_init(|| build(&shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap(), &HybridOptions::default()).unwrap())
+    &walls::ellipsoids().1
 }
 
 fn material() -> Material {

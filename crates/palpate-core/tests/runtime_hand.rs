@@ -7,22 +7,20 @@
 //! each region change); let the wall leak or push energy in; take the shell's explicit sub-steps
 //! at the rest-linearised count while a press stretches it (a deep press diverged so).
 
-use palpate_core::hybrid::{build, shapes, HybridModel, HybridOptions};
+#[path = "support/walls.rs"]
+mod walls;
+
+use palpate_core::hybrid::HybridModel;
 use palpate_core::material::{Damping, Elasticity};
-use palpate_core::mesh::generate::TruncatedEllipsoidWall;
 use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace, TickReport};
 use palpate_core::{Material, Vec3};
-use std::sync::OnceLock;
 
-/// The synthetic truncated ventricle of the benchmark protocol, as the Python `build_shape`.
 fn ventricle() -> &'static HybridModel {
-    static M: OnceLock<HybridModel> = OnceLock::new();
-    M.get_or_init(|| build(&shapes::truncated_ventricle(&TruncatedEllipsoidWall { circumferential: 96, longitudinal: 24, ..Default::default() }).unwrap(), &HybridOptions::default()).unwrap())
+    &walls::ventricle().1
 }
 
 fn ellipsoids() -> &'static HybridModel {
-    static M: OnceLock<HybridModel> = OnceLock::new();
-    M.get_or_init(|| build(&shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap(), &HybridOptions::default()).unwrap())
+    &walls::ellipsoids().1
 }
 
 /// Myocardium as the protocol has it (30 kPa, nu 0.4), undamped: the hardest case for the

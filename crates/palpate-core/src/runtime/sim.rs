@@ -170,9 +170,9 @@ impl Sim {
     /// particles under it, elsewhere at its ties to the core (`SimState::skin` is fresh only near
     /// the tool, see [`super::tick::SKIN_LIVE_MARGIN`]).
     pub fn skin_positions(&self, state: &SimState, out: &mut [Vec3]) {
-        let (x, v) = (&state.core.x, &state.core.v);
+        let x = &state.core.x;
         for (i, o) in out.iter_mut().enumerate() {
-            *o = super::tick::skin_over_particles(self, &state.activation, i, &state.particles.x, &state.particles.v, x, v).map_or_else(|| self.skin.position(i, x), |c| c.0);
+            *o = super::tick::skin_over_particles(self, &state.activation, i, &state.particles.x, x).unwrap_or_else(|| self.skin.position(i, x));
         }
     }
 

@@ -285,7 +285,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     // 6. The skin.
     // Near the tool every tick; everywhere every SKIN_REFRESH_TICKS ticks.
     let live = (*ticks % SKIN_REFRESH_TICKS != 0).then_some((tool, o.tool.radius + o.activation_margin + SKIN_LIVE_MARGIN));
-    update_skin(sim, activation, particles, &core.x, &core.v, &mut ws.frames, &mut ws.over, *ticks + 1, live, skin);
+    update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, *ticks + 1, live, skin);
     report.force = tool_force;
     *last_tool = Some(tool);
     *ticks += 1;
@@ -330,27 +330,18 @@ struct NearLists<'a> {
 /// capacities are the model's bounds). The core does not move within a tick, so the ties' part of
 /// each vertex's place is computed once here (`ws.tie_x`, `ws.tie_v` hold the active particles').
 fn near_lists(sim: &Sim, activation: &Activation, core_x: &[Vec3], core_v: &[Vec3], ws: &mut SimWorkspace) {
-    let (h, tie) = (&sim.hybrid, &sim.particle_tie);
     ws.near_ptr.clear();
     ws.near_items.clear();
     ws.near_base.clear();
     ws.near_ptr.push(0);
     for &v in &ws.near {
         let start = ws.near_items.len();
-        let mut wsum = 0.0;
-        for &t in h.outer_adjacency.vertex_tris.get(v) {
-            if !activation.is_triangle_active(t) {
-                continue;
-            }
-            for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
-                let w = tie.offsets()[p].norm_squared();
-                ws.near_items.push((p, w));
-                wsum += w;
-            }
-        }
+        ws.near_items.extend(skin_weights(sim, activation, v));
+        let wsum: f64 = ws.near_items[start..].iter().map(|&(_, w)| w).sum();
         let (mut bx, mut bv) = (sim.skin.position(v, core_x), sim.skin.velocity(v, core_x, core_v));
         for item in &mut ws.near_items[start..] {
-            item.1 /= wsum;
+            // No weight at all (particles on the face itself): the vertex stays at its tie.
+            item.1 = if wsum > 0.0 { item.1 / wsum } else { 0.0 };
             bx -= item.1 * ws.tie_x[item.0];
             bv -= item.1 * ws.tie_v[item.0];
         }
@@ -359,33 +350,28 @@ fn near_lists(sim: &Sim, activation: &Activation, core_x: &[Vec3], core_v: &[Vec
     }
 }
 
-/// Where outer vertex `v` is, over active triangles: its tie to the core moved by the weighted
-/// mean displacement of the active particles under its triangles from their own ties (each
-/// weighted by its tie's squared depth over the core face, so that the outermost particles, just
-/// under the skin, count most); and its velocity likewise. `None` over no active triangle.
-/// Returns the position, the velocity and the sum of the weights. (The sub-steps use the same
-/// placement through [`NearLists`], with the ties computed once a tick.)
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], vel: &[Vec3], core_x: &[Vec3], core_v: &[Vec3]) -> Option<(Vec3, Vec3, f64)> {
+/// The particles under outer vertex `v`'s active triangles with their weights in its placement:
+/// each tie's squared depth over its core face, so that the outermost particles, just under the
+/// skin, count most.
+fn skin_weights<'a>(sim: &'a Sim, activation: &'a Activation, v: usize) -> impl Iterator<Item = (usize, f64)> + 'a {
     let h = &sim.hybrid;
-    let tie = &sim.particle_tie;
-    let (mut d, mut dv, mut wsum) = (Vec3::zeros(), Vec3::zeros(), 0.0);
-    for &t in h.outer_adjacency.vertex_tris.get(v) {
-        if !activation.is_triangle_active(t) {
-            continue;
-        }
-        for p in h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize {
-            let w = tie.offsets()[p].norm_squared();
-            let (tx, tv) = (tie.position(p, core_x), tie.velocity(p, core_x, core_v));
-            d += w * (x[p] - tx);
-            dv += w * (vel[p] - tv);
-            wsum += w;
-        }
-    }
-    (wsum > 0.0).then(|| {
-        let (sx, sv) = (sim.skin.position(v, core_x), sim.skin.velocity(v, core_x, core_v));
-        (sx + d / wsum, sv + dv / wsum, wsum)
+    h.outer_adjacency.vertex_tris.get(v).iter().filter(|&&t| activation.is_triangle_active(t)).flat_map(move |&t| {
+        (h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize).map(move |p| (p, sim.particle_tie.offsets()[p].norm_squared()))
     })
+}
+
+/// Where outer vertex `v` is, over active triangles: its tie to the core moved by the weighted
+/// mean displacement of the particles under it from their own ties ([`skin_weights`]); `None`
+/// over no active triangle. (The sub-steps place the near vertices the same way through
+/// [`NearLists`], with the ties computed once a tick.)
+pub(crate) fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], core_x: &[Vec3]) -> Option<Vec3> {
+    let tie = &sim.particle_tie;
+    let (mut d, mut wsum) = (Vec3::zeros(), 0.0);
+    for (p, w) in skin_weights(sim, activation, v) {
+        d += w * (x[p] - tie.position(p, core_x));
+        wsum += w;
+    }
+    (wsum > 0.0).then(|| sim.skin.position(v, core_x) + d / wsum)
 }
 
 /// Skin vertices at their ties, or, over active triangles, carried by the particles under them.
@@ -402,7 +388,7 @@ pub const SKIN_REFRESH_TICKS: u64 = 32;
 /// `radius` of the tool and those over active triangles are updated (a fine outer surface, the
 /// Rodero model's 31,788 vertices, made the whole skin's update a third of its tick).
 #[allow(clippy::too_many_arguments)]
-fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], core_v: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, live: Option<(Vec3, f64)>, skin: &mut [Vec3]) {
+fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, live: Option<(Vec3, f64)>, skin: &mut [Vec3]) {
     embed::face_frames(core_x, &sim.hybrid.core_faces, frames);
     for &s in activation.active_regions() {
         for &t in activation.region_triangles(s as usize) {
@@ -415,10 +401,7 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
         if over[v] != stamp && live.is_some_and(|(c, r)| (*s - c).norm_squared() > r * r) {
             continue;
         }
-        let carried = if over[v] == stamp { skin_over_particles(sim, activation, v, &particles.x, &particles.v, core_x, core_v) } else { None };
-        *s = match carried {
-            Some((x, _, _)) => x,
-            None => sim.skin.position_framed(v, core_x, frames),
-        };
+        let carried = if over[v] == stamp { skin_over_particles(sim, activation, v, &particles.x, core_x) } else { None };
+        *s = carried.unwrap_or_else(|| sim.skin.position_framed(v, core_x, frames));
     }
 }
