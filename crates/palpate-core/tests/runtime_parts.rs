@@ -410,6 +410,57 @@ fn particles_inside_their_region_feel_no_wall() {
     );
 }
 
+/// The tick skips the wall's search for a particle that stayed within its free radius of where
+/// the tick started: no point within that radius may feel the wall (else the skip would change
+/// the forces), and the radius must not be uselessly small for particles deep in a region.
+/// A radius too large (e.g. forgetting the diagonal neighbours, or the cube beyond them) fails
+/// the first check; one that ignores the slack fails on the particles resting outside.
+#[test]
+fn within_its_free_radius_a_particle_feels_no_wall() {
+    let m = ventricle();
+    let wall = Confinement::new(100.0);
+    let mut rng = 0x2545_f491_4f6c_dd1du64;
+    let mut uniform = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut tried, mut positive, mut deep) = (0, 0, 0);
+    for s in (0..m.n_regions()).step_by(61) {
+        let a = only(m, s);
+        let counts = a.triangle_counts();
+        for &q in a.active() {
+            // Where a tick may start: around the rest position, a little moved.
+            let x0 = m.particles[q] + (Vec3::new(uniform(), uniform(), uniform()) - Vec3::repeat(0.5)) * m.grid.h;
+            let slack = wall.slack(&m.grid, &m.voxel_owner, counts, &m.particles[q]);
+            let r = wall.free_radius(&m.grid, &m.voxel_owner, counts, &x0, slack);
+            assert!(r >= 0.0 && r.is_finite());
+            if r > 0.0 {
+                positive += 1;
+            }
+            if r >= 0.5 * m.grid.h {
+                deep += 1;
+            }
+            // (A zero radius skips nothing: the tick tests |x - x0| < r.)
+            for _ in 0..if r > 0.0 { 8 } else { 0 } {
+                // A point on the sphere of radius just under r: the worst place.
+                let d = Vec3::new(uniform() - 0.5, uniform() - 0.5, uniform() - 0.5);
+                if d.norm() == 0.0 {
+                    continue;
+                }
+                let x = x0 + d.normalize() * (0.999 * r);
+                let p = wall.push_with_slack(&m.grid, &m.voxel_owner, counts, &x, &m.particles[q], slack);
+                assert_eq!(p.force, Vec3::zeros(), "region {s} particle {q}: free radius {r:.3e} m but {p:?} at {:.3e} m", (x - x0).norm());
+                tried += 1;
+            }
+        }
+    }
+    println!("{tried} points within their free radius, none pushed; {positive} particles with a positive radius, {deep} of at least half a voxel");
+    assert!(tried > 1000);
+    assert!(deep * 4 > positive, "free radii are mostly tiny: {deep} of {positive} at least half a voxel");
+}
+
 /// Outside the region, the wall pushes back to the nearest voxel of the region: the distance is
 /// exactly a brute-force search over region_field(s)'s labels (when within reach), and the
 /// direction agrees with region_field(s)'s gradient (the offline B(p_s) field, which points to

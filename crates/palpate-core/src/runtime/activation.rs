@@ -169,16 +169,25 @@ impl Activation {
 
     /// Touch every region whose outer vertex lies within `radius + margin` \[m\] of `centre` \[m\];
     /// `vertices` are the outer vertices' current positions \[m\] (the skin), one per region.
-    /// Returns the number touched. A brute-force sweep (a few thousand vertices: microseconds).
+    /// Returns the number touched. A sweep of every vertex (the tick looks only at those that can
+    /// be within reach: [`Activation::touch_sphere_among`]).
     pub fn touch_sphere(&mut self, centre: &Vec3, radius: f64, margin: f64, vertices: &[Vec3]) -> usize {
+        self.touch_sphere_among(centre, radius, margin, vertices, 0..vertices.len())
+    }
+
+    /// [`Activation::touch_sphere`] looking only at the vertices `among` (indices into
+    /// `vertices`, in the order their regions are to be touched; out of range ones skipped):
+    /// the tick passes the skin vertices that can be within reach.
+    pub fn touch_sphere_among(&mut self, centre: &Vec3, radius: f64, margin: f64, vertices: &[Vec3], among: impl Iterator<Item = usize>) -> usize {
         let reach = radius + margin;
         if !(reach >= 0.0 && reach.is_finite()) {
             return 0;
         }
         let r2 = reach * reach;
         let mut n = 0;
-        for (s, p) in vertices.iter().enumerate().take(self.n_regions()) {
-            if (p - centre).norm_squared() <= r2 && self.touch(s) {
+        let n_regions = self.n_regions().min(vertices.len());
+        for s in among.filter(|&s| s < n_regions) {
+            if (vertices[s] - centre).norm_squared() <= r2 && self.touch(s) {
                 n += 1;
             }
         }

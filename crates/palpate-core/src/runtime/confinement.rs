@@ -265,6 +265,70 @@ impl Confinement {
         }
     }
 
+    /// How far \[m\] a particle whose (rest-frame) position is `x0` and whose slack is `slack`
+    /// can move from `x0` with the wall surely exerting no force on it (a radius for skipping the
+    /// search; a tick computes it once, at its start, and the sub-steps test only the particles
+    /// that moved farther). Inside the allowed set: the distance from `x0` to the nearest cube
+    /// that is not allowed (or past the grid), looked for among its voxel's 26 neighbours and
+    /// bounded beyond them by a cube's width plus `x0`'s distance to its own cube's faces.
+    /// Outside it: `min(slack, (reach - 1) h) - dist(x0)`, as the distance to a set grows no
+    /// faster than the point moves, and the search finds any allowed cube within `(reach - 1) h`.
+    /// Zero when neither holds (or for a non-finite input).
+    pub fn free_radius(&self, grid: &VoxelGrid, owner: &[u32], tri_count: &[u32], x0: &Vec3, slack: f64) -> f64 {
+        if owner.len() != grid.len() || grid.is_empty() || !(grid.h > 0.0) || !x0.iter().all(|c| c.is_finite()) || !slack.is_finite() {
+            return 0.0;
+        }
+        let h = grid.h;
+        let mut c = [0isize; 3];
+        for a in 0..3 {
+            let f = ((x0[a] - grid.origin[a]) / h).floor();
+            if !(f >= 0.0 && f < grid.dims[a] as f64) {
+                return 0.0; // past the grid: the search's clamped cell, not worth a bound
+            }
+            c[a] = f as isize;
+        }
+        if !allowed(owner[grid.index(c[0] as usize, c[1] as usize, c[2] as usize)], tri_count) {
+            return self.outside_free_radius(grid, owner, tri_count, x0, slack);
+        }
+        // Per axis and offset -1, 0, +1: the squared gap from x0 to that slab.
+        let mut gap = [[0.0f64; 3]; 3];
+        let mut face = f64::INFINITY;
+        for a in 0..3 {
+            let lo = grid.origin[a] + c[a] as f64 * h;
+            let (below, above) = ((x0[a] - lo).max(0.0), (lo + h - x0[a]).max(0.0));
+            gap[a] = [below * below, 0.0, above * above];
+            face = face.min(below).min(above);
+        }
+        let mut best = (face + h) * (face + h);
+        for dk in -1..=1isize {
+            for dj in -1..=1isize {
+                for di in -1..=1isize {
+                    let g = gap[0][(di + 1) as usize] + gap[1][(dj + 1) as usize] + gap[2][(dk + 1) as usize];
+                    if g >= best || (di, dj, dk) == (0, 0, 0) {
+                        continue;
+                    }
+                    let (i, j, k) = (c[0] + di, c[1] + dj, c[2] + dk);
+                    let inside = i >= 0 && j >= 0 && k >= 0 && (i as usize) < grid.dims[0] && (j as usize) < grid.dims[1] && (k as usize) < grid.dims[2];
+                    if !inside || !allowed(owner[grid.index(i as usize, j as usize, k as usize)], tri_count) {
+                        best = g;
+                    }
+                }
+            }
+        }
+        best.sqrt()
+    }
+
+    /// [`Confinement::free_radius`] outside the allowed set (`x0` in the grid).
+    fn outside_free_radius(&self, grid: &VoxelGrid, owner: &[u32], tri_count: &[u32], x0: &Vec3, slack: f64) -> f64 {
+        let found = (self.reach.min(MAX_REACH) as f64 - 1.0).max(0.0) * grid.h;
+        // Staying in the grid (the search starts from the particle's own cell).
+        let edge = (0..3).map(|a| (x0[a] - grid.origin[a]).min(grid.origin[a] + grid.dims[a] as f64 * grid.h - x0[a])).fold(f64::INFINITY, f64::min);
+        match self.distance(grid, owner, tri_count, x0) {
+            Some((d, _)) => (slack.min(found) - d).min(edge).max(0.0),
+            None => 0.0,
+        }
+    }
+
     /// Write the slacks of the particles `which` (indices into `anchors` and `slacks`; out of
     /// range ones skipped) into `slacks` \[m\], once per tick. Allocation-free.
     pub fn slacks(&self, grid: &VoxelGrid, owner: &[u32], tri_count: &[u32], anchors: &[Vec3], which: &[usize], slacks: &mut [f64]) {

@@ -29,7 +29,7 @@
 use super::activation::Activation;
 use super::embed;
 use super::sim::Sim;
-use super::state::{SimState, SimWorkspace};
+use super::state::{LiveSkin, SimState, SimWorkspace};
 use crate::error::StepError;
 use crate::integrate::{step, StepReport};
 use crate::math::{is_finite3, Mat3, Vec3};
@@ -75,7 +75,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     if !is_finite3(&tool) {
         return Err(StepError::NonFiniteTool);
     }
-    let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active } = state;
+    let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active, live } = state;
     // The shell's clock is the core's (it advances only while particles are active).
     particles.t = core.t;
     // The core's face frames and their rates, once: every tie on a face shares them.
@@ -89,7 +89,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     let mut report = TickReport::default();
 
     // 1. Activation.
-    activation.touch_sphere(&tool, o.tool.radius, o.activation_margin, skin);
+    activation.touch_sphere_among(&tool, o.tool.radius, o.activation_margin, skin, live.iter());
     let sets = activation.update(*ticks);
     for &p in sets.entered {
         is_active[p] = true;
@@ -108,13 +108,19 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     // 2. The ring follows the core, and so do the held active particles (lone lattice particles,
     // see Sim::new: the step does not move them); the active particles' anchors for confinement.
     let held = sim.particles.fixed();
+    // Marks of this tick (the workspace's own count, so that marks left by another state's
+    // ticks, e.g. one restored from a snapshot, are never mistaken for this tick's).
+    ws.epoch += 1;
+    let stamp = ws.epoch;
     for &p in &particles.active {
         if held[p] {
             particles.x[p] = tie.position_framed(p, &core.x, frames);
             particles.v[p] = tie.velocity_framed(p, &core.v, rates);
         }
         for &j in sim.particles.neighbours(p) {
-            if !is_active[j] {
+            // A ring particle borders several active ones: placed once a tick.
+            if !is_active[j] && ws.placed[j] != stamp {
+                ws.placed[j] = stamp;
                 particles.x[j] = tie.position_framed(j, &core.x, frames);
                 particles.v[j] = tie.velocity_framed(j, &core.v, rates);
             }
@@ -132,8 +138,8 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
     // The skin vertices over active triangles that the tool may reach this tick.
     ws.near.clear();
     let reach = o.tool.radius + (tool - prev).norm() + o.activation_margin;
-    for (v, x) in skin.iter().enumerate() {
-        if (x - tool).norm_squared() < reach * reach && over_active(sim, activation, v) {
+    for v in live.iter() {
+        if (skin[v] - tool).norm_squared() < reach * reach && over_active(sim, activation, v) {
             ws.near.push(v);
         }
     }
@@ -147,10 +153,17 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         let tri_count = activation.triangle_counts();
         let rest = &sim.hybrid.particles;
         sim.confinement.slacks(&sim.hybrid.grid, &sim.hybrid.voxel_owner, tri_count, rest, &particles.active, &mut ws.slacks);
+        // Most particles are well inside their regions: the sub-steps look only at those that
+        // moved farther than their free radius since the tick's start (the same forces, cheaper).
+        for &p in &particles.active {
+            ws.x0[p] = particles.x[p] - ws.anchors[p];
+            ws.free[p] = sim.confinement.free_radius(&sim.hybrid.grid, &sim.hybrid.voxel_owner, tri_count, &ws.x0[p], ws.slacks[p]);
+        }
         // What the sub-steps send to the core is gathered per particle (`to_core`, through its
         // tie) and per skin vertex (`skin_to_core`) and spread once after them: the core does not
         // move within a tick, so the spread of the sum is the sum of the spreads.
         let (shift, slacks, x_rest, f_wall) = (&ws.anchors, &ws.slacks, &mut ws.x_rest, &mut ws.f_wall);
+        let (x0, free, wall_check) = (&ws.x0, &ws.free, &mut ws.wall_check);
         let (tie_x, tie_v, to_core, skin_to_core) = (&ws.tie_x, &ws.tie_v, &mut ws.to_core, &mut ws.skin_to_core);
         let lists = NearLists { near: &ws.near, ptr: &ws.near_ptr, items: &ws.near_items, base: &ws.near_base };
         let (hybrid, held) = (&sim.hybrid, sim.particles.fixed());
@@ -192,14 +205,19 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
             }
             // The wall belongs to the core's regions: its reaction goes to the core through the
             // particle's tie (momentum stays exact).
+            wall_check.clear();
             for &p in sub.active {
                 x_rest[p] = sub.x[p] - shift[p];
+                if (x_rest[p] - x0[p]).norm_squared() < free[p] * free[p] {
+                    continue;
+                }
                 f_wall[p] = Vec3::zeros();
+                wall_check.push(p);
             }
-            let wall = sim.confinement.apply(&hybrid.grid, &hybrid.voxel_owner, tri_count, x_rest, rest, Some(slacks), sub.active, f_wall);
+            let wall = sim.confinement.apply(&hybrid.grid, &hybrid.voxel_owner, tri_count, x_rest, rest, Some(slacks), wall_check, f_wall);
             report.confined = report.confined.max(wall.pushed);
             if wall.pushed > 0 {
-                for &p in sub.active {
+                for &p in wall_check.iter() {
                     f[p] += f_wall[p];
                     to_core[p] -= f_wall[p];
                 }
@@ -246,7 +264,8 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
 
     // 4. Skin contact where no particle is active under the tool.
     let reach = o.tool.radius;
-    for (v, x) in skin.iter().enumerate() {
+    for v in live.iter() {
+        let x = &skin[v];
         if (x - tool).norm_squared() >= reach * reach || over_active(sim, activation, v) {
             continue;
         }
@@ -284,8 +303,13 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
 
     // 6. The skin.
     // Near the tool every tick; everywhere every SKIN_REFRESH_TICKS ticks.
-    let live = (*ticks % SKIN_REFRESH_TICKS != 0).then_some((tool, o.tool.radius + o.activation_margin + SKIN_LIVE_MARGIN));
-    update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, *ticks + 1, live, skin);
+    let r_live = o.tool.radius + o.activation_margin + SKIN_LIVE_MARGIN;
+    let whole = *ticks % SKIN_REFRESH_TICKS == 0;
+    update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, stamp, (tool, r_live), whole, live, skin);
+    if whole {
+        // Until the next whole update the tool travels at most SKIN_REFRESH_TICKS steps.
+        live.rebuild(skin, &tool, r_live + SKIN_REFRESH_TICKS as f64 * o.max_tool_step);
+    }
     report.force = tool_force;
     *last_tool = Some(tool);
     *ticks += 1;
@@ -383,25 +407,42 @@ pub const SKIN_LIVE_MARGIN: f64 = 0.02;
 pub const SKIN_REFRESH_TICKS: u64 = 32;
 
 /// The core's face frames are computed once (`frames`), not per vertex, and the vertices over
-/// active triangles are marked from the active regions (`over[v] == stamp`) rather than found by
-/// asking every vertex's triangles; with `live = Some((tool, radius))` only the vertices within
-/// `radius` of the tool and those over active triangles are updated (a fine outer surface, the
-/// Rodero model's 31,788 vertices, made the whole skin's update a third of its tick).
+/// active triangles are found from the active regions (`over[v] == stamp`) rather than by asking
+/// every vertex's triangles; unless `whole`, only those and the vertices of `live` within
+/// `near.1` of the tool's centre `near.0` are updated (a fine outer surface, the Rodero model's
+/// 31,788 vertices, made the whole skin's update a third of its tick). Every vertex moved here
+/// joins `live`.
 #[allow(clippy::too_many_arguments)]
-fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, live: Option<(Vec3, f64)>, skin: &mut [Vec3]) {
+fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, near: (Vec3, f64), whole: bool, live: &mut LiveSkin, skin: &mut [Vec3]) {
     embed::face_frames(core_x, &sim.hybrid.core_faces, frames);
+    let place = |v: usize, over: bool, frames: &[Option<Mat3>]| {
+        let carried = if over { skin_over_particles(sim, activation, v, &particles.x, core_x) } else { None };
+        carried.unwrap_or_else(|| sim.skin.position_framed(v, core_x, frames))
+    };
     for &s in activation.active_regions() {
         for &t in activation.region_triangles(s as usize) {
             for &v in &sim.hybrid.outer_tris[t as usize] {
-                over[v] = stamp;
+                if over[v] != stamp {
+                    over[v] = stamp;
+                    skin[v] = place(v, true, frames);
+                    live.add(v);
+                }
             }
         }
     }
-    for (v, s) in skin.iter_mut().enumerate() {
-        if over[v] != stamp && live.is_some_and(|(c, r)| (*s - c).norm_squared() > r * r) {
-            continue;
+    live.sort();
+    let (c, r) = near;
+    if whole {
+        for v in 0..skin.len() {
+            if over[v] != stamp {
+                skin[v] = place(v, false, frames);
+            }
         }
-        let carried = if over[v] == stamp { skin_over_particles(sim, activation, v, &particles.x, core_x) } else { None };
-        *s = carried.unwrap_or_else(|| sim.skin.position_framed(v, core_x, frames));
+    } else {
+        for v in live.iter() {
+            if over[v] != stamp && (skin[v] - c).norm_squared() <= r * r {
+                skin[v] = place(v, false, frames);
+            }
+        }
     }
 }
