@@ -132,6 +132,21 @@ impl Embedding {
         self.nodes.is_empty()
     }
 
+    /// Per face of `n_faces`: the largest `sum |w|` and the largest offset length \[m\] of the
+    /// points tied to it (zeros for a face without points). A point's place moves by at most
+    /// `sum |w| max_a |dx_a| + |dR|_F |o|` when its face's nodes move by `dx_a` and its frame by
+    /// `dR` (`position_framed`), so these bound how far a face's points moved.
+    pub fn face_reach(&self, n_faces: usize) -> Vec<(f64, f64)> {
+        let mut out = vec![(0.0f64, 0.0f64); n_faces];
+        for i in 0..self.len() {
+            if let Some(b) = out.get_mut(self.face[i] as usize) {
+                b.0 = b.0.max(self.weights[i].iter().map(|w| w.abs()).sum());
+                b.1 = b.1.max(self.offset[i].norm());
+            }
+        }
+        out
+    }
+
     /// The face nodes and weights of point `i`.
     #[inline]
     pub fn tie(&self, i: usize) -> ([u32; 3], [f64; 3]) {

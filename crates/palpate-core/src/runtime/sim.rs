@@ -101,6 +101,10 @@ pub struct Sim {
     /// The core's nodes on its outer faces (where the tool meets the core once it has pushed
     /// the shell aside).
     pub core_surface: Vec<usize>,
+    /// Per core face, the largest `sum |w|` and offset \[m\] of the skin vertices tied to it
+    /// ([`super::embed::Embedding::face_reach`]): how far the skin can have moved, from how far
+    /// the core's faces moved (the tick's bound on its stale skin vertices).
+    pub skin_face_reach: Vec<(f64, f64)>,
     /// The shell's mass carried by each core node \[kg\] `(n_core_nodes)` (in `core`'s masses).
     pub shell_mass: Vec<f64>,
     pub options: SimOptions,
@@ -158,7 +162,8 @@ impl Sim {
         let mut core_surface: Vec<usize> = hybrid.core_faces.iter().flatten().copied().collect();
         core_surface.sort_unstable();
         core_surface.dedup();
-        Ok(Sim { hybrid, core, particles, particle_tie, skin, coupled, coupling, confinement, shell, core_surface, shell_mass: attached, options })
+        let skin_face_reach = skin.face_reach(hybrid.core_faces.len());
+        Ok(Sim { hybrid, core, particles, particle_tie, skin, skin_face_reach, coupled, coupling, confinement, shell, core_surface, shell_mass: attached, options })
     }
 
     /// Number of shell particles.
@@ -168,7 +173,7 @@ impl Sim {
 
     /// The whole skin \[m\] into `out` `(n_outer)`, fresh: over active triangles carried by the
     /// particles under it, elsewhere at its ties to the core (`SimState::skin` is fresh only near
-    /// the tool, see [`super::tick::SKIN_LIVE_MARGIN`]).
+    /// the tool, and elsewhere within [`super::tick::SKIN_LIVE_MARGIN`] of this).
     pub fn skin_positions(&self, state: &SimState, out: &mut [Vec3]) {
         let x = &state.core.x;
         for (i, o) in out.iter_mut().enumerate() {

@@ -18,9 +18,9 @@ pub struct SimState {
     /// [`Sim::particle_positions`] for all of them.
     pub particles: ParticleState,
     /// The outer surface's vertices (the skin) \[m\]: after the last tick near the tool (within
-    /// [`super::tick::SKIN_LIVE_MARGIN`] of its reach), elsewhere as of the last whole update
-    /// (every [`super::tick::SKIN_REFRESH_TICKS`] ticks); [`super::Sim::skin_positions`] gives the
-    /// whole skin fresh.
+    /// [`super::tick::SKIN_LIVE_MARGIN`] of its reach) and over active particles, elsewhere
+    /// within that margin of their place (see `LiveSkin`); [`super::Sim::skin_positions`]
+    /// gives the whole skin fresh.
     pub skin: Vec<Vec3>,
     /// The simulated tool's centre after the last tick \[m\] (`None` before the first): the
     /// device's position, followed at a bounded speed ([`super::SimOptions::max_tool_step`]).
@@ -36,23 +36,40 @@ pub struct SimState {
 }
 
 /// The skin vertices a tick may need to look at (contact, activation, the skin's update near the
-/// tool): those within reach of the tool at the last whole update of the skin, widened by the
-/// tool's largest travel until the next one, plus every vertex moved since. A vertex outside it
-/// was farther than that radius at the last whole update and has not moved since, so no tick
-/// before the next whole update can find it within the tool's reach or the skin's live radius:
-/// scanning the list instead of the whole skin changes no result (the list is kept in index
-/// order, so even sums come out bit-identical), and costs a tick on the Rodero model's 31,788
-/// skin vertices a few hundred instead of ~32,000 distance tests per scan.
+/// tool), and how stale the others may be.
+///
+/// Every stored skin vertex is within [`super::tick::SKIN_LIVE_MARGIN`] of where the core (or the
+/// particles under it) puts it: the tick bounds how far the core's faces have moved since the
+/// last update of the whole skin (`ref_x`, `ref_frames`, [`super::Sim::skin_face_reach`]) and
+/// updates the whole skin when that bound reaches half the margin; a vertex that stops being
+/// carried by particles is put back at its tie at once (`carried`). The list holds the vertices
+/// within `r_live + margin + step` of the tool when it was last rebuilt (`ref_tool`; rebuilt
+/// once the tool has travelled a margin), plus every vertex moved since. A vertex outside it
+/// therefore cannot be within the tool's reach before the next rebuild, and those within the
+/// live radius are updated every tick: scanning the list instead of the whole skin changes no
+/// contact or activation (the list is kept in index order, so even sums come out in the same
+/// order), and costs a tick on the Rodero model's 31,788 skin vertices a few hundred instead
+/// of ~32,000 distance tests per scan, with no periodic whole update (a 1 ms spike there).
 #[derive(Debug, Clone)]
 pub(crate) struct LiveSkin {
     /// Vertex indices, ascending.
     pub(crate) list: Vec<u32>,
     /// Per outer vertex: in `list`?
     pub(crate) member: Vec<bool>,
+    /// Per outer vertex: its stored place is where the particles under it carried it (not its
+    /// tie)?
+    pub(crate) carried: Vec<bool>,
     /// `false` until the first whole update: every vertex is looked at.
     pub(crate) valid: bool,
     /// `list` gained vertices out of order this tick (sorted before the next use).
     pub(crate) unsorted: bool,
+    /// The core's positions \[m\] and face frames at the last whole update of the skin.
+    pub(crate) ref_x: Vec<Vec3>,
+    pub(crate) ref_frames: Vec<Option<crate::math::Mat3>>,
+    /// The tool's centre when the list was last rebuilt \[m\].
+    pub(crate) ref_tool: Vec3,
+    /// The bound on the skin's travel since the last whole update, as of the last tick \[m\].
+    pub(crate) travel: f64,
 }
 
 /// [`LiveSkin::iter`]: the list, or every vertex before the first whole update.
@@ -72,8 +89,18 @@ impl Iterator for LiveIter<'_> {
 }
 
 impl LiveSkin {
-    pub(crate) fn new(n_outer: usize) -> LiveSkin {
-        LiveSkin { list: Vec::with_capacity(n_outer), member: vec![false; n_outer], valid: false, unsorted: false }
+    pub(crate) fn new(n_outer: usize, n_core: usize, n_faces: usize) -> LiveSkin {
+        LiveSkin {
+            list: Vec::with_capacity(n_outer),
+            member: vec![false; n_outer],
+            carried: vec![false; n_outer],
+            valid: false,
+            unsorted: false,
+            ref_x: vec![Vec3::zeros(); n_core],
+            ref_frames: vec![None; n_faces],
+            ref_tool: Vec3::zeros(),
+            travel: f64::INFINITY,
+        }
     }
 
     /// The vertices to look at, in index order.
@@ -98,18 +125,20 @@ impl LiveSkin {
         }
     }
 
-    /// Rebuild from the whole skin: the vertices within `radius` of `centre`.
+    /// Rebuild from the whole skin: the vertices within `radius` of `centre`, and those carried
+    /// by particles (they must be put back at their ties when their triangles turn inactive).
     pub(crate) fn rebuild(&mut self, skin: &[Vec3], centre: &Vec3, radius: f64) {
         for &v in &self.list {
             self.member[v as usize] = false;
         }
         self.list.clear();
         for (v, x) in skin.iter().enumerate() {
-            if (x - centre).norm_squared() <= radius * radius {
+            if self.carried[v] || (x - centre).norm_squared() <= radius * radius {
                 self.member[v] = true;
                 self.list.push(v as u32);
             }
         }
+        self.ref_tool = *centre;
         self.valid = true;
         self.unsorted = false;
     }
@@ -128,7 +157,7 @@ impl SimState {
             activation: Activation::new(&sim.hybrid, sim.options.linger_ticks),
             ticks: 0,
             is_active: vec![false; sim.n_particles()],
-            live: LiveSkin::new(sim.hybrid.outer_points.len()),
+            live: LiveSkin::new(sim.hybrid.outer_points.len(), sim.core.n_nodes(), sim.hybrid.core_faces.len()),
         }
     }
 

@@ -303,13 +303,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
 
     // 6. The skin.
     // Near the tool every tick; everywhere every SKIN_REFRESH_TICKS ticks.
-    let r_live = o.tool.radius + o.activation_margin + SKIN_LIVE_MARGIN;
-    let whole = *ticks % SKIN_REFRESH_TICKS == 0;
-    update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, stamp, (tool, r_live), whole, live, skin);
-    if whole {
-        // Until the next whole update the tool travels at most SKIN_REFRESH_TICKS steps.
-        live.rebuild(skin, &tool, r_live + SKIN_REFRESH_TICKS as f64 * o.max_tool_step);
-    }
+    update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, stamp, tool, live, skin);
     report.force = tool_force;
     *last_tool = Some(tool);
     *ticks += 1;
@@ -399,23 +393,50 @@ pub(crate) fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, 
 }
 
 /// Skin vertices at their ties, or, over active triangles, carried by the particles under them.
-/// Skin vertices farther than this beyond the tool's reach \[m\] are updated only every
-/// [`SKIN_REFRESH_TICKS`] ticks: they cannot meet the tool before then unless the organ moves
-/// 20 mm in 32 ms (0.6 m/s) toward it. ([`Sim::skin_positions`] gives the whole skin fresh.)
-pub const SKIN_LIVE_MARGIN: f64 = 0.02;
-/// Ticks between updates of the whole skin (see [`SKIN_LIVE_MARGIN`]).
-pub const SKIN_REFRESH_TICKS: u64 = 32;
+/// Every stored skin vertex is within this \[m\] of its place (see `LiveSkin` in `state.rs`):
+/// the whole skin is updated when the core's faces may have carried it half as far since the
+/// last whole update, and the vertices within this of the tool's reach every tick.
+pub const SKIN_LIVE_MARGIN: f64 = 0.005;
+
+/// The radius \[m\] within which the skin is updated every tick: the tool's reach, two of its
+/// steps (it moves before the next tick's contact) and [`SKIN_LIVE_MARGIN`] (a stale vertex is
+/// no farther than that from its place).
+fn live_radius(o: &super::SimOptions) -> f64 {
+    o.tool.radius + o.activation_margin + 2.0 * o.max_tool_step + SKIN_LIVE_MARGIN
+}
+
+/// How far \[m\] the skin's ties may have moved since the core was at `ref_x` with face frames
+/// `ref_frames`: over the faces carrying skin, `sum |w| max |dx| + |dR|_F |o|` (infinite where a
+/// face's frame turned degenerate or back).
+fn skin_travel(sim: &Sim, core_x: &[Vec3], frames: &[Option<Mat3>], ref_x: &[Vec3], ref_frames: &[Option<Mat3>]) -> f64 {
+    let mut travel = 0.0f64;
+    for (f, (&(w, o), face)) in sim.skin_face_reach.iter().zip(&sim.hybrid.core_faces).enumerate() {
+        if w == 0.0 && o == 0.0 {
+            continue;
+        }
+        let dx = face.iter().map(|&a| (core_x[a] - ref_x[a]).norm()).fold(0.0, f64::max);
+        let dr = match (frames[f], ref_frames[f]) {
+            (Some(a), Some(b)) => (a - b).norm(),
+            (None, None) => 0.0,
+            _ => f64::INFINITY,
+        };
+        travel = travel.max(w * dx + dr * o);
+    }
+    travel
+}
 
 /// The core's face frames are computed once (`frames`), not per vertex, and the vertices over
 /// active triangles are found from the active regions (`over[v] == stamp`) rather than by asking
-/// every vertex's triangles; unless `whole`, only those and the vertices of `live` within
-/// `near.1` of the tool's centre `near.0` are updated (a fine outer surface, the Rodero model's
-/// 31,788 vertices, made the whole skin's update a third of its tick). Every vertex moved here
-/// joins `live`.
+/// every vertex's triangles. Then, unless the skin's travel bound calls for a whole update: the
+/// vertices of `live` within [`live_radius`] of the tool, and those no longer carried by
+/// particles, go to their ties (a fine outer surface, the Rodero model's 31,788 vertices, made
+/// the whole skin's update a third of its tick); the list is rebuilt when the tool has moved
+/// [`SKIN_LIVE_MARGIN`] since it last was. Every vertex moved here joins `live`.
 #[allow(clippy::too_many_arguments)]
-fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, near: (Vec3, f64), whole: bool, live: &mut LiveSkin, skin: &mut [Vec3]) {
+fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, tool: Vec3, live: &mut LiveSkin, skin: &mut [Vec3]) {
     embed::face_frames(core_x, &sim.hybrid.core_faces, frames);
-    let place = |v: usize, over: bool, frames: &[Option<Mat3>]| {
+    let frames = &*frames;
+    let place = |v: usize, over: bool| {
         let carried = if over { skin_over_particles(sim, activation, v, &particles.x, core_x) } else { None };
         carried.unwrap_or_else(|| sim.skin.position_framed(v, core_x, frames))
     };
@@ -424,25 +445,39 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
             for &v in &sim.hybrid.outer_tris[t as usize] {
                 if over[v] != stamp {
                     over[v] = stamp;
-                    skin[v] = place(v, true, frames);
+                    skin[v] = place(v, true);
+                    live.carried[v] = true;
                     live.add(v);
                 }
             }
         }
     }
     live.sort();
-    let (c, r) = near;
-    if whole {
+    let r_live = live_radius(&sim.options);
+    let r_list = r_live + SKIN_LIVE_MARGIN + sim.options.max_tool_step;
+    live.travel = if live.valid { skin_travel(sim, core_x, frames, &live.ref_x, &live.ref_frames) } else { f64::INFINITY };
+    if !(2.0 * live.travel <= SKIN_LIVE_MARGIN) {
+        // The whole skin: every stored vertex back at its place.
         for v in 0..skin.len() {
             if over[v] != stamp {
-                skin[v] = place(v, false, frames);
+                skin[v] = place(v, false);
+                live.carried[v] = false;
             }
         }
-    } else {
-        for v in live.iter() {
-            if over[v] != stamp && (skin[v] - c).norm_squared() <= r * r {
-                skin[v] = place(v, false, frames);
-            }
+        live.ref_x.copy_from_slice(core_x);
+        live.ref_frames.copy_from_slice(frames);
+        live.travel = 0.0;
+        live.rebuild(skin, &tool, r_list);
+        return;
+    }
+    for k in 0..live.list.len() {
+        let v = live.list[k] as usize;
+        if over[v] != stamp && (live.carried[v] || (skin[v] - tool).norm_squared() <= r_live * r_live) {
+            skin[v] = place(v, false);
+            live.carried[v] = false;
         }
+    }
+    if !((tool - live.ref_tool).norm() <= SKIN_LIVE_MARGIN) {
+        live.rebuild(skin, &tool, r_list);
     }
 }
