@@ -177,7 +177,7 @@ impl Sim {
     pub fn skin_positions(&self, state: &SimState, out: &mut [Vec3]) {
         let x = &state.core.x;
         for (i, o) in out.iter_mut().enumerate() {
-            *o = super::tick::skin_over_particles(self, &state.activation, i, &state.particles.x, x).unwrap_or_else(|| self.skin.position(i, x));
+            *o = super::tick::skin_over_particles(self, &state.activation, i, &state.particles.x, x, None).unwrap_or_else(|| self.skin.position(i, x));
         }
     }
 

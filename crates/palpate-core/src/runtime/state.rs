@@ -188,6 +188,8 @@ pub struct SimWorkspace {
     pub(crate) x0: Vec<Vec3>,
     pub(crate) free: Vec<f64>,
     pub(crate) wall_check: Vec<usize>,
+    /// The held (lone) particles among the active ones this tick.
+    pub(crate) held_active: Vec<usize>,
     /// Ticks run with this workspace: the stamp of this tick's marks (`placed`, `over`).
     pub(crate) epoch: u64,
     /// Per particle, the stamp of the last tick it was put at its tie as part of the ring.
@@ -236,6 +238,7 @@ impl SimWorkspace {
             x0: vec![Vec3::zeros(); n],
             free: vec![0.0; n],
             wall_check: Vec::with_capacity(n),
+            held_active: Vec::with_capacity(n),
             epoch: 0,
             placed: vec![0; n],
             save: Vec::with_capacity(n),

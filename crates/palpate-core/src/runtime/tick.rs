@@ -164,9 +164,12 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         // move within a tick, so the spread of the sum is the sum of the spreads.
         let (shift, slacks, x_rest, f_wall) = (&ws.anchors, &ws.slacks, &mut ws.x_rest, &mut ws.f_wall);
         let (x0, free, wall_check) = (&ws.x0, &ws.free, &mut ws.wall_check);
+        ws.held_active.clear();
+        ws.held_active.extend(particles.active.iter().copied().filter(|&p| held[p]));
+        let held_active = &ws.held_active;
         let (tie_x, tie_v, to_core, skin_to_core) = (&ws.tie_x, &ws.tie_v, &mut ws.to_core, &mut ws.skin_to_core);
         let lists = NearLists { near: &ws.near, ptr: &ws.near_ptr, items: &ws.near_items, base: &ws.near_base };
-        let (hybrid, held) = (&sim.hybrid, sim.particles.fixed());
+        let hybrid = &sim.hybrid;
         let external = |sub: &meshfree::SubStep<'_>, f: &mut [Vec3]| {
             let c = prev + ((sub.index + 1) as f64 / k as f64) * (tool - prev);
             for &p in sub.active {
@@ -196,17 +199,16 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
                 }
             }
             report.particle_contacts = report.particle_contacts.max(count);
+            // The coupling springs and, in the same pass, the particles the wall must look at.
+            // The wall belongs to the core's regions: its reaction goes to the core through the
+            // particle's tie (momentum stays exact).
+            wall_check.clear();
             for &p in sub.active {
                 if sim.coupled[p] {
                     let fc = sim.coupling.force(&tie_x[p], &tie_v[p], &sub.x[p], &sub.v[p]);
                     f[p] += fc;
                     to_core[p] -= fc;
                 }
-            }
-            // The wall belongs to the core's regions: its reaction goes to the core through the
-            // particle's tie (momentum stays exact).
-            wall_check.clear();
-            for &p in sub.active {
                 x_rest[p] = sub.x[p] - shift[p];
                 if (x_rest[p] - x0[p]).norm_squared() < free[p] * free[p] {
                     continue;
@@ -224,10 +226,8 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
             }
             // Held particles (lone lattice particles, see Sim::new) do not move: what acts on
             // them is carried by the core, through their ties.
-            for &p in sub.active {
-                if held[p] {
-                    to_core[p] += f[p];
-                }
+            for &p in held_active.iter() {
+                to_core[p] += f[p];
             }
         };
         if let Err(e) = meshfree::step_with(&sim.particles, particles, &mut ws.particles, dt, k, external) {
@@ -381,15 +381,20 @@ fn skin_weights<'a>(sim: &'a Sim, activation: &'a Activation, v: usize) -> impl 
 /// Where outer vertex `v` is, over active triangles: its tie to the core moved by the weighted
 /// mean displacement of the particles under it from their own ties ([`skin_weights`]); `None`
 /// over no active triangle. (The sub-steps place the near vertices the same way through
-/// [`NearLists`], with the ties computed once a tick.)
-pub(crate) fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], core_x: &[Vec3]) -> Option<Vec3> {
+/// [`NearLists`], with the ties computed once a tick.) With the core's face `frames` at `core_x`
+/// ([`embed::face_frames`]), the ties take them instead of computing a frame per particle.
+pub(crate) fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], core_x: &[Vec3], frames: Option<&[Option<Mat3>]>) -> Option<Vec3> {
     let tie = &sim.particle_tie;
+    let at = |e: &embed::Embedding, i: usize| match frames {
+        Some(f) => e.position_framed(i, core_x, f),
+        None => e.position(i, core_x),
+    };
     let (mut d, mut wsum) = (Vec3::zeros(), 0.0);
     for (p, w) in skin_weights(sim, activation, v) {
-        d += w * (x[p] - tie.position(p, core_x));
+        d += w * (x[p] - at(tie, p));
         wsum += w;
     }
-    (wsum > 0.0).then(|| sim.skin.position(v, core_x) + d / wsum)
+    (wsum > 0.0).then(|| at(&sim.skin, v) + d / wsum)
 }
 
 /// Skin vertices at their ties, or, over active triangles, carried by the particles under them.
@@ -437,7 +442,7 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
     embed::face_frames(core_x, &sim.hybrid.core_faces, frames);
     let frames = &*frames;
     let place = |v: usize, over: bool| {
-        let carried = if over { skin_over_particles(sim, activation, v, &particles.x, core_x) } else { None };
+        let carried = if over { skin_over_particles(sim, activation, v, &particles.x, core_x, Some(frames)) } else { None };
         carried.unwrap_or_else(|| sim.skin.position_framed(v, core_x, frames))
     };
     for &s in activation.active_regions() {
