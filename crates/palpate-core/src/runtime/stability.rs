@@ -29,6 +29,19 @@
 //!
 //! The count is capped ([`super::SimOptions::max_substeps`]): past it a tick costs more than a
 //! haptic tick has, and a tick that still diverges is contained (restored and reported).
+//!
+//! **Where a lower count could come from** (measured 2026-11-25 on the paper's ellipsoids, 28,210
+//! particles; not adopted). The rest-linearised `omega_max^2` is the whole shell's: its top mode
+//! sits on ~10 poorly supported lattice particles (6-9 neighbours, 95% of the mode's mass-weighted
+//! energy) in one spot, and a ball of the shell restricted to itself (the rest frozen, as an
+//! active set is) has 0.30-0.47 of that eigenvalue at 4 mm and 0.52-0.67 at 8 mm, i.e. 20-45%
+//! fewer sub-steps. But a restricted patch's eigenvalue is a lower bound of the active set's, not
+//! an upper one; the proven per-particle bound (block Gershgorin rows of `M^-1 K`) is 0.72 of the
+//! global eigenvalue there (15% fewer sub-steps). Holding the few-neighbour particles lowers the
+//! global eigenvalue to 0.67 on the ellipsoids but only to 0.95 on the ventricle (holding 5-9% of
+//! the shell). The paper's damping (`phi = psi = 1 Pa s`) costs the most: `zeta = 0.53` at the top
+//! mode, 20 sub-steps instead of 13 undamped; a viscous term implicit in time would remove that
+//! factor but needs a solve per sub-step.
 
 use super::confinement::Confinement;
 use super::coupling::Coupling;
