@@ -12,7 +12,7 @@
 //!   momentum-exact (where and why this departs from the paper: see the module);
 //! - [`stability`]: how many particle sub-steps a tick needs (stretch, springs, contact);
 //! - [`sim`], [`state`]: the compiled simulation, its state and workspace;
-//! - [`tick`]: the one ordered tick, tool in, force out.
+//! - [`tick`](mod@tick): the one ordered tick, tool in, force out.
 //!
 //! **Status (issue 12, in progress).** Each exchange is exact: the tick conserves linear
 //! momentum to round-off with the tool away and changes it by the tool's impulse with the tool

@@ -19,7 +19,7 @@
 //!   tick with twice the sub-steps, tried as a safety net, made the force jump by 0.15-0.5 N
 //!   instead, and was taken out.)
 //! - **The runtime's springs** on a particle: the tool's penalty (through the skin, see
-//!   [`super::tick`]), the coupling spring and the confinement wall, each explicit. Their rates
+//!   [`super::tick`](mod@super::tick)), the coupling spring and the confinement wall, each explicit. Their rates
 //!   `k / m` (and `c / m` for the damping) add to the internal `omega^2` (Weyl's inequality for
 //!   a sum of symmetric stiffnesses in the mass metric). The coupling and the wall are bounded
 //!   once, at [`Shell::new`]; the tool's share of each particle is the Gershgorin row sum of the

@@ -167,7 +167,7 @@ impl SimState {
     }
 }
 
-/// Scratch space of [`super::tick`].
+/// Scratch space of [`super::tick()`].
 #[derive(Debug, Clone)]
 pub struct SimWorkspace {
     pub(crate) core: Workspace,
