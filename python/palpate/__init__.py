@@ -55,6 +55,9 @@ from ._palpate import (
     ventricle_surface,
 )
 from . import defaults
+from . import _pickle
+
+_pickle.register()
 from .hybrid import build_from_files, build_shape, build_tagged_file
 from .io import UNITS, VtuSeries, load_mesh, read_mesh_arrays
 from .surfaces import (load_surface, orient_consistently, read_surface_arrays, read_tagged_surface,

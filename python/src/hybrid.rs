@@ -215,6 +215,14 @@ impl PyHybridModel {
         Ok(PyHybridModel { model })
     }
 
+    /// A model from the bytes of :meth:`to_bytes` (or of a file :meth:`save` wrote); how a
+    /// model unpickles. Raises :class:`ModelFileError` as :meth:`load` does.
+    #[staticmethod]
+    fn from_bytes(py: Python<'_>, data: &[u8]) -> PyResult<PyHybridModel> {
+        let model = py.detach(|| hybrid::file::from_bytes(data, "<bytes>")).map_err(file_error)?;
+        Ok(PyHybridModel { model })
+    }
+
     /// The model file's bytes (what :meth:`save` writes).
     fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, pyo3::types::PyBytes> {
         pyo3::types::PyBytes::new(py, &hybrid::file::to_bytes(&self.model))

@@ -39,4 +39,4 @@ pub use integrate::{step, Integrator, StepReport};
 pub use material::{Law, Material};
 pub use math::{Mat3, Real, Vec3};
 pub use mesh::TetMesh;
-pub use fem::{Model, ModelBuilder, State, Workspace};
+pub use fem::{Model, ModelBuilder, State, StepMemory, Workspace};

@@ -11,5 +11,5 @@ pub mod tet4;
 pub mod viscous;
 
 pub use model::{Model, ModelBuilder};
-pub use state::{State, Workspace};
+pub use state::{State, StepMemory, Workspace};
 pub use tet4::TetRest;
