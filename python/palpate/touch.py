@@ -66,7 +66,10 @@ import csv
 import math
 import os
 import time
-import tomllib
+try:
+    import tomllib
+except ImportError:  # Python < 3.11 (the tomli backport, a dependency there)
+    import tomli as tomllib
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
