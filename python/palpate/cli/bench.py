@@ -9,6 +9,7 @@ import math
 import sys
 
 from .. import __version__
+from .. import _progress
 from .. import bench
 from .. import bench_hybrid as bh
 from .. import bench_particles as bp
@@ -114,24 +115,30 @@ def cmd_bench_protocol(a) -> int:
               f"integrator {a.integrator}, single thread (shared/bench/PROTOCOL.md)")
         print(f"{'mesh':<16}{'tets':>7}{'steps/s':>10}{'stable':>8}{'max|u| mm':>11}{'probe mm':>10}"
               f"{'iter':>6}{'inv':>5}{'p50 us':>8}{'p99 us':>8}{'max us':>8}{'vsStatic':>10}{'vsNewton':>10}")
-    for make in _bench_cases(a):
-        case = make()
-        r = bench.run(case, a.integrator, steps=a.steps, max_wall_s=a.max_wall, newton=newton)
-        if a.json:
-            print(json.dumps(r), flush=True)
-        else:
-            def rel(k):
-                return "-" if r[k] is None else f"{100 * r[k]:.3f}%"
-            sps = "-" if r["steps_per_s"] is None else f"{r['steps_per_s']:.1f}"
-            us = lambda k: "-" if r[k] is None else f"{r[k]:.0f}"  # noqa: E731
-            it = "-" if r["iterations_mean"] is None else f"{r['iterations_mean']:.2f}"
-            print(f"{r['mesh']:<16}{r['tets']:>7}{sps:>10}{str(r['stable']):>8}"
-                  f"{fmt_mm(r['max_disp_m']):>11}{fmt_mm(r['probe_disp_avg_m']):>10}{it:>6}"
-                  f"{r['inverted_max']:>5}{us('step_us_p50'):>8}{us('step_us_p99'):>8}{us('step_us_max'):>8}"
-                  f"{rel('rel_L2_vs_static'):>10}{rel('rel_L2_vs_newton'):>10}", flush=True)
-            if r.get("error"):
-                print(f"  note: {r['error']}")
+    cases = list(_bench_cases(a))
+    with _progress.task("bench protocol", total=len(cases), quiet=a.json) as advance:   # a terminal only
+        for make in cases:
+            _print_protocol_row(a, bench.run(make(), a.integrator, steps=a.steps, max_wall_s=a.max_wall, newton=newton))
+            advance(1)
     return 0
+
+
+def _print_protocol_row(a, r) -> None:
+    """One result of bench.run: a JSON line or a table row."""
+    if a.json:
+        print(json.dumps(r), flush=True)
+    else:
+        def rel(k):
+            return "-" if r[k] is None else f"{100 * r[k]:.3f}%"
+        sps = "-" if r["steps_per_s"] is None else f"{r['steps_per_s']:.1f}"
+        us = lambda k: "-" if r[k] is None else f"{r[k]:.0f}"  # noqa: E731
+        it = "-" if r["iterations_mean"] is None else f"{r['iterations_mean']:.2f}"
+        print(f"{r['mesh']:<16}{r['tets']:>7}{sps:>10}{str(r['stable']):>8}"
+              f"{fmt_mm(r['max_disp_m']):>11}{fmt_mm(r['probe_disp_avg_m']):>10}{it:>6}"
+              f"{r['inverted_max']:>5}{us('step_us_p50'):>8}{us('step_us_p99'):>8}{us('step_us_max'):>8}"
+              f"{rel('rel_L2_vs_static'):>10}{rel('rel_L2_vs_newton'):>10}", flush=True)
+        if r.get("error"):
+            print(f"  note: {r['error']}")
 
 
 def cmd_bench_particles(a) -> int:

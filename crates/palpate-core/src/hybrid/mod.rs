@@ -3,7 +3,7 @@
 //! (each outer vertex tied to a core face) and one activation region per outer vertex.
 //!
 //! [`build()`] compiles a [`HybridModel`] from a [`Wall`] (two nested closed surfaces, or one
-//! closed surface tagged inner / outer / base); [`file`] saves and loads it. One module per part
+//! closed surface tagged inner / outer / base); [`file`](mod@file) saves and loads it. One module per part
 //! of the model, each building its part and writing, reading and checking its section of the
 //! model file: [`options`], `core`, `shell`, `outer`, `regions`, `region_field` (the shared
 //! voxels and B(p_s)), `skin`; `model` holds the compiled model and [`build()`] the order of the
