@@ -59,7 +59,7 @@ from . import _pickle
 
 _pickle.register()
 from .hybrid import build_from_files, build_shape, build_tagged_file
-from .io import UNITS, VtuSeries, load_mesh, read_mesh_arrays
+from .io import UNITS, VtuSeries, load_mesh, read_mesh_arrays, write_hybrid_model, write_particles
 from .surfaces import (load_surface, orient_consistently, read_surface_arrays, read_tagged_surface,
                        repair_surface)
 from .vtp import read_vtp
@@ -90,6 +90,8 @@ __all__ = [
     "TriSurface",
     "UNITS",
     "VtuSeries",
+    "write_hybrid_model",
+    "write_particles",
     "__version__",
     "box_mesh",
     "build_from_files",

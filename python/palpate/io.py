@@ -13,13 +13,16 @@ from __future__ import annotations
 import os
 import re
 import warnings
-from typing import List, Optional, Sequence, Tuple, Union
+from typing import TYPE_CHECKING, Dict, List, Optional, Sequence, Tuple, Union
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
 from . import _readers
 from ._palpate import MeshError, TetMesh
+
+if TYPE_CHECKING:
+    from ._palpate import Body, HybridModel, ParticleBody
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -209,8 +212,10 @@ def load_mesh(path: PathLike, unit: str = "m") -> TetMesh:
 class VtuSeries:
     """Write frames of a body as ``<stem>_<k>.vtu`` plus ``<stem>.pvd`` (ParaView collection).
 
-    Point data written per frame: ``displacement`` [m] and ``velocity`` [m/s], both (n, 3).
-    Points are the deformed positions [m]; cells are the mesh's tets.
+    Point data written per frame: ``displacement`` [m] and ``velocity`` [m/s], both (n, 3), and
+    whatever ``point_data`` / ``cell_data`` :meth:`write` is given; :meth:`write_body` writes
+    everything a ParaView user plots (see there). Points are the deformed positions [m]; cells
+    are the mesh's tets.
     """
 
     def __init__(self, outdir: PathLike, tets: np.ndarray, stem: str = "frame"):
@@ -225,22 +230,48 @@ class VtuSeries:
     def pvd_path(self) -> str:
         return os.path.join(self.outdir, f"{self.stem}.pvd")
 
-    def write(self, time: float, positions: np.ndarray, displacement: np.ndarray, velocity: np.ndarray) -> str:
-        """Write one frame at simulated ``time`` [s]; returns the .vtu path. Rewrites the .pvd."""
+    def write(self, time: float, positions: np.ndarray, displacement: np.ndarray, velocity: np.ndarray,
+              point_data: Optional[Dict[str, np.ndarray]] = None,
+              cell_data: Optional[Dict[str, np.ndarray]] = None) -> str:
+        """Write one frame at simulated ``time`` [s]; returns the .vtu path. Rewrites the .pvd.
+        ``point_data``: extra arrays (n, ...) per node; ``cell_data``: arrays (m, ...) per tet."""
         import meshio
 
         fname = f"{self.stem}_{len(self.entries):05d}.vtu"
+        pd = {"displacement": np.asarray(displacement, dtype=np.float64),
+              "velocity": np.asarray(velocity, dtype=np.float64)}
+        pd.update({k: np.asarray(v) for k, v in (point_data or {}).items()})
         mesh = meshio.Mesh(
             np.asarray(positions, dtype=np.float64),
             [("tetra", self.tets)],
-            point_data={"displacement": np.asarray(displacement, dtype=np.float64),
-                        "velocity": np.asarray(velocity, dtype=np.float64)},
+            point_data=pd,
+            cell_data={k: [np.asarray(v)] for k, v in (cell_data or {}).items()},
         )
         path = os.path.join(self.outdir, fname)
         meshio.write(path, mesh, file_format="vtu")  # binary, zlib-compressed: ParaView reads it
         self.entries.append((float(time), fname))
         self._write_pvd()
         return path
+
+    def write_body(self, body: "Body", loaded: Optional[np.ndarray] = None) -> str:
+        """Write one frame of a :class:`~palpate.Body` at its time: point data ``displacement``
+        [m] and ``velocity`` [m/s] (n, 3), ``fixed`` and ``loaded`` (n,) uint8 flags (``loaded``:
+        the given node indices, else the nodes carrying a non-zero external force); cell data
+        ``von_mises`` [Pa] and ``energy_density`` [J/m^3] (``Body.element_fields``), ``det_f``
+        [-] and ``inverted`` (m,) uint8 (det F <= 0)."""
+        n = body.n_nodes
+        fixed = np.zeros(n, dtype=np.uint8)
+        fixed[body.fixed] = 1
+        load = np.zeros(n, dtype=np.uint8)
+        if loaded is None:
+            load[np.any(body.forces != 0.0, axis=1)] = 1
+        else:
+            load[np.asarray(loaded, dtype=np.int64)] = 1
+        ef = body.element_fields()
+        return self.write(body.time, body.positions, body.displacements, body.velocities,
+                          point_data={"fixed": fixed, "loaded": load},
+                          cell_data={"von_mises": ef["von_mises"], "energy_density": ef["energy_density"],
+                                     "det_f": ef["det_f"], "inverted": (ef["det_f"] <= 0.0).astype(np.uint8)})
 
     def _write_pvd(self) -> None:
         write_pvd(self.pvd_path, [(t, f, 0, None) for t, f in self.entries])
@@ -281,3 +312,58 @@ def read_pvd(path: PathLike) -> List[Tuple[float, str]]:
     base = os.path.dirname(os.path.abspath(path))
     return [(float(ds.get("timestep")), os.path.join(base, ds.get("file")))
             for ds in root.iter("DataSet")]
+
+
+def write_particles(path: PathLike, body: "ParticleBody") -> str:
+    """Write a :class:`~palpate.ParticleBody` as a VTU of vertex cells at its current positions
+    [m]: point data ``displacement`` [m] and ``velocity`` [m/s] (n, 3), ``mass`` [kg] (n,),
+    ``fixed`` and ``active`` (n,) uint8 flags. Returns the path."""
+    import meshio
+
+    n = body.n_particles
+    fixed = np.zeros(n, dtype=np.uint8)
+    fixed[body.fixed] = 1
+    active = np.zeros(n, dtype=np.uint8)
+    active[body.active] = 1
+    mesh = meshio.Mesh(body.positions, [("vertex", np.arange(n, dtype=np.int64)[:, None])],
+                       point_data={"displacement": body.displacements, "velocity": body.velocities,
+                                   "mass": body.masses, "fixed": fixed, "active": active})
+    path = os.fspath(path)
+    meshio.write(path, mesh, file_format="vtu")
+    return path
+
+
+def write_hybrid_model(outdir: PathLike, model: "HybridModel", stem: str = "hybrid") -> str:
+    """Write the parts of a :class:`~palpate.HybridModel` at rest for ParaView, into ``outdir``:
+    ``<stem>_core.vtu`` (the FEM core's tets; point data ``fixed``: the base nodes),
+    ``<stem>_shell.vtu`` (the particles as vertex cells; point data ``mass`` [kg],
+    ``outer_triangle`` and ``core_face``: the outer triangle above and the core face below each
+    particle, which key its activation regions), ``<stem>_skin.vtu`` (the outer surface's
+    triangles; point data ``region``: the activation region of each outer vertex, whose index is
+    the vertex's), and ``<stem>.pvd`` naming the three parts. Positions [m]. Returns the .pvd path."""
+    import meshio
+
+    outdir = os.fspath(outdir)
+    os.makedirs(outdir, exist_ok=True)
+    core_pts = model.core_points
+    base = np.zeros(len(core_pts), dtype=np.uint8)
+    base[model.core_base_nodes] = 1
+    p = model.particles
+    skin_pts = model.outer_points
+    parts = {
+        "core": meshio.Mesh(core_pts, [("tetra", model.core_tets)], point_data={"fixed": base}),
+        "shell": meshio.Mesh(p, [("vertex", np.arange(len(p), dtype=np.int64)[:, None])],
+                             point_data={"mass": model.particle_masses,
+                                         "outer_triangle": model.particle_outer_triangle,
+                                         "core_face": model.particle_core_face}),
+        "skin": meshio.Mesh(skin_pts, [("triangle", model.outer_triangles)],
+                            point_data={"region": np.arange(len(skin_pts), dtype=np.int64)}),
+    }
+    entries = []
+    for k, (name, mesh) in enumerate(parts.items()):
+        fname = f"{stem}_{name}.vtu"
+        meshio.write(os.path.join(outdir, fname), mesh, file_format="vtu")
+        entries.append((0.0, fname, k, name))
+    pvd = os.path.join(outdir, f"{stem}.pvd")
+    write_pvd(pvd, entries)
+    return pvd

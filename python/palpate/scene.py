@@ -349,17 +349,20 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
 def run_scene(scene: Scene, write: bool = True, log=print) -> Dict[str, Any]:
     """Run a scene, writing a VTU series; returns a summary dict.
 
-    Frames (deformed positions, point data ``displacement`` [m] and ``velocity`` [m/s]) are
-    written at step 0, every ``output_every`` steps and after the last step, into
+    Frames (deformed positions, the fields of :meth:`VtuSeries.write_body`: displacement,
+    velocity, fixed and loaded flags per node; von Mises stress, strain energy density, det F and
+    inverted flags per tet) are written at step 0, every ``output_every`` steps and after the last step, into
     ``scene.output`` with ``frame.pvd`` as the ParaView collection. Raises ``StepError`` if a step
     fails (frames written so far are kept).
     """
     body = scene.body
     series = VtuSeries(scene.output, body.mesh.tets) if write and scene.output else None
+    loaded = np.unique(np.concatenate([np.asarray(ld.nodes, dtype=np.int64).ravel() for ld in scene.loads]
+                                      or [np.zeros(0, dtype=np.int64)]))
 
     def frame():
         if series is not None:
-            series.write(body.time, body.positions, body.displacements, body.velocities)
+            series.write_body(body, loaded=loaded)
 
     frame()
     # One run loop for every caller (palpate_core::probe): the loads ramp from the scene's start

@@ -294,6 +294,19 @@ impl PyBody {
         self.model.strain_energy(&self.state.x)
     }
 
+    /// Per-element fields of the current positions, for output: a dict of (m,) float64 arrays,
+    /// ``von_mises`` [Pa] (von Mises equivalent of the elastic Cauchy stress; of the Kirchhoff
+    /// stress for an inverted element), ``energy_density`` [J/m^3] (strain energy per rest
+    /// volume), ``det_f`` [-] (volume ratio; <= 0: inverted).
+    fn element_fields<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let f = py.detach(|| self.model.element_fields(&self.state.x));
+        let d = PyDict::new(py);
+        d.set_item("von_mises", conv::f64s_to_py(py, &f.von_mises))?;
+        d.set_item("energy_density", conv::f64s_to_py(py, &f.energy_density))?;
+        d.set_item("det_f", conv::f64s_to_py(py, &f.det_f))?;
+        Ok(d)
+    }
+
     /// Kinetic energy of the current velocities [J].
     fn kinetic_energy(&self) -> f64 {
         self.model.kinetic_energy(&self.state.v)
