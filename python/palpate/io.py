@@ -29,7 +29,8 @@ PathLike = Union[str, "os.PathLike[str]"]
 #: Length units accepted by :func:`load_mesh`, as metres per unit.
 UNITS = {"m": 1.0, "cm": 1.0e-2, "mm": 1.0e-3}
 
-_MESHIO_FORMATS = {".vtk": "vtk", ".vtu": "vtu"}
+# Formats read through meshio (its format names): .mesh is Medit's, .inp Abaqus's.
+_MESHIO_FORMATS = {".vtk": "vtk", ".vtu": "vtu", ".mesh": "medit", ".inp": "abaqus"}
 
 
 def unit_scale(unit: str) -> float:
@@ -51,16 +52,25 @@ def _read_meshio(path: str, fmt: str):
     if fmt == "vtu":
         _vtu_precheck(path)
     # The format's own reader, not meshio.read: that one prints and calls sys.exit(1) on a ReadError.
-    reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": meshio.gmsh.read}[fmt]
+    reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": meshio.gmsh.read,
+              "medit": meshio.medit.read, "abaqus": meshio.abaqus.read}[fmt]
+    m = _meshio_read(reader, path, name, fmt)
+    return _meshio_arrays(m, name, fmt)
+
+
+def _meshio_read(reader, path: str, name: str, fmt: str):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            m = reader(path)
+            return reader(path)
     except MeshError:
         raise
     except (Exception, SystemExit) as e:  # ReadError, but also ValueError, KeyError, XML errors ...
         reason = str(e).strip() or "malformed or truncated file"
         raise MeshError(f"{name}: cannot read as {fmt.upper()} ({type(e).__name__}: {reason})") from None
+
+
+def _meshio_arrays(m, name: str, fmt: str):
     points = np.asarray(m.points, dtype=np.float64)
     if points.ndim != 2 or (len(points) and points.shape[1] not in (2, 3)):
         raise MeshError(f"{name}: points have shape {points.shape}, expected (n, 3)")
@@ -134,7 +144,8 @@ def read_mesh_arrays(path: PathLike, unit: str = "m") -> Tuple[np.ndarray, np.nd
         points, blocks, node_labels = _read_npz(path)
     else:
         raise MeshError(f"{name}: unsupported mesh format {ext or '(no extension)'!r}; "
-                        "palpate reads .msh (gmsh 2/4), .vtk, .vtu, .node/.ele (TetGen) and .npz")
+                        "palpate reads .msh (gmsh 2/4), .vtk, .vtu, .mesh (Medit), .inp (Abaqus), "
+                        ".node/.ele (TetGen) and .npz")
     if len(points) == 0:
         raise MeshError(f"{name}: no points (empty mesh)")
     blocks = [b for b in blocks if len(b.data)]
@@ -157,6 +168,68 @@ def read_mesh_arrays(path: PathLike, unit: str = "m") -> Tuple[np.ndarray, np.nd
     tets = np.concatenate([b.data for b in tet_blocks], axis=0)
     labels = [lab for b in tet_blocks for lab in b.labels]
     return points * scale, tets, labels, node_labels
+
+
+def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.ndarray]]:
+    """The named node and element sets of a mesh file, read by meshio: ``(node_sets, tet_sets)``,
+    each ``{name: int64 indices, ascending}`` into the nodes and tets of :func:`load_mesh` /
+    :func:`read_mesh_arrays` of the same file (a scene can fix or load a set by name).
+
+    gmsh (``.msh``): one set per physical group, named by ``$PhysicalNames`` (``"physical <tag>"``
+    if unnamed): its tets, and the nodes of all its elements (e.g. a clamped face's triangles).
+    Medit (``.mesh``): one set per element reference, ``"ref <k>"``. Abaqus (``.inp``) and any
+    format meshio gives point / cell sets for: those, by name. Raises :class:`MeshError` for an
+    unreadable file or one whose tets meshio orders differently from palpate's reader.
+    """
+    import meshio
+
+    path = os.fspath(path)
+    name = os.path.basename(path)
+    ext = os.path.splitext(path)[1].lower()
+    fmt = "gmsh" if ext == ".msh" else _MESHIO_FORMATS.get(ext)
+    if fmt is None:
+        raise MeshError(f"{name}: named sets are read from .msh, .vtk, .vtu, .mesh and .inp files, not {ext!r}")
+    if not os.path.exists(path):
+        raise MeshError(f"{name}: no such file ({path})")
+    reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": meshio.gmsh.read,
+              "medit": meshio.medit.read, "abaqus": meshio.abaqus.read}[fmt]
+    m = _meshio_read(reader, path, name, fmt)
+    _, tets, _, _ = read_mesh_arrays(path)
+    tet_blocks = [k for k, cb in enumerate(m.cells) if cb.type == "tetra"]
+    mesh_tets = np.concatenate([np.asarray(m.cells[k].data, dtype=np.int64) for k in tet_blocks]) if tet_blocks \
+        else np.zeros((0, 4), dtype=np.int64)
+    if not np.array_equal(mesh_tets, tets):
+        raise MeshError(f"{name}: meshio orders the tets differently from palpate's reader: sets not mapped")
+    # Offsets of each tetra block in the concatenated tets.
+    offsets, k0 = {}, 0
+    for k in tet_blocks:
+        offsets[k] = k0
+        k0 += len(m.cells[k].data)
+    node_sets: Dict[str, set] = {}
+    tet_sets: Dict[str, list] = {}
+
+    def add(label: str, k: int, rows: np.ndarray) -> None:
+        cb = m.cells[k]
+        node_sets.setdefault(label, set()).update(np.asarray(cb.data)[rows].ravel().tolist())
+        if k in offsets:
+            tet_sets.setdefault(label, []).extend((offsets[k] + rows).tolist())
+
+    tags = {"gmsh": "gmsh:physical", "medit": "medit:ref"}.get(fmt)
+    if tags and tags in m.cell_data:
+        names = {int(v[0]): n for n, v in (m.field_data or {}).items()}
+        for k, values in enumerate(m.cell_data[tags]):
+            values = np.asarray(values)
+            for tag in np.unique(values):
+                label = names.get(int(tag), f"physical {int(tag)}") if fmt == "gmsh" else f"ref {int(tag)}"
+                add(label, k, np.flatnonzero(values == tag))
+    for label, per_block in (m.cell_sets or {}).items():
+        for k, rows in enumerate(per_block):
+            if rows is not None and len(rows):
+                add(label, k, np.asarray(rows, dtype=np.int64))
+    for label, nodes in (m.point_sets or {}).items():
+        node_sets.setdefault(label, set()).update(np.asarray(nodes).ravel().tolist())
+    as_array = lambda s: np.array(sorted(s), dtype=np.int64)  # noqa: E731
+    return ({n: as_array(s) for n, s in node_sets.items()}, {n: as_array(s) for n, s in tet_sets.items()})
 
 
 def _with_label(msg: str, kind: str, index: Optional[int], labels: Optional[Sequence[str]]) -> str:
