@@ -65,3 +65,29 @@ def test_medit_and_abaqus_load_with_their_sets(tmp_path, bar):
 def test_sets_of_an_unsupported_format(tmp_path):
     with pytest.raises(palpate.MeshError, match="named sets"):
         palpate.read_mesh_sets(tmp_path / "x.npz")
+
+
+def test_scene_fixes_and_loads_named_sets(tmp_path, bar):
+    from palpate.scene import load_scene, run_scene
+
+    pts, tets, faces, _ = bar
+    tip_faces = np.array([t[f] for t in tets for f in ([0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3])
+                          if np.all(pts[t[f], 0] == 0.1)])
+    mesh = meshio.Mesh(pts, [("triangle", faces), ("triangle", tip_faces), ("tetra", tets)],
+                       cell_data={"gmsh:physical": [np.full(len(faces), 1), np.full(len(tip_faces), 2),
+                                                    np.full(len(tets), 3)],
+                                  "gmsh:geometrical": [np.full(len(faces), 1), np.full(len(tip_faces), 2),
+                                                       np.full(len(tets), 3)]},
+                       field_data={"clamp": np.array([1, 2]), "tip": np.array([2, 2]), "bar": np.array([3, 3])})
+    meshio.write(tmp_path / "bar.msh", mesh, file_format="gmsh22", binary=False)
+    (tmp_path / "s.toml").write_text(
+        '[mesh]\nfile = "bar.msh"\n[material]\nyoung = 3e4\npoisson = 0.4\n[fixed]\nset = "clamp"\n'
+        '[[loads]]\nset = "tip"\nforce = [0.0, 0.0, -0.01]\n[run]\nsteps = 5\n')
+    scene = load_scene(tmp_path / "s.toml")
+    np.testing.assert_array_equal(scene.body.fixed, np.flatnonzero(pts[:, 0] == 0.0))
+    np.testing.assert_array_equal(np.sort(scene.loads[0].nodes), np.flatnonzero(pts[:, 0] == 0.1))
+    run_scene(scene, write=False, log=lambda *a: None)
+    (tmp_path / "bad.toml").write_text(
+        '[mesh]\nfile = "bar.msh"\n[material]\nyoung = 3e4\npoisson = 0.4\n[fixed]\nset = "nope"\n')
+    with pytest.raises(Exception, match="no node set 'nope'"):
+        load_scene(tmp_path / "bad.toml")
