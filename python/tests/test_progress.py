@@ -101,3 +101,16 @@ def test_download_is_announced_and_offline_says_how(tmp_path, monkeypatch):
         data.rodero_lv_path()
     said = err.getvalue()
     assert f"{data.RODERO_WHEEL_MB:g} MB" in said and str(tmp_path / "cache") in said and "CC BY 4.0" in said
+
+
+def test_big_newton_reference_announces_its_time(monkeypatch, capsys):
+    from palpate import bench
+
+    # The generated 192-tet wall stands in for a big mesh: lower the bar instead of waiting minutes.
+    monkeypatch.setattr(bench, "NEWTON_REFERENCE_MAX_TETS", 100)
+    r = bench.run(bench.generated_case(bench.FORCE), steps=20, newton=True)
+    err = capsys.readouterr().err
+    assert "Newton reference on ellipsoid_192 (192 tets) takes about" in err and "--newton off" in err
+    assert r["rel_L2_vs_newton"] is not None
+    bench.run(bench.generated_case(bench.FORCE), steps=20, newton=False)
+    assert "Newton" not in capsys.readouterr().err

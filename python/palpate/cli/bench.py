@@ -164,25 +164,33 @@ def cmd_bench_particles(a) -> int:
         print(f"{'N':>7}{'in h':>6}{'nbrs':>7}{'fixed':>7}{'sub/tick':>9}{'sub dt us':>10}{'tick ms':>9}{'ticks/s':>9}"
               f"{'GFlop/s':>9}{'%peak':>7}{'build s':>9}{'max|u| mm':>10}")
     failed = False
-    for n in sizes:
-        try:
-            r = bp.run(n, a.spacing, a.kernel, a.ticks, a.max_wall, a.support)
-        except ValueError as e:
-            raise Fail(f"palpate bench particles: {e}") from None
-        except palpate_errors() as e:
-            raise Fail(f"palpate bench particles: N = {n}: {type(e).__name__}: {e}", 1) from None
-        failed |= r["error"] is not None and "wall-clock cap" not in r["error"]
-        if a.json:
-            print(json.dumps(r), flush=True)
-            continue
-        f = lambda v, fmt: "-" if v is None else format(v, fmt)  # noqa: E731
-        print(f"{r['n']:>7}{r['mean_neighbours_in_support']:>6.1f}{r['mean_neighbours']:>7.1f}{r['fixed']:>7}{r['substeps']:>9}{r['substep_dt_s'] * 1e6:>10.1f}"
-              f"{f(r['tick_median_s'] and r['tick_median_s'] * 1e3, '.3f'):>9}{f(r['ticks_per_s'], '.1f'):>9}"
-              f"{f(r['gflops'], '.2f'):>9}{f(r['peak_fraction'] and 100 * r['peak_fraction'], '.1f'):>7}"
-              f"{r['build_s']:>9.2f}{fmt_mm(r['max_disp_m']):>10}", flush=True)
-        if r["error"]:
-            print(f"  note: {r['error']} (median over {r['ticks']} ticks)")
+    with _progress.task("bench particles", total=len(sizes), quiet=a.json or len(sizes) < 2) as advance:
+        for n in sizes:
+            failed |= _particles_row(a, n)
+            advance(1)
     return 1 if failed else 0
+
+
+def _particles_row(a, n) -> bool:
+    """One size of bench particles: run, print; whether it failed (not merely capped)."""
+    try:
+        r = bp.run(n, a.spacing, a.kernel, a.ticks, a.max_wall, a.support)
+    except ValueError as e:
+        raise Fail(f"palpate bench particles: {e}") from None
+    except palpate_errors() as e:
+        raise Fail(f"palpate bench particles: N = {n}: {type(e).__name__}: {e}", 1) from None
+    failed = r["error"] is not None and "wall-clock cap" not in r["error"]
+    if a.json:
+        print(json.dumps(r), flush=True)
+        return failed
+    f = lambda v, fmt: "-" if v is None else format(v, fmt)  # noqa: E731
+    print(f"{r['n']:>7}{r['mean_neighbours_in_support']:>6.1f}{r['mean_neighbours']:>7.1f}{r['fixed']:>7}{r['substeps']:>9}{r['substep_dt_s'] * 1e6:>10.1f}"
+          f"{f(r['tick_median_s'] and r['tick_median_s'] * 1e3, '.3f'):>9}{f(r['ticks_per_s'], '.1f'):>9}"
+          f"{f(r['gflops'], '.2f'):>9}{f(r['peak_fraction'] and 100 * r['peak_fraction'], '.1f'):>7}"
+          f"{r['build_s']:>9.2f}{fmt_mm(r['max_disp_m']):>10}", flush=True)
+    if r["error"]:
+        print(f"  note: {r['error']} (median over {r['ticks']} ticks)")
+    return failed
 
 
 def cmd_bench_hybrid(a) -> int:
