@@ -1,6 +1,8 @@
 # palpate: one-command set-up on a fresh machine (needs python3 with venv, and cargo).
 #   make demo   set up .venv, build the extension (release), run the demo
-#   make test   set up, then cargo test --release (core) and pytest
+#   make test   set up, then cargo test --release (core), the release wheel and pytest
+#   make wheel  the release wheel in dist/: abi3 (CPython >= 3.9), manylinux_2_28, stripped
+#   make lint   clippy -D warnings, cargo doc -D warnings, stubtest (the last also in make test)
 # The set-up is stamp-file driven: a warm re-run is a no-op, an edit to any .rs / Cargo.toml /
 # pyproject.toml rebuilds the extension. Python sources are installed editable (maturin develop),
 # so edits to python/palpate/*.py need no rebuild.
@@ -12,13 +14,20 @@ BIN := $(VENV)/bin
 # Versions that build together on this machine (see shared/design/stack-notes.md).
 PY_DEPS := maturin==1.16.0 numpy==2.4.6 meshio==5.3.5 matplotlib==3.11.2 pytest==9.2.0 \
            scipy==1.17.1 scikit-fem==12.0.2  # the last two: independent reference in python/tests
+# `make wheel` only: zig as the linker, against glibc 2.28's symbols, so that the wheel installs on
+# common Linux systems (a plain build here needs glibc 2.34: manylinux_2_34).
+WHEEL_DEPS := ziglang==0.17.1
+# `make lint` / `make stubtest`: mypy's stubtest checks python/palpate/_palpate.pyi against the
+# extension it describes.
+LINT_DEPS := mypy==2.4.1
+DIST := dist
 
 RUST_INPUTS := $(shell find crates python/src -name '*.rs' 2>/dev/null) \
                $(wildcard crates/*/Cargo.toml) Cargo.toml $(wildcard Cargo.lock) python/Cargo.toml python/pyproject.toml
 
 export MPLBACKEND ?= Agg
 
-.PHONY: all setup demo test cargo-test pytest clean distclean
+.PHONY: all setup demo test cargo-test pytest wheel lint clippy rustdoc stubtest clean distclean
 
 all: setup
 
@@ -46,17 +55,47 @@ $(VENV)/.data: python/palpate/data.py | $(VENV)/.built
 demo: setup
 	$(BIN)/python -m palpate.demo
 
-test: cargo-test pytest
+$(VENV)/.wheel-deps: $(VENV)/.deps
+	$(BIN)/python -m pip install -q --disable-pip-version-check $(WHEEL_DEPS)
+	touch $@
+
+# Cargo profile `wheel` (Cargo.toml): release without debug info, stripped, in its own target
+# folder, so the release builds of `make test` keep their debug info. python/tests/test_wheel.py
+# installs the newest dist/ wheel into a clean venv and runs the demo from outside the tree.
+wheel: $(VENV)/.wheel-deps
+	rm -f $(DIST)/palpate-*.whl
+	cd python && PATH=$(abspath $(BIN)):$$PATH $(abspath $(BIN))/maturin build -q --profile wheel --zig \
+	    --compatibility manylinux_2_28 -o $(abspath $(DIST))
+
+# `lint`'s clippy and rustdoc parts are not in `test` yet: they still warn in files other work is
+# changing (runtime/, mesh/, the binding's conv.rs and mesh.rs).
+test: cargo-test pytest stubtest
 
 cargo-test:
 	cargo test --release -q
 
-pytest: setup
+pytest: setup wheel
 	$(BIN)/python -m pytest -q python/tests
+
+$(VENV)/.lint-deps: $(VENV)/.deps
+	$(BIN)/python -m pip install -q --disable-pip-version-check $(LINT_DEPS)
+	touch $@
+
+lint: clippy rustdoc stubtest
+
+clippy:
+	cargo clippy --workspace --all-targets -- -D warnings
+
+rustdoc:
+	RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --workspace
+
+# Names only the stub has (the TypedDicts of returned dicts) are listed in the allowlist.
+stubtest: setup $(VENV)/.lint-deps
+	$(BIN)/python -m mypy.stubtest palpate._palpate --allowlist python/stubtest-allowlist.txt
 
 clean:
 	rm -f $(VENV)/.built python/palpate/*.so
-	rm -rf out
+	rm -rf out $(DIST)
 
 distclean: clean
 	rm -rf $(VENV) target

@@ -55,8 +55,12 @@ from ._palpate import (
     ventricle_surface,
 )
 from . import defaults
+from . import _pickle
+
+_pickle.register()
 from .hybrid import build_from_files, build_shape, build_tagged_file
-from .io import UNITS, VtuSeries, load_mesh, read_mesh_arrays
+from .io import (UNITS, VtuSeries, load_mesh, read_mesh_arrays, read_mesh_sets, write_hybrid_model,
+                 write_particles)
 from .surfaces import (load_surface, orient_consistently, read_surface_arrays, read_tagged_surface,
                        repair_surface)
 from .vtp import read_vtp
@@ -87,6 +91,9 @@ __all__ = [
     "TriSurface",
     "UNITS",
     "VtuSeries",
+    "read_mesh_sets",
+    "write_hybrid_model",
+    "write_particles",
     "__version__",
     "box_mesh",
     "build_from_files",

@@ -4,7 +4,7 @@
 import os
 from typing import Any, Dict, Optional, Sequence, Tuple, TypedDict, Union, overload
 
-from typing_extensions import Unpack
+from typing_extensions import Unpack, final
 
 import numpy as np
 import numpy.typing as npt
@@ -40,8 +40,9 @@ class ModelFileError(PalpateError): ...
 
 class MeshWarning(UserWarning): ...
 
+@final
 class TetMesh:
-    def __init__(self, points: npt.ArrayLike, tets: npt.ArrayLike, *, source: Optional[str] = None) -> None: ...
+    def __new__(cls, points: npt.ArrayLike, tets: npt.ArrayLike, *, source: Optional[str] = None) -> TetMesh: ...
     @property
     def points(self) -> _FloatArray: ...
     @property
@@ -58,13 +59,15 @@ class TetMesh:
     def nodes_below(self, z_cut: float = 0.0, tol: float = 1e-9) -> _IntArray: ...
     def __len__(self) -> int: ...
 
+@final
 class Law:
     ST_VENANT_KIRCHHOFF: Law
     NEO_HOOKEAN: Law
 
+@final
 class Material:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         young: Optional[float] = None,
         poisson: Optional[float] = None,
         lame_lambda: Optional[float] = None,
@@ -73,7 +76,7 @@ class Material:
         phi: float = 0.0,
         psi: float = 0.0,
         law: Law = ...,
-    ) -> None: ...
+    ) -> Material: ...
     @staticmethod
     def myocardium() -> Material: ...
     @staticmethod
@@ -97,29 +100,33 @@ class Material:
     @property
     def wave_speed(self) -> float: ...
 
+@final
 class Filter:
     PAPER: Filter
     STABLE: Filter
 
+@final
 class Solver:
     QUASI_NEWTON: Solver
     NEWTON: Solver
     LINEARISED: Solver
 
+@final
 class SemiImplicit:
-    def __init__(self, filter: Filter = ...) -> None: ...
+    def __new__(cls, filter: Filter = ...) -> SemiImplicit: ...
     @property
     def filter(self) -> Filter: ...
 
+@final
 class BackwardEuler:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         solver: Solver = ...,
         *,
         max_iterations: Optional[int] = None,
         tolerance: Optional[float] = None,
         history: Optional[int] = None,
-    ) -> None: ...
+    ) -> BackwardEuler: ...
     @property
     def solver(self) -> Solver: ...
     @property
@@ -159,15 +166,32 @@ class ProbeRun(TypedDict):
     unconverged_steps: int
     error: Optional[str]
 
+class BodyState(TypedDict):
+    positions: _FloatArray
+    velocities: _FloatArray
+    forces: _FloatArray
+    time: float
+    factored_dt: float
+    refreshed_at: Optional[_FloatArray]
+    excess_iterations: int
+
+class ParticleState(TypedDict):
+    positions: _FloatArray
+    velocities: _FloatArray
+    forces: _FloatArray
+    time: float
+    active: _IntArray
+
+@final
 class Body:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         mesh: TetMesh,
         material: Material,
         fixed: Optional[_Indices] = None,
         gravity: Optional[_Vec3] = None,
         integrator: Optional[Union[SemiImplicit, BackwardEuler]] = None,
-    ) -> None: ...
+    ) -> Body: ...
     def step(self, n: int = 1, dt: float = 1e-3) -> StepStats: ...
     def set_forces(self, forces: npt.ArrayLike) -> None: ...
     @property
@@ -198,7 +222,16 @@ class Body:
     def gravity(self) -> _FloatArray: ...
     def strain_energy(self) -> float: ...
     def kinetic_energy(self) -> float: ...
+    def element_fields(self) -> Dict[str, _FloatArray]: ...
     def reset(self) -> None: ...
+    def get_state(self) -> BodyState: ...
+    def set_state(self, state: BodyState) -> None: ...
+    def set_positions(self, positions: npt.ArrayLike) -> None: ...
+    def set_velocities(self, velocities: npt.ArrayLike) -> None: ...
+    def prepare(self, dt: float) -> bool: ...
+    def copy(self) -> Body: ...
+    def __copy__(self) -> Body: ...
+    def __deepcopy__(self, memo: Any) -> Body: ...
     def static_solve(
         self,
         forces: Optional[npt.ArrayLike] = None,
@@ -243,10 +276,11 @@ def truncated_ellipsoid_wall(
     layers: Optional[int] = None,
 ) -> TetMesh: ...
 def box_mesh(
-    size: Tuple[float, float, float] = (0.1, 0.02, 0.02),
-    cells: Tuple[int, int, int] = (10, 2, 2),
+    size: Tuple[float, float, float] = ...,   # (0.1, 0.02, 0.02) [m]
+    cells: Tuple[int, int, int] = ...,       # (10, 2, 2)
 ) -> TetMesh: ...
 
+@final
 class Kernel:
     WENDLAND_C2: Kernel
     CUBIC_SPLINE: Kernel
@@ -271,9 +305,10 @@ class TimedRun(TypedDict):
     substep_dt: float
     error: Optional[str]
 
+@final
 class ParticleBody:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         positions: npt.ArrayLike,
         masses: npt.ArrayLike,
         material: Material,
@@ -283,12 +318,21 @@ class ParticleBody:
         gravity: Optional[_Vec3] = None,
         hourglass: float = ...,              # palpate.defaults.particles.hourglass
         min_relative_weight: float = ...,    # palpate.defaults.particles.min_relative_weight
-    ) -> None: ...
+    ) -> ParticleBody: ...
     def step(self, n: int = 1, dt: float = 1e-3) -> ParticleStepStats: ...
     def run_timed(self, ticks: int, dt: float = 1e-3, max_wall_s: Optional[float] = None) -> TimedRun: ...
     def set_forces(self, forces: npt.ArrayLike) -> None: ...
     def set_positions(self, positions: npt.ArrayLike) -> None: ...
     def set_velocities(self, velocities: npt.ArrayLike) -> None: ...
+    def get_state(self) -> ParticleState: ...
+    def set_state(self, state: ParticleState) -> None: ...
+    def copy(self) -> ParticleBody: ...
+    def __copy__(self) -> ParticleBody: ...
+    def __deepcopy__(self, memo: Any) -> ParticleBody: ...
+    @property
+    def gravity(self) -> _FloatArray: ...
+    @property
+    def min_relative_weight(self) -> float: ...
     @property
     def forces(self) -> _FloatArray: ...
     @property
@@ -338,8 +382,9 @@ class ParticleBody:
     def reset(self) -> None: ...
     def __len__(self) -> int: ...
 
+@final
 class TriSurface:
-    def __init__(self, points: npt.ArrayLike, triangles: npt.ArrayLike, *, source: Optional[str] = None) -> None: ...
+    def __new__(cls, points: npt.ArrayLike, triangles: npt.ArrayLike, *, source: Optional[str] = None) -> TriSurface: ...
     @property
     def points(self) -> _FloatArray: ...
     @property
@@ -355,19 +400,20 @@ class TriSurface:
     @property
     def bounding_box(self) -> Tuple[_FloatArray, _FloatArray]: ...
     @overload
-    def contains(self, points: _Vec3, method: str = "winding") -> bool: ...
+    def contains(self, points: _Vec3, method: str = "winding") -> bool: ...  # type: ignore[overload-overlap]  # one point (3,)
     @overload
     def contains(self, points: npt.ArrayLike, method: str = "winding") -> npt.NDArray[np.bool_]: ...
     @overload
-    def winding_number(self, points: _Vec3) -> float: ...
+    def winding_number(self, points: _Vec3) -> float: ...  # type: ignore[overload-overlap]  # one point (3,)
     @overload
     def winding_number(self, points: npt.ArrayLike) -> _FloatArray: ...
     def __len__(self) -> int: ...
 
 def ellipsoid_surface(
-    semi_axes: Tuple[float, float, float] = (0.026, 0.026, 0.042),
+    semi_axes: Tuple[float, float, float] = ...,   # (0.026, 0.026, 0.042) [m]
     subdivisions: int = 4,
 ) -> TriSurface: ...
+@final
 class Projection:
     TRANSMURAL: Projection
     RADIAL: Projection
@@ -423,10 +469,11 @@ class _HybridOptions(TypedDict, total=False):
     min_region_particles: int
     field_voxels: int
 
+@final
 class HybridSim:
     """The hybrid model you can touch: tool position in, force out (issue 12)."""
-    def __init__(
-        self,
+    def __new__(
+        cls,
         model: HybridModel,
         material: Material,
         *,
@@ -437,8 +484,11 @@ class HybridSim:
         max_tool_step: Optional[float] = None,
         linger_ticks: Optional[int] = None,
         max_substeps: Optional[int] = None,
-    ) -> None: ...
+    ) -> HybridSim: ...
     def step(self, tool_centre: _Vec3, dt: float = 1e-3) -> _FloatArray: ...
+    def copy(self) -> HybridSim: ...
+    def __copy__(self) -> HybridSim: ...
+    def __deepcopy__(self, memo: Any) -> HybridSim: ...
     def reset(self) -> None: ...
     @property
     def tool_radius(self) -> float: ...
@@ -466,6 +516,7 @@ class HybridSim:
     @property
     def n_particles(self) -> int: ...
 
+@final
 class HybridModel:
     @staticmethod
     def build_nested(inner: TriSurface, outer: TriSurface, **options: Unpack[_HybridOptions]) -> HybridModel: ...
@@ -476,6 +527,8 @@ class HybridModel:
     def save(self, path: Union[str, os.PathLike[str]]) -> None: ...
     @staticmethod
     def load(path: Union[str, os.PathLike[str]]) -> HybridModel: ...
+    @staticmethod
+    def from_bytes(data: bytes) -> HybridModel: ...
     def to_bytes(self) -> bytes: ...
     @property
     def core_points(self) -> _FloatArray: ...

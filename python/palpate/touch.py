@@ -66,7 +66,10 @@ import csv
 import math
 import os
 import time
-import tomllib
+try:
+    import tomllib
+except ImportError:  # Python < 3.11 (the tomli backport, a dependency there)
+    import tomli as tomllib
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
@@ -450,7 +453,11 @@ class _Series:
 def plot_force(rows: np.ndarray, path: str, title: str = "") -> None:
     """``force.png``: normal force [N] against depth [mm], and |f| and the normal force against
     time [s]; ``rows`` (n, len(COLUMNS)) as in ``force.csv``."""
-    import matplotlib
+    try:
+        import matplotlib
+    except ImportError:  # an extra (palpate[plot]): the CSV holds the same data
+        print(f"(matplotlib not installed: no {os.path.basename(path)}; pip install 'palpate[plot]')")
+        return
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

@@ -7,8 +7,8 @@ use std::time::Instant;
 use numpy::{PyArray1, PyArray2};
 use palpate_core::integrate::{static_solve, StaticOptions};
 use palpate_core::probe::{self, ProbeLoad, ProbeOptions, Ramp, StepClock, StepTotals};
-use palpate_core::{step, Model, ModelBuilder, State, Vec3, Workspace};
-use pyo3::exceptions::PyValueError;
+use palpate_core::{step, Model, ModelBuilder, State, StepMemory, Vec3, Workspace};
+use pyo3::exceptions::{PyKeyError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -37,6 +37,12 @@ use crate::mesh::PyTetMesh;
 ///     dt) at small deformation.
 ///
 /// All per-node arrays are (n, 3) float64 in SI units, world frame; getters return copies.
+///
+/// ``get_state()`` / ``set_state(s)`` save and restore the state with the integrator's memory (the
+/// steps after a restore repeat the original ones bit for bit); ``copy()`` is an independent body;
+/// a body pickles (its model is rebuilt from mesh, material, fixed nodes, gravity and integrator,
+/// then its state restored). Changing ``dt`` reuses the factorisations of the recently used
+/// ``dt`` (``prepare``).
 #[pyclass(module = "palpate", name = "Body")]
 pub struct PyBody {
     model: Model,
@@ -105,6 +111,27 @@ impl PyBody {
         d.set_item("unconverged_steps", t.unconverged)?;
         d.set_item("error", run.stop.map(|s| s.to_string()))?;
         Ok(d)
+    }
+}
+
+/// `state[key]`, or KeyError naming the key.
+fn item<'py>(state: &Bound<'py, PyDict>, key: &str) -> PyResult<Bound<'py, PyAny>> {
+    state.get_item(key)?.ok_or_else(|| PyKeyError::new_err(format!("state has no {key:?} (a dict from get_state())")))
+}
+
+/// `x` to 4 significant digits, printed shortest (0.4, not 0.39999999999999997), for reprs.
+pub(crate) fn sig4(x: f64) -> String {
+    format!("{:.3e}", x).parse::<f64>().map(|r| r.to_string()).unwrap_or_else(|_| x.to_string())
+}
+
+/// The integrator's name in palpate's words (`palpate.SemiImplicit`, `palpate.BackwardEuler`).
+pub(crate) fn integrator_words(i: palpate_core::Integrator) -> String {
+    use palpate_core::Integrator as I;
+    match i {
+        I::SemiImplicit { .. } => "semi-implicit".into(),
+        I::BackwardEulerLinear => "backward Euler, linearised".into(),
+        I::BackwardEulerQuasiNewton { .. } => "backward Euler, quasi-Newton".into(),
+        I::BackwardEulerNewton { .. } => "backward Euler, Newton".into(),
     }
 }
 
@@ -267,6 +294,19 @@ impl PyBody {
         self.model.strain_energy(&self.state.x)
     }
 
+    /// Per-element fields of the current positions, for output: a dict of (m,) float64 arrays,
+    /// ``von_mises`` [Pa] (von Mises equivalent of the elastic Cauchy stress; of the Kirchhoff
+    /// stress for an inverted element), ``energy_density`` [J/m^3] (strain energy per rest
+    /// volume), ``det_f`` [-] (volume ratio; <= 0: inverted).
+    fn element_fields<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let f = py.detach(|| self.model.element_fields(&self.state.x));
+        let d = PyDict::new(py);
+        d.set_item("von_mises", conv::f64s_to_py(py, &f.von_mises))?;
+        d.set_item("energy_density", conv::f64s_to_py(py, &f.energy_density))?;
+        d.set_item("det_f", conv::f64s_to_py(py, &f.det_f))?;
+        Ok(d)
+    }
+
     /// Kinetic energy of the current velocities [J].
     fn kinetic_energy(&self) -> f64 {
         self.model.kinetic_energy(&self.state.v)
@@ -379,13 +419,107 @@ impl PyBody {
         this.run_timed(py, &loads, steps, dt, stable_limit, max_wall_s)
     }
 
+    /// The state with the integrator's memory, as a dict of copies: ``positions`` [m],
+    /// ``velocities`` [m/s] and ``forces`` [N], each (n, 3) float64, world frame; ``time`` [s];
+    /// ``factored_dt`` [s] (the dt the factor in use was made for, NaN if none),
+    /// ``refreshed_at`` [m] ((n, 3) positions where the quasi-Newton / Newton factor was
+    /// refreshed, or None: the rest matrix) and ``excess_iterations`` (the refresh rule's count).
+    /// Plain Python and numpy values: it pickles.
+    fn get_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        let mem = self.ws.memory();
+        d.set_item("positions", conv::vec3s_to_py(py, &self.state.x))?;
+        d.set_item("velocities", conv::vec3s_to_py(py, &self.state.v))?;
+        d.set_item("forces", conv::vec3s_to_py(py, &self.state.f_ext))?;
+        d.set_item("time", self.state.t)?;
+        d.set_item("factored_dt", mem.factored_dt)?;
+        d.set_item("refreshed_at", mem.refreshed_at.as_ref().map(|x| conv::vec3s_to_py(py, x)))?;
+        d.set_item("excess_iterations", mem.excess_iterations)?;
+        Ok(d)
+    }
+
+    /// Restore a state from :meth:`get_state` (of this body or one built the same way): the next
+    /// steps repeat those that followed it bit for bit. Remakes the factor it records (one
+    /// factorisation unless held or cached). Raises ``KeyError`` for a missing entry,
+    /// ``ValueError`` for a wrong shape or a non-finite value, ``StepError`` if the factorisation
+    /// fails; the body is unchanged then.
+    fn set_state(&mut self, py: Python<'_>, state: &Bound<'_, PyDict>) -> PyResult<()> {
+        let n = self.model.n_nodes();
+        let x = conv::vec3s(&item(state, "positions")?, "positions", n, true)?;
+        let v = conv::vec3s(&item(state, "velocities")?, "velocities", n, true)?;
+        let f_ext = conv::vec3s(&item(state, "forces")?, "forces", n, true)?;
+        let t: f64 = item(state, "time")?.extract()?;
+        if !t.is_finite() {
+            return Err(PyValueError::new_err(format!("time = {t} s must be finite")));
+        }
+        let refreshed = item(state, "refreshed_at")?;
+        let mem = StepMemory {
+            factored_dt: item(state, "factored_dt")?.extract()?,
+            refreshed_at: if refreshed.is_none() { None } else { Some(conv::vec3s(&refreshed, "refreshed_at", n, true)?) },
+            excess_iterations: item(state, "excess_iterations")?.extract()?,
+        };
+        let (model, ws) = (&self.model, &mut self.ws);
+        py.detach(|| ws.restore_memory(model, &mem)).map_err(|e| errors::step_error(e, "in set_state"))?;
+        self.state = State { x, v, t, f_ext };
+        Ok(())
+    }
+
+    /// Set the positions of every node [m], (n, 3), world frame (e.g. an initial deformation);
+    /// fixed nodes stay where they are put. Velocities, forces and time are kept.
+    fn set_positions(&mut self, positions: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.state.x = conv::vec3s(positions, "positions", self.model.n_nodes(), true)?;
+        Ok(())
+    }
+
+    /// Set the velocities of every node [m/s], (n, 3), world frame (fixed nodes: zeroed by the
+    /// next step).
+    fn set_velocities(&mut self, velocities: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.state.v = conv::vec3s(velocities, "velocities", self.model.n_nodes(), true)?;
+        Ok(())
+    }
+
+    /// Factorise the implicit integrators' matrix for ``dt`` [s] ahead of the first step at that
+    /// ``dt`` (GIL released), so that a haptic loop does not stall on it: besides the factor in
+    /// use, the rest factors of the 3 ``dt`` used or prepared most recently are kept (each the
+    /// memory of one factor), and returning to one costs no factorisation. Changes the cost of later steps, never their
+    /// result. Returns whether it factorised (False: already held, or the semi-implicit scheme,
+    /// which has no factor). Raises ``StepError`` for a bad ``dt`` or a failed factorisation.
+    fn prepare(&mut self, py: Python<'_>, dt: f64) -> PyResult<bool> {
+        let (model, ws) = (&self.model, &mut self.ws);
+        py.detach(|| ws.prepare(model, dt)).map_err(|e| errors::step_error(e, "in prepare"))
+    }
+
+    /// An independent copy: the same model (shared mesh and material objects, which are
+    /// immutable), state, integrator memory and cached factors.
+    fn copy(&self, py: Python<'_>) -> PyBody {
+        PyBody {
+            model: self.model.clone(),
+            state: self.state.clone(),
+            ws: self.ws.clone(),
+            mesh: self.mesh.clone_ref(py),
+            material: self.material.clone_ref(py),
+        }
+    }
+
+    fn __copy__(&self, py: Python<'_>) -> PyBody {
+        self.copy(py)
+    }
+
+    fn __deepcopy__(&self, py: Python<'_>, _memo: &Bound<'_, PyAny>) -> PyBody {
+        self.copy(py)
+    }
+
     fn __repr__(&self) -> String {
+        let m = self.material.get().inner;
         format!(
-            "Body(n_nodes={}, n_tets={}, fixed={}, integrator={:?}, time={} s)",
+            "<palpate.Body: {} nodes, {} tets, {} fixed; E = {} Pa, nu = {}, {} kg/m^3; {}; t = {} s>",
             self.model.n_nodes(),
             self.model.n_tets(),
             self.model.fixed().iter().filter(|&&f| f).count(),
-            self.model.integrator(),
+            sig4(m.young()),
+            sig4(m.poisson()),
+            sig4(m.density()),
+            integrator_words(self.model.integrator()),
             self.state.t
         )
     }

@@ -27,7 +27,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// triangles (m, 3) int64, part (m,) int8: 0 inner, 1 outer, 2 base)``.
 #[pyfunction]
 #[pyo3(signature = (circumferential = 96, longitudinal = 24))]
-fn ventricle_surface<'py>(py: Python<'py>, circumferential: usize, longitudinal: usize) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<i64>>, Bound<'py, PyArray1<i8>>)> {
+fn ventricle_surface<'py>(py: Python<'py>, circumferential: usize, longitudinal: usize) -> PyResult<TaggedSurface<'py>> {
     if !(3..=4096).contains(&circumferential) || !(1..=4096).contains(&longitudinal) {
         return Err(PyValueError::new_err(format!("circumferential must be 3 to 4096 and longitudinal 1 to 4096, got {circumferential} and {longitudinal}")));
     }
@@ -36,6 +36,9 @@ fn ventricle_surface<'py>(py: Python<'py>, circumferential: usize, longitudinal:
     let parts: Vec<i8> = wall.parts.iter().map(|&w| w as u8 as i8).collect();
     Ok((conv::vec3s_to_py(py, wall.surface.points()), conv::index_rows_to_py(py, wall.surface.triangles()), PyArray1::from_vec(py, parts)))
 }
+
+/// Points (n, 3), triangles (m, 3) and a part per triangle (m,), as numpy arrays.
+type TaggedSurface<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<i64>>, Bound<'py, PyArray1<i8>>);
 
 fn hybrid_error(e: HybridError) -> PyErr {
     match e {
@@ -50,6 +53,7 @@ fn hybrid_error(e: HybridError) -> PyErr {
 /// How the builder projects between the outer surface and the core.
 #[pyclass(name = "Projection", module = "palpate", eq, eq_int, hash, frozen, from_py_object)]
 #[derive(Clone, Copy, PartialEq, Hash)]
+#[allow(clippy::upper_case_acronyms)] // the Python names (palpate.Projection.RADIAL)
 pub enum PyProjection {
     /// Along the streamlines of the transmural harmonic field (any wall shape; default).
     TRANSMURAL,
@@ -212,6 +216,14 @@ impl PyHybridModel {
     #[staticmethod]
     fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<PyHybridModel> {
         let model = py.detach(|| HybridModel::load(&path)).map_err(file_error)?;
+        Ok(PyHybridModel { model })
+    }
+
+    /// A model from the bytes of :meth:`to_bytes` (or of a file :meth:`save` wrote); how a
+    /// model unpickles. Raises :class:`ModelFileError` as :meth:`load` does.
+    #[staticmethod]
+    fn from_bytes(py: Python<'_>, data: &[u8]) -> PyResult<PyHybridModel> {
+        let model = py.detach(|| hybrid::file::from_bytes(data, "<bytes>")).map_err(file_error)?;
         Ok(PyHybridModel { model })
     }
 

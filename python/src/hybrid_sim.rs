@@ -247,6 +247,21 @@ impl PyHybridSim {
         self.last = TickReport::default();
     }
 
+    /// An independent copy (model, state, workspace and last tick report): a snapshot to go
+    /// back to (``sim = snapshot.copy()``) or to try a different touch from. Ticks of the copy
+    /// repeat those of the original bit for bit.
+    fn copy(&self) -> PyHybridSim {
+        PyHybridSim { sim: self.sim.clone(), state: self.state.clone(), ws: self.ws.clone(), last: self.last }
+    }
+
+    fn __copy__(&self) -> PyHybridSim {
+        self.copy()
+    }
+
+    fn __deepcopy__(&self, _memo: &Bound<'_, PyAny>) -> PyHybridSim {
+        self.copy()
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "HybridSim(core_tets={}, particles={}, regions={}, tool_radius={} m, time={} s)",

@@ -174,11 +174,11 @@ impl PyMaterial {
         let m = &self.inner;
         format!(
             "Material(young={}, poisson={}, density={}, phi={}, psi={}, law={})",
-            m.young(),
-            m.poisson(),
-            m.density(),
-            m.damping().phi,
-            m.damping().psi,
+            crate::body::sig4(m.young()),
+            crate::body::sig4(m.poisson()),
+            crate::body::sig4(m.density()),
+            crate::body::sig4(m.damping().phi),
+            crate::body::sig4(m.damping().psi),
             PyLaw::from(m.law()).py_name()
         )
     }

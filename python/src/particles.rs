@@ -6,12 +6,13 @@ use std::time::Instant;
 use numpy::{PyArray1, PyArray2};
 use palpate_core::meshfree::{Kernel, ParticleModel, ParticleModelBuilder, ParticleState, ParticleWorkspace, DEFAULT_HOURGLASS, DEFAULT_MIN_WEIGHT};
 use palpate_core::Vec3;
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyKeyError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use crate::conv::{self, PARTICLES};
 use crate::errors;
+use crate::body::sig4;
 use crate::material::PyMaterial;
 use crate::meshfree::PyKernel;
 
@@ -47,12 +48,25 @@ use crate::meshfree::PyKernel;
 ///
 /// All particles start active; ``active`` selects the simulated ones (the others are frozen but
 /// still shape their active neighbours' deformation). Getters return copies.
+///
+/// ``get_state()`` / ``set_state(s)`` save and restore the state (the steps after a restore
+/// repeat the original ones bit for bit: the explicit scheme keeps nothing else between steps);
+/// ``copy()`` is an independent body; a body pickles (its model is rebuilt from its constructor's
+/// arguments, then its state restored).
 #[pyclass(module = "palpate", name = "ParticleBody")]
 pub struct PyParticleBody {
     model: ParticleModel,
     state: ParticleState,
     ws: ParticleWorkspace,
     material: Py<PyMaterial>,
+    /// Constructor arguments the model does not return, kept for pickling.
+    gravity: Vec3,
+    min_relative_weight: f64,
+}
+
+/// `state[key]`, or KeyError naming the key.
+fn item<'py>(state: &Bound<'py, PyDict>, key: &str) -> PyResult<Bound<'py, PyAny>> {
+    state.get_item(key)?.ok_or_else(|| PyKeyError::new_err(format!("state has no {key:?} (a dict from get_state())")))
 }
 
 /// A time step [s] for `run_timed` / `substeps`: positive and finite, else ValueError.
@@ -109,7 +123,7 @@ impl PyParticleBody {
         let model = py.detach(|| builder.build()).map_err(errors::model_error)?;
         let state = ParticleState::rest(&model);
         let ws = ParticleWorkspace::new(&model);
-        Ok(PyParticleBody { model, state, ws, material: material.unbind() })
+        Ok(PyParticleBody { model, state, ws, material: material.unbind(), gravity, min_relative_weight })
     }
 
     /// Advance ``n`` steps of ``dt`` [s] with the current external forces (GIL released). Each
@@ -188,6 +202,70 @@ impl PyParticleBody {
     fn set_forces(&mut self, forces: &Bound<'_, PyAny>) -> PyResult<()> {
         self.state.f_ext = conv::vec3s(forces, "forces", self.model.n_particles(), true)?;
         Ok(())
+    }
+
+    /// The state as a dict of copies: ``positions`` [m], ``velocities`` [m/s] (half-step, Verlet)
+    /// and ``forces`` [N], each (n, 3) float64, world frame; ``time`` [s]; ``active``, int64 (k,).
+    /// Plain Python and numpy values: it pickles.
+    fn get_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        d.set_item("positions", conv::vec3s_to_py(py, &self.state.x))?;
+        d.set_item("velocities", conv::vec3s_to_py(py, &self.state.v))?;
+        d.set_item("forces", conv::vec3s_to_py(py, &self.state.f_ext))?;
+        d.set_item("time", self.state.t)?;
+        d.set_item("active", conv::usizes_to_py(py, &self.state.active))?;
+        Ok(d)
+    }
+
+    /// Restore a state from :meth:`get_state` (of this body or one built the same way): the next
+    /// steps repeat those that followed it bit for bit. Raises ``KeyError`` for a missing entry,
+    /// ``ValueError`` for a wrong shape, a non-finite value or a bad index; the body is unchanged
+    /// then.
+    fn set_state(&mut self, state: &Bound<'_, PyDict>) -> PyResult<()> {
+        let n = self.model.n_particles();
+        let x = conv::vec3s(&item(state, "positions")?, "positions", n, true)?;
+        let v = conv::vec3s(&item(state, "velocities")?, "velocities", n, true)?;
+        let f_ext = conv::vec3s(&item(state, "forces")?, "forces", n, true)?;
+        let t: f64 = item(state, "time")?.extract()?;
+        if !t.is_finite() {
+            return Err(PyValueError::new_err(format!("time = {t} s must be finite")));
+        }
+        let active = conv::indices(&item(state, "active")?, "active", n, PARTICLES, true)?;
+        self.state = ParticleState { x, v, t, f_ext, active };
+        Ok(())
+    }
+
+    /// An independent copy: the same model (shared, immutable material object) and state.
+    fn copy(&self, py: Python<'_>) -> PyParticleBody {
+        PyParticleBody {
+            model: self.model.clone(),
+            state: self.state.clone(),
+            ws: self.ws.clone(),
+            material: self.material.clone_ref(py),
+            gravity: self.gravity,
+            min_relative_weight: self.min_relative_weight,
+        }
+    }
+
+    fn __copy__(&self, py: Python<'_>) -> PyParticleBody {
+        self.copy(py)
+    }
+
+    fn __deepcopy__(&self, py: Python<'_>, _memo: &Bound<'_, PyAny>) -> PyParticleBody {
+        self.copy(py)
+    }
+
+    /// Gravitational acceleration [m/s^2], (3,), world frame.
+    #[getter]
+    fn gravity<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        conv::vec3_to_py(py, self.gravity)
+    }
+
+    /// The neighbour cut-off: pairs whose kernel weight is below this fraction of its peak are
+    /// left out [-].
+    #[getter]
+    fn min_relative_weight(&self) -> f64 {
+        self.min_relative_weight
     }
 
     /// Set the positions of every particle [m], (n, 3) (e.g. an initial deformation).
@@ -372,17 +450,29 @@ impl PyParticleBody {
     }
 
     fn __repr__(&self) -> String {
+        let m = self.material.get().inner;
         format!(
-            "ParticleBody(n_particles={}, n_pairs={}, active={}, fixed={}, kernel={:?}, support_radius={:e} m, stable_dt={:e} s, time={} s)",
+            "<palpate.ParticleBody: {} particles ({} active, {} fixed), {} pairs; {} kernel, support radius {} m; E = {} Pa, nu = {}, {} kg/m^3; stable dt {} s; t = {} s>",
             self.model.n_particles(),
-            self.model.n_pairs(),
             self.state.active.len(),
             self.model.fixed().iter().filter(|&&f| f).count(),
-            self.model.kernel(),
-            self.model.support(),
-            self.model.stable_dt(),
+            self.model.n_pairs(),
+            kernel_words(self.model.kernel()),
+            sig4(self.model.support()),
+            sig4(m.young()),
+            sig4(m.poisson()),
+            sig4(m.density()),
+            sig4(self.model.stable_dt()),
             self.state.t
         )
     }
 }
 
+/// The kernel's name in palpate's words (`palpate.Kernel`).
+fn kernel_words(k: Kernel) -> &'static str {
+    match k {
+        Kernel::WendlandC2 => "Wendland C2",
+        Kernel::CubicSpline => "cubic spline",
+        Kernel::LinearLennardJones => "linear Lennard-Jones",
+    }
+}

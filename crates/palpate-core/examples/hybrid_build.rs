@@ -11,8 +11,7 @@ fn main() {
         "ventricle" => shapes::truncated_ventricle(&TruncatedEllipsoidWall { circumferential: 96, longitudinal: 24, ..Default::default() }).unwrap(),
         _ => shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap(),
     };
-    let mut o = HybridOptions::default();
-    o.core_triangles = 0;
+    let mut o = HybridOptions { core_triangles: 0, ..HybridOptions::default() };
     if radial {
         o.projection = Projection::Radial;
     }

@@ -62,10 +62,10 @@ fn cantilever_tip_deflection_converges_to_beam_theory() {
         let sol = static_solve(&model, &f, &opts).unwrap_or_else(|e| panic!("{cells:?}: {e}"));
         // Tip deflection: load-weighted mean of -u_z over the tip face (= work-conjugate deflection).
         let (mut num, mut den) = (0.0, 0.0);
-        for i in 0..model.n_nodes() {
-            let w = f[i].z.abs();
+        for ((fi, x), x0) in f.iter().zip(&sol.x).zip(model.mesh().points()) {
+            let w = fi.z.abs();
             if w > 0.0 {
-                num += w * -(sol.x[i].z - model.mesh().points()[i].z);
+                num += w * -(x.z - x0.z);
                 den += w;
             }
         }

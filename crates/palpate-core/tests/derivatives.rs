@@ -139,7 +139,8 @@ fn rest_jacobian_is_symmetric_negative_semidefinite_with_six_rigid_modes() {
     assert!(e[6] <= -1e-6 * lmax, "a 7th (spurious) zero mode: {:e}", e[6]);
 
     // The rigid modes explicitly: translations and infinitesimal rotations are in the null space.
-    let modes: Vec<Box<dyn Fn(&Vec3) -> Vec3>> = vec![
+    type Mode = Box<dyn Fn(&Vec3) -> Vec3>;
+    let modes: Vec<Mode> = vec![
         Box::new(|_| Vec3::x()),
         Box::new(|_| Vec3::y()),
         Box::new(|_| Vec3::z()),

@@ -285,7 +285,7 @@ fn hourglass_control_keeps_particles_from_clumping_or_crossing() {
         let mut ws = ParticleWorkspace::new(model);
         st.f_ext[top_centre] = Vec3::new(0.0, 0.0, -2e-3); // 2 mN on one particle: ~10% local strain
         for _ in 0..300 {
-            meshfree::step(&model, &mut st, &mut ws, 1e-3).unwrap();
+            meshfree::step(model, &mut st, &mut ws, 1e-3).unwrap();
         }
         // Smallest neighbour distance / rest distance, smallest det F, and the non-affine residual.
         let mut min_ratio = f64::INFINITY;

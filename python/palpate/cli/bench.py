@@ -9,6 +9,7 @@ import math
 import sys
 
 from .. import __version__
+from .. import _progress
 from .. import bench
 from .. import bench_hybrid as bh
 from .. import bench_particles as bp
@@ -114,24 +115,30 @@ def cmd_bench_protocol(a) -> int:
               f"integrator {a.integrator}, single thread (shared/bench/PROTOCOL.md)")
         print(f"{'mesh':<16}{'tets':>7}{'steps/s':>10}{'stable':>8}{'max|u| mm':>11}{'probe mm':>10}"
               f"{'iter':>6}{'inv':>5}{'p50 us':>8}{'p99 us':>8}{'max us':>8}{'vsStatic':>10}{'vsNewton':>10}")
-    for make in _bench_cases(a):
-        case = make()
-        r = bench.run(case, a.integrator, steps=a.steps, max_wall_s=a.max_wall, newton=newton)
-        if a.json:
-            print(json.dumps(r), flush=True)
-        else:
-            def rel(k):
-                return "-" if r[k] is None else f"{100 * r[k]:.3f}%"
-            sps = "-" if r["steps_per_s"] is None else f"{r['steps_per_s']:.1f}"
-            us = lambda k: "-" if r[k] is None else f"{r[k]:.0f}"  # noqa: E731
-            it = "-" if r["iterations_mean"] is None else f"{r['iterations_mean']:.2f}"
-            print(f"{r['mesh']:<16}{r['tets']:>7}{sps:>10}{str(r['stable']):>8}"
-                  f"{fmt_mm(r['max_disp_m']):>11}{fmt_mm(r['probe_disp_avg_m']):>10}{it:>6}"
-                  f"{r['inverted_max']:>5}{us('step_us_p50'):>8}{us('step_us_p99'):>8}{us('step_us_max'):>8}"
-                  f"{rel('rel_L2_vs_static'):>10}{rel('rel_L2_vs_newton'):>10}", flush=True)
-            if r.get("error"):
-                print(f"  note: {r['error']}")
+    cases = list(_bench_cases(a))
+    with _progress.task("bench protocol", total=len(cases), quiet=a.json) as advance:   # a terminal only
+        for make in cases:
+            _print_protocol_row(a, bench.run(make(), a.integrator, steps=a.steps, max_wall_s=a.max_wall, newton=newton))
+            advance(1)
     return 0
+
+
+def _print_protocol_row(a, r) -> None:
+    """One result of bench.run: a JSON line or a table row."""
+    if a.json:
+        print(json.dumps(r), flush=True)
+    else:
+        def rel(k):
+            return "-" if r[k] is None else f"{100 * r[k]:.3f}%"
+        sps = "-" if r["steps_per_s"] is None else f"{r['steps_per_s']:.1f}"
+        us = lambda k: "-" if r[k] is None else f"{r[k]:.0f}"  # noqa: E731
+        it = "-" if r["iterations_mean"] is None else f"{r['iterations_mean']:.2f}"
+        print(f"{r['mesh']:<16}{r['tets']:>7}{sps:>10}{str(r['stable']):>8}"
+              f"{fmt_mm(r['max_disp_m']):>11}{fmt_mm(r['probe_disp_avg_m']):>10}{it:>6}"
+              f"{r['inverted_max']:>5}{us('step_us_p50'):>8}{us('step_us_p99'):>8}{us('step_us_max'):>8}"
+              f"{rel('rel_L2_vs_static'):>10}{rel('rel_L2_vs_newton'):>10}", flush=True)
+        if r.get("error"):
+            print(f"  note: {r['error']}")
 
 
 def cmd_bench_particles(a) -> int:
@@ -157,25 +164,33 @@ def cmd_bench_particles(a) -> int:
         print(f"{'N':>7}{'in h':>6}{'nbrs':>7}{'fixed':>7}{'sub/tick':>9}{'sub dt us':>10}{'tick ms':>9}{'ticks/s':>9}"
               f"{'GFlop/s':>9}{'%peak':>7}{'build s':>9}{'max|u| mm':>10}")
     failed = False
-    for n in sizes:
-        try:
-            r = bp.run(n, a.spacing, a.kernel, a.ticks, a.max_wall, a.support)
-        except ValueError as e:
-            raise Fail(f"palpate bench particles: {e}") from None
-        except palpate_errors() as e:
-            raise Fail(f"palpate bench particles: N = {n}: {type(e).__name__}: {e}", 1) from None
-        failed |= r["error"] is not None and "wall-clock cap" not in r["error"]
-        if a.json:
-            print(json.dumps(r), flush=True)
-            continue
-        f = lambda v, fmt: "-" if v is None else format(v, fmt)  # noqa: E731
-        print(f"{r['n']:>7}{r['mean_neighbours_in_support']:>6.1f}{r['mean_neighbours']:>7.1f}{r['fixed']:>7}{r['substeps']:>9}{r['substep_dt_s'] * 1e6:>10.1f}"
-              f"{f(r['tick_median_s'] and r['tick_median_s'] * 1e3, '.3f'):>9}{f(r['ticks_per_s'], '.1f'):>9}"
-              f"{f(r['gflops'], '.2f'):>9}{f(r['peak_fraction'] and 100 * r['peak_fraction'], '.1f'):>7}"
-              f"{r['build_s']:>9.2f}{fmt_mm(r['max_disp_m']):>10}", flush=True)
-        if r["error"]:
-            print(f"  note: {r['error']} (median over {r['ticks']} ticks)")
+    with _progress.task("bench particles", total=len(sizes), quiet=a.json or len(sizes) < 2) as advance:
+        for n in sizes:
+            failed |= _particles_row(a, n)
+            advance(1)
     return 1 if failed else 0
+
+
+def _particles_row(a, n) -> bool:
+    """One size of bench particles: run, print; whether it failed (not merely capped)."""
+    try:
+        r = bp.run(n, a.spacing, a.kernel, a.ticks, a.max_wall, a.support)
+    except ValueError as e:
+        raise Fail(f"palpate bench particles: {e}") from None
+    except palpate_errors() as e:
+        raise Fail(f"palpate bench particles: N = {n}: {type(e).__name__}: {e}", 1) from None
+    failed = r["error"] is not None and "wall-clock cap" not in r["error"]
+    if a.json:
+        print(json.dumps(r), flush=True)
+        return failed
+    f = lambda v, fmt: "-" if v is None else format(v, fmt)  # noqa: E731
+    print(f"{r['n']:>7}{r['mean_neighbours_in_support']:>6.1f}{r['mean_neighbours']:>7.1f}{r['fixed']:>7}{r['substeps']:>9}{r['substep_dt_s'] * 1e6:>10.1f}"
+          f"{f(r['tick_median_s'] and r['tick_median_s'] * 1e3, '.3f'):>9}{f(r['ticks_per_s'], '.1f'):>9}"
+          f"{f(r['gflops'], '.2f'):>9}{f(r['peak_fraction'] and 100 * r['peak_fraction'], '.1f'):>7}"
+          f"{r['build_s']:>9.2f}{fmt_mm(r['max_disp_m']):>10}", flush=True)
+    if r["error"]:
+        print(f"  note: {r['error']} (median over {r['ticks']} ticks)")
+    return failed
 
 
 def cmd_bench_hybrid(a) -> int:

@@ -7,6 +7,7 @@ import math
 from typing import Optional
 
 from .. import _palpate as _p
+from .. import _progress
 from .. import defaults
 from ._common import Fail, mb, model_lines, num
 
@@ -121,7 +122,8 @@ def cmd_build(a) -> int:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            model = build()
+            with _progress.task(f"building the hybrid model ({what})"):   # a terminal only
+                model = build()
     except (_p.SurfaceError, _p.MeshError, ValueError, DataError) as e:
         msg = str(e)
         if not any(os.path.basename(f) in msg for f in files + [a.tagged or ""] if f):

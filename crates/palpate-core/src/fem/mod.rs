@@ -10,6 +10,6 @@ pub mod tangent;
 pub mod tet4;
 pub mod viscous;
 
-pub use model::{Model, ModelBuilder};
-pub use state::{State, Workspace};
+pub use model::{ElementFields, Model, ModelBuilder};
+pub use state::{State, StepMemory, Workspace};
 pub use tet4::TetRest;

@@ -310,6 +310,27 @@ impl Model {
         self.mesh.tets().iter().zip(&self.rest).map(|(t, r)| tet4::strain_energy(&t.map(|i| x[i]), r, &self.material)).sum()
     }
 
+    /// Per-element fields of positions `x` `(n_nodes)` \[m\] for output (ParaView), each
+    /// `(n_tets)`: see [`ElementFields`].
+    pub fn element_fields(&self, x: &[Vec3]) -> ElementFields {
+        let n = self.n_tets();
+        let mut out = ElementFields { von_mises: Vec::with_capacity(n), energy_density: Vec::with_capacity(n), det_f: Vec::with_capacity(n) };
+        for (t, r) in self.mesh.tets().iter().zip(&self.rest) {
+            let xe = t.map(|i| x[i]);
+            let f = tet4::deformation_gradient(&xe, r);
+            let (p, psi) = tet4::elastic_stress(&xe, r, &self.material);
+            let j = f.determinant();
+            // Cauchy stress sigma = P F^T / J; an inverted element (J <= 0) reports the Kirchhoff
+            // stress P F^T instead (finite, and flagged by det_f).
+            let tau = p * f.transpose();
+            let sigma = if j > 0.0 { tau / j } else { tau };
+            out.von_mises.push(tet4::von_mises(&(0.5 * (sigma + sigma.transpose()))));
+            out.energy_density.push(psi);
+            out.det_f.push(j);
+        }
+        out
+    }
+
     /// Kinetic energy \[J\] of velocities `v` `(n_nodes)` \[m/s\] with the lumped masses.
     pub fn kinetic_energy(&self, v: &[Vec3]) -> f64 {
         0.5 * v.iter().zip(&self.mass).map(|(v, m)| m * v.norm_squared()).sum::<f64>()
@@ -397,4 +418,17 @@ impl Model {
             b[self.node_pos[fi]] = per_node[node];
         }
     }
+}
+
+/// Per-element output fields ([`Model::element_fields`]), each `(n_tets)`, of the elastic part
+/// of the stress (the viscous stress is left out: it vanishes at rest and is not a material state).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ElementFields {
+    /// Von Mises equivalent of the Cauchy stress \[Pa\] (of the Kirchhoff stress where det F <= 0).
+    pub von_mises: Vec<f64>,
+    /// Strain energy density per rest volume \[J/m^3\] (sums, times the rest volumes, to
+    /// [`Model::strain_energy`]).
+    pub energy_density: Vec<f64>,
+    /// det F \[-\]: the volume ratio; <= 0 marks an inverted element.
+    pub det_f: Vec<f64>,
 }

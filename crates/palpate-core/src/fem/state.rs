@@ -1,6 +1,8 @@
 //! The mutable simulation state and the preallocated scratch space of the step.
 
 use super::model::Model;
+use crate::error::StepError;
+use crate::integrate::factor::{self, DtCache};
 use crate::integrate::{CgWorkspace, Integrator, Lbfgs, PotentialWorkspace};
 use crate::linalg::Ldl;
 use crate::math::{Mat3, Vec3};
@@ -32,9 +34,26 @@ impl State {
     }
 }
 
+/// What a step carries over to the next besides [`State`] (the integrator's memory): which matrix
+/// the workspace holds factorised and the quasi-Newton refresh rule's count. With the [`State`] it
+/// makes the steps that follow bit-identical: [`Workspace::memory`] reads it,
+/// [`Workspace::restore_memory`] remakes the factor from it. (The L-BFGS pairs and the CG vectors
+/// start afresh every step, so they are not part of it.)
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepMemory {
+    /// The `dt` \[s\] the factor in use was made for (NaN: none yet).
+    pub factored_dt: f64,
+    /// Positions \[m\] `(n_nodes)`, world frame, at which the factor in use was refreshed with the
+    /// definite tangent (`integrate/factor.rs`); `None`: it is the rest matrix for `factored_dt`.
+    pub refreshed_at: Option<Vec<Vec3>>,
+    /// Surplus iterations since the last factorisation (the refresh rule's count).
+    pub excess_iterations: usize,
+}
+
 /// Scratch space of [`crate::step`]: buffers and numeric factorisations, sized once for a model
-/// so that stepping allocates nothing. A factorisation is refreshed only when `dt` changes
-/// (rest-linearised schemes) or every Newton iteration (Newton scheme).
+/// so that stepping allocates nothing once each `dt` in use has been seen. The factor is remade
+/// when `dt` changes (from the cache of [`crate::integrate::DT_CACHE_SIZE`] recently used `dt`'s
+/// rest factors when it holds it) or when the quasi-Newton / Newton refresh rule pays.
 #[derive(Debug, Clone)]
 pub struct Workspace {
     pub(crate) force: Vec<Vec3>,
@@ -52,6 +71,12 @@ pub struct Workspace {
     pub(crate) excess_iterations: usize,
     /// Sparse factorisations done so far (the step reports its own).
     pub(crate) factor_count: u64,
+    /// Whether `ldl` holds a definite tangent refreshed at `refresh_x` (else the rest matrix).
+    pub(crate) refreshed: bool,
+    /// Positions of the last refresh, `(n_nodes)`: a saved state remakes that factor from them.
+    pub(crate) refresh_x: Vec<Vec3>,
+    /// Rest factors of recently used `dt` (`integrate/factor.rs`).
+    pub(crate) dt_cache: DtCache,
     /// Semi-implicit scheme: per-node `(I - dt/m D_ii - dt^2/m J_ii)^-1`.
     pub(crate) node_inv: Vec<Mat3>,
     /// Minimising integrators: the incremental potential's buffers and cache.
@@ -80,10 +105,50 @@ impl Workspace {
             factored_dt: f64::NAN,
             excess_iterations: 0,
             factor_count: 0,
+            refreshed: false,
+            refresh_x: vec![Vec3::zeros(); n],
+            dt_cache: DtCache::new(),
             node_inv: vec![Mat3::identity(); n],
             potential: PotentialWorkspace::new(n, nf),
             lbfgs: Lbfgs::new(nf, model.integrator.history()),
             cg: CgWorkspace::new(if matches!(model.integrator, Integrator::BackwardEulerNewton { .. }) { nf } else { 0 }),
         }
+    }
+}
+
+impl Workspace {
+    /// The integrator's memory (see [`StepMemory`]).
+    pub fn memory(&self) -> StepMemory {
+        StepMemory {
+            factored_dt: self.factored_dt,
+            refreshed_at: (self.refreshed && self.factored_dt.is_finite()).then(|| self.refresh_x.clone()),
+            excess_iterations: self.excess_iterations,
+        }
+    }
+
+    /// Bring the workspace to `mem` (from [`Workspace::memory`] of a workspace of the same
+    /// `model`): remakes the factor it records (one factorisation, unless it is in use or
+    /// cached), so that stepping from the matching [`State`] repeats the original steps bit for
+    /// bit. Errors: `refreshed_at` not `(n_nodes)`, a non-positive `factored_dt`, a failed
+    /// factorisation.
+    pub fn restore_memory(&mut self, model: &Model, mem: &StepMemory) -> Result<(), StepError> {
+        if let Some(x) = &mem.refreshed_at {
+            let n = model.n_nodes();
+            if x.len() != n {
+                return Err(StepError::StateShape { nodes: n, x: x.len(), v: n, f_ext: n });
+            }
+        }
+        factor::restore(model, self, mem)
+    }
+
+    /// Factorise the rest matrix for `dt` \[s\] ahead of the first step at that `dt` and keep it
+    /// in the cache of recently used `dt` (the one in use is unchanged, and so are the results
+    /// of later steps: only their cost). Returns whether it factorised (false: already held).
+    /// The semi-implicit scheme needs no factor: a no-op.
+    pub fn prepare(&mut self, model: &Model, dt: f64) -> Result<bool, StepError> {
+        if matches!(model.integrator, Integrator::SemiImplicit { .. }) {
+            return Ok(false);
+        }
+        factor::prepare(model, self, dt)
     }
 }

@@ -80,6 +80,26 @@ pub fn strain_energy(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> f64 {
     }
 }
 
+/// Elastic first Piola-Kirchhoff stress `P(F)` \[Pa\] of the element at positions `x`, and its
+/// strain energy density `psi(F)` \[J/m^3\] (per rest volume): for post-processing.
+pub fn elastic_stress(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> (Mat3, f64) {
+    let f = deformation_gradient(x, rest);
+    match m.law() {
+        Law::StVenantKirchhoff => {
+            let e = material::green_strain(&f);
+            (f * material::stress(m, &e), material::energy_density(m, &e))
+        }
+        Law::NeoHookean => (neo_hookean_piola(m, &f), neo_hookean_energy(m, &f)),
+    }
+}
+
+/// Von Mises equivalent stress \[Pa\] of a symmetric stress tensor: `sqrt(3/2 s:s)`, `s` its
+/// deviatoric part.
+pub fn von_mises(sigma: &Mat3) -> f64 {
+    let s = sigma - Mat3::identity() * (sigma.trace() / 3.0);
+    (1.5 * s.component_mul(&s).sum()).sqrt()
+}
+
 /// Viscous second Piola stress `S_v(nu)`, `nu = sym(F^T Fdot)`, of nodal velocities `v` (eq. 10-11).
 #[inline]
 fn viscous(f: &Mat3, v: &[Vec3; 4], rest: &TetRest, m: &Material) -> Mat3 {

@@ -8,28 +8,138 @@ use crate::error::StepError;
 use crate::fem::model::NONE;
 use crate::fem::tangent;
 use crate::fem::{Model, Workspace};
+use crate::integrate::Integrator;
+use crate::linalg::Ldl;
 use crate::math::{Mat3, Vec3};
 
 /// A factorisation's cost in quasi-Newton iterations per unit of `Ldl::factor_to_solve_ratio`
 /// (an iteration is one solve plus about 1.5 force evaluations; measured: BENCHMARKS.md).
 pub(crate) const ITERATIONS_PER_FACTOR_RATIO: f64 = 0.7;
 
-/// Factorise the rest matrix `M - dt D0 - dt^2 K0` into `ws.ldl` unless it already holds a matrix
-/// for `dt` (the rest one, or one refreshed at this `dt`).
-pub(super) fn ensure(model: &Model, ws: &mut Workspace, dt: f64) -> Result<(), StepError> {
-    if ws.factored_dt != dt {
-        ws.factored_dt = f64::NAN;
-        ws.excess_iterations = 0;
+/// Rest factors kept besides the one in use, for the `dt` used most recently (issue 16: a haptic
+/// loop whose period varies would otherwise refactorise at every change, 40 ms on `lv_10k`). Each
+/// costs the memory of one factor (`Ldl::nnz_l` 3x3 blocks); a refreshed (deformed-state) factor
+/// is tied to a past state and never kept.
+pub const DT_CACHE_SIZE: usize = 3;
+
+/// The rest factors of recently used `dt` other than the one in use, least recent first. Their
+/// values depend only on the model and `dt`, so whether a factor comes from here or is made afresh
+/// changes the cost of a step, never its result.
+#[derive(Debug, Clone)]
+pub(crate) struct DtCache {
+    entries: Vec<(f64, Ldl)>,
+    /// Buffers of dropped (refreshed) factors, reused before a new one is allocated; with
+    /// `entries` and the factor in use there are never more than `DT_CACHE_SIZE + 1` factors.
+    free: Vec<Ldl>,
+}
+
+impl DtCache {
+    /// Empty, with room for every entry (so that a cache hit or an eviction allocates nothing).
+    pub(crate) fn new() -> DtCache {
+        DtCache { entries: Vec::with_capacity(DT_CACHE_SIZE), free: Vec::with_capacity(DT_CACHE_SIZE + 1) }
+    }
+
+    fn take(&mut self, dt: f64) -> Option<Ldl> {
+        let k = self.entries.iter().position(|(d, _)| *d == dt)?;
+        Some(self.entries.remove(k).1)
+    }
+
+    fn contains(&self, dt: f64) -> bool {
+        self.entries.iter().any(|(d, _)| *d == dt)
+    }
+
+    /// A factor buffer for a new entry: the least recent entry's if the cache is full, else a
+    /// free one, else a fresh one (the one allocation, once per newly kept `dt`). Afterwards the
+    /// cache has room for one entry.
+    fn spare(&mut self, model: &Model) -> Ldl {
+        if self.entries.len() >= DT_CACHE_SIZE {
+            self.entries.remove(0).1
+        } else if let Some(l) = self.free.pop() {
+            l
+        } else {
+            model.ldl.clone()
+        }
+    }
+}
+
+/// Make `ws.ldl` hold a factor for `dt`: unchanged if it already does (the rest one, or one
+/// refreshed at this `dt`), else the cached rest factor for `dt`, else a new factorisation. The
+/// rest factor being left is cached for a later return to its `dt`.
+pub(crate) fn ensure(model: &Model, ws: &mut Workspace, dt: f64) -> Result<(), StepError> {
+    if ws.factored_dt == dt {
+        return Ok(());
+    }
+    let leaving = (ws.factored_dt.is_finite() && !ws.refreshed).then_some(ws.factored_dt);
+    ws.factored_dt = f64::NAN;
+    ws.refreshed = false;
+    ws.excess_iterations = 0;
+    let hit = ws.dt_cache.take(dt);
+    let cached = hit.is_some();
+    let next = match (hit, leaving) {
+        (Some(l), _) => Some(l),
+        (None, Some(_)) => Some(ws.dt_cache.spare(model)),
+        (None, None) => None,
+    };
+    if let Some(next) = next {
+        let old = std::mem::replace(&mut ws.ldl, next);
+        match leaving {
+            Some(d) => ws.dt_cache.entries.push((d, old)),
+            None => ws.dt_cache.free.push(old),
+        }
+    }
+    if !cached {
         model.system_values(1.0, -dt, -dt * dt, &model.k0, &model.d0, &mut ws.a_values);
         model.factor(&mut ws.ldl, &ws.a_values)?;
-        ws.factored_dt = dt;
         ws.factor_count += 1;
     }
+    ws.factored_dt = dt;
+    Ok(())
+}
+
+/// Put the rest factor for `dt` into the cache (or keep the one in use) without changing what the
+/// next step at the current `dt` does; returns whether it factorised.
+pub(crate) fn prepare(model: &Model, ws: &mut Workspace, dt: f64) -> Result<bool, StepError> {
+    if !(dt > 0.0 && dt.is_finite()) {
+        return Err(StepError::BadTimeStep(dt));
+    }
+    if (ws.factored_dt == dt && !ws.refreshed) || ws.dt_cache.contains(dt) {
+        return Ok(false);
+    }
+    let mut ldl = ws.dt_cache.spare(model);
+    model.system_values(1.0, -dt, -dt * dt, &model.k0, &model.d0, &mut ws.a_values);
+    model.factor(&mut ldl, &ws.a_values)?;
+    ws.factor_count += 1;
+    ws.dt_cache.entries.push((dt, ldl));
+    Ok(true)
+}
+
+/// Bring the factor and the refresh rule's count to what `mem` records (see
+/// [`crate::fem::StepMemory`]): the rest factor for its `dt`, or the definite tangent refreshed at
+/// its positions, both made the same way as in the step that made them, hence bit-identical.
+pub(crate) fn restore(model: &Model, ws: &mut Workspace, mem: &crate::fem::StepMemory) -> Result<(), StepError> {
+    let dt = mem.factored_dt;
+    if matches!(model.integrator, Integrator::SemiImplicit { .. }) || dt.is_nan() {
+        // The semi-implicit scheme's per-node inverses are redone at the next step's dt.
+        ws.factored_dt = f64::NAN;
+        ws.refreshed = false;
+    } else if !(dt > 0.0 && dt.is_finite()) {
+        return Err(StepError::BadTimeStep(dt));
+    } else if let Some(x) = &mem.refreshed_at {
+        refresh(model, ws, x, dt)?;
+    } else {
+        if ws.refreshed {
+            ws.factored_dt = f64::NAN;
+            ws.refreshed = false;
+        }
+        ensure(model, ws, dt)?;
+    }
+    ws.excess_iterations = mem.excess_iterations;
+    ws.potential.invalidate();
     Ok(())
 }
 
 /// `out = dt^2 A^-1 v` over the free nodes (`H0^-1 v`, `H0 = A / dt^2`), through `ws.rhs`.
-pub(super) fn apply_inverse(model: &Model, ws: &mut Workspace, v: &[Vec3], out: &mut [Vec3], dt: f64) {
+pub(crate) fn apply_inverse(model: &Model, ws: &mut Workspace, v: &[Vec3], out: &mut [Vec3], dt: f64) {
     for (fi, &pos) in model.node_pos.iter().enumerate() {
         ws.rhs[pos] = v[fi];
     }
@@ -43,7 +153,7 @@ pub(super) fn apply_inverse(model: &Model, ws: &mut Workspace, v: &[Vec3], out: 
 /// Count `surplus` work units (iterations beyond what the step needed with an exact Hessian) and,
 /// once they have cost a factorisation and this step `struggled`, refactorise at `x` with the
 /// definite tangent (ski rental: a refresh never costs more than the work it replaces).
-pub(super) fn refresh_if_paid(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64, surplus: usize, struggled: bool) -> Result<(), StepError> {
+pub(crate) fn refresh_if_paid(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64, surplus: usize, struggled: bool) -> Result<(), StepError> {
     ws.excess_iterations = ws.excess_iterations.saturating_add(surplus);
     if struggled && ws.excess_iterations as f64 >= model.refresh_cost {
         refresh(model, ws, x, dt)?;
@@ -68,9 +178,13 @@ fn refresh(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<(),
     ws.k = k;
     ws.excess_iterations = 0;
     ws.factored_dt = f64::NAN;
+    ws.refreshed = false;
     ws.factor_count += 1;
     if model.factor(&mut ws.ldl, &ws.a_values).is_ok() {
         ws.factored_dt = dt;
+        // Remembered so that a saved state can remake this factor (`restore`).
+        ws.refresh_x.copy_from_slice(x);
+        ws.refreshed = true;
         return Ok(());
     }
     ensure(model, ws, dt)

@@ -12,7 +12,7 @@
 //! non-finite state behind: the state is restored and [`StepError::NonFinite`] names the node.
 
 mod backward_euler;
-mod factor;
+pub(crate) mod factor;
 mod newton;
 mod potential;
 mod quasi_newton;
@@ -23,6 +23,7 @@ pub use potential::{incremental_potential, incremental_potential_gradient};
 pub(crate) use newton::CgWorkspace;
 pub(crate) use potential::PotentialWorkspace;
 pub(crate) use factor::ITERATIONS_PER_FACTOR_RATIO;
+pub use factor::DT_CACHE_SIZE;
 pub(crate) use quasi_newton::Lbfgs;
 pub(crate) use semi_implicit::stable_filter_factor;
 pub use statics::{static_solve, StaticOptions, StaticSolution};

@@ -26,8 +26,11 @@ pub fn meshes_dir() -> Option<PathBuf> {
     d.is_dir().then_some(d)
 }
 
+/// Points (in mesh units) and tets of a mesh file.
+pub type MeshArrays = (Vec<[f64; 3]>, Vec<[i64; 4]>);
+
 /// Read a gmsh 4.1 ASCII mesh: (points in mesh units, tets).
-pub fn read_msh4(path: &Path) -> Result<(Vec<[f64; 3]>, Vec<[i64; 4]>), String> {
+pub fn read_msh4(path: &Path) -> Result<MeshArrays, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
     let mut lines = text.lines();
     let mut points = Vec::new();

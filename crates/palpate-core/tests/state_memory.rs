@@ -1,0 +1,130 @@
+//! The integrator's memory (issue 16): a state saved with [`Workspace::memory`] and restored into
+//! another workspace repeats the original steps bit for bit, and returning to a recently used
+//! `dt` costs no factorisation.
+//!
+//! What a wrong implementation would do: a restore that keeps the rest factor where the original
+//! had refreshed it at a deformed state (or that resets the refresh rule's count) takes different
+//! quasi-Newton iterations, caught by the bitwise comparison under a press firm enough to refresh;
+//! a cache keyed wrongly, or one that hands back a refreshed factor, either refactorises
+//! (counted) or changes the result against a run without the cache (compared bitwise).
+
+#[path = "support/common.rs"]
+mod common;
+
+use common::*;
+use palpate_core::mesh::generate::{base_nodes, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
+use palpate_core::{step, Integrator, Model, ModelBuilder, State, Vec3, Workspace};
+
+fn model(integ: Integrator) -> Model {
+    let p = TruncatedEllipsoidWall::with_resolution(3);
+    let mesh = truncated_ellipsoid_wall(&p);
+    let fixed = base_nodes(&mesh, p.z_cut, 1e-9);
+    ModelBuilder::new(mesh, material(3.0e4, 0.4, 1000.0, 0.5, 0.5))
+        .fixed_nodes(fixed)
+        .gravity(Vec3::new(0.0, 0.0, -9.81))
+        .integrator(integ)
+        .build()
+        .unwrap()
+}
+
+fn bits(v: &[Vec3]) -> Vec<u64> {
+    v.iter().flat_map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]).collect()
+}
+
+/// A firm press (2 N, enough for the quasi-Newton rule to refresh its factor) on the top node.
+fn press(model: &Model, s: &mut State) {
+    let pts = model.mesh().points();
+    let top = (0..model.n_nodes()).max_by(|&a, &b| pts[a].z.total_cmp(&pts[b].z)).unwrap();
+    s.f_ext[top] = Vec3::new(0.3, 0.0, -2.0);
+}
+
+#[test]
+fn restored_state_and_memory_repeat_the_steps_bit_for_bit() {
+    for integ in [Integrator::quasi_newton(), Integrator::newton(), Integrator::BackwardEulerLinear, Integrator::semi_implicit()] {
+        let model = model(integ);
+        let dt = if matches!(integ, Integrator::SemiImplicit { .. }) { 1e-4 } else { 1e-3 };
+        let mut s = State::rest(&model);
+        let mut ws = Workspace::new(&model);
+        press(&model, &mut s);
+        let mut refreshed = false;
+        for _ in 0..40 {
+            step(&model, &mut s, &mut ws, dt).unwrap();
+            refreshed |= ws.memory().refreshed_at.is_some();
+        }
+        if matches!(integ, Integrator::BackwardEulerQuasiNewton { .. }) {
+            assert!(refreshed, "the press should make the quasi-Newton rule refresh its factor");
+        }
+        let (saved, mem) = (s.clone(), ws.memory());
+        let mut iters_a = Vec::new();
+        for _ in 0..30 {
+            iters_a.push(step(&model, &mut s, &mut ws, dt).unwrap().iterations);
+        }
+        // Into a fresh workspace, as an unpickled body would.
+        let mut ws2 = Workspace::new(&model);
+        ws2.restore_memory(&model, &mem).unwrap();
+        let mut s2 = saved.clone();
+        let mut iters_b = Vec::new();
+        for _ in 0..30 {
+            iters_b.push(step(&model, &mut s2, &mut ws2, dt).unwrap().iterations);
+        }
+        assert_eq!(iters_a, iters_b, "{integ:?}");
+        assert_eq!(bits(&s.x), bits(&s2.x), "{integ:?}: positions differ");
+        assert_eq!(bits(&s.v), bits(&s2.v), "{integ:?}: velocities differ");
+        assert_eq!(s.t.to_bits(), s2.t.to_bits());
+        // And into the same workspace after it moved on.
+        ws.restore_memory(&model, &mem).unwrap();
+        let mut s3 = saved;
+        for _ in 0..30 {
+            step(&model, &mut s3, &mut ws, dt).unwrap();
+        }
+        assert_eq!(bits(&s.x), bits(&s3.x), "{integ:?}: restore into a used workspace");
+    }
+}
+
+#[test]
+fn alternating_two_dt_refactorises_only_the_first_time_and_changes_nothing() {
+    let model = model(Integrator::quasi_newton());
+    let (dts, n) = ([1e-3, 7e-4], 20);
+    let mut s = State::rest(&model);
+    let mut ws = Workspace::new(&model);
+    s.f_ext[0] = Vec3::new(0.0, 0.0, -1e-3); // a light load: no refresh, only dt changes
+    let mut counts = Vec::new();
+    for k in 0..n {
+        counts.push(step(&model, &mut s, &mut ws, dts[k % 2]).unwrap().factorizations);
+    }
+    assert_eq!(&counts[..2], &[1, 1]);
+    assert!(counts[2..].iter().all(|&c| c == 0), "refactorised on a return to a cached dt: {counts:?}");
+
+    // The same steps with a workspace that never kept a factor (new for each step but its memory):
+    // the cache changes the cost, not the result.
+    let mut s_ref = State::rest(&model);
+    s_ref.f_ext[0] = s.f_ext[0];
+    let mut mem = Workspace::new(&model).memory();
+    for k in 0..n {
+        let mut w = Workspace::new(&model);
+        w.restore_memory(&model, &mem).unwrap();
+        step(&model, &mut s_ref, &mut w, dts[k % 2]).unwrap();
+        mem = w.memory();
+    }
+    assert_eq!(bits(&s.x), bits(&s_ref.x));
+}
+
+#[test]
+fn prepare_factorises_ahead_without_changing_the_next_steps() {
+    let model = model(Integrator::quasi_newton());
+    let mut ws = Workspace::new(&model);
+    let mut s = State::rest(&model);
+    press(&model, &mut s);
+    assert!(ws.prepare(&model, 5e-4).unwrap());
+    assert!(!ws.prepare(&model, 5e-4).unwrap(), "prepared twice");
+    let mut s_ref = s.clone();
+    let mut ws_ref = Workspace::new(&model);
+    for _ in 0..10 {
+        step(&model, &mut s, &mut ws, 1e-3).unwrap();
+        step(&model, &mut s_ref, &mut ws_ref, 1e-3).unwrap();
+    }
+    assert_eq!(bits(&s.x), bits(&s_ref.x));
+    assert_eq!(step(&model, &mut s, &mut ws, 5e-4).unwrap().factorizations, 0);
+    assert!(ws.prepare(&model, f64::NAN).is_err());
+    assert_eq!(palpate_core::integrate::DT_CACHE_SIZE, 3);
+}

@@ -1,0 +1,43 @@
+"""Progress display for long work (downloads, model builds, sweeps, benchmarks): a ``rich``
+progress bar (a spinner with the elapsed time when the amount of work is unknown) on stderr when
+stderr is a terminal, nothing otherwise (logs, pipes, CI, ``--quiet``). ``rich`` comes with
+meshio, a core dependency; without it the display is simply off."""
+from __future__ import annotations
+
+import os
+import sys
+from contextlib import contextmanager
+from typing import Callable, Iterator, Optional
+
+
+def shown(quiet: bool = False) -> bool:
+    """Whether progress is displayed: not ``quiet``, stderr a terminal, and ``TERM`` not ``dumb``."""
+    if quiet or os.environ.get("TERM") == "dumb":
+        return False
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):   # a replaced or closed stderr
+        return False
+
+
+@contextmanager
+def task(description: str, total: Optional[int] = None, quiet: bool = False) -> Iterator[Callable[[int], None]]:
+    """``with task("building", total=n) as advance: ... advance(1)``: a bar over ``total`` units
+    (or a spinner if None) on a terminal; ``advance`` is a no-op otherwise."""
+    if not shown(quiet):
+        yield lambda k=1: None
+        return
+    try:
+        from rich.console import Console
+        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn,
+                                   TimeElapsedColumn)
+    except ImportError:
+        yield lambda k=1: None
+        return
+    cols = [SpinnerColumn(), TextColumn("{task.description}")]
+    if total is not None:
+        cols += [BarColumn(), MofNCompleteColumn()]
+    cols.append(TimeElapsedColumn())
+    with Progress(*cols, console=Console(stderr=True), transient=True) as p:
+        t = p.add_task(description, total=total)
+        yield lambda k=1: p.advance(t, k)

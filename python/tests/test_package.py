@@ -1,0 +1,59 @@
+"""What a user installing palpate sees before running it: the licence texts and the data
+attribution, the metadata, and a core install of numpy and meshio (plotting and the reference FEM
+are extras)."""
+import subprocess
+import sys
+
+from conftest import REPO
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+PYPROJECT = tomllib.loads((REPO / "python" / "pyproject.toml").read_text())["project"]
+
+
+def test_licence_files_and_data_attribution():
+    for name in ("LICENSE-MIT", "LICENSE-APACHE", "NOTICE"):
+        assert (REPO / name).is_file(), name
+        # The wheel takes them from python/ (PEP 639 paths are relative to pyproject.toml).
+        assert (REPO / "python" / name).read_text() == (REPO / name).read_text()
+    assert "Apache License" in (REPO / "LICENSE-APACHE").read_text()
+    notice = (REPO / "NOTICE").read_text()
+    for needed in ("CC BY 4.0", "Rodero", "10.1371/journal.pcbi.1008851", "MIT OR Apache-2.0"):
+        assert needed in notice, needed
+
+
+def test_pyproject_metadata():
+    assert PYPROJECT["license"] == "MIT OR Apache-2.0"
+    assert set(PYPROJECT["license-files"]) == {"LICENSE-MIT", "LICENSE-APACHE", "NOTICE"}
+    for key in ("readme", "authors", "classifiers", "requires-python", "description"):
+        assert PYPROJECT.get(key), key
+
+
+def test_core_dependencies_are_numpy_and_meshio():
+    core = {d.split(">")[0].split(";")[0].strip() for d in PYPROJECT["dependencies"]}
+    assert core == {"numpy", "meshio", "tomli"}   # tomli: Python < 3.11 only
+    extras = PYPROJECT["optional-dependencies"]
+    assert any(d.startswith("matplotlib") for d in extras["plot"])
+    assert any(d.startswith("scikit-fem") for d in extras["test"])
+
+
+def test_import_needs_no_extra():
+    # A core install has no matplotlib or scikit-fem: importing palpate and its CLI must not need them.
+    code = ("import sys; import palpate, palpate.cli, palpate.touch, palpate.demo, palpate.io; "
+            "bad = [m for m in ('matplotlib', 'skfem', 'scipy') if m in sys.modules]; "
+            "assert not bad, bad")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_cargo_metadata():
+    ws = tomllib.loads((REPO / "Cargo.toml").read_text())["workspace"]["package"]
+    assert ws["rust-version"] == "1.89"   # nalgebra 0.35's own rust-version
+    for key in ("license", "authors", "readme"):
+        assert ws.get(key), key
+    for crate in ("crates/palpate-core/Cargo.toml", "python/Cargo.toml"):
+        pkg = tomllib.loads((REPO / crate).read_text())["package"]
+        for key in ("license", "authors", "readme", "rust-version"):
+            assert pkg.get(key) == {"workspace": True}, (crate, key)
