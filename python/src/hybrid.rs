@@ -32,7 +32,7 @@ fn ventricle_surface<'py>(py: Python<'py>, circumferential: usize, longitudinal:
         return Err(PyValueError::new_err(format!("circumferential must be 3 to 4096 and longitudinal 1 to 4096, got {circumferential} and {longitudinal}")));
     }
     let p = palpate_core::mesh::generate::TruncatedEllipsoidWall { circumferential, longitudinal, ..Default::default() };
-    let wall = py.detach(|| hybrid::shapes::truncated_ventricle(&p)).map_err(hybrid_error)?;
+    let wall = errors::guard("ventricle_surface", || py.detach(|| hybrid::shapes::truncated_ventricle(&p)).map_err(hybrid_error))?;
     let parts: Vec<i8> = wall.parts.iter().map(|&w| w as u8 as i8).collect();
     Ok((conv::vec3s_to_py(py, wall.surface.points()), conv::index_rows_to_py(py, wall.surface.triangles()), PyArray1::from_vec(py, parts)))
 }
@@ -42,6 +42,7 @@ fn hybrid_error(e: HybridError) -> PyErr {
         HybridError::Surface(s) => surface_error(s),
         HybridError::Mesh(m) => errors::mesh_error(m),
         HybridError::Parameter { .. } => PyValueError::new_err(e.to_string()),
+        HybridError::Limit(l) => errors::limit_error(&l, None),
         other => errors::ModelError::new_err(other.to_string()),
     }
 }
@@ -139,7 +140,7 @@ pub fn default_options(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 }
 
 fn build_wall(py: Python<'_>, wall: Wall, o: HybridOptions) -> PyResult<PyHybridModel> {
-    let model = py.detach(|| hybrid::build(&wall, &o)).map_err(hybrid_error)?;
+    let model = errors::guard("HybridModel.build", || py.detach(|| hybrid::build(&wall, &o)).map_err(hybrid_error))?;
     Ok(PyHybridModel { model })
 }
 
@@ -211,7 +212,7 @@ impl PyHybridModel {
     /// a foreign, truncated, corrupted or other-version file.
     #[staticmethod]
     fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<PyHybridModel> {
-        let model = py.detach(|| HybridModel::load(&path)).map_err(file_error)?;
+        let model = errors::guard(&format!("HybridModel.load({})", path.display()), || py.detach(|| HybridModel::load(&path)).map_err(file_error))?;
         Ok(PyHybridModel { model })
     }
 

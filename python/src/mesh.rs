@@ -50,7 +50,7 @@ impl PyTetMesh {
     fn new(py: Python<'_>, points: &Bound<'_, PyAny>, tets: &Bound<'_, PyAny>, source: Option<String>) -> PyResult<Self> {
         let p = conv::points(points, "points")?;
         let t = conv::index_rows::<4>(tets, "tets")?;
-        let (mesh, warnings) = TetMesh::from_arrays(&p, &t).map_err(|e| match &source {
+        let (mesh, warnings) = errors::guard("TetMesh", || Ok(TetMesh::from_arrays(&p, &t)))?.map_err(|e| match &source {
             Some(s) => errors::mesh_error(e.in_file(s.clone())),
             None => errors::mesh_error(e),
         })?;
@@ -174,7 +174,7 @@ pub fn ellipsoid_wall(
     };
     check_shell(p.inner, p.outer, p.layers)?;
     check_size(4usize.checked_pow(p.subdivisions.min(64) as u32).and_then(|f| f.checked_mul(24)).and_then(|f| f.checked_mul(p.layers)))?;
-    Ok(PyTetMesh::from_core(py.detach(|| generate::ellipsoid_wall(&p))))
+    errors::guard("ellipsoid_wall", || Ok(PyTetMesh::from_core(py.detach(|| generate::try_ellipsoid_wall(&p)).map_err(errors::mesh_error)?)))
 }
 
 /// The left-ventricle-like wall: between two concentric ellipsoids, above the plane z = z_cut.
@@ -234,7 +234,7 @@ pub fn truncated_ellipsoid_wall(
             .and_then(|t| t.checked_mul(3))
             .and_then(|t| t.checked_mul(p.layers)),
     )?;
-    Ok(PyTetMesh::from_core(py.detach(|| generate::truncated_ellipsoid_wall(&p))))
+    errors::guard("truncated_ellipsoid_wall", || Ok(PyTetMesh::from_core(py.detach(|| generate::try_truncated_ellipsoid_wall(&p)).map_err(errors::mesh_error)?)))
 }
 
 /// The box [0, sx] x [0, sy] x [0, sz] [m] cut into nx * ny * nz cells of 6 tets each.
@@ -258,5 +258,5 @@ pub fn box_mesh(py: Python<'_>, size: [f64; 3], cells: [usize; 3]) -> PyResult<P
         return Err(PyValueError::new_err(format!("box needs at least one cell per axis, got {cells:?}")));
     }
     check_size(cells[0].checked_mul(cells[1]).and_then(|c| c.checked_mul(cells[2])).and_then(|c| c.checked_mul(6)))?;
-    Ok(PyTetMesh::from_core(py.detach(|| generate::box_mesh(size, cells))))
+    errors::guard("box_mesh", || Ok(PyTetMesh::from_core(py.detach(|| generate::try_box_mesh(size, cells)).map_err(errors::mesh_error)?)))
 }

@@ -61,6 +61,16 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     }
     // --- transmural field ---
     let h = (wall_volume / o.field_voxels as f64).cbrt();
+    // The voxel grid spans the wall's bounding box, sized by the wall's volume: a thin wall (or
+    // a wrongly scaled surface) makes the box hold 1e4x more voxels than the wall. Refused over
+    // the memory budget before it is taken (~40 bytes a voxel in the field solve).
+    let (lo, hi) = surf.bounding_box();
+    let dims = (hi - lo).map(|e| (e + 4.0 * h) / h);
+    crate::limits::check_grid(
+        &format!("transmural voxel grid ({:.0} x {:.0} x {:.0} voxels of {h:.3e} m for a wall of {wall_volume:.3e} m^3: the wall is thin for its bounding box; lower field_voxels)", dims.x, dims.y, dims.z),
+        [dims.x, dims.y, dims.z],
+        40.0,
+    )?;
     let mean_edge = (surf.area() / surf.n_triangles() as f64 * 2.3).sqrt();
     let wall_grid = TriangleGrid::new(surf.points(), surf.triangles(), mean_edge.max(0.5 * h));
     let field = transmural::solve(surf, &wall.parts, h, &wall_grid);

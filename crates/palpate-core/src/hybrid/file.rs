@@ -220,8 +220,59 @@ pub fn from_bytes(bytes: &[u8], path: &str) -> Result<HybridModel, ModelFileErro
     for s in &SECTIONS {
         (s.check)(&m).map_err(|reason| r.corrupt(reason))?;
     }
+    semantic(&m).map_err(|reason| r.corrupt(reason))?;
     outer::derive(&mut m);
     Ok(m)
+}
+
+/// What a built model guarantees beyond index ranges, checked on load so that a crafted file is
+/// as safe to use as a freshly built model (the checksum only catches accidents: anyone can
+/// write a file with a valid checksum). Finite, physical numbers everywhere (a NaN option or
+/// mass would load and print `nan`, or poison the first tick); region ring counts no larger than
+/// the builder makes (each region is regrown ring by ring on demand: 255 rings everywhere made a
+/// crafted file take a minute); the skin's barycentric weights; voxel owners in range; the core a
+/// valid tet mesh (no degenerate or inverted tet: the runtime factorises its stiffness).
+fn semantic(m: &HybridModel) -> Result<(), String> {
+    options::check(&m.options).map_err(|e| format!("options: {e}"))?;
+    if !(m.wall_volume > 0.0 && m.wall_volume.is_finite()) {
+        return Err(format!("wall volume {} m^3 must be positive and finite", m.wall_volume));
+    }
+    let s = &m.stats;
+    for (name, t) in [("field", s.field_s), ("core", s.core_s), ("particles", s.particles_s), ("regions", s.regions_s), ("total", s.total_s)] {
+        if !(t >= 0.0 && t.is_finite()) {
+            return Err(format!("build statistics: {name} time {t} s must be non-negative and finite"));
+        }
+    }
+    if let Some(i) = m.particle_mass.iter().position(|&x| !(x > 0.0 && x.is_finite())) {
+        return Err(format!("particle {i}: mass {} kg must be positive and finite", m.particle_mass[i]));
+    }
+    if let Some(i) = m.region_rings.iter().position(|&r| r as usize > 2 * options::MAX_RINGS) {
+        return Err(format!("region {i}: {} rings, more than the builder makes ({})", m.region_rings[i], 2 * options::MAX_RINGS));
+    }
+    for (v, b) in m.skin_bary.iter().enumerate() {
+        let sum: f64 = b.iter().sum();
+        if !b.iter().all(|x| x.is_finite() && (-1e-6..=1.0 + 1e-6).contains(x)) || (sum - 1.0).abs() > 1e-6 {
+            return Err(format!("skin vertex {v}: barycentric weights {b:?} are not in [0, 1] with sum 1"));
+        }
+    }
+    let g = &m.grid;
+    if !g.origin.iter().all(|x| x.is_finite()) {
+        return Err(format!("voxel grid origin {:?} is not finite", g.origin));
+    }
+    let nt = m.outer_tris.len() as u32;
+    if let Some(v) = m.voxel_owner.iter().position(|&o| o >= nt && o != region_field::VOXEL_OUTSIDE && o != region_field::VOXEL_CORE) {
+        return Err(format!("voxel {v}: owner {} out of range ({nt} outer triangles)", m.voxel_owner[v]));
+    }
+    if m.outer_tris.is_empty() || m.particles.is_empty() || m.core_tets.is_empty() {
+        return Err("empty model: no outer triangles, particles or core tets".into());
+    }
+    let pts: Vec<[f64; 3]> = m.core_points.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let tets: Vec<[i64; 4]> = m.core_tets.iter().map(|t| t.map(|i| i as i64)).collect();
+    match crate::mesh::TetMesh::from_arrays(&pts, &tets) {
+        Ok((_, w)) if w.is_empty() => Ok(()),
+        Ok((_, w)) => Err(format!("FEM core: {} inverted tets (first: {})", w.len(), w[0])),
+        Err(e) => Err(format!("FEM core: {e}")),
+    }
 }
 
 /// Every entry of `v` below `n`, or which is not.
@@ -250,7 +301,16 @@ impl HybridModel {
 
     /// Load from `path`.
     pub fn load(path: &std::path::Path) -> Result<HybridModel, ModelFileError> {
-        let bytes = std::fs::read(path).map_err(|e| ModelFileError::Io { path: path.display().to_string(), reason: e.to_string() })?;
-        from_bytes(&bytes, &path.display().to_string())
+        let name = path.display().to_string();
+        let io = |e: std::io::Error| ModelFileError::Io { path: name.clone(), reason: e.to_string() };
+        // A FIFO or a device would block the read forever (or never end): regular files only.
+        let meta = std::fs::metadata(path).map_err(io)?;
+        if !meta.is_file() {
+            let kind = if meta.is_dir() { "a directory" } else { "not a regular file (a FIFO, socket or device?)" };
+            return Err(ModelFileError::Io { path: name, reason: format!("{kind}: a model file must be a regular file") });
+        }
+        crate::limits::check("model file", meta.len() as f64, 1.0).map_err(|source| ModelFileError::Limit { path: name.clone(), source })?;
+        let bytes = std::fs::read(path).map_err(io)?;
+        from_bytes(&bytes, &name)
     }
 }
