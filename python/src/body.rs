@@ -8,7 +8,6 @@ use numpy::{PyArray1, PyArray2};
 use palpate_core::integrate::{static_solve, StaticOptions};
 use palpate_core::probe::{self, ProbeLoad, ProbeOptions, Ramp, StepClock, StepTotals};
 use palpate_core::{step, Model, ModelBuilder, State, Vec3, Workspace};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -70,16 +69,16 @@ impl StepClock for WallClock {
 fn py_load(n: usize, nodes: Vec<usize>, total_force: &Bound<'_, PyAny>, ramp_time: f64, start: f64) -> PyResult<ProbeLoad> {
     let total = conv::vec3(total_force, "total_force")?;
     if !(ramp_time >= 0.0 && ramp_time.is_finite()) {
-        return Err(PyValueError::new_err(format!("ramp_time = {ramp_time} s must be finite and >= 0")));
+        return Err(crate::errors::param_error_from(format!("ramp_time = {ramp_time} s must be finite and >= 0")));
     }
-    ProbeLoad::new(n, nodes, total, Ramp { start, duration: ramp_time }).map_err(|e| PyValueError::new_err(format!("nodes: {e}")))
+    ProbeLoad::new(n, nodes, total, Ramp { start, duration: ramp_time }).map_err(|e| crate::errors::param_error_from(format!("nodes: {e}")))
 }
 
 impl PyBody {
     /// `probe::run_probe` timed by a wall clock, GIL released; its result as a dict.
     fn run_timed<'py>(&mut self, py: Python<'py>, loads: &[ProbeLoad], steps: usize, dt: f64, stable_limit: f64, max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
         if steps == 0 {
-            return Err(PyValueError::new_err("steps must be at least 1"));
+            return Err(crate::errors::param_error_from("steps must be at least 1"));
         }
         let opts = ProbeOptions { max_wall_s, ..ProbeOptions::new(steps, dt, stable_limit) };
         let run = py.detach(|| {
@@ -158,7 +157,8 @@ impl PyBody {
     /// Other Python threads run meanwhile; they cannot use this body until the call returns
     /// (doing so raises ``RuntimeError: Already borrowed``).
     #[pyo3(signature = (n = 1, dt = 1e-3))]
-    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: usize, dt: f64) -> PyResult<Bound<'py, PyDict>> {
+    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: i64, dt: f64) -> PyResult<Bound<'py, PyDict>> {
+        let n = errors::count(n, "n")?;
         let this = &mut *slf;
         let tot = py
             .detach(|| this.run_steps(n, dt))
@@ -180,7 +180,9 @@ impl PyBody {
 
     /// Set the external force on every node [N], array (n, 3); held until changed.
     fn set_forces(&mut self, forces: &Bound<'_, PyAny>) -> PyResult<()> {
-        self.state.f_ext = conv::vec3s(forces, "forces", self.model.n_nodes(), true)?;
+        let f = conv::vec3s(forces, "forces", self.model.n_nodes(), true)?;
+        errors::warn_fixed_load(forces.py(), self.model.fixed(), f.iter().map(|v| v.norm()).enumerate(), "set_forces")?;
+        self.state.f_ext = f;
         Ok(())
     }
 
@@ -302,7 +304,7 @@ impl PyBody {
             _ => self.state.f_ext.clone(),
         };
         if !(tolerance > 0.0 && tolerance.is_finite()) {
-            return Err(PyValueError::new_err(format!("tolerance = {tolerance} must be positive")));
+            return Err(crate::errors::param_error_from(format!("tolerance = {tolerance} must be positive")));
         }
         let opts = StaticOptions { max_iterations, tolerance, load_steps: load_steps.max(1) };
         let model = &self.model;
@@ -338,14 +340,16 @@ impl PyBody {
         nodes: &Bound<'py, PyAny>,
         total_force: &Bound<'py, PyAny>,
         ramp_time: f64,
-        steps: usize,
+        steps: i64,
         dt: f64,
         stable_limit: f64,
         max_wall_s: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let steps = errors::count(steps, "steps")?;
         let this = &mut *slf;
         let n = this.model.n_nodes();
         let loaded = conv::node_indices(nodes, "nodes", n)?;
+        errors::warn_fixed_load(py, this.model.fixed(), loaded.iter().map(|&i| (i, 1.0)), "run_probe")?;
         let load = py_load(n, loaded, total_force, ramp_time, this.state.t)?;
         this.run_timed(py, &[load], steps, dt, stable_limit, max_wall_s)
     }
@@ -362,7 +366,7 @@ impl PyBody {
         mut slf: PyRefMut<'py, Self>,
         py: Python<'py>,
         loads: Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)>,
-        steps: usize,
+        steps: i64,
         dt: f64,
         ramp_start: Option<f64>,
         stable_limit: f64,
@@ -376,6 +380,11 @@ impl PyBody {
             .enumerate()
             .map(|(k, (nodes, force, ramp))| py_load(n, conv::node_indices(nodes, &format!("loads[{k}] nodes"), n)?, force, *ramp, start))
             .collect::<PyResult<Vec<_>>>()?;
+        let steps = errors::count(steps, "steps")?;
+        for (k, l) in loads.iter().enumerate() {
+            let share = l.total_force().norm() / l.nodes().len().max(1) as f64;
+            errors::warn_fixed_load(py, this.model.fixed(), l.nodes().iter().map(|&i| (i, share)), &format!("run_loads: loads[{k}]"))?;
+        }
         this.run_timed(py, &loads, steps, dt, stable_limit, max_wall_s)
     }
 

@@ -66,6 +66,12 @@ create_exception!(
 );
 create_exception!(
     palpate,
+    LoadWarning,
+    PyUserWarning,
+    "A load that the body will not carry as given (force on fixed nodes, which the solver drops)."
+);
+create_exception!(
+    palpate,
     InternalError,
     PalpateError,
     "A palpate bug caught at the binding (a Rust panic): the operation was abandoned and nothing it \
@@ -89,6 +95,38 @@ pub fn param_error(msg: String) -> PyErr {
     })
 }
 
+/// [`param_error`] of anything printable (the binding's argument checks).
+pub fn param_error_from(msg: impl Into<String>) -> PyErr {
+    param_error(msg.into())
+}
+
+/// Warn (`palpate.LoadWarning`) when external force falls on fixed nodes: the solver drops it, so
+/// the body carries less load than was asked (28 % of a probe's force in one report). `force`
+/// gives each loaded node's force; `what` names the call.
+pub fn warn_fixed_load(py: Python<'_>, fixed: &[bool], loaded: impl IntoIterator<Item = (usize, f64)>, what: &str) -> PyResult<()> {
+    let (mut total, mut dropped, mut nodes) = (0.0, 0.0, Vec::new());
+    for (i, f) in loaded {
+        total += f;
+        if fixed.get(i).copied().unwrap_or(false) && f > 0.0 {
+            dropped += f;
+            nodes.push(i);
+        }
+    }
+    if nodes.is_empty() {
+        return Ok(());
+    }
+    let share = if total > 0.0 { 100.0 * dropped / total } else { 0.0 };
+    let shown: Vec<String> = nodes.iter().take(5).map(|i| i.to_string()).collect();
+    let msg = format!(
+        "{what}: {} loaded node(s) are fixed (node {}{}): their load is dropped, {share:.1} % of the total force",
+        nodes.len(),
+        shown.join(", "),
+        if nodes.len() > 5 { ", ..." } else { "" }
+    );
+    let msg = CString::new(msg).unwrap_or_default();
+    PyErr::warn(py, &py.get_type::<LoadWarning>(), &msg, 1)
+}
+
 static PARAMETER: pyo3::sync::PyOnceLock<Py<PyAny>> = pyo3::sync::PyOnceLock::new();
 
 /// Register the classes on the module and give the detail attributes a class-level `None`.
@@ -107,6 +145,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     limit.setattr("budget", py.None())?;
     m.add("LimitError", limit)?;
     m.add("InternalError", py.get_type::<InternalError>())?;
+    m.add("LoadWarning", py.get_type::<LoadWarning>())?;
     // A model file that cannot be opened or read: both a ModelFileError (a PalpateError) and an
     // OSError (what `except OSError` callers of the earlier API expect).
     let io_type = py.import("builtins")?.getattr("type")?.call1((
@@ -298,8 +337,11 @@ fn surface_location(e: &CoreSurfaceError) -> (Option<usize>, Option<usize>) {
 /// A core surface error as a Python exception: bad sampling arguments are `ValueError`, the rest
 /// `SurfaceError` with `.triangle` / `.vertex`.
 pub fn surface_error(e: CoreSurfaceError) -> PyErr {
+    if let CoreSurfaceError::Limit(l) = &e {
+        return limit_error(l, None);
+    }
     if matches!(e, CoreSurfaceError::Parameter { .. } | CoreSurfaceError::TooLarge { .. }) {
-        return PyValueError::new_err(e.to_string());
+        return param_error(e.to_string());
     }
     let (triangle, vertex) = surface_location(&e);
     let err = SurfaceError::new_err(e.to_string());

@@ -6,7 +6,6 @@ use std::time::Instant;
 use numpy::{PyArray1, PyArray2};
 use palpate_core::meshfree::{Kernel, ParticleModel, ParticleModelBuilder, ParticleState, ParticleWorkspace, DEFAULT_HOURGLASS, DEFAULT_MIN_WEIGHT};
 use palpate_core::Vec3;
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -60,7 +59,7 @@ fn check_dt(dt: f64) -> PyResult<()> {
     if dt > 0.0 && dt.is_finite() {
         Ok(())
     } else {
-        Err(PyValueError::new_err(format!("dt = {dt} s must be positive and finite")))
+        Err(crate::errors::param_error_from(format!("dt = {dt} s must be positive and finite")))
     }
 }
 
@@ -290,7 +289,7 @@ impl PyParticleBody {
     /// Neighbours of particle ``i`` at rest, int64, ascending.
     fn neighbours<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
         if i >= self.model.n_particles() {
-            return Err(PyValueError::new_err(format!("particle index {i} out of range (the body has {} particles)", self.model.n_particles())));
+            return Err(crate::errors::param_error_from(format!("particle index {i} out of range (the body has {} particles)", self.model.n_particles())));
         }
         Ok(conv::usizes_to_py(py, self.model.neighbours(i)))
     }

@@ -63,9 +63,9 @@ def verdict(case, r):
         return f"outcome {o} ({r.get('type')}: {r.get('message', '')[:300]}), expected {case['expect']}"
     if o == "error" and case.get("types") and r["type"] not in case["types"] and not set(case["types"]) & set(r.get("mro", [])):
         return f"error {r['type']} ({r['message'][:300]}), expected one of {case['types']}"
-    if o == "error":
+    if o == "error" and r["type"] != "ParameterError":  # a bad argument is not about a file
         msg = r["message"]
-        files = [a for a in case.get("code", "").split("'") if "." in a and "/" not in a and " " not in a]
+        files = case.get("names") or [a for a in case.get("code", "").split("'") if "." in a and "/" not in a and " " not in a]
         if "os.path.join(D" in case.get("code", "") and files and not any(f in msg for f in files):
             return f"error message does not name the file {files}: {msg[:300]}"
     if r.get("seconds", 0) > 10:

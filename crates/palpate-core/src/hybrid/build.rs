@@ -87,6 +87,10 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     // --- particles, and the shared voxels they take their outer triangle from ---
     let t0 = Instant::now();
     let spacing = shell::spacing(o, wall_volume, m.core_volume());
+    // Each particle costs the build and the model ~600 bytes (position, mass, owners, regions,
+    // neighbour searches): refused over the budget before the lattice is filled.
+    let estimate = (wall_volume - m.core_volume()).max(0.0) / (spacing * spacing * spacing);
+    crate::limits::check(&format!("particle shell of about {estimate:.3e} particles at spacing {spacing:e} m"), estimate, 600.0)?;
     let core_grid = TetGrid::new(&m.core_points, &m.core_tets, 2.0 * spacing.max(h));
     let particles = shell::lattice(wall, &m.core_points, &core_grid, spacing, o.density)?;
     outer::build(&mut m, wall);
