@@ -227,6 +227,13 @@ def _model_file_cases(c: Corpus, rng):
     if not os.path.exists(fifo):
         os.mkfifo(fifo)
     c.api("model_fifo", "hang", _loader("model", "a_fifo.palpate"), ["error"], ["ModelFileIOError"])
+    # Swapped tags on one closed wall (inner tagged outer and the reverse): detected.
+    c.api("build_tagged_swapped", "silent",
+          "v, t, part = palpate.ventricle_surface(48, 12); part = np.where(part == 2, 2, 1 - part)\n"
+          "palpate.HybridModel.build_tagged(v, t, part, particles=400, field_voxels=20000)", ["error"], ["ModelError"])
+    c.api("build_tagged_correct", "seed",
+          "v, t, part = palpate.ventricle_surface(48, 12)\n"
+          "palpate.HybridModel.build_tagged(v, t, part, particles=400, field_voxels=20000)", ["ok"])
     # Swapped surfaces (inner given as outer): detected.
     c.api("build_swapped_surfaces", "silent",
           "a = palpate.ellipsoid_surface((0.02, 0.02, 0.035), 3); b = palpate.ellipsoid_surface((0.026, 0.026, 0.042), 3)\n"
@@ -471,7 +478,7 @@ def _cli_cases(c: Corpus):
         ("cli_bench_not_ventricle", "untyped", ["bench", "protocol", "{D}/seed.vtk", "--steps", "2"], (2,)),
         ("cli_bench_bomb", "bomb", ["bench", "protocol", "{D}/bomb.vtu"], (2,)),
         ("cli_build_out_dir", "output", ["build", "--shape", "ellipsoids", "-o", "{D}/a_directory.palpate", "--particles", "400", "--field-voxels", "20000"], (1, 2)),
-        ("cli_build_out_dotdot", "output", ["build", "--shape", "ellipsoids", "-o", "..", "--particles", "400"], (1, 2)),
+        ("cli_build_out_dotdot", "output", ["build", "--shape", "ellipsoids", "-o", "..", "--particles", "400", "--field-voxels", "20000"], (1, 2)),
         ("cli_build_thin_surfaces", "abort", ["build", "{D}/seed.obj", "{D}/seed.obj", "-o", "{D}/out.palpate", "--unit", "mm"], (1, 2)),
         ("cli_build_swapped", "silent", ["build", "{D}/outer.vtp", "{D}/inner.vtp", "-o", "{D}/out2.palpate", "--unit", "mm"], (1, 2)),
         ("cli_build_field_voxels", "abort", ["build", "--shape", "ellipsoids", "-o", "{D}/out3.palpate", "--field-voxels", "1000000000000"], (1, 2)),

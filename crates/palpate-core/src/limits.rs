@@ -20,7 +20,10 @@ pub const ENV: &str = "PALPATE_MAX_MEMORY";
 /// A size such as `"8G"`, `"512M"`, `"1e9"` or `"1073741824"` in bytes; `None` if unreadable or
 /// not positive.
 pub fn parse_size(s: &str) -> Option<u64> {
+    // "2GiB", "2GB", "2G" alike: drop a trailing B, then a trailing i, then read the unit.
     let s = s.trim();
+    let s = s.strip_suffix(['B', 'b']).unwrap_or(s);
+    let s = s.strip_suffix(['i', 'I']).unwrap_or(s);
     let (num, mul) = match s.chars().last()?.to_ascii_uppercase() {
         'K' => (&s[..s.len() - 1], 1u64 << 10),
         'M' => (&s[..s.len() - 1], 1 << 20),
@@ -28,7 +31,7 @@ pub fn parse_size(s: &str) -> Option<u64> {
         'T' => (&s[..s.len() - 1], 1 << 40),
         _ => (s, 1),
     };
-    let v: f64 = num.trim().trim_end_matches(['i', 'I', 'b', 'B']).parse().ok()?;
+    let v: f64 = num.trim().parse().ok()?;
     let bytes = v * mul as f64;
     (bytes.is_finite() && bytes >= 1.0 && bytes < 1.8e19).then_some(bytes as u64)
 }
