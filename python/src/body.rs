@@ -81,10 +81,12 @@ impl PyBody {
             return Err(crate::errors::param_error_from("steps must be at least 1"));
         }
         let opts = ProbeOptions { max_wall_s, ..ProbeOptions::new(steps, dt, stable_limit) };
-        let run = py.detach(|| {
-            let mut clock = WallClock(Instant::now());
-            probe::run_probe(&self.model, &mut self.state, &mut self.ws, loads, &opts, &mut clock)
-        });
+        let run = errors::guard("Body.run_probe", || {
+            Ok(py.detach(|| {
+                let mut clock = WallClock(Instant::now());
+                probe::run_probe(&self.model, &mut self.state, &mut self.ws, loads, &opts, &mut clock)
+            }))
+        })?;
         let d = PyDict::new(py);
         d.set_item("steps", run.steps)?;
         d.set_item("wall_s", run.wall_s)?;
@@ -133,7 +135,7 @@ impl PyBody {
             .fixed_nodes(fixed)
             .gravity(gravity)
             .integrator(integrator);
-        let model = py.detach(|| builder.build()).map_err(errors::model_error)?;
+        let model = errors::guard("Body", || py.detach(|| builder.build()).map_err(errors::model_error))?;
         let state = State::rest(&model);
         let ws = Workspace::new(&model);
         Ok(PyBody { model, state, ws, mesh: mesh.unbind(), material: material.unbind() })
@@ -160,9 +162,9 @@ impl PyBody {
     fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: i64, dt: f64) -> PyResult<Bound<'py, PyDict>> {
         let n = errors::count(n, "n")?;
         let this = &mut *slf;
-        let tot = py
-            .detach(|| this.run_steps(n, dt))
-            .map_err(|(k, e)| errors::step_error(e, &format!("in step {} of {n}", k + 1)))?;
+        let tot = errors::guard("Body.step", || {
+            py.detach(|| this.run_steps(n, dt)).map_err(|(k, e)| errors::step_error(e, &format!("in step {} of {n}", k + 1)))
+        })?;
         let d = PyDict::new(py);
         d.set_item("steps", tot.steps)?;
         d.set_item("iterations", tot.iterations)?;
@@ -308,7 +310,7 @@ impl PyBody {
         }
         let opts = StaticOptions { max_iterations, tolerance, load_steps: load_steps.max(1) };
         let model = &self.model;
-        let sol = py.detach(|| static_solve(model, &f, &opts)).map_err(errors::solve_error)?;
+        let sol = errors::guard("Body.static_solve", || py.detach(|| static_solve(model, &f, &opts)).map_err(errors::solve_error))?;
         Ok(conv::vec3s_to_py(py, &sol.x))
     }
 

@@ -104,7 +104,7 @@ impl PyHybridSim {
             options.max_substeps = k;
         }
         let (hm, mat) = (model.model.clone(), material.inner);
-        let sim = py.detach(|| Sim::new(hm, mat, options)).map_err(errors::model_error)?;
+        let sim = errors::guard("HybridSim", || py.detach(|| Sim::new(hm, mat, options)).map_err(errors::model_error))?;
         let state = SimState::rest(&sim);
         let ws = SimWorkspace::new(&sim);
         Ok(PyHybridSim { sim, state, ws, last: TickReport::default() })
@@ -119,7 +119,7 @@ impl PyHybridSim {
     fn step<'py>(&mut self, py: Python<'py>, tool_centre: &Bound<'py, PyAny>, dt: f64) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let c = conv::vec3(tool_centre, "tool_centre")?;
         let (sim, state, ws) = (&self.sim, &mut self.state, &mut self.ws);
-        let r = py.detach(|| tick(sim, state, ws, c, dt)).map_err(|e| errors::step_error(e, "in the hybrid tick"))?;
+        let r = errors::guard("HybridSim.step", || py.detach(|| tick(sim, state, ws, c, dt)).map_err(|e| errors::step_error(e, "in the hybrid tick")))?;
         self.last = r;
         Ok(conv::vec3_to_py(py, r.force))
     }
