@@ -33,7 +33,7 @@ pub fn parse_size(s: &str) -> Option<u64> {
     };
     let v: f64 = num.trim().parse().ok()?;
     let bytes = v * mul as f64;
-    (bytes.is_finite() && bytes >= 1.0 && bytes < 1.8e19).then_some(bytes as u64)
+    (1.0..1.8e19).contains(&bytes).then_some(bytes as u64)
 }
 
 /// The budget in bytes: `PALPATE_MAX_MEMORY` when set and readable, else the default.

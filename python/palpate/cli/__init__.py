@@ -61,7 +61,16 @@ def main(argv: Optional[List[str]] = None) -> int:
         return quiet_pipe()
     if getattr(a, "steps", None) is not None and a.steps <= 0:
         ap.error("--steps must be positive")
-    return _flushed(run_guarded(lambda: a.func(a)))
+    import warnings
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        # A warning is one line too (`palpate: warning: ...`), not Python's two-line format with
+        # the source line.
+        print(f"palpate: warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = one_line
+        return _flushed(run_guarded(lambda: a.func(a)))
 
 
 def _flushed(code: int) -> int:
