@@ -99,3 +99,19 @@ clean:
 
 distclean: clean
 	rm -rf $(VENV) target
+
+# Hardening (issue 15). The malformed-input corpus (python/tests/test_corpus.py) and the readers'
+# mutation fuzzing (test_corpus_fuzz.py) run in `make pytest`. Coverage-guided fuzzing of the
+# model-file loader and the mesh validators (fuzz/, libFuzzer) needs a nightly toolchain and
+# cargo-fuzz (`cargo install cargo-fuzz`): `make fuzz` runs every target FUZZ_SECONDS each (CI:
+# `make fuzz-ci`, 20 s each, skipped with a note where cargo-fuzz or nightly is missing).
+FUZZ_SECONDS ?= 60
+FUZZ_TARGETS := model_file model_payload tet_mesh tri_surface
+.PHONY: fuzz fuzz-ci
+fuzz:
+	cd fuzz && for t in $(FUZZ_TARGETS); do \
+	  mkdir -p corpus/$$t && cargo +nightly fuzz run $$t corpus/$$t seeds/$$t -- -max_total_time=$(FUZZ_SECONDS) \
+	    -rss_limit_mb=2048 -timeout=10 || exit 1; done
+fuzz-ci:
+	@if cargo +nightly fuzz --version >/dev/null 2>&1; then $(MAKE) fuzz FUZZ_SECONDS=20; \
+	else echo "fuzz-ci: cargo-fuzz or a nightly toolchain is missing: skipped (cargo install cargo-fuzz)"; fi

@@ -37,8 +37,23 @@ class SurfaceError(MeshError):
     vertex: Optional[int]
 
 class ModelFileError(PalpateError): ...
+class ModelFileIOError(ModelFileError, OSError):
+    # OSError's own attributes (errno and strerror are None: the message says why)
+    errno: Optional[int]
+    strerror: Optional[str]
+    filename: Any
+    filename2: Any
+    characters_written: int
+class ParameterError(PalpateError, ValueError): ...
+
+class LimitError(PalpateError):
+    requested: Optional[float]
+    budget: Optional[int]
+
+class InternalError(PalpateError): ...
 
 class MeshWarning(UserWarning): ...
+class LoadWarning(UserWarning): ...
 
 @final
 class TetMesh:

@@ -13,12 +13,82 @@ of each node (e.g. ``"gmsh node 7"``), both for error messages.
 from __future__ import annotations
 
 import os
+import stat
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Tuple, Type
 
 import numpy as np
 
-from ._palpate import MeshError
+from ._palpate import LimitError, MeshError
+
+# ---------------------------------------------------------------------------------------------
+# Input files and the memory budget (the Rust core's crate::limits, mirrored for the readers)
+# ---------------------------------------------------------------------------------------------
+
+#: Default memory budget [bytes] of one input (8 GiB), as the core's ``limits::DEFAULT_MAX_MEMORY``.
+DEFAULT_MAX_MEMORY = 8 << 30
+_UNITS = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def parse_size(text: str) -> Optional[int]:
+    """``"8G"``, ``"512M"``, ``"1e9"`` in bytes (powers of 1024), as the core parses it; None if
+    unreadable or not positive."""
+    t = text.strip().upper().rstrip("B").rstrip("I")
+    mul = 1
+    if t and t[-1] in _UNITS:
+        t, mul = t[:-1], _UNITS[t[-1]]
+    try:
+        v = float(t) * mul
+    except ValueError:
+        return None
+    return int(v) if 1 <= v < 1.8e19 else None
+
+
+def max_memory() -> int:
+    """The memory budget [bytes]: ``PALPATE_MAX_MEMORY`` when set and readable, else 8 GiB."""
+    return parse_size(os.environ.get("PALPATE_MAX_MEMORY", "")) or DEFAULT_MAX_MEMORY
+
+
+def _human(b: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if b < 1024 or unit == "PiB":
+            return f"{b:.0f} B" if unit == "B" else f"{b:.1f} {unit}"
+        b /= 1024
+    return f"{b}"
+
+
+def check_budget(what: str, nbytes: float, name: Optional[str] = None) -> None:
+    """Refuse ``nbytes`` for ``what`` (prefixed by the file ``name``) over the budget, before
+    anything is allocated: a :class:`palpate.LimitError` saying what, how much, the budget and
+    how to raise it."""
+    budget = max_memory()
+    if nbytes <= budget:
+        return
+    prefix = f"{name}: " if name else ""
+    err = LimitError(f"{prefix}{what}: needs {_human(nbytes)}, over the memory budget of {_human(budget)}; "
+                     "raise the budget with the environment variable PALPATE_MAX_MEMORY (e.g. "
+                     "PALPATE_MAX_MEMORY=32G) if the machine has the memory, or check the input")
+    err.requested, err.budget = float(nbytes), budget
+    raise err
+
+
+def check_input_file(path: str, error: Type[Exception] = MeshError) -> int:
+    """The size of the regular file ``path`` [bytes], after refusing with ``error`` a missing file,
+    a directory, and anything that is not a regular file (a FIFO or a device would block the read
+    forever or never end), and with a LimitError a file over the memory budget."""
+    name = os.path.basename(path) or path
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise error(f"{name}: no such file ({path})") from None
+    except OSError as e:
+        raise error(f"{name}: cannot open: {e.strerror or e}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise error(f"{name}: is a directory, not a file ({path})")
+    if not stat.S_ISREG(st.st_mode):
+        raise error(f"{name}: not a regular file (a FIFO, socket or device): palpate reads regular files only")
+    check_budget("reading the file", st.st_size, name)
+    return st.st_size
 
 #: gmsh element type code -> (meshio-style name, nodes per element, topological dimension)
 GMSH_TYPES: Dict[int, Tuple[str, int, int]] = {
@@ -82,11 +152,10 @@ def read_text(path: str, error: Type[Exception] = MeshError) -> str:
     """The file as text; a clear ``error`` (a MeshError by default) for a missing, empty or binary
     file."""
     name = os.path.basename(path)
+    check_input_file(path, error)
     try:
         with open(path, "rb") as fh:
             raw = fh.read()
-    except FileNotFoundError:
-        raise error(f"{name}: no such file ({path})") from None
     except OSError as e:
         raise error(f"{name}: cannot read: {e.strerror or e}") from None
     if not raw.strip():
@@ -99,6 +168,61 @@ def read_text(path: str, error: Type[Exception] = MeshError) -> str:
         raise error(f"{name}: not a text file (invalid UTF-8 at byte {e.start}: binary or garbage)") from None
 
 
+def vtk_xml_inflated_precheck(path: str, error: Type[Exception] = MeshError) -> None:
+    """The bytes a compressed VTK XML file (.vtu, .vtp) inflates to, summed from its block headers
+    (``[nblocks, blocksize, lastsize, ...]`` before each array), against the memory budget before
+    any block is inflated: a 3 MB file of zlib streams can inflate to 3 GB and more."""
+    import base64
+    import binascii
+    import re
+    import struct
+
+    name = os.path.basename(path)
+    with open(path, "rb") as fh:
+        raw = fh.read()
+    head = raw[:4096]
+    if b"compressor=" not in head:
+        return
+    m = re.search(rb'header_type\s*=\s*"(UInt32|UInt64)"', head)
+    big_endian = b'byte_order="BigEndian"' in head
+    fmt, hs = ("Q", 8) if m and m.group(1) == b"UInt64" else ("I", 4)
+    fmt3 = (">" if big_endian else "<") + fmt * 3
+    total = 0
+
+    def add(header: bytes, where: str) -> None:
+        nonlocal total
+        if len(header) < 3 * hs:
+            return  # a cut-short header is the reader's error to name
+        nblocks, bsize, last = struct.unpack(fmt3, header[:3 * hs])
+        total += max(nblocks - 1, 0) * bsize + (last or bsize if nblocks else 0)
+        if total > max_memory():
+            check_budget(f"compressed data inflates to at least {total} bytes (at {where})", total, name)
+
+    def b64_head(text: bytes) -> bytes:
+        chars = 4 * ((3 * hs + 2) // 3)
+        try:
+            return base64.b64decode(text[:chars] + b"=" * (-len(text[:chars]) % 4))
+        except (binascii.Error, ValueError):
+            return b""
+
+    app = raw.find(b"<AppendedData")
+    xml = raw if app < 0 else raw[:app]
+    for k, mm in enumerate(re.finditer(rb"<DataArray([^>]*)>\s*([A-Za-z0-9+/=]{8,})", xml)):
+        if b'format="binary"' in mm.group(1):
+            add(b64_head(mm.group(2)), f"inline array {k}, byte {mm.start(2)}")
+    if app >= 0:
+        enc = re.search(rb'encoding\s*=\s*"(raw|base64)"', raw[app:app + 200])
+        start = raw.find(b"_", app) + 1
+        for k, mm in enumerate(re.finditer(rb"<DataArray([^>]*)>", xml)):
+            attrs = mm.group(1)
+            off = re.search(rb'offset\s*=\s*"\s*(\d+)\s*"', attrs)
+            if b'format="appended"' not in attrs or off is None or start <= 0:
+                continue
+            pos = start + int(off.group(1))
+            header = raw[pos:pos + 3 * hs] if enc is None or enc.group(1) == b"raw" else b64_head(raw[pos:pos + 64])
+            add(header, f"appended array {k}, byte {pos}")
+
+
 # ---------------------------------------------------------------------------------------------
 # gmsh
 # ---------------------------------------------------------------------------------------------
@@ -106,11 +230,12 @@ def read_text(path: str, error: Type[Exception] = MeshError) -> str:
 def gmsh_format(path: str) -> Tuple[str, bool]:
     """(version string, is_binary) from a gmsh file's $MeshFormat header."""
     name = os.path.basename(path)
+    check_input_file(path)
     try:
         with open(path, "rb") as fh:
             head = fh.read(256)
-    except FileNotFoundError:
-        raise MeshError(f"{name}: no such file ({path})") from None
+    except OSError as e:
+        raise MeshError(f"{name}: cannot read: {e.strerror or e}") from None
     if not head.strip():
         raise MeshError(f"{name}: empty file")
     lines = head.split(b"\n")
@@ -132,6 +257,38 @@ def gmsh_format(path: str) -> Tuple[str, bool]:
     if version.split(".")[0] not in ("2", "4"):
         raise MeshError(f"{name}: line 2: unsupported gmsh MSH version {version!r} (palpate reads 2.x and 4.x)")
     return version, binary
+
+
+def gmsh_binary_precheck(path: str) -> None:
+    """A binary gmsh file's $Nodes / $Elements counts against the file's size and the budget,
+    before meshio allocates them (a 200-byte file claiming 1e8 nodes made it allocate 2.4 GB)."""
+    name = os.path.basename(path)
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        raw = fh.read(min(size, 1 << 16)) if size > (1 << 16) else fh.read()
+    for section, per_item in ((b"$Nodes\n", 3 * 8), (b"$Elements\n", 4 * 4)):
+        i = raw.find(section)
+        if i < 0:
+            continue
+        j = i + len(section)
+        line_end = raw.find(b"\n", j)
+        line = raw[j:line_end if line_end >= 0 else None]
+        counts = []
+        try:
+            counts = [int(t) for t in line.split()]
+        except ValueError:
+            counts = []
+        if len(counts) not in (1, 4) and len(raw) >= j + 16:  # MSH 4.1 binary: size_t numbers
+            import struct
+            counts = list(struct.unpack("<QQ", raw[j:j + 16]))
+        if not counts:
+            continue
+        n = counts[1] if len(counts) >= 2 else counts[0]
+        what = section.strip().decode()
+        if n * per_item > size:
+            raise MeshError(f"{name}: byte {j}: {what} announces {n} entries, which need at least {n * per_item} "
+                            f"bytes; the file has {size} (truncated or corrupt header)")
+        check_budget(f"{what} of {n} entries", n * 64.0, name)
 
 
 def read_gmsh_ascii(path: str, version: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:

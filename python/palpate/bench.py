@@ -104,6 +104,11 @@ def setup(name: str, points_mu: np.ndarray, tets: np.ndarray, force: float = FOR
     P, n = probe_point()
     d = np.linalg.norm(p[outer] - P, axis=1)
     loaded = outer[d <= PROBE_R]
+    if len(outer) == 0 or len(fixed) == 0:
+        # Not the protocol's ventricle: no node on its outer ellipsoid or its base plane.
+        raise _p.MeshError(f"{name}: not a benchmark-protocol ventricle mesh ({len(outer)} nodes on the protocol's "
+                           f"outer ellipsoid, {len(fixed)} on its base plane z <= {BASE_TOL} mesh units): "
+                           "palpate bench protocol needs the shared lv_* meshes or a mesh of the same geometry")
     if len(loaded) == 0:
         loaded = outer[[int(np.argmin(d))]]
     mesh = _p.TetMesh(p * SCALE, tets, source=name)

@@ -19,7 +19,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from . import _readers
-from ._palpate import MeshError, TetMesh
+from ._palpate import MeshError, ParameterError, TetMesh
 
 if TYPE_CHECKING:
     from ._palpate import Body, HybridModel, ParticleBody
@@ -38,19 +38,20 @@ def unit_scale(unit: str) -> float:
     try:
         return UNITS[unit]
     except (KeyError, TypeError):
-        raise ValueError(f"unit must be one of {sorted(UNITS)}, got {unit!r}") from None
+        raise ParameterError(f"unit must be one of {sorted(UNITS)}, got {unit!r}") from None
 
 
 def _read_meshio(path: str, fmt: str):
     import meshio
 
     name = os.path.basename(path)
-    if not os.path.exists(path):
-        raise MeshError(f"{name}: no such file ({path})")
-    if os.path.getsize(path) == 0:
+    if _readers.check_input_file(path) == 0:
         raise MeshError(f"{name}: empty file")
     if fmt == "vtu":
         _vtu_precheck(path)
+        _readers.vtk_xml_inflated_precheck(path, MeshError)
+    if fmt == "gmsh" and _readers.gmsh_format(path)[1]:
+        _readers.gmsh_binary_precheck(path)
     # The format's own reader, not meshio.read: that one prints and calls sys.exit(1) on a ReadError.
     reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": meshio.gmsh.read,
               "medit": meshio.medit.read, "abaqus": meshio.abaqus.read}[fmt]
@@ -65,6 +66,11 @@ def _meshio_read(reader, path: str, name: str, fmt: str):
             return reader(path)
     except MeshError:
         raise
+    except MemoryError:
+        _readers.check_budget("reading the file (the reader ran out of memory)", float("inf"), name)
+        raise
+    except RecursionError:
+        raise MeshError(f"{name}: cannot read as {fmt.upper()}: nested too deeply (corrupt or crafted file)") from None
     except (Exception, SystemExit) as e:  # ReadError, but also ValueError, KeyError, XML errors ...
         reason = str(e).strip() or "malformed or truncated file"
         raise MeshError(f"{name}: cannot read as {fmt.upper()} ({type(e).__name__}: {reason})") from None
@@ -85,6 +91,21 @@ def _meshio_arrays(m, name: str, fmt: str):
     return points, blocks, None
 
 
+def _npz_precheck(path: str) -> None:
+    """An .npz is a zip: its members' uncompressed sizes (from the zip directory) against the
+    memory budget before numpy inflates them (a 3 MB file can hold a 3 GB array of zeros)."""
+    import zipfile
+
+    name = os.path.basename(path)
+    try:
+        with zipfile.ZipFile(path) as z:
+            infos = z.infolist()
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as e:
+        raise MeshError(f"{name}: cannot read as NPZ (not a zip archive: {e})") from None
+    for info in infos:
+        _readers.check_budget(f"zip member {info.filename!r} inflates to {info.file_size} bytes", info.file_size, name)
+
+
 def _vtu_precheck(path: str) -> None:
     """Name the defects meshio's VTU reader reports obscurely (an empty piece)."""
     with open(path, "rb") as fh:
@@ -96,8 +117,8 @@ def _vtu_precheck(path: str) -> None:
 
 def _read_npz(path: str):
     name = os.path.basename(path)
-    if not os.path.exists(path):
-        raise MeshError(f"{name}: no such file ({path})")
+    _readers.check_input_file(path)
+    _npz_precheck(path)
     try:
         with np.load(path, allow_pickle=False) as d:
             missing = [k for k in ("points", "tets") if k not in d.files]

@@ -68,6 +68,7 @@ import numpy as np
 
 from . import _palpate as _p
 from ._fields import FieldChecker
+from ._readers import read_text
 from .io import UNITS, VtuSeries, load_mesh, read_mesh_sets
 
 if sys.version_info >= (3, 11):
@@ -76,8 +77,9 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 
-class SceneError(Exception):
-    """An invalid scene file; the message names the file and the key."""
+class SceneError(_p.PalpateError, ValueError):
+    """An invalid scene file; the message names the file and the key. A :class:`palpate.PalpateError`
+    (and a ``ValueError``, as before)."""
 
 
 _GENERATORS = {
@@ -150,17 +152,35 @@ def _material_key(msg: str, given: Dict[str, float]) -> str:
     return "material"
 
 
+def _check_output(path: Path, out: str) -> None:
+    """Refuse an output folder that is empty, ends in ``.`` or ``..`` (the run would write frames
+    into, and clear stale frames from, the current or the parent folder: almost never meant), is
+    an existing file, or contains a NUL byte."""
+    where = f"{path.name}: output folder {out!r}"
+    if not out.strip() or "\0" in out:
+        raise SceneError(f"{where}: give a folder name")
+    if os.path.basename(os.path.normpath(out)) in (".", "..") or os.path.normpath(out) in (".", "..", os.sep):
+        raise SceneError(f"{where}: would write into (and remove old frames from) an existing folder such as "
+                         "'.' or '..'; give a subfolder, e.g. out/run1")
+    if os.path.exists(out) and not os.path.isdir(out):
+        raise SceneError(f"{where}: exists and is not a folder")
+
+
 def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Optional[int] = None) -> Scene:
     """Parse and build a scene; raises :class:`SceneError` for any problem in the file."""
     path = Path(path)
     c = _Ctx(path)
+    if not path.exists():
+        raise SceneError(f"{path}: no such scene file")
+    # read_text: a directory, a FIFO, a file over the budget, NUL bytes or invalid UTF-8 are a
+    # SceneError naming the file (not IsADirectoryError / a hang / UnicodeDecodeError).
+    text = read_text(str(path), SceneError)
     try:
-        with open(path, "rb") as fh:
-            doc = tomllib.load(fh)
-    except FileNotFoundError:
-        raise SceneError(f"{path}: no such scene file") from None
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise SceneError(f"{path.name}: invalid TOML: {e}") from None
+    except RecursionError:
+        raise SceneError(f"{path.name}: invalid TOML: nested too deeply") from None
     c.known(doc, "", _TOP_KEYS)
 
     # --- mesh
@@ -370,6 +390,7 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
         out = output
     if out is None:
         out = os.path.join("out", path.stem)
+    _check_output(path, out)
     if steps is not None:
         nsteps = steps
     return Scene(path, body, loads, float(dt), int(nsteps), int(every), out,

@@ -14,6 +14,7 @@ from typing import Dict, Iterable, Optional, Tuple, Union
 
 import numpy as np
 
+from . import _readers
 from ._palpate import MeshWarning, SurfaceError, TriSurface
 from .io import unit_scale
 from .vtp import read_vtp
@@ -63,10 +64,12 @@ def _read_surface(path: PathLike, unit: str) -> Tuple[np.ndarray, np.ndarray, Di
     if fmt is None:
         raise SurfaceError(f"{name}: unsupported surface format {ext or '(no extension)'!r}; palpate reads "
                            f"{', '.join(SURFACE_FORMATS)} triangle surfaces")
-    if not os.path.exists(path):
-        raise SurfaceError(f"{name}: no such file ({path})")
-    if os.path.getsize(path) == 0:
+    size = _readers.check_input_file(path, SurfaceError)
+    if size == 0:
         raise SurfaceError(f"{name}: empty file")
+    _header_precheck(path, fmt, size)
+    if fmt == "vtu":
+        _readers.vtk_xml_inflated_precheck(path, SurfaceError)
     if fmt == "vtp":
         d = read_vtp(path)
         return d.points * scale, d.triangles, d.cell_data
@@ -78,6 +81,11 @@ def _read_surface(path: PathLike, unit: str) -> Tuple[np.ndarray, np.ndarray, Di
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             m = reader(path)
+    except MemoryError:
+        _readers.check_budget("reading the file (the reader ran out of memory)", float("inf"), name)
+        raise
+    except RecursionError:
+        raise SurfaceError(f"{name}: cannot read as {fmt.upper()}: nested too deeply (corrupt or crafted file)") from None
     except (Exception, SystemExit) as e:
         reason = str(e).strip() or "malformed or truncated file"
         raise SurfaceError(f"{name}: cannot read as {fmt.upper()} ({type(e).__name__}: {reason})") from None
@@ -110,6 +118,77 @@ def _read_surface(path: PathLike, unit: str) -> Tuple[np.ndarray, np.ndarray, Di
             arr = arr[:, 0]
         cell_data[key] = arr
     return points * scale, np.concatenate(tris, axis=0), cell_data
+
+
+def _header_precheck(path: str, fmt: str, size: int) -> None:
+    """What meshio's OFF, PLY and binary STL readers trust without checking, checked first: a
+    header cut short (the OFF and PLY readers looped forever waiting for the rest of it) and
+    counts the file cannot hold (a 100-byte file announcing 1e8 vertices made them allocate
+    gigabytes). Errors name the file, the line or byte, and the reason."""
+    import struct
+
+    name = os.path.basename(path)
+    if fmt not in ("off", "ply", "stl"):
+        return
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    if fmt == "stl":
+        if head[:5].lower() == b"solid" and b"facet" in head[:4096].lower() or size < 84:
+            return  # ASCII STL: read line by line, no count to trust
+        (n,) = struct.unpack("<I", head[80:84])
+        if 84 + 50 * n != size:
+            raise SurfaceError(f"{name}: byte 80: binary STL announces {n} triangles, which take {84 + 50 * n} bytes; "
+                               f"the file has {size} (truncated or not a binary STL)")
+        return
+    lines = head.decode("latin-1").splitlines()
+    if fmt == "off":
+        toks, lineno = [], 0
+        for lineno, line in enumerate(lines, 1):
+            line = line.split("#", 1)[0]
+            toks += line.split()
+            if len(toks) >= 4:
+                break
+        if not toks or not toks[0].upper().endswith("OFF"):
+            raise SurfaceError(f"{name}: line 1: not an OFF file (expected 'OFF', got {(toks or [''])[0][:20]!r})")
+        if len(toks) < 4:
+            raise SurfaceError(f"{name}: line {lineno}: the OFF header ends before its counts "
+                               "'vertices faces edges' (truncated file)")
+        try:
+            nv, nf = int(toks[1]), int(toks[2])
+        except ValueError:
+            raise SurfaceError(f"{name}: line {lineno}: OFF counts {' '.join(toks[1:4])!r} are not integers") from None
+        if nv < 0 or nf < 0 or 6 * nv + 8 * nf > size:
+            raise SurfaceError(f"{name}: line {lineno}: the OFF header announces {nv} vertices and {nf} faces, "
+                               f"more than a file of {size} bytes can hold (truncated or corrupt header)")
+        _readers.check_budget(f"{nv} vertices and {nf} faces", 64.0 * (nv + nf), name)
+        return
+    # PLY
+    if not lines or lines[0].strip() != "ply":
+        raise SurfaceError(f"{name}: line 1: not a PLY file (expected 'ply')")
+    end = next((k for k, line in enumerate(lines) if line.strip() == "end_header"), None)
+    if end is None:
+        raise SurfaceError(f"{name}: no 'end_header' line in the first {len(head)} bytes: the PLY header is cut "
+                           "short (truncated file)")
+    binary = any(line.startswith("format binary") for line in lines[:end])
+    count, props, elements = 0, 0, []
+    for k, line in enumerate(lines[:end], 1):
+        t = line.split()
+        if t[:1] == ["element"] and len(t) == 3:
+            try:
+                count = int(t[2])
+            except ValueError:
+                raise SurfaceError(f"{name}: line {k}: element count {t[2]!r} is not an integer") from None
+            if count < 0:
+                raise SurfaceError(f"{name}: line {k}: negative element count {count}")
+            elements.append([t[1], count, 0, k])
+        elif t[:1] == ["property"] and elements:
+            elements[-1][2] += 1
+    need = sum(c * max(p, 1) * (1 if binary else 2) for _, c, p, _ in elements)
+    if need > size:
+        what = ", ".join(f"{c} {e}" for e, c, _, _ in elements)
+        raise SurfaceError(f"{name}: line {elements[0][3] if elements else 1}: the PLY header announces {what}, "
+                           f"more than a file of {size} bytes can hold (truncated or corrupt header)")
+    _readers.check_budget("the PLY elements", 64.0 * sum(c * max(p, 1) for _, c, p, _ in elements), name)
 
 
 def load_surface(path: PathLike, unit: str = "m", repair: bool = False) -> TriSurface:
@@ -186,8 +265,9 @@ def read_part_definition(path: PathLike) -> Dict[str, int]:
     path = os.fspath(path)
     name = os.path.basename(path)
     try:
-        with open(path, encoding="utf-8") as fh:
-            doc = json.load(fh)
+        doc = json.loads(_readers.read_text(path, SurfaceError))
+    except RecursionError:
+        raise SurfaceError(f"{name}: cannot read the part definition: nested too deeply (corrupt or crafted file)") from None
     except (OSError, ValueError) as e:
         raise SurfaceError(f"{name}: cannot read the part definition ({type(e).__name__}: {e})") from None
     found: Dict[str, int] = {}

@@ -30,6 +30,7 @@ from typing import Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
+from . import _readers
 from ._palpate import SurfaceError
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -78,8 +79,8 @@ class _Reader:
     # --- file and XML -------------------------------------------------------------------------
 
     def load(self) -> PolyData:
-        if not os.path.exists(self.path):
-            raise self.error(f"no such file ({self.path})")
+        _readers.check_input_file(self.path, SurfaceError)
+        _readers.vtk_xml_inflated_precheck(self.path, SurfaceError)
         with open(self.path, "rb") as fh:
             raw = fh.read()
         if not raw.strip():
@@ -372,6 +373,10 @@ class _Reader:
         csizes = header[3:]
         if nblocks < 0 or bsize < 0 or last < 0 or (csizes < 0).any():
             raise self.error(f"{what}: corrupt compressed-data header {header[:3].tolist()}")
+        # The inflated size from the header, against the memory budget before any block is
+        # inflated (the file-level precheck covers the usual layouts; this covers every one).
+        _readers.check_budget(f"{what}: {label} data inflates to {max(nblocks - 1, 0) * bsize + (last or bsize)} bytes",
+                              max(nblocks - 1, 0) * bsize + (last or bsize), self.name)
         if int(csizes.sum()) > len(body):
             raise self.error(f"{what}: {label} blocks need {int(csizes.sum())} bytes but {len(body)} are present "
                              "(truncated file)")

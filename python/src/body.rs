@@ -8,7 +8,7 @@ use numpy::{PyArray1, PyArray2};
 use palpate_core::integrate::{static_solve, StaticOptions};
 use palpate_core::probe::{self, ProbeLoad, ProbeOptions, Ramp, StepClock, StepTotals};
 use palpate_core::{step, Model, ModelBuilder, State, StepMemory, Vec3, Workspace};
-use pyo3::exceptions::{PyKeyError, PyValueError};
+use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -76,22 +76,24 @@ impl StepClock for WallClock {
 fn py_load(n: usize, nodes: Vec<usize>, total_force: &Bound<'_, PyAny>, ramp_time: f64, start: f64) -> PyResult<ProbeLoad> {
     let total = conv::vec3(total_force, "total_force")?;
     if !(ramp_time >= 0.0 && ramp_time.is_finite()) {
-        return Err(PyValueError::new_err(format!("ramp_time = {ramp_time} s must be finite and >= 0")));
+        return Err(crate::errors::param_error_from(format!("ramp_time = {ramp_time} s must be finite and >= 0")));
     }
-    ProbeLoad::new(n, nodes, total, Ramp { start, duration: ramp_time }).map_err(|e| PyValueError::new_err(format!("nodes: {e}")))
+    ProbeLoad::new(n, nodes, total, Ramp { start, duration: ramp_time }).map_err(|e| crate::errors::param_error_from(format!("nodes: {e}")))
 }
 
 impl PyBody {
     /// `probe::run_probe` timed by a wall clock, GIL released; its result as a dict.
     fn run_timed<'py>(&mut self, py: Python<'py>, loads: &[ProbeLoad], steps: usize, dt: f64, stable_limit: f64, max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
         if steps == 0 {
-            return Err(PyValueError::new_err("steps must be at least 1"));
+            return Err(crate::errors::param_error_from("steps must be at least 1"));
         }
         let opts = ProbeOptions { max_wall_s, ..ProbeOptions::new(steps, dt, stable_limit) };
-        let run = py.detach(|| {
-            let mut clock = WallClock(Instant::now());
-            probe::run_probe(&self.model, &mut self.state, &mut self.ws, loads, &opts, &mut clock)
-        });
+        let run = errors::guard("Body.run_probe", || {
+            Ok(py.detach(|| {
+                let mut clock = WallClock(Instant::now());
+                probe::run_probe(&self.model, &mut self.state, &mut self.ws, loads, &opts, &mut clock)
+            }))
+        })?;
         let d = PyDict::new(py);
         d.set_item("steps", run.steps)?;
         d.set_item("wall_s", run.wall_s)?;
@@ -161,7 +163,7 @@ impl PyBody {
             .fixed_nodes(fixed)
             .gravity(gravity)
             .integrator(integrator);
-        let model = py.detach(|| builder.build()).map_err(errors::model_error)?;
+        let model = errors::guard("Body", || py.detach(|| builder.build()).map_err(errors::model_error))?;
         let state = State::rest(&model);
         let ws = Workspace::new(&model);
         Ok(PyBody { model, state, ws, mesh: mesh.unbind(), material: material.unbind() })
@@ -185,11 +187,12 @@ impl PyBody {
     /// Other Python threads run meanwhile; they cannot use this body until the call returns
     /// (doing so raises ``RuntimeError: Already borrowed``).
     #[pyo3(signature = (n = 1, dt = 1e-3))]
-    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: usize, dt: f64) -> PyResult<Bound<'py, PyDict>> {
+    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: i64, dt: f64) -> PyResult<Bound<'py, PyDict>> {
+        let n = errors::count(n, "n")?;
         let this = &mut *slf;
-        let tot = py
-            .detach(|| this.run_steps(n, dt))
-            .map_err(|(k, e)| errors::step_error(e, &format!("in step {} of {n}", k + 1)))?;
+        let tot = errors::guard("Body.step", || {
+            py.detach(|| this.run_steps(n, dt)).map_err(|(k, e)| errors::step_error(e, &format!("in step {} of {n}", k + 1)))
+        })?;
         let d = PyDict::new(py);
         d.set_item("steps", tot.steps)?;
         d.set_item("iterations", tot.iterations)?;
@@ -207,7 +210,9 @@ impl PyBody {
 
     /// Set the external force on every node [N], array (n, 3); held until changed.
     fn set_forces(&mut self, forces: &Bound<'_, PyAny>) -> PyResult<()> {
-        self.state.f_ext = conv::vec3s(forces, "forces", self.model.n_nodes(), true)?;
+        let f = conv::vec3s(forces, "forces", self.model.n_nodes(), true)?;
+        errors::warn_fixed_load(forces.py(), self.model.fixed(), f.iter().map(|v| v.norm()).enumerate(), "set_forces")?;
+        self.state.f_ext = f;
         Ok(())
     }
 
@@ -342,11 +347,11 @@ impl PyBody {
             _ => self.state.f_ext.clone(),
         };
         if !(tolerance > 0.0 && tolerance.is_finite()) {
-            return Err(PyValueError::new_err(format!("tolerance = {tolerance} must be positive")));
+            return Err(crate::errors::param_error_from(format!("tolerance = {tolerance} must be positive")));
         }
         let opts = StaticOptions { max_iterations, tolerance, load_steps: load_steps.max(1) };
         let model = &self.model;
-        let sol = py.detach(|| static_solve(model, &f, &opts)).map_err(errors::solve_error)?;
+        let sol = errors::guard("Body.static_solve", || py.detach(|| static_solve(model, &f, &opts)).map_err(errors::solve_error))?;
         Ok(conv::vec3s_to_py(py, &sol.x))
     }
 
@@ -378,14 +383,16 @@ impl PyBody {
         nodes: &Bound<'py, PyAny>,
         total_force: &Bound<'py, PyAny>,
         ramp_time: f64,
-        steps: usize,
+        steps: i64,
         dt: f64,
         stable_limit: f64,
         max_wall_s: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
+        let steps = errors::count(steps, "steps")?;
         let this = &mut *slf;
         let n = this.model.n_nodes();
         let loaded = conv::node_indices(nodes, "nodes", n)?;
+        errors::warn_fixed_load(py, this.model.fixed(), loaded.iter().map(|&i| (i, 1.0)), "run_probe")?;
         let load = py_load(n, loaded, total_force, ramp_time, this.state.t)?;
         this.run_timed(py, &[load], steps, dt, stable_limit, max_wall_s)
     }
@@ -402,7 +409,7 @@ impl PyBody {
         mut slf: PyRefMut<'py, Self>,
         py: Python<'py>,
         loads: Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)>,
-        steps: usize,
+        steps: i64,
         dt: f64,
         ramp_start: Option<f64>,
         stable_limit: f64,
@@ -416,6 +423,11 @@ impl PyBody {
             .enumerate()
             .map(|(k, (nodes, force, ramp))| py_load(n, conv::node_indices(nodes, &format!("loads[{k}] nodes"), n)?, force, *ramp, start))
             .collect::<PyResult<Vec<_>>>()?;
+        let steps = errors::count(steps, "steps")?;
+        for (k, l) in loads.iter().enumerate() {
+            let share = l.total_force().norm() / l.nodes().len().max(1) as f64;
+            errors::warn_fixed_load(py, this.model.fixed(), l.nodes().iter().map(|&i| (i, share)), &format!("run_loads: loads[{k}]"))?;
+        }
         this.run_timed(py, &loads, steps, dt, stable_limit, max_wall_s)
     }
 
@@ -450,7 +462,7 @@ impl PyBody {
         let f_ext = conv::vec3s(&item(state, "forces")?, "forces", n, true)?;
         let t: f64 = item(state, "time")?.extract()?;
         if !t.is_finite() {
-            return Err(PyValueError::new_err(format!("time = {t} s must be finite")));
+            return Err(crate::errors::param_error_from(format!("time = {t} s must be finite")));
         }
         let refreshed = item(state, "refreshed_at")?;
         let mem = StepMemory {

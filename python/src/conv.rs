@@ -17,7 +17,7 @@ use std::collections::HashSet;
 use numpy::ndarray::{Array1, Array2, ArrayD, IxDyn};
 use numpy::{Element, IntoPyArray, PyArray1, PyArray2, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use palpate_core::Vec3;
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 
 /// `obj` as a numpy array (converted with `numpy.asarray` if it is not one already).
@@ -104,7 +104,7 @@ fn check_2d(a: &Bound<'_, PyUntypedArray>, what: &str, rows: Option<usize>, cols
     let shape = a.shape();
     let ok = shape.len() == 2 && shape[1] == cols && rows.map_or(true, |r| shape[0] == r);
     if !ok {
-        return Err(PyValueError::new_err(format!("{what} must have shape {form}, got {}", shape_str(shape))));
+        return Err(crate::errors::param_error_from(format!("{what} must have shape {form}, got {}", shape_str(shape))));
     }
     Ok(shape[0])
 }
@@ -130,7 +130,7 @@ pub fn vec3s(obj: &Bound<'_, PyAny>, what: &str, n: usize, finite: bool) -> PyRe
     let out: Vec<Vec3> = v.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
     if finite {
         if let Some(i) = out.iter().position(|f| !(f.x.is_finite() && f.y.is_finite() && f.z.is_finite())) {
-            return Err(PyValueError::new_err(format!("{what}: row {i} is not finite ({}, {}, {})", out[i].x, out[i].y, out[i].z)));
+            return Err(crate::errors::param_error_from(format!("{what}: row {i} is not finite ({}, {}, {})", out[i].x, out[i].y, out[i].z)));
         }
     }
     Ok(out)
@@ -140,7 +140,7 @@ pub fn vec3s(obj: &Bound<'_, PyAny>, what: &str, n: usize, finite: bool) -> PyRe
 pub fn reals(obj: &Bound<'_, PyAny>, what: &str, n: usize, per: &str) -> PyResult<Vec<f64>> {
     let a = as_array(obj, what)?;
     if a.shape() != [n] {
-        return Err(PyValueError::new_err(format!("{what} must have shape ({n},) {per}, got {}", shape_str(a.shape()))));
+        return Err(crate::errors::param_error_from(format!("{what} must have shape ({n},) {per}, got {}", shape_str(a.shape()))));
     }
     to_f64(&a, what, REAL_VALUES)
 }
@@ -167,11 +167,11 @@ pub fn index_rows<const K: usize>(obj: &Bound<'_, PyAny>, what: &str) -> PyResul
 pub fn vec3(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec3> {
     let a = as_array(obj, what)?;
     if a.shape() != [3] {
-        return Err(PyValueError::new_err(format!("{what} must be 3 numbers (x, y, z), got shape {}", shape_str(a.shape()))));
+        return Err(crate::errors::param_error_from(format!("{what} must be 3 numbers (x, y, z), got shape {}", shape_str(a.shape()))));
     }
     let v = to_f64(&a, what, REAL_ROWS)?;
     if !v.iter().all(|x| x.is_finite()) {
-        return Err(PyValueError::new_err(format!("{what} = ({}, {}, {}) is not finite", v[0], v[1], v[2])));
+        return Err(crate::errors::param_error_from(format!("{what} = ({}, {}, {}) is not finite", v[0], v[1], v[2])));
     }
     Ok(Vec3::new(v[0], v[1], v[2]))
 }
@@ -193,7 +193,7 @@ pub fn indices(obj: &Bound<'_, PyAny>, what: &str, n: usize, of: Items, unique: 
     let a = as_array(obj, what)?;
     let shape = a.shape().to_vec();
     if shape.len() != 1 {
-        return Err(PyValueError::new_err(format!(
+        return Err(crate::errors::param_error_from(format!(
             "{what} must be a 1-D array of {item} indices (or a boolean mask of length {n}), got shape {}",
             shape_str(&shape)
         )));
@@ -203,7 +203,7 @@ pub fn indices(obj: &Bound<'_, PyAny>, what: &str, n: usize, of: Items, unique: 
     }
     if a.dtype().kind() == b'b' {
         if shape[0] != n {
-            return Err(PyValueError::new_err(format!("{what}: a boolean mask must have length {n} (one per {item}), got {}", shape[0])));
+            return Err(crate::errors::param_error_from(format!("{what}: a boolean mask must have length {n} (one per {item}), got {}", shape[0])));
         }
         let mask = flat::<bool, _>(&a, |x| x).ok_or_else(|| PyTypeError::new_err(format!("{what}: unreadable boolean mask")))?;
         return Ok(mask.iter().enumerate().filter(|(_, &m)| m).map(|(i, _)| i).collect());
@@ -212,7 +212,7 @@ pub fn indices(obj: &Bound<'_, PyAny>, what: &str, n: usize, of: Items, unique: 
         .into_iter()
         .map(|i| {
             if i < 0 || i as u64 >= n as u64 {
-                Err(PyValueError::new_err(format!("{what}: {item} index {i} out of range ({owner} has {n} {item}s)")))
+                Err(crate::errors::param_error_from(format!("{what}: {item} index {i} out of range ({owner} has {n} {item}s)")))
             } else {
                 Ok(i as usize)
             }
@@ -221,7 +221,7 @@ pub fn indices(obj: &Bound<'_, PyAny>, what: &str, n: usize, of: Items, unique: 
     if unique {
         let mut seen = HashSet::with_capacity(idx.len());
         if let Some(&i) = idx.iter().find(|&&i| !seen.insert(i)) {
-            return Err(PyValueError::new_err(format!("{what}: {item} {i} is listed more than once")));
+            return Err(crate::errors::param_error_from(format!("{what}: {item} {i} is listed more than once")));
         }
     }
     Ok(idx)
@@ -235,7 +235,7 @@ pub fn node_indices(obj: &Bound<'_, PyAny>, what: &str, n: usize) -> PyResult<Ve
 /// Small integer codes, 1-D (e.g. a part per triangle): any integer dtype, or floats with whole
 /// values; `form` says what is expected.
 pub fn codes(obj: &Bound<'_, PyAny>, what: &str, form: &str) -> PyResult<Vec<i64>> {
-    let bad = || PyValueError::new_err(format!("{what}: expected {form}"));
+    let bad = || crate::errors::param_error_from(format!("{what}: expected {form}"));
     let a = as_array(obj, what).map_err(|_| bad())?;
     if a.shape().len() != 1 {
         return Err(bad());

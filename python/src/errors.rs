@@ -55,6 +55,80 @@ create_exception!(
     "A compiled-model file that cannot be read: not a palpate model, another format version, truncated or corrupted. The message names the file and the reason."
 );
 
+create_exception!(
+    palpate,
+    LimitError,
+    PalpateError,
+    "A size from the input (node or element count, voxel grid, neighbour pairs, steps, a file or its \
+     decompressed length) over palpate's memory budget, refused before the memory is taken. The message \
+     says what was asked, how much and the budget; raise the budget with the environment variable \
+     PALPATE_MAX_MEMORY (bytes, or e.g. 16G). Attributes `requested` and `budget` [bytes] hold the numbers."
+);
+create_exception!(
+    palpate,
+    LoadWarning,
+    PyUserWarning,
+    "A load that the body will not carry as given (force on fixed nodes, which the solver drops)."
+);
+create_exception!(
+    palpate,
+    InternalError,
+    PalpateError,
+    "A palpate bug caught at the binding (a Rust panic): the operation was abandoned and nothing it \
+     touched should be trusted. The message says where; please report it with the input."
+);
+
+/// A count argument (steps, ticks) that must not be negative, as `usize`: a negative count is a
+/// `palpate.ParameterError` naming the argument (pyo3's own conversion raised OverflowError).
+pub fn count(v: i64, name: &str) -> PyResult<usize> {
+    usize::try_from(v).map_err(|_| param_error(format!("{name} = {v}: must be a count, 0 or more")))
+}
+
+/// A bad argument value as `palpate.ParameterError`: a PalpateError that is also a ValueError.
+pub fn param_error(msg: String) -> PyErr {
+    Python::attach(|py| match PARAMETER.get(py) {
+        Some(t) => match t.bind(py).call1((msg.clone(),)) {
+            Ok(inst) => PyErr::from_value(inst),
+            Err(_) => PyValueError::new_err(msg),
+        },
+        None => PyValueError::new_err(msg),
+    })
+}
+
+/// [`param_error`] of anything printable (the binding's argument checks).
+pub fn param_error_from(msg: impl Into<String>) -> PyErr {
+    param_error(msg.into())
+}
+
+/// Warn (`palpate.LoadWarning`) when external force falls on fixed nodes: the solver drops it, so
+/// the body carries less load than was asked (28 % of a probe's force in one report). `force`
+/// gives each loaded node's force; `what` names the call.
+pub fn warn_fixed_load(py: Python<'_>, fixed: &[bool], loaded: impl IntoIterator<Item = (usize, f64)>, what: &str) -> PyResult<()> {
+    let (mut total, mut dropped, mut nodes) = (0.0, 0.0, Vec::new());
+    for (i, f) in loaded {
+        total += f;
+        if fixed.get(i).copied().unwrap_or(false) && f > 0.0 {
+            dropped += f;
+            nodes.push(i);
+        }
+    }
+    if nodes.is_empty() {
+        return Ok(());
+    }
+    let share = if total > 0.0 { 100.0 * dropped / total } else { 0.0 };
+    let shown: Vec<String> = nodes.iter().take(5).map(|i| i.to_string()).collect();
+    let msg = format!(
+        "{what}: {} loaded node(s) are fixed (node {}{}): their load is dropped, {share:.1} % of the total force",
+        nodes.len(),
+        shown.join(", "),
+        if nodes.len() > 5 { ", ..." } else { "" }
+    );
+    let msg = CString::new(msg).unwrap_or_default();
+    PyErr::warn(py, &py.get_type::<LoadWarning>(), &msg, 1)
+}
+
+static PARAMETER: pyo3::sync::PyOnceLock<Py<PyAny>> = pyo3::sync::PyOnceLock::new();
+
 /// Register the classes on the module and give the detail attributes a class-level `None`.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
@@ -66,6 +140,35 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("StepError", py.get_type::<StepError>())?;
     m.add("MeshWarning", py.get_type::<MeshWarning>())?;
     m.add("ModelFileError", py.get_type::<ModelFileError>())?;
+    let limit = py.get_type::<LimitError>();
+    limit.setattr("requested", py.None())?;
+    limit.setattr("budget", py.None())?;
+    m.add("LimitError", limit)?;
+    m.add("InternalError", py.get_type::<InternalError>())?;
+    m.add("LoadWarning", py.get_type::<LoadWarning>())?;
+    // A model file that cannot be opened or read: both a ModelFileError (a PalpateError) and an
+    // OSError (what `except OSError` callers of the earlier API expect).
+    let io_type = py.import("builtins")?.getattr("type")?.call1((
+        "ModelFileIOError",
+        (py.get_type::<ModelFileError>(), py.get_type::<PyOSError>()),
+        pyo3::types::PyDict::new(py),
+    ))?;
+    io_type.setattr("__module__", "palpate")?;
+    io_type.setattr("__doc__", "A model file that cannot be opened or read (missing, a directory, not a regular file, unreadable): a ModelFileError and an OSError.")?;
+    m.add("ModelFileIOError", &io_type)?;
+    let _ = MODEL_FILE_IO.set(py, io_type.unbind());
+    // An argument palpate refuses (a negative count, a parameter out of range): a PalpateError
+    // and a ValueError, so both `except palpate.PalpateError` and `except ValueError` catch it.
+    let param_type = py.import("builtins")?.getattr("type")?.call1((
+        "ParameterError",
+        (py.get_type::<PalpateError>(), py.get_type::<PyValueError>()),
+        pyo3::types::PyDict::new(py),
+    ))?;
+    param_type.setattr("__module__", "palpate")?;
+    param_type.setattr("__doc__", "An argument value palpate refuses (negative count, parameter out of range): a PalpateError and a ValueError.")?;
+    m.add("ParameterError", &param_type)?;
+    let _ = PARAMETER.set(py, param_type.unbind());
+    install_panic_hook();
     let surface = py.get_type::<SurfaceError>();
     surface.setattr("triangle", py.None())?;
     surface.setattr("vertex", py.None())?;
@@ -102,6 +205,15 @@ fn mesh_location(e: &core::MeshError) -> (Option<usize>, Option<usize>) {
 }
 
 pub fn mesh_error(e: core::MeshError) -> PyErr {
+    match &e {
+        core::MeshError::Limit(l) => return limit_error(l, None),
+        core::MeshError::InFile { file, source } => {
+            if let core::MeshError::Limit(l) = source.as_ref() {
+                return limit_error(l, Some(file));
+            }
+        }
+        _ => {}
+    }
     let (tet, node) = mesh_location(&e);
     let err = MeshError::new_err(e.to_string());
     Python::attach(|py| {
@@ -109,6 +221,69 @@ pub fn mesh_error(e: core::MeshError) -> PyErr {
         set_attr(py, &err, "node", node);
     });
     err
+}
+
+/// A memory-budget refusal as `palpate.LimitError`, with `requested` and `budget` [bytes];
+/// `prefix` (e.g. a file name) is put before the message.
+pub fn limit_error(e: &core::LimitError, prefix: Option<&str>) -> PyErr {
+    let msg = match prefix {
+        Some(p) => format!("{p}: {e}"),
+        None => e.to_string(),
+    };
+    let err = LimitError::new_err(msg);
+    Python::attach(|py| {
+        set_attr(py, &err, "requested", Some(e.bytes));
+        set_attr(py, &err, "budget", Some(e.budget));
+    });
+    err
+}
+
+// ---------------------------------------------------------------------------------------------
+// Panics: none may cross into Python as pyo3's PanicException (a BaseException, which
+// `except Exception` and `except palpate.PalpateError` both miss). `guard` runs a call under
+// catch_unwind and turns a panic into `palpate.InternalError`; the hook keeps the panic's
+// message and place for that error instead of printing a Rust backtrace note on stderr (set
+// PALPATE_DEBUG=1 to see it printed as well).
+// ---------------------------------------------------------------------------------------------
+
+static MODEL_FILE_IO: pyo3::sync::PyOnceLock<Py<PyAny>> = pyo3::sync::PyOnceLock::new();
+
+thread_local! {
+    static LAST_PANIC: std::cell::RefCell<Option<String>> = const { std::cell::RefCell::new(None) };
+}
+
+fn install_panic_hook() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let default = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            let msg = match (info.payload().downcast_ref::<&str>(), info.payload().downcast_ref::<String>()) {
+                (Some(s), _) => s.to_string(),
+                (_, Some(s)) => s.clone(),
+                _ => "panic".to_string(),
+            };
+            let at = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
+            LAST_PANIC.with(|p| *p.borrow_mut() = Some(format!("{msg}{at}")));
+            if std::env::var_os("PALPATE_DEBUG").is_some() {
+                default(info);
+            }
+        }));
+    });
+}
+
+/// Run `f`, turning a panic inside it into `palpate.InternalError` naming `what` (the call).
+pub fn guard<T>(what: &str, f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
+        Ok(r) => r,
+        Err(payload) => {
+            let msg = LAST_PANIC.with(|p| p.borrow_mut().take()).unwrap_or_else(|| match (payload.downcast_ref::<&str>(), payload.downcast_ref::<String>()) {
+                (Some(s), _) => s.to_string(),
+                (_, Some(s)) => s.clone(),
+                _ => "panic".to_string(),
+            });
+            Err(InternalError::new_err(format!("{what}: internal error (a palpate bug; please report it with the input): {msg}")))
+        }
+    }
 }
 
 pub fn material_error(e: core::MaterialError) -> PyErr {
@@ -119,6 +294,7 @@ pub fn model_error(e: core::ModelError) -> PyErr {
     match e {
         core::ModelError::Mesh(m) => mesh_error(m),
         core::ModelError::Material(m) => material_error(m),
+        core::ModelError::Limit(l) => limit_error(&l, None),
         other => ModelError::new_err(other.to_string()),
     }
 }
@@ -161,8 +337,11 @@ fn surface_location(e: &CoreSurfaceError) -> (Option<usize>, Option<usize>) {
 /// A core surface error as a Python exception: bad sampling arguments are `ValueError`, the rest
 /// `SurfaceError` with `.triangle` / `.vertex`.
 pub fn surface_error(e: CoreSurfaceError) -> PyErr {
+    if let CoreSurfaceError::Limit(l) = &e {
+        return limit_error(l, None);
+    }
     if matches!(e, CoreSurfaceError::Parameter { .. } | CoreSurfaceError::TooLarge { .. }) {
-        return PyValueError::new_err(e.to_string());
+        return param_error(e.to_string());
     }
     let (triangle, vertex) = surface_location(&e);
     let err = SurfaceError::new_err(e.to_string());
@@ -181,7 +360,16 @@ pub fn surface_error(e: CoreSurfaceError) -> PyErr {
 /// A model-file error: an I/O failure is `OSError`, anything else `ModelFileError`.
 pub fn file_error(e: core::ModelFileError) -> PyErr {
     match e {
-        core::ModelFileError::Io { .. } => PyOSError::new_err(e.to_string()),
+        // I/O failures stay OSError subclasses for `except OSError` callers, but are also
+        // ModelFileError (a PalpateError): see ModelFileIOError in the Python package.
+        core::ModelFileError::Io { .. } => Python::attach(|py| match MODEL_FILE_IO.get(py) {
+            Some(t) => match t.bind(py).call1((e.to_string(),)) {
+                Ok(inst) => PyErr::from_value(inst),
+                Err(err) => err,
+            },
+            None => ModelFileError::new_err(e.to_string()),
+        }),
+        core::ModelFileError::Limit { path, source } => limit_error(&source, Some(&path)),
         other => ModelFileError::new_err(other.to_string()),
     }
 }

@@ -9,7 +9,7 @@ use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use palpate_core::hybrid::{self, HybridModel, HybridOptions, Projection, Spacing, VoxelLabel, Wall, WallPart};
 use palpate_core::mesh::TriSurface;
 use palpate_core::HybridError;
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -27,12 +27,13 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// triangles (m, 3) int64, part (m,) int8: 0 inner, 1 outer, 2 base)``.
 #[pyfunction]
 #[pyo3(signature = (circumferential = 96, longitudinal = 24))]
-fn ventricle_surface<'py>(py: Python<'py>, circumferential: usize, longitudinal: usize) -> PyResult<TaggedSurface<'py>> {
+fn ventricle_surface<'py>(py: Python<'py>, circumferential: i64, longitudinal: i64) -> PyResult<TaggedSurface<'py>> {
+    let (circumferential, longitudinal) = (errors::count(circumferential, "circumferential")?, errors::count(longitudinal, "longitudinal")?);
     if !(3..=4096).contains(&circumferential) || !(1..=4096).contains(&longitudinal) {
-        return Err(PyValueError::new_err(format!("circumferential must be 3 to 4096 and longitudinal 1 to 4096, got {circumferential} and {longitudinal}")));
+        return Err(crate::errors::param_error_from(format!("circumferential must be 3 to 4096 and longitudinal 1 to 4096, got {circumferential} and {longitudinal}")));
     }
     let p = palpate_core::mesh::generate::TruncatedEllipsoidWall { circumferential, longitudinal, ..Default::default() };
-    let wall = py.detach(|| hybrid::shapes::truncated_ventricle(&p)).map_err(hybrid_error)?;
+    let wall = errors::guard("ventricle_surface", || py.detach(|| hybrid::shapes::truncated_ventricle(&p)).map_err(hybrid_error))?;
     let parts: Vec<i8> = wall.parts.iter().map(|&w| w as u8 as i8).collect();
     Ok((conv::vec3s_to_py(py, wall.surface.points()), conv::index_rows_to_py(py, wall.surface.triangles()), PyArray1::from_vec(py, parts)))
 }
@@ -44,7 +45,8 @@ fn hybrid_error(e: HybridError) -> PyErr {
     match e {
         HybridError::Surface(s) => surface_error(s),
         HybridError::Mesh(m) => errors::mesh_error(m),
-        HybridError::Parameter { .. } => PyValueError::new_err(e.to_string()),
+        HybridError::Parameter { .. } => crate::errors::param_error_from(e.to_string()),
+        HybridError::Limit(l) => errors::limit_error(&l, None),
         other => errors::ModelError::new_err(other.to_string()),
     }
 }
@@ -143,7 +145,7 @@ pub fn default_options(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 }
 
 fn build_wall(py: Python<'_>, wall: Wall, o: HybridOptions) -> PyResult<PyHybridModel> {
-    let model = py.detach(|| hybrid::build(&wall, &o)).map_err(hybrid_error)?;
+    let model = errors::guard("HybridModel.build", || py.detach(|| hybrid::build(&wall, &o)).map_err(hybrid_error))?;
     Ok(PyHybridModel { model })
 }
 
@@ -186,7 +188,7 @@ impl PyHybridModel {
         let tris = conv::index_rows::<3>(triangles, "triangles")?;
         let raw = conv::codes(parts, "parts", "a 1-D integer array (0 inner, 1 outer, 2 base)")?;
         if raw.len() != tris.len() {
-            return Err(PyValueError::new_err(format!("parts: {} entries for {} triangles", raw.len(), tris.len())));
+            return Err(crate::errors::param_error_from(format!("parts: {} entries for {} triangles", raw.len(), tris.len())));
         }
         let tags = raw
             .iter()
@@ -195,7 +197,7 @@ impl PyHybridModel {
                 0 => Ok(WallPart::Inner),
                 1 => Ok(WallPart::Outer),
                 2 => Ok(WallPart::Base),
-                _ => Err(PyValueError::new_err(format!("parts: triangle {t} has part {p}; expected 0 (inner), 1 (outer) or 2 (base)"))),
+                _ => Err(crate::errors::param_error_from(format!("parts: triangle {t} has part {p}; expected 0 (inner), 1 (outer) or 2 (base)"))),
             })
             .collect::<PyResult<Vec<_>>>()?;
         let (surface, _) = TriSurface::from_arrays(&pts, &tris).map_err(surface_error)?;
@@ -215,7 +217,7 @@ impl PyHybridModel {
     /// a foreign, truncated, corrupted or other-version file.
     #[staticmethod]
     fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<PyHybridModel> {
-        let model = py.detach(|| HybridModel::load(&path)).map_err(file_error)?;
+        let model = errors::guard(&format!("HybridModel.load({})", path.display()), || py.detach(|| HybridModel::load(&path)).map_err(file_error))?;
         Ok(PyHybridModel { model })
     }
 

@@ -4,7 +4,6 @@
 use numpy::{PyArray1, PyArray2};
 use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace, TickReport, Tool};
 use palpate_core::Vec3;
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -72,26 +71,26 @@ impl PyHybridSim {
         let mut tool = Tool::default();
         if let Some(r) = tool_radius {
             if !(r > 0.0 && r.is_finite()) {
-                return Err(PyValueError::new_err(format!("tool_radius = {r} m must be positive and finite")));
+                return Err(crate::errors::param_error_from(format!("tool_radius = {r} m must be positive and finite")));
             }
             tool.radius = r;
         }
         if let Some(k) = tool_stiffness {
             if !(k > 0.0 && k.is_finite()) {
-                return Err(PyValueError::new_err(format!("tool_stiffness = {k} N/m must be positive and finite")));
+                return Err(crate::errors::param_error_from(format!("tool_stiffness = {k} N/m must be positive and finite")));
             }
             tool.stiffness = k;
         }
         let mut options = SimOptions { tool, hold, ..Default::default() };
         if let Some(m) = activation_margin {
             if !(m >= 0.0 && m.is_finite()) {
-                return Err(PyValueError::new_err(format!("activation_margin = {m} m must be non-negative and finite")));
+                return Err(crate::errors::param_error_from(format!("activation_margin = {m} m must be non-negative and finite")));
             }
             options.activation_margin = m;
         }
         if let Some(d) = max_tool_step {
             if !(d > 0.0 && d.is_finite()) {
-                return Err(PyValueError::new_err(format!("max_tool_step = {d} m must be positive and finite")));
+                return Err(crate::errors::param_error_from(format!("max_tool_step = {d} m must be positive and finite")));
             }
             options.max_tool_step = d;
         }
@@ -100,12 +99,12 @@ impl PyHybridSim {
         }
         if let Some(k) = max_substeps {
             if k == 0 {
-                return Err(PyValueError::new_err("max_substeps must be at least 1"));
+                return Err(crate::errors::param_error_from("max_substeps must be at least 1"));
             }
             options.max_substeps = k;
         }
         let (hm, mat) = (model.model.clone(), material.inner);
-        let sim = py.detach(|| Sim::new(hm, mat, options)).map_err(errors::model_error)?;
+        let sim = errors::guard("HybridSim", || py.detach(|| Sim::new(hm, mat, options)).map_err(errors::model_error))?;
         let state = SimState::rest(&sim);
         let ws = SimWorkspace::new(&sim);
         Ok(PyHybridSim { sim, state, ws, last: TickReport::default() })
@@ -120,7 +119,7 @@ impl PyHybridSim {
     fn step<'py>(&mut self, py: Python<'py>, tool_centre: &Bound<'py, PyAny>, dt: f64) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let c = conv::vec3(tool_centre, "tool_centre")?;
         let (sim, state, ws) = (&self.sim, &mut self.state, &mut self.ws);
-        let r = py.detach(|| tick(sim, state, ws, c, dt)).map_err(|e| errors::step_error(e, "in the hybrid tick"))?;
+        let r = errors::guard("HybridSim.step", || py.detach(|| tick(sim, state, ws, c, dt)).map_err(|e| errors::step_error(e, "in the hybrid tick")))?;
         self.last = r;
         Ok(conv::vec3_to_py(py, r.force))
     }

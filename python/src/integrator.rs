@@ -4,7 +4,7 @@
 
 use palpate_core::integrate::Filter;
 use palpate_core::Integrator;
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 
 /// The filter of the paper's semi-implicit scheme (eq. 34).
@@ -142,14 +142,14 @@ impl PyBackwardEuler {
     #[pyo3(signature = (solver = PySolver::QuasiNewton, *, max_iterations = None, tolerance = None, history = None))]
     fn new(solver: PySolver, max_iterations: Option<usize>, tolerance: Option<f64>, history: Option<usize>) -> PyResult<Self> {
         if solver == PySolver::Linearised && (max_iterations.is_some() || tolerance.is_some() || history.is_some()) {
-            return Err(PyValueError::new_err("the LINEARISED solver takes no max_iterations, tolerance or history"));
+            return Err(crate::errors::param_error_from("the LINEARISED solver takes no max_iterations, tolerance or history"));
         }
         if solver != PySolver::QuasiNewton && history.is_some() {
-            return Err(PyValueError::new_err("history is an option of the QUASI_NEWTON solver only"));
+            return Err(crate::errors::param_error_from("history is an option of the QUASI_NEWTON solver only"));
         }
         let draft = PyBackwardEuler { solver, max_iterations, tolerance, history };
         let core = draft.integrator();
-        core.check().map_err(PyValueError::new_err)?;
+        core.check().map_err(crate::errors::param_error_from)?;
         Ok(PyBackwardEuler::from_core(core).expect("a backward Euler integrator"))
     }
     fn __repr__(&self) -> String {

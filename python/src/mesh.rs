@@ -3,7 +3,6 @@
 use numpy::{PyArray1, PyArray2};
 use palpate_core::mesh::generate::{self, EllipsoidWall, TruncatedEllipsoidWall};
 use palpate_core::TetMesh;
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::conv;
@@ -50,7 +49,7 @@ impl PyTetMesh {
     fn new(py: Python<'_>, points: &Bound<'_, PyAny>, tets: &Bound<'_, PyAny>, source: Option<String>) -> PyResult<Self> {
         let p = conv::points(points, "points")?;
         let t = conv::index_rows::<4>(tets, "tets")?;
-        let (mesh, warnings) = TetMesh::from_arrays(&p, &t).map_err(|e| match &source {
+        let (mesh, warnings) = errors::guard("TetMesh", || Ok(TetMesh::from_arrays(&p, &t)))?.map_err(|e| match &source {
             Some(s) => errors::mesh_error(e.in_file(s.clone())),
             None => errors::mesh_error(e),
         })?;
@@ -117,17 +116,17 @@ impl PyTetMesh {
 fn axes(v: Option<[f64; 3]>, default: [f64; 3], what: &str) -> PyResult<[f64; 3]> {
     let a = v.unwrap_or(default);
     if !a.iter().all(|x| x.is_finite() && *x > 0.0) {
-        return Err(PyValueError::new_err(format!("{what} semi-axes must be finite and positive [m], got {a:?}")));
+        return Err(crate::errors::param_error_from(format!("{what} semi-axes must be finite and positive [m], got {a:?}")));
     }
     Ok(a)
 }
 
 fn check_shell(inner: [f64; 3], outer: [f64; 3], layers: usize) -> PyResult<()> {
     if !(0..3).all(|i| outer[i] > inner[i]) {
-        return Err(PyValueError::new_err(format!("outer semi-axes {outer:?} must each exceed the inner ones {inner:?}")));
+        return Err(crate::errors::param_error_from(format!("outer semi-axes {outer:?} must each exceed the inner ones {inner:?}")));
     }
     if layers == 0 {
-        return Err(PyValueError::new_err("layers must be at least 1"));
+        return Err(crate::errors::param_error_from("layers must be at least 1"));
     }
     Ok(())
 }
@@ -138,7 +137,7 @@ const MAX_GENERATED_TETS: usize = 20_000_000;
 fn check_size(n_tets: Option<usize>) -> PyResult<()> {
     match n_tets {
         Some(n) if n <= MAX_GENERATED_TETS => Ok(()),
-        _ => Err(PyValueError::new_err(format!("the requested mesh is too large (more than {MAX_GENERATED_TETS} tets)"))),
+        _ => Err(crate::errors::param_error_from(format!("the requested mesh is too large (more than {MAX_GENERATED_TETS} tets)"))),
     }
 }
 
@@ -174,7 +173,7 @@ pub fn ellipsoid_wall(
     };
     check_shell(p.inner, p.outer, p.layers)?;
     check_size(4usize.checked_pow(p.subdivisions.min(64) as u32).and_then(|f| f.checked_mul(24)).and_then(|f| f.checked_mul(p.layers)))?;
-    Ok(PyTetMesh::from_core(py.detach(|| generate::ellipsoid_wall(&p))))
+    errors::guard("ellipsoid_wall", || Ok(PyTetMesh::from_core(py.detach(|| generate::try_ellipsoid_wall(&p)).map_err(errors::mesh_error)?)))
 }
 
 /// The left-ventricle-like wall: between two concentric ellipsoids, above the plane z = z_cut.
@@ -216,17 +215,17 @@ pub fn truncated_ellipsoid_wall(
     };
     check_shell(p.inner, p.outer, p.layers)?;
     if !(p.z_cut.is_finite() && p.z_cut.abs() < p.inner[2]) {
-        return Err(PyValueError::new_err(format!(
+        return Err(crate::errors::param_error_from(format!(
             "z_cut = {} m must lie strictly inside the inner ellipsoid's z range (-{c}, {c})",
             p.z_cut,
             c = p.inner[2]
         )));
     }
     if p.circumferential < 3 {
-        return Err(PyValueError::new_err(format!("circumferential must be at least 3, got {}", p.circumferential)));
+        return Err(crate::errors::param_error_from(format!("circumferential must be at least 3, got {}", p.circumferential)));
     }
     if p.longitudinal < 1 {
-        return Err(PyValueError::new_err("longitudinal must be at least 1"));
+        return Err(crate::errors::param_error_from("longitudinal must be at least 1"));
     }
     check_size(
         p.circumferential
@@ -234,7 +233,7 @@ pub fn truncated_ellipsoid_wall(
             .and_then(|t| t.checked_mul(3))
             .and_then(|t| t.checked_mul(p.layers)),
     )?;
-    Ok(PyTetMesh::from_core(py.detach(|| generate::truncated_ellipsoid_wall(&p))))
+    errors::guard("truncated_ellipsoid_wall", || Ok(PyTetMesh::from_core(py.detach(|| generate::try_truncated_ellipsoid_wall(&p)).map_err(errors::mesh_error)?)))
 }
 
 /// The box [0, sx] x [0, sy] x [0, sz] [m] cut into nx * ny * nz cells of 6 tets each.
@@ -250,13 +249,14 @@ pub fn truncated_ellipsoid_wall(
 /// ``i + (nx+1) * (j + (ny+1) * k)``.
 #[pyfunction]
 #[pyo3(signature = (size = [0.1, 0.02, 0.02], cells = [10, 2, 2]))]
-pub fn box_mesh(py: Python<'_>, size: [f64; 3], cells: [usize; 3]) -> PyResult<PyTetMesh> {
+pub fn box_mesh(py: Python<'_>, size: [f64; 3], cells: [i64; 3]) -> PyResult<PyTetMesh> {
+    let cells = [errors::count(cells[0], "cells[0]")?, errors::count(cells[1], "cells[1]")?, errors::count(cells[2], "cells[2]")?];
     if !size.iter().all(|s| s.is_finite() && *s > 0.0) {
-        return Err(PyValueError::new_err(format!("box size must be finite and positive [m], got {size:?}")));
+        return Err(crate::errors::param_error_from(format!("box size must be finite and positive [m], got {size:?}")));
     }
     if cells.iter().any(|&c| c == 0) {
-        return Err(PyValueError::new_err(format!("box needs at least one cell per axis, got {cells:?}")));
+        return Err(crate::errors::param_error_from(format!("box needs at least one cell per axis, got {cells:?}")));
     }
     check_size(cells[0].checked_mul(cells[1]).and_then(|c| c.checked_mul(cells[2])).and_then(|c| c.checked_mul(6)))?;
-    Ok(PyTetMesh::from_core(py.detach(|| generate::box_mesh(size, cells))))
+    errors::guard("box_mesh", || Ok(PyTetMesh::from_core(py.detach(|| generate::try_box_mesh(size, cells)).map_err(errors::mesh_error)?)))
 }

@@ -4,9 +4,8 @@
 //! loop's copies (`simd_path`, `set_simd_enabled`). The neighbour search releases the GIL.
 
 use numpy::{PyArray1, PyArrayDyn};
-use palpate_core::meshfree::neighbors::neighbours_within;
+use palpate_core::meshfree::neighbors::neighbours_within_limited;
 use palpate_core::meshfree::Kernel;
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::IntoPyObjectExt;
 
@@ -76,7 +75,7 @@ fn check_radius(h: f64, what: &str) -> PyResult<()> {
     if h > 0.0 && h.is_finite() {
         Ok(())
     } else {
-        Err(PyValueError::new_err(format!("{what} = {h} m must be positive and finite")))
+        Err(crate::errors::param_error_from(format!("{what} = {h} m must be positive and finite")))
     }
 }
 
@@ -110,6 +109,7 @@ type Csr<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>);
 fn neighbours<'py>(py: Python<'py>, points: &Bound<'py, PyAny>, radius: f64) -> PyResult<Csr<'py>> {
     check_radius(radius, "radius")?;
     let p = conv::points_vec3(points, "points")?;
-    let (ptr, idx) = py.detach(|| neighbours_within(&p, radius));
+    // 40 bytes a pair: the index lists here and the two int64 arrays handed to Python.
+    let (ptr, idx) = py.detach(|| neighbours_within_limited(&p, radius, 40.0)).map_err(|e| crate::errors::limit_error(&e, None))?;
     Ok((conv::usizes_to_py(py, &ptr), conv::usizes_to_py(py, &idx)))
 }

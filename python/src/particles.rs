@@ -6,7 +6,7 @@ use std::time::Instant;
 use numpy::{PyArray1, PyArray2};
 use palpate_core::meshfree::{Kernel, ParticleModel, ParticleModelBuilder, ParticleState, ParticleWorkspace, DEFAULT_HOURGLASS, DEFAULT_MIN_WEIGHT};
 use palpate_core::Vec3;
-use pyo3::exceptions::{PyKeyError, PyValueError};
+use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -74,7 +74,7 @@ fn check_dt(dt: f64) -> PyResult<()> {
     if dt > 0.0 && dt.is_finite() {
         Ok(())
     } else {
-        Err(PyValueError::new_err(format!("dt = {dt} s must be positive and finite")))
+        Err(crate::errors::param_error_from(format!("dt = {dt} s must be positive and finite")))
     }
 }
 
@@ -120,7 +120,7 @@ impl PyParticleBody {
             .gravity(gravity)
             .hourglass(hourglass)
             .min_relative_weight(min_relative_weight);
-        let model = py.detach(|| builder.build()).map_err(errors::model_error)?;
+        let model = errors::guard("ParticleBody", || py.detach(|| builder.build()).map_err(errors::model_error))?;
         let state = ParticleState::rest(&model);
         let ws = ParticleWorkspace::new(&model);
         Ok(PyParticleBody { model, state, ws, material: material.unbind(), gravity, min_relative_weight })
@@ -133,14 +133,17 @@ impl PyParticleBody {
     /// Raises ``StepError`` if a step fails; the steps before it are kept and the body is left as
     /// it was before the failing step.
     #[pyo3(signature = (n = 1, dt = 1e-3))]
-    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: usize, dt: f64) -> PyResult<Bound<'py, PyDict>> {
+    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: i64, dt: f64) -> PyResult<Bound<'py, PyDict>> {
+        let n = errors::count(n, "n")?;
         if !(dt > 0.0 && dt.is_finite()) {
             return Err(errors::step_error(palpate_core::StepError::BadTimeStep(dt), ""));
         }
         let this = &mut *slf;
         let (model, state, ws) = (&this.model, &mut this.state, &mut this.ws);
-        py.detach(|| (0..n).try_for_each(|k| palpate_core::meshfree::step(model, state, ws, dt).map(|_| ()).map_err(|e| (k, e))))
-            .map_err(|(k, e)| errors::step_error(e, &format!("in step {} of {n}", k + 1)))?;
+        errors::guard("ParticleBody.step", || {
+            py.detach(|| (0..n).try_for_each(|k| palpate_core::meshfree::step(model, state, ws, dt).map(|_| ()).map_err(|e| (k, e))))
+                .map_err(|(k, e)| errors::step_error(e, &format!("in step {} of {n}", k + 1)))
+        })?;
         let substeps = this.model.substeps(dt);
         let d = PyDict::new(py);
         d.set_item("steps", n)?;
@@ -157,13 +160,15 @@ impl PyParticleBody {
     /// early, else None). Stops early when a step fails or the summed wall time exceeds
     /// ``max_wall_s`` [s].
     #[pyo3(signature = (ticks, dt = 1e-3, max_wall_s = None))]
-    fn run_timed<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, ticks: usize, dt: f64, max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+    fn run_timed<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, ticks: i64, dt: f64, max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+        let ticks = errors::count(ticks, "ticks")?;
         check_dt(dt)?;
         let this = &mut *slf;
         let (model, state, ws) = (&this.model, &mut this.state, &mut this.ws);
         let substeps = model.substeps(dt);
-        let run = py.detach(|| {
-            let mut out = TimedRun { tick_wall: Vec::with_capacity(ticks), substeps, substep_dt: dt / substeps as f64, error: None };
+        // The per-tick record grows as ticks are taken (reserving 1e11 up front aborted).
+        let run = errors::guard("ParticleBody.run_timed", || Ok(py.detach(|| {
+            let mut out = TimedRun { tick_wall: Vec::with_capacity(ticks.min(1 << 16)), substeps, substep_dt: dt / substeps as f64, error: None };
             let mut total = 0.0;
             for k in 0..ticks {
                 let t0 = Instant::now();
@@ -188,7 +193,7 @@ impl PyParticleBody {
                 }
             }
             out
-        });
+        })))?;
         let d = PyDict::new(py);
         d.set_item("ticks", run.tick_wall.len())?;
         d.set_item("tick_wall_s", conv::f64s_to_py(py, &run.tick_wall))?;
@@ -228,7 +233,7 @@ impl PyParticleBody {
         let f_ext = conv::vec3s(&item(state, "forces")?, "forces", n, true)?;
         let t: f64 = item(state, "time")?.extract()?;
         if !t.is_finite() {
-            return Err(PyValueError::new_err(format!("time = {t} s must be finite")));
+            return Err(crate::errors::param_error_from(format!("time = {t} s must be finite")));
         }
         let active = conv::indices(&item(state, "active")?, "active", n, PARTICLES, true)?;
         self.state = ParticleState { x, v, t, f_ext, active };
@@ -363,7 +368,7 @@ impl PyParticleBody {
     /// Neighbours of particle ``i`` at rest, int64, ascending.
     fn neighbours<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
         if i >= self.model.n_particles() {
-            return Err(PyValueError::new_err(format!("particle index {i} out of range (the body has {} particles)", self.model.n_particles())));
+            return Err(crate::errors::param_error_from(format!("particle index {i} out of range (the body has {} particles)", self.model.n_particles())));
         }
         Ok(conv::usizes_to_py(py, self.model.neighbours(i)))
     }

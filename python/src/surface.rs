@@ -6,7 +6,6 @@ use numpy::ndarray::Array1;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyUntypedArrayMethods};
 use palpate_core::mesh::{self, TriSurface};
 use palpate_core::Vec3;
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::IntoPyObjectExt;
 
@@ -129,7 +128,7 @@ impl PyTriSurface {
         match method {
             "winding" => per_point(py, points, "points", |p| s.contains(p)),
             "parity" => per_point(py, points, "points", |p| s.contains_parity(p)),
-            other => Err(PyValueError::new_err(format!("method must be 'winding' or 'parity', got {other:?}"))),
+            other => Err(crate::errors::param_error_from(format!("method must be 'winding' or 'parity', got {other:?}"))),
         }
     }
 
@@ -156,12 +155,13 @@ impl PyTriSurface {
 #[pyo3(signature = (semi_axes = [0.026, 0.026, 0.042], subdivisions = 4))]
 pub fn ellipsoid_surface(py: Python<'_>, semi_axes: [f64; 3], subdivisions: usize) -> PyResult<PyTriSurface> {
     if !semi_axes.iter().all(|a| a.is_finite() && *a > 0.0) {
-        return Err(PyValueError::new_err(format!("semi_axes must be finite and positive [m], got {semi_axes:?}")));
+        return Err(crate::errors::param_error_from(format!("semi_axes must be finite and positive [m], got {semi_axes:?}")));
     }
     if subdivisions > 9 {
-        return Err(PyValueError::new_err(format!("subdivisions = {subdivisions} is too many (at most 9: 2 million triangles)")));
+        return Err(crate::errors::param_error_from(format!("subdivisions = {subdivisions} is too many (at most 9: 2 million triangles)")));
     }
-    Ok(PyTriSurface { inner: py.detach(|| mesh::ellipsoid_surface(semi_axes, subdivisions)) })
+    let inner = crate::errors::guard("ellipsoid_surface", || py.detach(|| mesh::surface::try_ellipsoid_surface(semi_axes, subdivisions)).map_err(crate::errors::surface_error))?;
+    Ok(PyTriSurface { inner })
 }
 
 type Sampled<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>);

@@ -3,6 +3,20 @@
 
 use thiserror::Error;
 
+/// A size that comes from input and exceeds the memory budget ([`crate::limits`]), refused before
+/// the memory is taken. Names what was asked, how much, the budget and how to raise it.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("{what}: {count:.3e} items need {need}, over the memory budget of {have}; raise the budget with the environment variable PALPATE_MAX_MEMORY (e.g. PALPATE_MAX_MEMORY=32G) if the machine has the memory, or check the input", need = crate::limits::human_bytes(*.bytes), have = crate::limits::human_bytes(*.budget as f64))]
+pub struct LimitError {
+    /// What would have been allocated, e.g. "transmural voxel grid (312 x 905 x 1204 voxels)".
+    pub what: String,
+    /// How many items, and their bytes in all.
+    pub count: f64,
+    pub bytes: f64,
+    /// The budget in bytes.
+    pub budget: u64,
+}
+
 /// A tetrahedral mesh that cannot be used. Every variant names the offending element or node.
 /// `source` is the file the mesh came from when known (filled by the caller, e.g. the Python loader).
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -28,6 +42,11 @@ pub enum MeshError {
     Shape { what: &'static str, expected: String, got: String },
     #[error("{file}: {source}")]
     InFile { file: String, source: Box<MeshError> },
+    /// A generator's parameters whose mesh would fail validation, refused before it is built.
+    #[error("{generator}: {reason}")]
+    Generator { generator: &'static str, reason: String },
+    #[error(transparent)]
+    Limit(#[from] LimitError),
 }
 
 impl MeshError {
@@ -76,6 +95,8 @@ pub enum ModelError {
     Parameter { name: &'static str, value: f64, reason: &'static str },
     #[error("{0}")]
     Empty(&'static str),
+    #[error(transparent)]
+    Limit(#[from] LimitError),
 }
 
 /// A linear or nonlinear solve that failed.
@@ -110,6 +131,10 @@ pub enum StepError {
     NonFiniteForce { node: usize },
     #[error("the tool's position is not finite")]
     NonFiniteTool,
+    /// A time step that needs more sub-steps than the cap (a dt far above the stable one, or a
+    /// material so stiff that its stable step is tiny): refused instead of running for minutes.
+    #[error("dt = {dt} s needs {substeps:.3e} sub-steps of the stable {stable_dt:e} s, over the cap of {cap} per step: take a smaller dt (or check the material's stiffness and the masses)")]
+    TooManySubsteps { dt: f64, stable_dt: f64, substeps: f64, cap: usize },
     #[error(transparent)]
     Solve(#[from] SolveError),
 }
@@ -134,6 +159,8 @@ pub enum HybridError {
     TwistedCore { prism: usize, triangle: usize, radial: bool },
     #[error("particles: {0}")]
     Particles(String),
+    #[error(transparent)]
+    Limit(#[from] LimitError),
 }
 
 fn radial_hint(radial: &bool) -> &'static str {
@@ -159,6 +186,9 @@ pub enum ModelFileError {
     Checksum { path: String, stored: u64, computed: u64 },
     #[error("{path}: corrupted: {reason}")]
     Corrupt { path: String, reason: String },
+    /// A file whose sizes exceed the memory budget (a crafted count, or a genuinely huge model).
+    #[error("{path}: {source}")]
+    Limit { path: String, source: LimitError },
 }
 
 /// A probe load that cannot be applied to its body (`probe::ProbeLoad::new`).

@@ -31,6 +31,7 @@ pub mod error;
 pub mod fem;
 pub mod hybrid;
 pub mod integrate;
+pub mod limits;
 pub mod linalg;
 pub mod material;
 pub mod math;
@@ -40,7 +41,7 @@ pub mod probe;
 pub mod runtime;
 pub mod spatial;
 
-pub use error::{HybridError, LoadError, MaterialError, MeshError, ModelError, ModelFileError, SolveError, StepError};
+pub use error::{HybridError, LimitError, LoadError, MaterialError, MeshError, ModelError, ModelFileError, SolveError, StepError};
 pub use integrate::{step, Integrator, StepReport};
 pub use material::{Law, Material};
 pub use math::{Mat3, Real, Vec3};

@@ -196,6 +196,10 @@ impl StepTotals {
     }
 }
 
+/// How many steps' records [`run_probe`] reserves before its first step (the usual benchmark runs
+/// fit, so their steps do not allocate); further records grow the arrays as steps are taken.
+pub const RESERVE_STEPS: usize = 1 << 16;
+
 /// Why a run stopped before its last step.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ProbeStop {
@@ -246,7 +250,10 @@ pub struct ProbeRun {
 /// Steps `state` `opts.steps` times under `loads` (every other external force is zeroed), the
 /// load of each step taken at its end (module docs), and measures the run. Never panics: a
 /// failing step, a blow-up or the wall-clock cap stops the run and is reported in
-/// [`ProbeRun::stop`]. Allocates the result's arrays once, before the first step.
+/// [`ProbeRun::stop`]. The per-step records grow as the steps are taken (reserved up to
+/// [`RESERVE_STEPS`] ahead): a requested count of 1e11 steps costs nothing until it is run
+/// (reserving it up front aborted the process), and a run stopped by its wall-clock cap holds
+/// only the steps it took.
 pub fn run_probe(model: &Model, state: &mut State, ws: &mut Workspace, loads: &[ProbeLoad], opts: &ProbeOptions, clock: &mut dyn StepClock) -> ProbeRun {
     let steps = opts.steps;
     let rest = model.mesh().points();
@@ -255,10 +262,10 @@ pub fn run_probe(model: &Model, state: &mut State, ws: &mut Workspace, loads: &[
     let mut out = ProbeRun {
         steps: 0,
         wall_s: 0.0,
-        step_s: Vec::with_capacity(steps),
+        step_s: Vec::with_capacity(steps.min(RESERVE_STEPS)),
         stable: true,
         max_disp: 0.0,
-        probe_disp: Vec::with_capacity(steps),
+        probe_disp: Vec::with_capacity(steps.min(RESERVE_STEPS)),
         probe_disp_avg: f64::NAN,
         mean_disp: vec![Vec3::zeros(); model.n_nodes()],
         totals: StepTotals::default(),

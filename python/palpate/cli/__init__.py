@@ -33,14 +33,14 @@ from typing import List, Optional
 
 from .. import __version__
 from . import bench, build, info, run, touch
-from ._common import Fail
+from ._common import Fail, Parser, run_guarded
 
 #: The commands, in the order of ``palpate --help``: each module adds its parser and handler.
 COMMANDS = (run, bench, build, info, touch)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="palpate", description="Real-time soft-tissue FEM for haptic interaction (SI units).")
+    ap = Parser(prog="palpate", description="Real-time soft-tissue FEM for haptic interaction (SI units).")
     ap.add_argument("--version", action="version", version=f"palpate {__version__}")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
@@ -51,14 +51,34 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Optional[List[str]] = None) -> int:
     ap = build_parser()
-    a = ap.parse_args(argv)
+    try:
+        a = ap.parse_args(argv)
+    except SystemExit as e:  # --help / --version print to stdout, which may be a closed pipe
+        code = e.code if isinstance(e.code, int) else 0
+        return _flushed(code)
+    except BrokenPipeError:
+        from ._common import quiet_pipe
+        return quiet_pipe()
     if getattr(a, "steps", None) is not None and a.steps <= 0:
         ap.error("--steps must be positive")
+    import warnings
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        # A warning is one line too (`palpate: warning: ...`), not Python's two-line format with
+        # the source line.
+        print(f"palpate: warning: {' '.join(str(message).split())}", file=sys.stderr)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = one_line
+        return _flushed(run_guarded(lambda: a.func(a)))
+
+
+def _flushed(code: int) -> int:
+    """Flush stdout now, so that a reader that closed the pipe early (``| head``) ends the
+    command quietly here rather than in Python's exit handler with a traceback."""
+    from ._common import quiet_pipe
     try:
-        return a.func(a)
-    except Fail as e:
-        print(f"palpate: error: {e}", file=sys.stderr)
-        return e.code
-    except KeyboardInterrupt:
-        print("palpate: interrupted", file=sys.stderr)
-        return 130
+        sys.stdout.flush()
+    except BrokenPipeError:
+        return quiet_pipe()
+    return code

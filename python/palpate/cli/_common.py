@@ -2,8 +2,11 @@
 the description of a hybrid model (``palpate build`` and ``palpate info``)."""
 from __future__ import annotations
 
+import argparse
 import math
-from typing import List
+import os
+import sys
+from typing import Callable, List
 
 
 class Fail(Exception):
@@ -13,6 +16,62 @@ class Fail(Exception):
     def __init__(self, msg: str, code: int = 2):
         super().__init__(msg)
         self.code = code
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with the CLI's one-line errors: ``palpate: error: ...`` and exit 2 (usage),
+    instead of argparse's usage block followed by the error."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def run_guarded(func: Callable[[], int]) -> int:
+    """Run a command so that whatever it raises ends as one line on stderr and an exit code, never
+    a traceback: :class:`Fail` with its code; a palpate error with 1 when a simulation or build
+    failed (StepError, SolveError, InternalError) and 2 for bad input (every other PalpateError,
+    a missing or unreadable file: OSError); MemoryError 1; anything else is a bug: 1, one line
+    saying so (``PALPATE_DEBUG=1`` shows the traceback). A closed stdout (``palpate ... | head``)
+    ends quietly."""
+    from .. import _palpate as _p
+
+    def say(msg: str, code: int) -> int:
+        print(f"palpate: error: {' '.join(str(msg).split())}", file=sys.stderr)
+        return code
+
+    try:
+        return func()
+    except Fail as e:
+        return say(str(e), e.code)
+    except BrokenPipeError:
+        return quiet_pipe()
+    except KeyboardInterrupt:
+        print("palpate: interrupted", file=sys.stderr)
+        return 130
+    except (_p.StepError, _p.SolveError, _p.InternalError) as e:
+        return say(f"{type(e).__name__}: {e}", 1)
+    except _p.PalpateError as e:
+        return say(f"{type(e).__name__}: {e}", 2)
+    except OSError as e:
+        return say(f"{e.filename + ': ' if getattr(e, 'filename', None) else ''}{e.strerror or e}", 2)
+    except MemoryError:
+        return say("out of memory (lower the input's size, or see PALPATE_MAX_MEMORY)", 1)
+    except Exception as e:  # noqa: BLE001 - the promise is one line, never a traceback
+        if os.environ.get("PALPATE_DEBUG"):
+            raise
+        return say(f"internal error ({type(e).__name__}: {e}); please report it (PALPATE_DEBUG=1 shows the traceback)", 1)
+
+
+def quiet_pipe() -> int:
+    """stdout was closed by the reader (``| head``): point it at /dev/null so that Python's own
+    flush at exit does not print a BrokenPipeError, and end with 141 (128 + SIGPIPE), as Unix
+    tools killed by SIGPIPE do."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+    return 141
 
 
 def fmt_mm(v) -> str:

@@ -20,6 +20,9 @@ def _looks_like_model(path: str) -> bool:
 
     if path.lower().endswith(".palpate"):
         return True
+    import os
+    if not os.path.isfile(path):
+        return False  # opening a FIFO would block; the loaders refuse it with a message
     try:
         with open(path, "rb") as fh:
             head = fh.read(len(MODEL_MAGIC))

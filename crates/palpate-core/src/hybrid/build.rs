@@ -61,6 +61,16 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     }
     // --- transmural field ---
     let h = (wall_volume / o.field_voxels as f64).cbrt();
+    // The voxel grid spans the wall's bounding box, sized by the wall's volume: a thin wall (or
+    // a wrongly scaled surface) makes the box hold 1e4x more voxels than the wall. Refused over
+    // the memory budget before it is taken (~40 bytes a voxel in the field solve).
+    let (lo, hi) = surf.bounding_box();
+    let dims = (hi - lo).map(|e| (e + 4.0 * h) / h);
+    crate::limits::check_grid(
+        &format!("transmural voxel grid ({:.0} x {:.0} x {:.0} voxels of {h:.3e} m for a wall of {wall_volume:.3e} m^3: the wall is thin for its bounding box; lower field_voxels)", dims.x, dims.y, dims.z),
+        [dims.x, dims.y, dims.z],
+        40.0,
+    )?;
     let mean_edge = (surf.area() / surf.n_triangles() as f64 * 2.3).sqrt();
     let wall_grid = TriangleGrid::new(surf.points(), surf.triangles(), mean_edge.max(0.5 * h));
     let field = transmural::solve(surf, &wall.parts, h, &wall_grid);
@@ -77,6 +87,10 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     // --- particles, and the shared voxels they take their outer triangle from ---
     let t0 = Instant::now();
     let spacing = shell::spacing(o, wall_volume, m.core_volume());
+    // Each particle costs the build and the model ~600 bytes (position, mass, owners, regions,
+    // neighbour searches): refused over the budget before the lattice is filled.
+    let estimate = (wall_volume - m.core_volume()).max(0.0) / (spacing * spacing * spacing);
+    crate::limits::check(&format!("particle shell of about {estimate:.3e} particles at spacing {spacing:e} m"), estimate, 600.0)?;
     let core_grid = TetGrid::new(&m.core_points, &m.core_tets, 2.0 * spacing.max(h));
     let particles = shell::lattice(wall, &m.core_points, &core_grid, spacing, o.density)?;
     outer::build(&mut m, wall);

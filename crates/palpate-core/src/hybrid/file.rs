@@ -19,6 +19,10 @@
 //! offset table monotone), so that a loaded model is as valid as a built one. Saving then
 //! loading gives a model equal to the original, field by field and bit by bit.
 
+// Untrusted bytes are read here: no unwrap, expect or unchecked indexing (`cargo clippy` denies
+// them; every access goes through `get` and a typed error).
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
+
 use super::model::{self, HybridModel};
 use super::{build, core, options, outer, region_field, regions, shell, skin};
 use crate::error::ModelFileError;
@@ -122,21 +126,29 @@ impl<'a> Reader<'a> {
     /// A corrupted file, for `reason`.
     pub(super) fn corrupt(&self, reason: String) -> ModelFileError { ModelFileError::Corrupt { path: self.path.into(), reason } }
     fn take(&mut self, n: usize, field: &'static str) -> Res<&'a [u8]> {
-        if self.b.len() - self.off < n {
-            return Err(ModelFileError::Truncated { path: self.path.into(), field, offset: self.off + HEADER, need: n, have: self.b.len() + HEADER });
+        match self.off.checked_add(n).and_then(|end| self.b.get(self.off..end)) {
+            Some(s) => {
+                self.off += n;
+                Ok(s)
+            }
+            None => Err(ModelFileError::Truncated { path: self.path.into(), field, offset: self.off + HEADER, need: n, have: self.b.len() + HEADER }),
         }
-        let s = &self.b[self.off..self.off + n];
-        self.off += n;
-        Ok(s)
     }
-    pub(super) fn u8(&mut self, f: &'static str) -> Res<u8> { Ok(self.take(1, f)?[0]) }
-    pub(super) fn u32(&mut self, f: &'static str) -> Res<u32> { Ok(u32::from_le_bytes(self.take(4, f)?.try_into().unwrap())) }
-    pub(super) fn u64(&mut self, f: &'static str) -> Res<u64> { Ok(u64::from_le_bytes(self.take(8, f)?.try_into().unwrap())) }
-    pub(super) fn f64(&mut self, f: &'static str) -> Res<f64> { Ok(f64::from_le_bytes(self.take(8, f)?.try_into().unwrap())) }
+    /// `N` bytes as an array (a short read is the truncation error of `take`).
+    fn array_of<const N: usize>(&mut self, f: &'static str) -> Res<[u8; N]> {
+        let s = self.take(N, f)?;
+        let mut a = [0u8; N];
+        a.copy_from_slice(s);
+        Ok(a)
+    }
+    pub(super) fn u8(&mut self, f: &'static str) -> Res<u8> { Ok(self.array_of::<1>(f)?[0]) }
+    pub(super) fn u32(&mut self, f: &'static str) -> Res<u32> { Ok(u32::from_le_bytes(self.array_of(f)?)) }
+    pub(super) fn u64(&mut self, f: &'static str) -> Res<u64> { Ok(u64::from_le_bytes(self.array_of(f)?)) }
+    pub(super) fn f64(&mut self, f: &'static str) -> Res<f64> { Ok(f64::from_le_bytes(self.array_of(f)?)) }
     /// The count of an array of `item`-byte entries, checked against the bytes left.
     fn count(&mut self, item: usize, f: &'static str) -> Res<usize> {
         let n = self.u64(f)?;
-        let left = (self.b.len() - self.off) as u64;
+        let left = self.b.len().saturating_sub(self.off) as u64;
         if n.saturating_mul(item as u64) > left {
             return Err(ModelFileError::Truncated { path: self.path.into(), field: f, offset: self.off + HEADER, need: n.saturating_mul(item as u64).min(usize::MAX as u64) as usize, have: self.b.len() + HEADER });
         }
@@ -185,26 +197,29 @@ pub fn to_bytes(m: &HybridModel) -> Vec<u8> {
 
 /// Read a model from the bytes of a model file; `path` names it in errors.
 pub fn from_bytes(bytes: &[u8], path: &str) -> Result<HybridModel, ModelFileError> {
-    if bytes.len() < 16 || &bytes[..16] != MAGIC {
+    if bytes.get(..16) != Some(&MAGIC[..]) {
         return Err(ModelFileError::NotAModel { path: path.into() });
     }
-    if bytes.len() < HEADER {
-        return Err(ModelFileError::Truncated { path: path.into(), field: "header", offset: 16, need: HEADER - 16, have: bytes.len() });
-    }
-    let version = u32::from_le_bytes(bytes[16..20].try_into().unwrap());
+    let truncated = || ModelFileError::Truncated { path: path.into(), field: "header", offset: 16, need: HEADER - 16, have: bytes.len() };
+    let word = |at: usize| -> Result<u64, ModelFileError> {
+        let b: [u8; 8] = bytes.get(at..at + 8).and_then(|s| s.try_into().ok()).ok_or_else(truncated)?;
+        Ok(u64::from_le_bytes(b))
+    };
+    let head = word(16)?;
+    let version = (head & 0xffff_ffff) as u32;
     if version != FORMAT_VERSION {
         return Err(ModelFileError::Version { path: path.into(), found: version, supported: FORMAT_VERSION });
     }
-    let len = u64::from_le_bytes(bytes[24..32].try_into().unwrap());
-    let stored = u64::from_le_bytes(bytes[32..40].try_into().unwrap());
-    let have = (bytes.len() - HEADER) as u64;
+    let len = word(24)?;
+    let stored = word(32)?;
+    let payload = bytes.get(HEADER..).ok_or_else(truncated)?;
+    let have = payload.len() as u64;
     if len > have {
         return Err(ModelFileError::Truncated { path: path.into(), field: "payload", offset: HEADER, need: len.min(usize::MAX as u64) as usize, have: bytes.len() });
     }
     if len < have {
         return Err(ModelFileError::Corrupt { path: path.into(), reason: format!("{} bytes after the end of the model", have - len) });
     }
-    let payload = &bytes[HEADER..];
     let computed = checksum(payload);
     if computed != stored {
         return Err(ModelFileError::Checksum { path: path.into(), stored, computed });
@@ -220,8 +235,59 @@ pub fn from_bytes(bytes: &[u8], path: &str) -> Result<HybridModel, ModelFileErro
     for s in &SECTIONS {
         (s.check)(&m).map_err(|reason| r.corrupt(reason))?;
     }
+    semantic(&m).map_err(|reason| r.corrupt(reason))?;
     outer::derive(&mut m);
     Ok(m)
+}
+
+/// What a built model guarantees beyond index ranges, checked on load so that a crafted file is
+/// as safe to use as a freshly built model (the checksum only catches accidents: anyone can
+/// write a file with a valid checksum). Finite, physical numbers everywhere (a NaN option or
+/// mass would load and print `nan`, or poison the first tick); region ring counts no larger than
+/// the builder makes (each region is regrown ring by ring on demand: 255 rings everywhere made a
+/// crafted file take a minute); the skin's barycentric weights; voxel owners in range; the core a
+/// valid tet mesh (no degenerate or inverted tet: the runtime factorises its stiffness).
+fn semantic(m: &HybridModel) -> Result<(), String> {
+    options::check(&m.options).map_err(|e| format!("options: {e}"))?;
+    if !(m.wall_volume > 0.0 && m.wall_volume.is_finite()) {
+        return Err(format!("wall volume {} m^3 must be positive and finite", m.wall_volume));
+    }
+    let s = &m.stats;
+    for (name, t) in [("field", s.field_s), ("core", s.core_s), ("particles", s.particles_s), ("regions", s.regions_s), ("total", s.total_s)] {
+        if !(t >= 0.0 && t.is_finite()) {
+            return Err(format!("build statistics: {name} time {t} s must be non-negative and finite"));
+        }
+    }
+    if let Some(i) = m.particle_mass.iter().position(|&x| !(x > 0.0 && x.is_finite())) {
+        return Err(format!("particle {i}: mass {:?} kg must be positive and finite", m.particle_mass.get(i)));
+    }
+    if let Some(i) = m.region_rings.iter().position(|&r| r as usize > 2 * options::MAX_RINGS) {
+        return Err(format!("region {i}: {:?} rings, more than the builder makes ({})", m.region_rings.get(i), 2 * options::MAX_RINGS));
+    }
+    for (v, b) in m.skin_bary.iter().enumerate() {
+        let sum: f64 = b.iter().sum();
+        if !b.iter().all(|x| x.is_finite() && (-1e-6..=1.0 + 1e-6).contains(x)) || (sum - 1.0).abs() > 1e-6 {
+            return Err(format!("skin vertex {v}: barycentric weights {b:?} are not in [0, 1] with sum 1"));
+        }
+    }
+    let g = &m.grid;
+    if !g.origin.iter().all(|x| x.is_finite()) {
+        return Err(format!("voxel grid origin {:?} is not finite", g.origin));
+    }
+    let nt = m.outer_tris.len() as u32;
+    if let Some(v) = m.voxel_owner.iter().position(|&o| o >= nt && o != region_field::VOXEL_OUTSIDE && o != region_field::VOXEL_CORE) {
+        return Err(format!("voxel {v}: owner {:?} out of range ({nt} outer triangles)", m.voxel_owner.get(v)));
+    }
+    if m.outer_tris.is_empty() || m.particles.is_empty() || m.core_tets.is_empty() {
+        return Err("empty model: no outer triangles, particles or core tets".into());
+    }
+    let pts: Vec<[f64; 3]> = m.core_points.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let tets: Vec<[i64; 4]> = m.core_tets.iter().map(|t| t.map(|i| i as i64)).collect();
+    match crate::mesh::TetMesh::from_arrays(&pts, &tets) {
+        Ok((_, w)) if w.is_empty() => Ok(()),
+        Ok((_, w)) => Err(format!("FEM core: {} inverted tets (first: {})", w.len(), w.first().map(|x| x.to_string()).unwrap_or_default())),
+        Err(e) => Err(format!("FEM core: {e}")),
+    }
 }
 
 /// Every entry of `v` below `n`, or which is not.
@@ -250,7 +316,16 @@ impl HybridModel {
 
     /// Load from `path`.
     pub fn load(path: &std::path::Path) -> Result<HybridModel, ModelFileError> {
-        let bytes = std::fs::read(path).map_err(|e| ModelFileError::Io { path: path.display().to_string(), reason: e.to_string() })?;
-        from_bytes(&bytes, &path.display().to_string())
+        let name = path.display().to_string();
+        let io = |e: std::io::Error| ModelFileError::Io { path: name.clone(), reason: e.to_string() };
+        // A FIFO or a device would block the read forever (or never end): regular files only.
+        let meta = std::fs::metadata(path).map_err(io)?;
+        if !meta.is_file() {
+            let kind = if meta.is_dir() { "a directory" } else { "not a regular file (a FIFO, socket or device?)" };
+            return Err(ModelFileError::Io { path: name, reason: format!("{kind}: a model file must be a regular file") });
+        }
+        crate::limits::check("model file", meta.len() as f64, 1.0).map_err(|source| ModelFileError::Limit { path: name.clone(), source })?;
+        let bytes = std::fs::read(path).map_err(io)?;
+        from_bytes(&bytes, &name)
     }
 }

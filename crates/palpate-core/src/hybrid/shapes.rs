@@ -4,7 +4,7 @@
 use super::wall::Wall;
 use super::transmural::WallPart;
 use crate::error::HybridError;
-use crate::mesh::generate::{truncated_ellipsoid_wall, TruncatedEllipsoidWall};
+use crate::mesh::generate::{try_truncated_ellipsoid_wall, TruncatedEllipsoidWall};
 use crate::mesh::{ellipsoid_surface, TriSurface};
 
 /// The paper's "Ellipsoids Model" wall: concentric ellipsoids of semi-axes `inner` and `outer`
@@ -17,7 +17,7 @@ pub fn ellipsoids(inner: [f64; 3], outer: [f64; 3], subdivisions: usize) -> Resu
 /// above `z = p.z_cut`, as one closed surface tagged inner / outer / base, at the surface
 /// resolution of `p` (circumferential x longitudinal points per surface).
 pub fn truncated_ventricle(p: &TruncatedEllipsoidWall) -> Result<Wall, HybridError> {
-    let mesh = truncated_ellipsoid_wall(&TruncatedEllipsoidWall { layers: 1, ..*p });
+    let mesh = try_truncated_ellipsoid_wall(&TruncatedEllipsoidWall { layers: 1, ..*p })?;
     let faces = mesh.boundary_faces();
     let pts = mesh.points();
     let level = |x: &crate::math::Vec3, a: [f64; 3]| ((x.x / a[0]).powi(2) + (x.y / a[1]).powi(2) + (x.z / a[2]).powi(2)).sqrt();

@@ -138,7 +138,7 @@ pub(super) fn check(m: &HybridModel) -> Result<(), String> {
     in_range("particle outer triangles", m.particle_outer_tri.iter().map(|&x| x as usize), nt)?;
     in_range("particle core faces", m.particle_core_face.iter().map(|&x| x as usize), nf)?;
     let ptr = &m.tri_particle_ptr;
-    if ptr.len() != nt + 1 || ptr[0] != 0 || *ptr.last().unwrap() as usize != np || ptr.windows(2).any(|w| w[0] > w[1]) {
+    if ptr.len() != nt + 1 || ptr.first() != Some(&0) || ptr.last().map(|&x| x as usize) != Some(np) || ptr.windows(2).any(|w| w[0] > w[1]) {
         return Err(format!("particles per outer triangle: offset table inconsistent ({} entries for {nt} rows over {np} items)", ptr.len()));
     }
     finite("particles", &m.particles)

@@ -120,6 +120,7 @@ impl Wall {
                 return Err(HybridError::Parts(format!("no {need:?} triangles")));
             }
         }
+        check_not_swapped(&surface, &parts)?;
         Ok(Wall { surface, parts, dropped_pieces: dropped })
     }
 
@@ -142,4 +143,29 @@ impl Wall {
         }
         PartSurface { points, tris }
     }
+}
+
+/// Swapped inner and outer tags are refused (they were accepted, and built a wall inside out).
+/// With the wall's boundary oriented outward, the outer part's share of the enclosed volume
+/// (`sum (a . (b x c)) / 6` from the surface's centroid) is positive and the inner part's, facing
+/// the cavity, negative; swapped tags give the opposite signs.
+fn check_not_swapped(surface: &TriSurface, parts: &[WallPart]) -> Result<(), HybridError> {
+    let pts = surface.points();
+    let centre = pts.iter().fold(crate::math::Vec3::zeros(), |a, p| a + p) / pts.len().max(1) as f64;
+    let (mut inner, mut outer) = (0.0, 0.0);
+    for (t, part) in surface.triangles().iter().zip(parts) {
+        let [a, b, c] = t.map(|v| pts[v] - centre);
+        let v = a.dot(&b.cross(&c)) / 6.0;
+        match part {
+            WallPart::Inner => inner += v,
+            WallPart::Outer => outer += v,
+            WallPart::Base => {}
+        }
+    }
+    if outer < 0.0 && inner > 0.0 {
+        return Err(HybridError::Parts(format!(
+            "the inner and outer tags look swapped: the triangles tagged outer face the cavity (volume share {outer:.3e} m^3) and those tagged inner face outward ({inner:.3e} m^3); swap the inner and outer tag values"
+        )));
+    }
+    Ok(())
 }

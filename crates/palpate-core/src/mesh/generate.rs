@@ -61,6 +61,8 @@ use std::f64::consts::PI;
 
 use super::prism::{split_prism, TetOrder};
 use super::TetMesh;
+use crate::error::MeshError;
+use crate::limits;
 use crate::math::Vec3;
 
 /// Validate generated arrays: a generator bug (an inverted or degenerate tet, an unused node) is a
@@ -70,6 +72,33 @@ fn finish(points: &[Vec3], tets: &[[usize; 4]]) -> TetMesh {
     let (mesh, warnings) = TetMesh::from_arrays(&p, &t).expect("mesh generator produced an invalid mesh");
     assert!(warnings.is_empty(), "mesh generator produced inverted tets: {warnings:?}");
     mesh
+}
+
+/// Validate generated arrays without panicking: for parameters at the edge of their ranges (a
+/// box of cells a million times thinner than wide, a ventricle of 4096 rings) the construction is
+/// right but its tets are too thin for [`TetMesh::from_arrays`]; that is the caller's input, so
+/// it is an error naming the generator, not a panic.
+fn try_finish(generator: &'static str, points: &[Vec3], tets: &[[usize; 4]]) -> Result<TetMesh, MeshError> {
+    let (p, t) = to_arrays(points, tets);
+    match TetMesh::from_arrays(&p, &t) {
+        Ok((mesh, warnings)) if warnings.is_empty() => Ok(mesh),
+        Ok((_, warnings)) => Err(MeshError::Generator { generator, reason: format!("the parameters give inverted tets ({} of them)", warnings.len()) }),
+        Err(e) => Err(MeshError::Generator {
+            generator,
+            reason: format!("these parameters give a mesh that fails validation ({e}): its cells are too thin or too small; use fewer cells along the short direction or less extreme sizes"),
+        }),
+    }
+}
+
+/// Bytes a generated mesh of `nodes` nodes and `tets` tets takes while it is built and validated
+/// (arrays built, converted and checked: ~3 copies), for the memory budget.
+fn check_size(generator: &'static str, nodes: f64, tets: f64) -> Result<(), MeshError> {
+    limits::check(&format!("{generator}: {nodes:.3e} nodes and {tets:.3e} tets"), 1.0, nodes * 3.0 * 24.0 + tets * 3.0 * 64.0)?;
+    Ok(())
+}
+
+fn param(generator: &'static str, ok: bool, reason: impl FnOnce() -> String) -> Result<(), MeshError> {
+    if ok { Ok(()) } else { Err(MeshError::Generator { generator, reason: reason() }) }
 }
 
 fn to_arrays(points: &[Vec3], tets: &[[usize; 4]]) -> (Vec<[f64; 3]>, Vec<[i64; 4]>) {
@@ -95,6 +124,31 @@ fn check_axes(name: &str, axes: [f64; 3]) {
 pub fn box_mesh(size: [f64; 3], cells: [usize; 3]) -> TetMesh {
     let (points, tets) = box_arrays(size, cells);
     finish(&points, &tets)
+}
+
+/// [`box_mesh`] for input from outside: parameters are checked before anything is built (the
+/// sizes against the memory budget, the cells' shape against the validator's degeneracy bound:
+/// a Kuhn tet of cell `hx, hy, hz` has volume `hx hy hz / 6` and longest edge the cell
+/// diagonal), and refused with a [`MeshError::Generator`] instead of a panic.
+pub fn try_box_mesh(size: [f64; 3], cells: [usize; 3]) -> Result<TetMesh, MeshError> {
+    const G: &str = "box_mesh";
+    param(G, size.iter().all(|s| s.is_finite() && *s > 0.0), || format!("size must be finite and positive, got {size:?}"))?;
+    param(G, cells.iter().all(|&n| n > 0), || format!("cells must be at least 1 per axis, got {cells:?}"))?;
+    let c = cells.map(|n| n as f64);
+    check_size(G, (c[0] + 1.0) * (c[1] + 1.0) * (c[2] + 1.0), 6.0 * c[0] * c[1] * c[2])?;
+    let h: [f64; 3] = std::array::from_fn(|a| size[a] / c[a]);
+    let diag = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
+    let relative = h[0] * h[1] * h[2] / 6.0 / (diag * diag * diag);
+    // A margin of 2 over the bound: the validator measures each tet's own longest edge after
+    // rounding.
+    param(G, relative >= 2.0 * super::tet_mesh::DEGENERATE_RELATIVE_VOLUME && h.iter().all(|x| x.is_normal()), || {
+        format!(
+            "cells of {:.3e} x {:.3e} x {:.3e} m are too thin (tet volume {relative:.1e} of its longest edge cubed, the validator needs {:.0e}): make size / cells closer on the three axes",
+            h[0], h[1], h[2], super::tet_mesh::DEGENERATE_RELATIVE_VOLUME
+        )
+    })?;
+    let (points, tets) = box_arrays(size, cells);
+    try_finish(G, &points, &tets)
 }
 
 fn box_arrays(size: [f64; 3], cells: [usize; 3]) -> (Vec<Vec3>, Vec<[usize; 4]>) {
@@ -239,6 +293,24 @@ pub fn ellipsoid_wall(p: &EllipsoidWall) -> TetMesh {
     finish(&points, &tets)
 }
 
+fn axes_ok(g: &'static str, name: &str, axes: [f64; 3]) -> Result<(), MeshError> {
+    param(g, axes.iter().all(|a| a.is_finite() && *a > 0.0), || format!("{name} semi-axes must be finite and positive, got {axes:?}"))
+}
+
+/// [`ellipsoid_wall`] for input from outside: parameters and size checked first, a mesh that
+/// fails validation an error (not a panic).
+pub fn try_ellipsoid_wall(p: &EllipsoidWall) -> Result<TetMesh, MeshError> {
+    const G: &str = "ellipsoid_wall";
+    axes_ok(G, "inner", p.inner)?;
+    axes_ok(G, "outer", p.outer)?;
+    param(G, (0..3).all(|i| p.outer[i] > p.inner[i]), || format!("outer semi-axes {:?} must exceed inner {:?}", p.outer, p.inner))?;
+    param(G, p.layers > 0 && p.subdivisions <= 12, || format!("layers must be at least 1 and subdivisions at most 12, got {} and {}", p.layers, p.subdivisions))?;
+    let t = 8.0 * 4f64.powi(p.subdivisions as i32);
+    check_size(G, (p.layers as f64 + 1.0) * (t / 2.0 + 2.0), 3.0 * p.layers as f64 * t)?;
+    let (points, tets) = ellipsoid_wall_arrays(p);
+    try_finish(G, &points, &tets)
+}
+
 fn ellipsoid_wall_arrays(p: &EllipsoidWall) -> (Vec<Vec3>, Vec<[usize; 4]>) {
     check_axes("inner", p.inner);
     check_axes("outer", p.outer);
@@ -355,6 +427,25 @@ impl TruncatedEllipsoidWall {
 pub fn truncated_ellipsoid_wall(p: &TruncatedEllipsoidWall) -> TetMesh {
     let (points, tets) = truncated_ellipsoid_wall_arrays(p);
     finish(&points, &tets)
+}
+
+/// [`truncated_ellipsoid_wall`] for input from outside: parameters and size checked first, a
+/// mesh that fails validation an error (not a panic). The validation cannot be predicted in
+/// closed form here (the apex fan and the crowded rings near it set the thinnest tet), so a fine
+/// resolution inside the documented ranges is refused after it is built, with the reason.
+pub fn try_truncated_ellipsoid_wall(p: &TruncatedEllipsoidWall) -> Result<TetMesh, MeshError> {
+    const G: &str = "truncated_ellipsoid_wall";
+    axes_ok(G, "inner", p.inner)?;
+    axes_ok(G, "outer", p.outer)?;
+    param(G, (0..3).all(|i| p.outer[i] > p.inner[i]), || format!("outer semi-axes {:?} must exceed inner {:?}", p.outer, p.inner))?;
+    param(G, p.z_cut.is_finite() && p.z_cut.abs() < p.inner[2], || format!("z_cut = {} must lie strictly inside the inner ellipsoid's z range", p.z_cut))?;
+    param(G, p.circumferential >= 3 && p.longitudinal >= 1 && p.layers >= 1, || {
+        format!("need circumferential >= 3, longitudinal >= 1 and layers >= 1, got {}, {}, {}", p.circumferential, p.longitudinal, p.layers)
+    })?;
+    let (c, l, n) = (p.circumferential as f64, p.longitudinal as f64, p.layers as f64);
+    check_size(G, (n + 1.0) * (c * l + 1.0), 3.0 * n * c * (2.0 * l - 1.0))?;
+    let (points, tets) = truncated_ellipsoid_wall_arrays(p);
+    try_finish(G, &points, &tets)
 }
 
 fn truncated_ellipsoid_wall_arrays(p: &TruncatedEllipsoidWall) -> (Vec<Vec3>, Vec<[usize; 4]>) {

@@ -58,6 +58,10 @@ impl Lattice {
                 return Err(SurfaceError::TooLarge { points: total, limit: MAX_LATTICE_POINTS });
             }
             n[a] = k as usize;
+            if a == 2 {
+                // Every lattice point may lie inside (a box): position and mass each, 32 bytes.
+                crate::limits::check(&format!("sampling lattice of {total:.3e} points at spacing {s:e} m"), total, 32.0)?;
+            }
             origin[a] = 0.5 * (lo[a] + hi[a]) - 0.5 * (k - 1.0) * s;
         }
         Ok(Lattice { origin, n, s })

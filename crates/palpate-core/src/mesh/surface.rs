@@ -69,6 +69,8 @@ pub enum SurfaceError {
     TooLarge { points: f64, limit: f64 },
     #[error("{file}: {source}")]
     InFile { file: String, source: Box<SurfaceError> },
+    #[error(transparent)]
+    Limit(#[from] crate::error::LimitError),
 }
 
 fn list(v: &[usize]) -> String {
@@ -428,6 +430,27 @@ impl ColumnGrid {
 ///
 /// # Panics
 /// If a semi-axis is not finite and positive, or `subdivisions > 10` (8 million triangles).
+/// [`ellipsoid_surface`] for input from outside: the semi-axes checked (finite, positive, and
+/// within 1e6 of each other: a flatter ellipsoid's triangles are degenerate) and the surface
+/// validated without panicking.
+pub fn try_ellipsoid_surface(semi_axes: [f64; 3], subdivisions: usize) -> Result<TriSurface, SurfaceError> {
+    let (lo, hi) = (semi_axes.iter().copied().fold(f64::INFINITY, f64::min), semi_axes.iter().copied().fold(0.0, f64::max));
+    if !(semi_axes.iter().all(|a| a.is_finite() && a.is_normal() && *a > 0.0) && hi <= 1e6 * lo && hi < 1e150) {
+        return Err(SurfaceError::Parameter { name: "ellipsoid semi-axes ratio", value: hi / lo, reason: "semi-axes must be finite, positive, below 1e150 m and within a factor 1e6 of each other" });
+    }
+    if subdivisions > 10 {
+        return Err(SurfaceError::Parameter { name: "subdivisions", value: subdivisions as f64, reason: "too many (at most 10)" });
+    }
+    let (verts, tris) = super::generate::geodesic_sphere(subdivisions);
+    let points: Vec<[f64; 3]> = verts.iter().map(|d| [semi_axes[0] * d.x, semi_axes[1] * d.y, semi_axes[2] * d.z]).collect();
+    let triangles: Vec<[i64; 3]> = tris.iter().map(|t| t.map(|i| i as i64)).collect();
+    let (s, warnings) = TriSurface::from_arrays(&points, &triangles)?;
+    if !warnings.is_empty() {
+        return Err(SurfaceError::Parameter { name: "ellipsoid surface warnings", value: warnings.len() as f64, reason: "the semi-axes give a surface that needed repairs" });
+    }
+    Ok(s)
+}
+
 pub fn ellipsoid_surface(semi_axes: [f64; 3], subdivisions: usize) -> TriSurface {
     assert!(semi_axes.iter().all(|a| a.is_finite() && *a > 0.0), "ellipsoid semi-axes must be finite and positive, got {semi_axes:?}");
     assert!(subdivisions <= 10, "subdivisions = {subdivisions} is too many (at most 10)");

@@ -4,7 +4,7 @@
 
 use super::kernel::Kernel;
 use super::model::{to_p4, ParticleModel};
-use super::neighbors::neighbours_within;
+use super::neighbors::neighbours_within_limited;
 use super::pair_loop::p4;
 use crate::error::{MaterialError, ModelError};
 use crate::material::{Law, Material};
@@ -16,6 +16,9 @@ pub const DEFAULT_HOURGLASS: f64 = 0.5;
 pub const DEFAULT_MIN_WEIGHT: f64 = 1e-3;
 /// Smallest accepted ratio of the moment matrix's eigenvalues (its conditioning).
 const MIN_MOMENT_CONDITION: f64 = 1e-4;
+/// What one neighbour pair costs the model in bytes (its index twice, kernel weight, rest offset,
+/// gradient and hourglass vectors), for the memory budget ([`crate::limits`]).
+const BYTES_PER_PAIR: f64 = 136.0;
 
 /// With [`ParticleModelBuilder::fix_unsupported`], particles with fewer neighbours than this are
 /// held (a least-squares gradient over fewer than 6 neighbours fits them almost exactly: little
@@ -126,7 +129,9 @@ impl ParticleModelBuilder {
             is_fixed[i] = true;
         }
 
-        let (ptr, nbr) = neighbours_within(&rest, h);
+        // Each pair costs the model ~130 bytes (index, weights, gradients, rest offsets), refused
+        // over the memory budget before the lists grow (a radius of many spacings).
+        let (ptr, nbr) = neighbours_within_limited(&rest, h, BYTES_PER_PAIR)?;
         // Drop the pairs whose kernel weight is negligible (on a cubic lattice with a support of
         // 1.8 spacings, the 8 corner neighbours at sqrt(3) spacings have W/W(0) = 1e-5: a third
         // of the pair work for nothing). W depends on the distance only, so the lists stay
@@ -212,7 +217,11 @@ impl ParticleModelBuilder {
                     ),
                 });
             }
-            let a_inv = a.try_inverse().expect("checked positive definite");
+            // The eigenvalue test above passes a matrix whose entries underflow or overflow (masses
+            // near 1e-150 make volumes of 1e-153): an error, not a panic.
+            let Some(a_inv) = a.try_inverse().filter(|m| m.iter().all(|v| v.is_finite())) else {
+                return Err(ModelError::Particle { particle: i, reason: format!("its moment matrix cannot be inverted (volume {:e} m^3 from mass {:e} kg): masses and density must give volumes of a physical size", volume[i], masses[i]) });
+            };
             let c = hourglass * material.mu() * volume[i] / second;
             r_inv[i] = a_inv;
             hg_c[i] = c;
@@ -255,6 +264,15 @@ impl ParticleModelBuilder {
             damping_max: 0.0,
         };
         model.compute_stable_dt();
+        // An extreme stiffness or mass (E = 1e150 Pa) overflows the frequency bound to inf or
+        // NaN, which made the stable step infinite: one sub-step of any dt, silently wrong.
+        if !(model.stable_dt > 0.0 && model.stable_dt.is_finite() && model.omega_max.is_finite()) {
+            return Err(ModelError::Parameter {
+                name: "stable time step",
+                value: model.stable_dt,
+                reason: "not a positive finite number (the material's stiffness over the masses overflows or vanishes: check young, density and the masses)",
+            });
+        }
         Ok(model)
     }
 }

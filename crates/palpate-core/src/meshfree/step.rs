@@ -62,12 +62,25 @@ where
     advance(model, state, ws, dt, substeps, Some(&mut external))
 }
 
+/// The most particle-sub-steps one step may take (active particles x sub-steps, about a second
+/// of work), and the sub-step cap never goes below [`MIN_SUBSTEP_CAP`].
+pub const MAX_PARTICLE_SUBSTEPS: usize = 100_000_000;
+pub const MIN_SUBSTEP_CAP: usize = 1000;
+
 fn advance(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize, external: Option<ExtForce<'_>>) -> Result<ParticleStepReport, StepError> {
     // A ring left from an earlier step must not be mistaken for this one's if this one fails.
     ws.ring.clear();
     ws.ring_force.clear();
     if !(dt > 0.0 && dt.is_finite()) || substeps == 0 {
         return Err(StepError::BadTimeStep(dt));
+    }
+    // Bounded work per step: a dt of 1e3 s (or a stiffness of 1e150 Pa) asks for 1e8+ sub-steps,
+    // minutes with no answer. The cap is on particle-sub-steps (about a second of work); the
+    // stable count saturates at usize::MAX when the stable dt underflows, and is refused too.
+    let cap = (MAX_PARTICLE_SUBSTEPS / state.active.len().max(1)).max(MIN_SUBSTEP_CAP);
+    if substeps > cap {
+        let wanted = if substeps == usize::MAX { dt / model.stable_dt() } else { substeps as f64 };
+        return Err(StepError::TooManySubsteps { dt, stable_dt: model.stable_dt(), substeps: wanted, cap });
     }
     let n = model.n_particles();
     if state.x.len() != n || state.v.len() != n || state.f_ext.len() != n {

@@ -1,0 +1,493 @@
+"""The malformed- and extreme-input corpus of issue 15 (test_corpus.py runs it): every reader, the
+model file, the generators, the bodies and the command line, each case with its class in the
+issue's table and the outcome it must have.
+
+``make(folder)`` writes the input files into ``folder`` and returns the cases, each a dict:
+
+- ``name``, ``klass`` (the issue's row: abort, panic, hang, bomb, silent, output, untyped, or
+  ``mutation`` / ``seed`` for the generated reader cases), ``kind`` (``api`` or ``cli``);
+- ``code`` (Python run with ``palpate``, ``np``, ``D`` = folder) or ``argv`` (``{D}`` = folder);
+- ``expect``: the outcomes allowed: ``error`` (a PalpateError, optionally of ``types``),
+  ``warning``, ``ok``; a CLI case expects an exit code in ``codes`` with one line on stderr.
+
+Mutations are deterministic (seeded) truncations, byte flips and count inflations of valid seed
+files and of the existing malformed-file corpora (data/malformed, data/malformed_surfaces).
+"""
+import os
+import random
+import shutil
+import struct
+import zlib
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+TYPED = ["error", "warning", "ok"]
+MAGIC_LEN, HEADER = 16, 40
+
+
+def _fnv(b):
+    h = 0xcbf29ce484222325
+    for x in b:
+        h = ((h ^ x) * 0x100000001b3) & 0xFFFFFFFFFFFFFFFF
+    return h
+
+
+def refresh_checksum(data: bytes) -> bytes:
+    """A model file's bytes with the payload length and checksum made consistent again: a
+    crafted file, which the checksum does not stop."""
+    payload = data[HEADER:]
+    return data[:24] + struct.pack("<QQ", len(payload), _fnv(payload)) + payload
+
+
+class Corpus:
+    def __init__(self, folder):
+        self.folder = folder
+        self.cases = []
+
+    def path(self, name):
+        return os.path.join(self.folder, name)
+
+    def write(self, name, content):
+        with open(self.path(name), "wb" if isinstance(content, bytes) else "w") as fh:
+            fh.write(content)
+        return name
+
+    def api(self, name, klass, code, expect=("error",), types=None, budget="1G", names=None):
+        self.cases.append({"name": name, "klass": klass, "kind": "api", "code": code, "expect": list(expect),
+                           "types": types, "budget": budget, "names": names})
+
+    def cli(self, name, klass, argv, codes=(1, 2), expect_stdout=None):
+        self.cases.append({"name": name, "klass": klass, "kind": "cli", "argv": list(argv), "codes": list(codes),
+                           "expect_stdout": expect_stdout, "budget": "1G"})
+
+
+# ---------------------------------------------------------------------------------------------
+# seeds: small valid files of every format
+# ---------------------------------------------------------------------------------------------
+
+def _seeds(c: Corpus):
+    import meshio
+
+    import palpate
+    from palpate.vtp import write_vtp
+
+    box = palpate.box_mesh((0.01, 0.01, 0.01), (2, 2, 2))
+    pts, tets = box.points, box.tets
+    mesh = meshio.Mesh(pts, [("tetra", tets)])
+    seeds_mesh = {}
+    meshio.write(c.path("seed.vtk"), mesh, binary=False)
+    meshio.write(c.path("seed_bin.vtk"), mesh, binary=True)
+    meshio.write(c.path("seed.vtu"), mesh)  # zlib-compressed binary
+    meshio.write(c.path("seed22.msh"), mesh, file_format="gmsh22", binary=False)
+    meshio.write(c.path("seed41.msh"), mesh, file_format="gmsh", binary=False)
+    meshio.write(c.path("seed41_bin.msh"), mesh, file_format="gmsh", binary=True)
+    np.savez(c.path("seed.npz"), points=pts, tets=tets)
+    for n in ("seed.vtk", "seed_bin.vtk", "seed.vtu", "seed22.msh", "seed41.msh", "seed41_bin.msh", "seed.npz"):
+        seeds_mesh[n] = "mesh"
+    surf = palpate.ellipsoid_surface((0.01, 0.01, 0.02), 2)
+    sm = meshio.Mesh(surf.points * 1e3, [("triangle", surf.triangles)])
+    seeds_surf = {}
+    for n, kw in (("seed.obj", {}), ("seed.stl", {"binary": False}), ("seed_bin.stl", {"binary": True}),
+                  ("seed.ply", {"binary": False}), ("seed_bin.ply", {"binary": True}), ("seed.off", {}),
+                  ("seed_surf.vtk", {"binary": False})):
+        meshio.write(c.path(n), sm, **kw)
+        seeds_surf[n] = "surface"
+    write_vtp(c.path("seed.vtp"), surf.points * 1e3, surf.triangles)
+    write_vtp(c.path("seed_app.vtp"), surf.points * 1e3, surf.triangles, fmt="appended")
+    seeds_surf["seed.vtp"] = seeds_surf["seed_app.vtp"] = "surface"
+    model = palpate.build_shape("ellipsoids", particles=400, field_voxels=20000)
+    model.save(c.path("seed.palpate"))
+    return seeds_mesh, seeds_surf
+
+
+def _loader(kind, name):
+    if kind == "mesh":
+        return f"palpate.load_mesh(os.path.join(D, {name!r}))"
+    if kind == "surface":
+        return f"palpate.load_surface(os.path.join(D, {name!r}), unit='mm')"
+    return f"palpate.HybridModel.load(os.path.join(D, {name!r}))"
+
+
+def _mutations(c: Corpus, name, kind, rng, n_trunc=3, n_flip=3):
+    data = open(c.path(name), "rb").read()
+    stem, ext = os.path.splitext(name)
+    if ext in (".node", ".ele") or len(data) < 16:
+        return  # a TetGen pair is mutated through its .node half below
+    load = lambda n: _loader(kind, n)  # noqa: E731
+    for k in range(n_trunc):
+        cut = int(len(data) * (k + 1) / (n_trunc + 1)) if k < n_trunc - 1 else max(1, len(data) - rng.randrange(1, 12))
+        n = c.write(f"mut_{stem}_trunc{k}{ext}", data[:cut])
+        c.api(n, "mutation", load(n), TYPED)
+    for k in range(n_flip):
+        b = bytearray(data)
+        for _ in range(1 + k * 4):
+            i = rng.randrange(len(b))
+            b[i] ^= 1 << rng.randrange(8)
+        n = c.write(f"mut_{stem}_flip{k}{ext}", bytes(b))
+        c.api(n, "mutation", load(n), TYPED)
+
+
+# ---------------------------------------------------------------------------------------------
+# the cases
+# ---------------------------------------------------------------------------------------------
+
+def make(folder):
+    c = Corpus(folder)
+    rng = random.Random(15)
+    seeds_mesh, seeds_surf = _seeds(c)
+    for n, kind in list(seeds_mesh.items()) + list(seeds_surf.items()):
+        c.api(n, "seed", _loader(kind, n), ["ok", "warning"])
+        _mutations(c, n, kind, rng)
+
+    # The earlier corpora, copied and mutated (their own tests check their exact messages).
+    for sub, kind in (("malformed", "mesh"), ("malformed_surfaces", "surface")):
+        src = os.path.join(HERE, "data", sub)
+        for f in sorted(os.listdir(src)):
+            if f in ("EXPECTED.toml", "make_corpus.py") or f.endswith(".json"):
+                continue
+            shutil.copy(os.path.join(src, f), c.path(f"old_{f}"))
+            for comp in (f[: -len(".vtp")] + "_part_definition.json",) if f.endswith(".vtp") else ():
+                if os.path.exists(os.path.join(src, comp)):
+                    shutil.copy(os.path.join(src, comp), c.path("old_" + comp))
+            if f.endswith(".ele") or f.endswith(".node") and not os.path.exists(os.path.join(src, f[:-5] + ".ele")):
+                continue
+            _mutations(c, f"old_{f}", kind, rng, n_trunc=1, n_flip=1)
+
+    _model_file_cases(c, rng)
+    _reader_cases(c)
+    _generator_cases(c)
+    _body_cases(c)
+    _cli_cases(c)
+    return c.cases
+
+
+def _model_file_cases(c: Corpus, rng):
+    data = open(c.path("seed.palpate"), "rb").read()
+    c.api("seed.palpate", "seed", _loader("model", "seed.palpate"), ["ok"])
+    # Truncations and flips (the checksum catches flips: corrupted, not crafted).
+    for k, cut in enumerate([0, 8, 16, 39, 40, 41, 100, len(data) // 2, len(data) - 1]):
+        n = c.write(f"model_trunc{k}.palpate", data[:cut])
+        c.api(n, "mutation", _loader("model", n), ["error"], ["ModelFileError"])
+    for k in range(6):
+        b = bytearray(data)
+        i = rng.randrange(HEADER, len(b))
+        b[i] ^= 0x10
+        n = c.write(f"model_flip{k}.palpate", bytes(b))
+        c.api(n, "mutation", _loader("model", n), ["error"], ["ModelFileError"])
+    # Crafted: bytes changed and the checksum made right again (a file written on purpose).
+    for k in range(30):
+        b = bytearray(data)
+        for _ in range(1 + k % 4):
+            i = rng.randrange(HEADER, len(b))
+            b[i] = rng.randrange(256)
+        n = c.write(f"model_crafted{k}.palpate", refresh_checksum(bytes(b)))
+        c.api(n, "mutation", _loader("model", n), TYPED)
+    # Crafted: a field's value replaced by NaN / inf / a negative (found by its bytes: the
+    # format is packed, not aligned): options, wall volume, masses, skin, points.
+    import palpate
+    m = palpate.HybridModel.load(c.path("seed.palpate"))
+    info = m.info()
+    fields = {"core_fraction": info["core_fraction"], "wall_volume": m.wall_volume, "mass": float(m.particle_masses[0]),
+              "skin_bary": float(m.skin_barycentric[0, 0]), "skin_offset": float(m.skin_offsets[0, 0]),
+              "core_point": float(m.core_points[0, 0]), "particle": float(m.particles[0, 0]),
+              "outer_point": float(m.outer_points[0, 0])}
+    for fname, value in fields.items():
+        i = data.find(struct.pack("<d", value), HEADER)
+        assert i > 0, fname
+        for tag, bad in (("nan", float("nan")), ("inf", float("inf")), ("neg", -abs(value) - 1.0)):
+            if tag == "neg" and fname in ("skin_offset", "core_point", "particle", "outer_point"):
+                continue  # a negative coordinate is a valid coordinate
+            b = data[:i] + struct.pack("<d", bad) + data[i + 8:]
+            n = c.write(f"model_{tag}_{fname}.palpate", refresh_checksum(b))
+            c.api(n, "silent", _loader("model", n), ["error"], ["ModelFileError"])
+    nan = struct.pack("<d", float("nan"))
+    # NaN in the last f64s: the build statistics (palpate info printed "nan" with exit 0).
+    b = data[:-72] + nan + data[-64:]
+    n = c.write("model_nan_stats.palpate", refresh_checksum(b))
+    c.api(n, "silent", _loader("model", n), ["error"], ["ModelFileError"])
+    c.cli("cli_info_nan_model", "silent", ["info", "{D}/model_nan_stats.palpate"], codes=(2,))
+    # Counts inflated to 1e8 / 2^63 (checksum fixed).
+    for k, off in enumerate(range(HEADER, HEADER + 400, 8)):
+        (v,) = struct.unpack("<Q", data[off:off + 8])
+        if 0 < v < 10_000_000:
+            for j, big in enumerate((100_000_000, 1 << 63)):
+                b = data[:off] + struct.pack("<Q", big) + data[off + 8:]
+                n = c.write(f"model_count{k}_{j}.palpate", refresh_checksum(b))
+                # Some of these words are option values, not counts: loading is then fine.
+                c.api(n, "abort", _loader("model", n), ["error", "ok"], ["ModelFileError", "LimitError"])
+    c.write("model_magic_only.palpate", b"PALPATE\0HYBRID\0\0")
+    c.api("model_magic_only.palpate", "mutation", _loader("model", "model_magic_only.palpate"), ["error"], ["ModelFileError"])
+    c.write("model_version.palpate", data[:16] + struct.pack("<I", 99) + data[20:])
+    c.api("model_version.palpate", "mutation", _loader("model", "model_version.palpate"), ["error"], ["ModelFileError"])
+    os.makedirs(c.path("a_directory.palpate"), exist_ok=True)
+    c.api("model_directory", "untyped", _loader("model", "a_directory.palpate"), ["error"], ["ModelFileIOError"])
+    c.api("model_missing", "untyped", _loader("model", "no_such.palpate"), ["error"], ["ModelFileIOError"])
+    fifo = c.path("a_fifo.palpate")
+    if not os.path.exists(fifo):
+        os.mkfifo(fifo)
+    c.api("model_fifo", "hang", _loader("model", "a_fifo.palpate"), ["error"], ["ModelFileIOError"])
+    # Swapped tags on one closed wall (inner tagged outer and the reverse): detected.
+    c.api("build_tagged_swapped", "silent",
+          "v, t, part = palpate.ventricle_surface(48, 12); part = np.where(part == 2, 2, 1 - part)\n"
+          "palpate.HybridModel.build_tagged(v, t, part, particles=400, field_voxels=20000)", ["error"], ["ModelError"])
+    c.api("build_tagged_correct", "seed",
+          "v, t, part = palpate.ventricle_surface(48, 12)\n"
+          "palpate.HybridModel.build_tagged(v, t, part, particles=400, field_voxels=20000)", ["ok"])
+    # Swapped surfaces (inner given as outer): detected.
+    c.api("build_swapped_surfaces", "silent",
+          "a = palpate.ellipsoid_surface((0.02, 0.02, 0.035), 3); b = palpate.ellipsoid_surface((0.026, 0.026, 0.042), 3)\n"
+          "palpate.HybridModel.build_nested(b, a)", ["error"])
+
+
+def _reader_cases(c: Corpus):
+    fifo_names = []
+    for ext in (".msh", ".vtk", ".vtu", ".node", ".npz"):
+        n = f"fifo{ext}"
+        if not os.path.exists(c.path(n)):
+            os.mkfifo(c.path(n))
+        c.api(f"mesh_{n}", "hang", _loader("mesh", n), ["error"], ["MeshError"])
+        fifo_names.append(n)
+    for ext in (".obj", ".stl", ".ply", ".off", ".vtp"):
+        n = f"fifo{ext}"
+        if not os.path.exists(c.path(n)):
+            os.mkfifo(c.path(n))
+        c.api(f"surface_{n}", "hang", _loader("surface", n), ["error"], ["SurfaceError"])
+    for ext in (".msh", ".vtk", ".vtu", ".npz", ".node"):
+        d = c.path(f"dir{ext}")
+        os.makedirs(d, exist_ok=True)
+        c.api(f"mesh_dir{ext}", "untyped", _loader("mesh", f"dir{ext}"), ["error"], ["MeshError"])
+    for ext in (".obj", ".ply", ".off", ".vtp", ".stl"):
+        d = c.path(f"dir{ext}")
+        os.makedirs(d, exist_ok=True)
+        c.api(f"surface_dir{ext}", "untyped", _loader("surface", f"dir{ext}"), ["error"], ["SurfaceError"])
+    # OFF and PLY with a truncated header (meshio's reader looped forever).
+    for k, text in enumerate(["OFF\n", "OFF\n# only a comment\n", "OFF\n8 12", "OFF\n3 1 0\n0 0 0\n"]):
+        n = c.write(f"off_header{k}.off", text)
+        c.api(n, "hang", _loader("surface", n), ["error"], ["SurfaceError"])
+    for k, text in enumerate(["ply\n", "ply\nformat ascii 1.0\n", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n",
+                              "ply\nformat binary_little_endian 1.0\nelement vertex 100000000\nproperty float x\nproperty float y\nproperty float z\nend_header\n"]):
+        n = c.write(f"ply_header{k}.ply", text)
+        c.api(n, "hang", _loader("surface", n), ["error"], ["SurfaceError", "LimitError"])
+    # Oversized counts in headers.
+    n = c.write("off_huge.off", "OFF\n100000000 200000000 0\n0 0 0\n")
+    c.api(n, "abort", _loader("surface", n), ["error"], ["SurfaceError", "LimitError"])
+    n = c.write("stl_bin_huge.stl", b"\0" * 80 + struct.pack("<I", 100_000_000) + b"\0" * 100)
+    c.api(n, "abort", _loader("surface", n), ["error"], ["SurfaceError", "LimitError"])
+    n = c.write("gmsh2_huge_nodes.msh", "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n100000000\n1 0 0 0\n$EndNodes\n")
+    c.api(n, "abort", _loader("mesh", n), ["error"], ["MeshError", "LimitError"])
+    head = b"$MeshFormat\n4.1 1 8\n" + struct.pack("<i", 1) + b"\n$EndMeshFormat\n$Nodes\n"
+    n = c.write("gmsh4_bin_1e8_nodes.msh", head + struct.pack("<QQQQ", 1, 100_000_000, 1, 100_000_000)
+                + struct.pack("<iiiQ", 3, 1, 0, 100_000_000) + b"\0" * 64)
+    c.api(n, "abort", _loader("mesh", n), ["error"], ["MeshError", "LimitError"])
+    head2 = b"$MeshFormat\n2.2 1 8\n" + struct.pack("<i", 1) + b"\n$EndMeshFormat\n$Nodes\n100000000\n"
+    n = c.write("gmsh2_bin_1e8_nodes.msh", head2 + b"\0" * 64)
+    c.api(n, "abort", _loader("mesh", n), ["error"], ["MeshError", "LimitError"])
+    n = c.write("tetgen_huge.node", "100000000 3 0 0\n1 0 0 0\n")
+    c.write("tetgen_huge.ele", "1 4 0\n1 1 1 1 1\n")
+    c.api(n, "abort", _loader("mesh", n), ["error"], ["MeshError", "LimitError"])
+    n = c.write("vtk_huge_points.vtk", "# vtk DataFile Version 4.2\nx\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS 100000000 double\n0 0 0\n")
+    c.api(n, "abort", _loader("mesh", n), ["error"], ["MeshError", "LimitError"])
+    n = c.write("vtk_bin_huge_points.vtk", b"# vtk DataFile Version 4.2\nx\nBINARY\nDATASET UNSTRUCTURED_GRID\nPOINTS 400000000 double\n" + b"\0" * 48)
+    c.api(n, "abort", _loader("mesh", n), ["error"], ["MeshError", "LimitError"])
+    # VTK cells of an unknown type (meshio dropped them with a warning we suppressed).
+    txt = ("# vtk DataFile Version 4.2\nx\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS 5 double\n0 0 0 1 0 0 0 1 0 0 0 1 1 1 1\n"
+           "CELLS 2 10\n4 0 1 2 3\n4 1 2 3 4\nCELL_TYPES 2\n10\n99\n")
+    n = c.write("vtk_unknown_cell_type.vtk", txt)
+    c.api(n, "silent", _loader("mesh", n), ["error", "warning"])
+    # Bombs: zlib streams that inflate to 3 GB (a VTU and a VTP), a zip (npz) that does.
+    _bombs(c)
+    # Bad text: invalid UTF-8, NUL bytes, deep nesting.
+    n = c.write("bad_utf8.msh", b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n1\n1 0 0 \xff\xfe\n$EndNodes\n")
+    c.api(n, "untyped", _loader("mesh", n), ["error"], ["MeshError"])
+    n = c.write("bad_utf8.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\n\xff\xfe f 1 2 3\n")
+    c.api(n, "untyped", _loader("surface", n), ["error"], ["SurfaceError"])
+    n = c.write("scene_bad_utf8.toml", b"[mesh]\ngenerator = \"\xff\xfe\"\n")
+    c.api("scene_bad_utf8", "untyped", f"import palpate.scene as s; s.load_scene(os.path.join(D, {n!r}))", ["error"])
+    n = c.write("scene_deep.toml", "a = " + "[" * 5000 + "]" * 5000 + "\n")
+    c.api("scene_deep", "untyped", f"import palpate.scene as s; s.load_scene(os.path.join(D, {n!r}))", ["error"])
+    n = c.write("tagged_deep_part_definition.json", "[" * 100000 + "]" * 100000)
+    c.write("tagged_deep.vtp", open(c.path("old_tagged_unmapped_tag.vtp"), "rb").read())
+    c.api("part_definition_deep", "untyped",
+          "palpate.read_tagged_surface(os.path.join(D, 'tagged_deep.vtp'), unit='mm')", ["error"], ["SurfaceError"],
+          names=["tagged_deep_part_definition.json"])
+    n = c.write("scene_garbage.toml", b"\x00\x01\x02 not toml")
+    c.api("scene_garbage", "untyped", f"import palpate.scene as s; s.load_scene(os.path.join(D, {n!r}))", ["error"])
+    c.api("scene_missing", "untyped", "import palpate.scene as s; s.load_scene(os.path.join(D, 'none.toml'))", ["error"])
+    c.api("scene_directory", "untyped", "import palpate.scene as s; s.load_scene(os.path.join(D, 'dir.msh'))", ["error"])
+    c.api("load_mesh_unit_bad", "untyped", "palpate.load_mesh(os.path.join(D, 'seed.vtk'), unit='furlong')", ["error"])
+
+
+def _bombs(c: Corpus):
+    import base64
+
+    big = 3 << 30
+    block = 1 << 30
+    comp = zlib.compress(b"\0" * block, 9)  # ~1 MB for 1 GiB of zeros
+    nblocks = big // block
+    header = struct.pack("<QQQ", nblocks, block, block) + struct.pack("<Q", len(comp)) * nblocks
+    b64 = base64.b64encode(header).decode() + base64.b64encode(comp * nblocks).decode()
+    vtu = f"""<?xml version="1.0"?>
+<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian" header_type="UInt64" compressor="vtkZLibDataCompressor">
+<UnstructuredGrid><Piece NumberOfPoints="134217728" NumberOfCells="1">
+<Points><DataArray type="Float64" NumberOfComponents="3" format="binary">{b64}</DataArray></Points>
+<Cells><DataArray type="Int64" Name="connectivity" format="ascii">0 1 2 3</DataArray>
+<DataArray type="Int64" Name="offsets" format="ascii">4</DataArray>
+<DataArray type="UInt8" Name="types" format="ascii">10</DataArray></Cells>
+</Piece></UnstructuredGrid></VTKFile>
+"""
+    c.write("bomb.vtu", vtu)
+    c.api("bomb.vtu", "bomb", _loader("mesh", "bomb.vtu"), ["error"], ["MeshError", "LimitError"])
+    vtp = vtu.replace("UnstructuredGrid", "PolyData").replace('NumberOfCells="1"', 'NumberOfPolys="1"').replace("<Cells>", "<Polys>").replace("</Cells>", "</Polys>")
+    c.write("bomb.vtp", vtp)
+    c.api("bomb.vtp", "bomb", _loader("surface", "bomb.vtp"), ["error"], ["SurfaceError", "LimitError"])
+    import zipfile
+    with zipfile.ZipFile(c.path("bomb.npz"), "w", compression=zipfile.ZIP_DEFLATED) as z:
+        hdr = np.lib.format.header_data_from_array_1_0(np.zeros((1, 3)))
+        hdr["shape"] = (big // 24, 3)
+        import io
+        buf = io.BytesIO()
+        np.lib.format.write_array_header_1_0(buf, hdr)
+        with z.open("points.npy", "w", force_zip64=True) as fh:
+            fh.write(buf.getvalue())
+            chunk = b"\0" * (64 << 20)
+            for _ in range(big // len(chunk)):
+                fh.write(chunk)
+        z.writestr("tets.npy", b"")
+    c.api("bomb.npz", "bomb", _loader("mesh", "bomb.npz"), ["error"], ["MeshError", "LimitError"])
+
+
+def _generator_cases(c: Corpus):
+    g = [
+        ("box_thin", "panic", "palpate.box_mesh(size=(1, 1, 1e-12), cells=(2, 2, 2))", ["MeshError"]),
+        ("box_thin_cells", "panic", "palpate.box_mesh(size=(0.1, 0.1, 0.1), cells=(1, 1, 200000))", ["MeshError", "LimitError"]),
+        ("box_thin_but_valid", "panic", "palpate.box_mesh(size=(0.1, 0.1, 0.1), cells=(1, 1, 20000))", ["ok"]),
+        ("box_huge_cells", "panic", "palpate.box_mesh(size=(1, 1, 1), cells=(100000, 100000, 100000))", None),
+        ("box_huge_size", "panic", "palpate.box_mesh(size=(1e300, 1e300, 1e300), cells=(2, 2, 2))", None),
+        ("box_tiny_size", "panic", "palpate.box_mesh(size=(1e-300, 1e-300, 1e-300), cells=(2, 2, 2))", None),
+        ("box_nan", "panic", "palpate.box_mesh(size=(float('nan'), 1, 1), cells=(2, 2, 2))", None),
+        ("box_negative_cells", "untyped", "palpate.box_mesh(size=(1, 1, 1), cells=(-1, 2, 2))", None),
+        ("box_zero_cells", "panic", "palpate.box_mesh(size=(1, 1, 1), cells=(0, 2, 2))", None),
+        ("ventricle_96_600", "panic", "palpate.ventricle_surface(96, 600)", None),
+        ("ventricle_3_4096", "panic", "palpate.ventricle_surface(3, 4096)", None),
+        ("ventricle_512_512", "panic", "palpate.ventricle_surface(512, 512)", None),
+        ("ventricle_4096_4096", "abort", "palpate.ventricle_surface(4096, 4096)", None),
+        ("ventricle_negative", "untyped", "palpate.ventricle_surface(-3, 10)", None),
+        ("ellipsoid_wall_subdiv_40", "abort", "palpate.ellipsoid_wall(subdivisions=40)", None),
+        ("ellipsoid_wall_thin", "panic", "palpate.ellipsoid_wall(inner=(0.02, 0.02, 0.035), outer=(0.0200000001, 0.0200000001, 0.0350000001))", None),
+        ("ellipsoid_wall_swapped", "panic", "palpate.ellipsoid_wall(inner=(0.026, 0.026, 0.042), outer=(0.02, 0.02, 0.035))", None),
+        ("truncated_wall_zcut", "panic", "palpate.truncated_ellipsoid_wall(z_cut=0.0349999)", None),
+        ("truncated_wall_huge", "abort", "palpate.truncated_ellipsoid_wall(circumferential=100000, longitudinal=100000, layers=100)", None),
+        ("ellipsoid_surface_subdiv_30", "abort", "palpate.ellipsoid_surface((0.01, 0.01, 0.01), 30)", None),
+        ("ellipsoid_surface_flat", "panic", "palpate.ellipsoid_surface((0.01, 0.01, 1e-300), 3)", None),
+        ("sample_inside_tiny_spacing", "abort", "palpate.sample_inside(palpate.ellipsoid_surface((0.01, 0.01, 0.01), 2), 1e-7, 1000.0)", None),
+        ("sample_inside_nan_spacing", "panic", "palpate.sample_inside(palpate.ellipsoid_surface((0.01, 0.01, 0.01), 2), float('nan'), 1000.0)", None),
+        ("build_thin_wall", "abort", "a = palpate.ellipsoid_surface((0.02, 0.02, 0.035), 3); b = palpate.ellipsoid_surface((0.02002, 0.02002, 0.03502), 3)\n"
+                                      "palpate.HybridModel.build_nested(a, b)", None),
+        ("build_field_voxels_huge", "abort", "palpate.build_shape('ellipsoids', field_voxels=10**12)", None),
+        ("build_particles_huge", "abort", "palpate.build_shape('ellipsoids', particles=50_000_000)", None),
+        ("build_spacing_tiny", "abort", "palpate.build_shape('ellipsoids', spacing=1e-7)", None),
+        ("neighbours_tiny_radius", "abort", "palpate.neighbours(np.random.default_rng(0).random((1000, 3)) * 0.1, 1e-9)", ["error", "ok"]),
+        ("neighbours_huge_radius", "abort", "palpate.neighbours(np.random.default_rng(0).random((40000, 3)), 10.0)", None),
+    ]
+    for name, klass, code, types in g:
+        if types and types[0] in ("error", "ok", "warning"):
+            c.api(name, klass, code, types)
+        else:
+            c.api(name, klass, code, ["error"], types)
+
+
+_PB = ("pts = np.mgrid[0:4, 0:4, 0:4].reshape(3, -1).T * 0.001\n"
+       "def pb(young=3e4, mass=1e-6, radius=0.0025, n=None, **kw):\n"
+       "    p = pts if n is None else n\n"
+       "    return palpate.ParticleBody(p, np.full(len(p), mass), palpate.Material(young=young, poisson=0.4, density=1000.0), support_radius=radius, **kw)\n")
+_BODY = ("mesh = palpate.box_mesh((0.1, 0.02, 0.02), (10, 2, 2))\n"
+         "def body(young=3e4, **kw):\n"
+         "    return palpate.Body(mesh, palpate.Material(young=young, poisson=0.4, density=1000.0), fixed=np.flatnonzero(mesh.points[:, 0] == 0), **kw)\n")
+_UNCHANGED = ("x0, v0, t0 = b.positions.copy(), b.velocities.copy(), b.time\n"
+              "try:\n    {call}\nexcept palpate.PalpateError:\n"
+              "    assert (b.positions == x0).all() and (b.velocities == v0).all() and b.time == t0, 'state changed by a rejected step'\n    raise\n")
+
+
+def _body_cases(c: Corpus):
+    vent = "v, t, part = palpate.ventricle_surface(); s = palpate.TriSurface(v, t); ps = palpate.sample_inside(s, 0.0015, 1000.0)\n"
+    cases = [
+        ("pb_support_1e-8", "panic", _PB + "pb(radius=1e-8)", ["error"]),
+        ("pb_support_1e-5_ventricle", "abort", _PB + vent + "pb(radius=1e-5, n=ps.positions if hasattr(ps, 'positions') else ps[0])", ["error"]),
+        ("pb_support_huge", "abort", _PB + "p = np.random.default_rng(1).random((30000, 3)) * 0.01\npb(radius=1.0, n=p)", ["error"]),
+        ("pb_mass_1e-150", "panic", _PB + "pb(mass=1e-150)", ["error"]),
+        ("pb_mass_1e150", "panic", _PB + "b = pb(mass=1e150); b.step(1)", ["error", "ok"]),
+        ("pb_young_1e150", "hang", _PB + "b = pb(young=1e150); b.step(1)", ["error"]),
+        ("pb_young_1e-300", "hang", _PB + "b = pb(young=1e-300); b.step(1)", ["error", "ok"]),
+        ("pb_dt_1e3", "hang", _PB + "b = pb()\n" + _UNCHANGED.format(call="b.step(1, dt=1e3)"), ["error"], ["StepError"]),
+        ("pb_dt_nan", "hang", _PB + "b = pb()\n" + _UNCHANGED.format(call="b.step(1, dt=float('nan'))"), ["error"], ["StepError"]),
+        ("pb_negative_steps", "untyped", _PB + "b = pb(); b.step(-1)", ["error"], ["ParameterError"]),
+        ("pb_run_timed_1e11", "abort", _PB + "b = pb(); r = b.run_timed(10**11, max_wall_s=0.5); assert r['error'] and 'cap' in r['error'], r['error']", ["ok"]),
+        ("pb_run_timed_negative", "untyped", _PB + "b = pb(); b.run_timed(-5)", ["error"], ["ParameterError"]),
+        ("pb_nan_force", "silent", _PB + "b = pb(); f = np.zeros((64, 3)); f[3, 0] = np.nan; b.set_forces(f)\n" + _UNCHANGED.format(call="b.step(1)"), ["error"]),
+        ("pb_huge_force", "silent", _PB + "b = pb(); f = np.zeros((64, 3)); f[3, 0] = 1e300; b.set_forces(f)\n" + _UNCHANGED.format(call="b.step(1)"), ["error"]),
+        ("pb_positions_nan", "silent", _PB + "p = pts.copy(); p[0, 0] = np.inf; pb(n=p)", ["error"]),
+        ("pb_duplicate_points", "panic", _PB + "p = np.zeros((64, 3)); pb(n=p)", ["error"]),
+        ("pb_fixed_out_of_range", "panic", _PB + "pb(fixed=[10**9])", ["error"]),
+        ("pb_fixed_negative", "untyped", _PB + "pb(fixed=[-1])", ["error"]),
+        ("body_run_probe_1e11", "abort", _BODY + "b = body(); r = b.run_probe([20], (0, 0, -1e-3), 0.1, 10**11, max_wall_s=0.5); assert r['steps'] < 10**11", ["ok"]),
+        ("body_run_loads_1e11", "abort", _BODY + "b = body(); r = b.run_loads([([20], (0, 0, -1e-3), 0.1)], 10**11, max_wall_s=0.5); assert r['steps'] < 10**11", ["ok"]),
+        ("body_negative_steps", "untyped", _BODY + "b = body(); b.step(-1)", ["error"]),
+        ("body_dt_1e3", "hang", _BODY + "b = body()\n" + _UNCHANGED.format(call="b.step(1, dt=1e3)"), TYPED),
+        ("body_young_1e150", "hang", _BODY + "b = body(young=1e150); b.step(5)", TYPED),
+        ("body_mass_tiny_density", "panic", "mesh = palpate.box_mesh(); palpate.Body(mesh, palpate.Material(young=3e4, poisson=0.4, density=1e-300)).step(1)", TYPED),
+        ("body_nan_force", "silent", _BODY + "b = body(); f = np.zeros((b.n_nodes, 3)); f[5, 2] = np.nan\n" + _UNCHANGED.format(call="b.set_forces(f); b.step(1)"), ["error"]),
+        ("body_inf_force", "silent", _BODY + "b = body(); f = np.zeros((b.n_nodes, 3)); f[5, 2] = 1e308\n" + _UNCHANGED.format(call="b.set_forces(f); b.step(3)"), ["error", "ok", "warning"]),
+        ("body_load_on_fixed", "silent", _BODY + "b = body(); f = np.zeros((b.n_nodes, 3)); f[0, 2] = -1.0; b.set_forces(f); b.step(1)", ["warning", "error"]),
+        ("body_probe_on_fixed", "silent", _BODY + "b = body(); b.run_probe([0, 20], (0, 0, -1e-3), 0.1, 5)", ["warning", "error"]),
+        ("tetmesh_inverted", "silent", "p = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]); palpate.TetMesh(p, [[0, 2, 1, 3]])", ["warning"]),
+        ("tetmesh_flat", "panic", "p = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]); palpate.TetMesh(p, [[0, 1, 2, 3]])", ["error"]),
+        ("tetmesh_huge_coords", "panic", "p = np.array([[0., 0, 0], [1e300, 0, 0], [0, 1e300, 0], [0, 0, 1e300]]); palpate.TetMesh(p, [[0, 1, 2, 3]])", TYPED),
+        ("tetmesh_tiny_coords", "panic", "p = np.array([[0., 0, 0], [1e-300, 0, 0], [0, 1e-300, 0], [0, 0, 1e-300]]); palpate.TetMesh(p, [[0, 1, 2, 3]])", TYPED),
+        ("tetmesh_index_huge", "panic", "p = np.zeros((4, 3)); palpate.TetMesh(p, [[0, 1, 2, 2**62]])", ["error"]),
+        ("trisurface_index_negative", "panic", "p = np.eye(3); palpate.TriSurface(p, [[0, 1, -2]])", ["error"]),
+        ("hybrid_sim_nan_tool", "silent",
+         "m = palpate.build_shape('ellipsoids', particles=400, field_voxels=20000); s = palpate.HybridSim(m, palpate.Material.myocardium()); s.step((float('nan'), 0, 0))", ["error"]),
+    ]
+    for entry in cases:
+        name, klass, code, expect = entry[:4]
+        types = entry[4] if len(entry) > 4 else None
+        c.api(name, klass, code, expect, types)
+
+
+def _cli_cases(c: Corpus):
+    c.write("scene_ok.toml", open(os.path.join(HERE, "..", "..", "scenes", "ellipsoid_probe.toml")).read())
+    cases = [
+        ("cli_no_args", "untyped", [], (2,)),
+        ("cli_unknown_command", "untyped", ["frobnicate"], (2,)),
+        ("cli_info_missing", "untyped", ["info", "{D}/nothing.msh"], (2,)),
+        ("cli_info_directory", "untyped", ["info", "{D}/a_directory.palpate"], (2,)),
+        ("cli_info_fifo", "hang", ["info", "{D}/a_fifo.palpate"], (2,)),
+        ("cli_info_fifo_mesh", "hang", ["info", "{D}/fifo.msh"], (2,)),
+        ("cli_info_garbage_model", "untyped", ["info", "{D}/model_flip0.palpate"], (2,)),
+        ("cli_info_bomb", "bomb", ["info", "{D}/bomb.vtu"], (2,)),
+        ("cli_info_bad_utf8", "untyped", ["info", "{D}/bad_utf8.msh"], (2,)),
+        ("cli_run_out_dotdot", "output", ["run", "{D}/scene_ok.toml", "--out", "..", "--steps", "2"], (2,)),
+        ("cli_run_out_file", "output", ["run", "{D}/scene_ok.toml", "--out", "{D}/seed.vtk", "--steps", "2"], (1, 2)),
+        ("cli_run_out_empty", "output", ["run", "{D}/scene_ok.toml", "--out", "", "--steps", "2"], (2,)),
+        ("cli_run_negative_steps", "untyped", ["run", "{D}/scene_ok.toml", "--steps", "-5"], (2,)),
+        ("cli_run_huge_steps", "abort", ["run", "{D}/scene_bad_utf8.toml", "--steps", "100000000000"], (2,)),
+        ("cli_run_scene_bad_utf8", "untyped", ["run", "{D}/scene_bad_utf8.toml"], (2,)),
+        ("cli_run_scene_deep", "untyped", ["run", "{D}/scene_deep.toml"], (2,)),
+        ("cli_run_scene_directory", "untyped", ["run", "{D}/dir.msh"], (2,)),
+        ("cli_bench_not_ventricle", "untyped", ["bench", "protocol", "{D}/seed.vtk", "--steps", "2"], (2,)),
+        ("cli_bench_bomb", "bomb", ["bench", "protocol", "{D}/bomb.vtu"], (2,)),
+        ("cli_build_out_dir", "output", ["build", "--shape", "ellipsoids", "-o", "{D}/a_directory.palpate", "--particles", "400", "--field-voxels", "20000"], (1, 2)),
+        ("cli_build_out_dotdot", "output", ["build", "--shape", "ellipsoids", "-o", "..", "--particles", "400", "--field-voxels", "20000"], (1, 2)),
+        ("cli_build_thin_surfaces", "abort", ["build", "{D}/seed.obj", "{D}/seed.obj", "-o", "{D}/out.palpate", "--unit", "mm"], (1, 2)),
+        ("cli_build_swapped", "silent", ["build", "{D}/outer.vtp", "{D}/inner.vtp", "-o", "{D}/out2.palpate", "--unit", "mm"], (1, 2)),
+        ("cli_build_field_voxels", "abort", ["build", "--shape", "ellipsoids", "-o", "{D}/out3.palpate", "--field-voxels", "1000000000000"], (1, 2)),
+    ]
+    import palpate
+    from palpate.vtp import write_vtp
+    a = palpate.ellipsoid_surface((0.02, 0.02, 0.035), 3)
+    b = palpate.ellipsoid_surface((0.026, 0.026, 0.042), 3)
+    write_vtp(c.path("inner.vtp"), a.points * 1e3, a.triangles)
+    write_vtp(c.path("outer.vtp"), b.points * 1e3, b.triangles)
+    for name, klass, argv, codes in cases:
+        c.cli(name, klass, argv, codes)
