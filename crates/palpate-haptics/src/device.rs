@@ -42,6 +42,10 @@ impl DeviceInput {
 pub trait ForceSink: Send + Sync {
     /// Sends `force` \[N\] (world frame, on the user's hand). Never blocks.
     fn send(&self, force: &Vec3);
+    /// Sends zero force because of a fault or the watchdog (a bridge flags it).
+    fn zeroed(&self) {
+        self.send(&Vec3::zeros())
+    }
 }
 
 /// The last force sent, readable from any thread (a seqlock), and how many were sent: the sink

@@ -8,13 +8,15 @@
 //! - [`coupling`]: the virtual coupling (device <-> simulated tool), why a proxy with a mass;
 //! - [`safety`]: force limit, force-rate limit, ramp;
 //! - [`device`], [`devices`]: the [`Device`] interface; scripted, replay, simulated hand;
-//! - (the UDP bridge: next)
+//! - [`bridge`]: the UDP bridge and its versioned binary protocol (`PROTOCOL.md`): vendor
+//!   devices connect through it as separate processes;
 //! - [`record`]: record and replay files; [`snapshot`]: non-blocking snapshots; [`stats`].
 //!
 //! Units: SI throughout (m, s, N, kg); positions and forces in the model's world frame; the force
 //! sent to a device is the force on the user's hand.
 
 
+pub mod bridge;
 pub mod coupling;
 pub mod device;
 pub mod devices;

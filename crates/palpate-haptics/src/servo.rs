@@ -288,7 +288,11 @@ impl HapticCore {
         while n < max_ticks && !device.finished(n, self.dt) {
             let s = device.read(self.tick, self.dt);
             let out = self.step(s);
-            sink.send(&out.force);
+            if out.fault {
+                sink.zeroed();
+            } else {
+                sink.send(&out.force);
+            }
             n += 1;
         }
         n
@@ -458,7 +462,7 @@ fn watch(shared: Arc<Shared>, sink: Arc<dyn ForceSink>, stall: f64) {
         }
         let now = shared.now_ns();
         if now.saturating_sub(beat) > limit {
-            sink.send(&Vec3::zeros());
+            sink.zeroed();
             shared.stall_ns.store(now - beat, Ordering::Relaxed);
             shared.tripped_at.store(now, Ordering::Relaxed);
             shared.trips.fetch_add(1, Ordering::Relaxed);
@@ -489,7 +493,11 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
             let stalled = shared.stall_ns.load(Ordering::Relaxed) as f64 * 1e-9;
             core.stalled(stalled, &mut out);
         }
-        sink.send(&out.force);
+        if out.fault {
+            sink.zeroed();
+        } else {
+            sink.send(&out.force);
+        }
         let t1 = Instant::now();
         shared.heartbeat.store(shared.now_ns().max(1), Ordering::Release);
         n += 1;
