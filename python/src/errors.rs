@@ -55,6 +55,13 @@ create_exception!(
     "A compiled-model file that cannot be read: not a palpate model, another format version, truncated or corrupted. The message names the file and the reason."
 );
 
+create_exception!(
+    palpate,
+    HapticsError,
+    PalpateError,
+    "The haptic loop could not start or run: a device that cannot be opened (a bridge port in use), a recording of another model or version, a loop already started or stopped."
+);
+
 /// Register the classes on the module and give the detail attributes a class-level `None`.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
@@ -66,6 +73,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("StepError", py.get_type::<StepError>())?;
     m.add("MeshWarning", py.get_type::<MeshWarning>())?;
     m.add("ModelFileError", py.get_type::<ModelFileError>())?;
+    m.add("HapticsError", py.get_type::<HapticsError>())?;
     let surface = py.get_type::<SurfaceError>();
     surface.setattr("triangle", py.None())?;
     surface.setattr("vertex", py.None())?;

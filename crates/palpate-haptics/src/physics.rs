@@ -10,7 +10,8 @@ use palpate_core::{Material, ModelError, StepError, Vec3};
 /// with another material or options) would not give the recorded forces.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Identity {
-    /// A 64-bit digest (FNV-1a) of the model file's bytes, the material and the options.
+    /// A 64-bit digest (FNV-1a) of the model file's bytes (less the build's timings), the
+    /// material and the options.
     pub digest: u64,
     /// A short human-readable description (kind, sizes).
     pub description: String,
@@ -57,7 +58,13 @@ pub struct HybridPhysics {
 impl HybridPhysics {
     /// Compiles `model` with `material` and `options` ([`Sim::new`]); the state at rest.
     pub fn new(model: HybridModel, material: Material, options: SimOptions) -> Result<HybridPhysics, ModelError> {
-        let mut digest = file::checksum(&file::to_bytes(&model));
+        // The model file's bytes without the build's timings (the same geometry built twice
+        // must have one identity).
+        let mut digest = {
+            let mut m = model.clone();
+            m.stats = Default::default();
+            file::checksum(&file::to_bytes(&m))
+        };
         let extra = format!("{material:?} {options:?}");
         digest ^= file::checksum(extra.as_bytes()).rotate_left(1);
         let sim = Sim::new(model, material, options)?;

@@ -169,6 +169,12 @@ pub struct HapticCore {
     fault_log: Vec<FaultRecord>,
     bad_inputs: u64,
     recording: Option<Recording>,
+    /// The largest force sent \[N\], and the energy the device has put into the user \[J\]:
+    /// `sum F_k . (x_{k+1} - x_k)` (the force held over a tick times the hand's move; negative
+    /// for a passive loop: the user does the work).
+    max_force: f64,
+    energy: f64,
+    last_sent: Option<(Vec3, Vec3)>,
 }
 
 impl HapticCore {
@@ -189,6 +195,9 @@ impl HapticCore {
             fault_log: Vec::with_capacity(FAULT_LOG),
             bad_inputs: 0,
             recording,
+            max_force: 0.0,
+            energy: 0.0,
+            last_sent: None,
         }
     }
 
@@ -244,6 +253,7 @@ impl HapticCore {
         }
         out.tissue = self.tissue;
         out.tool = self.coupling.proxy;
+        self.account(&out);
         if let Some(r) = &mut self.recording {
             if r.ticks.len() < r.ticks.capacity() {
                 r.ticks.push(TickRecord { input, has_input: sample.is_some(), force: out.force, tool: out.tool, tissue: out.tissue });
@@ -270,9 +280,18 @@ impl HapticCore {
         }
     }
 
+    fn account(&mut self, out: &TickOut) {
+        if let Some((f, x)) = self.last_sent {
+            self.energy += f.dot(&(out.device - x));
+        }
+        self.last_sent = Some((out.force, out.device));
+        self.max_force = self.max_force.max(out.force.norm());
+    }
+
     /// The watchdog tripped during the last tick: take the fault path for it.
     fn stalled(&mut self, seconds: f64, out: &mut TickOut) {
         self.fault(Fault::Stall(seconds), out);
+        self.last_sent = Some((out.force, out.device));
         out.tool = self.coupling.proxy;
         out.tissue = Vec3::zeros();
         if let Some(last) = self.recording.as_mut().and_then(|r| r.ticks.last_mut()) {
@@ -300,6 +319,14 @@ impl HapticCore {
 
     pub fn ticks(&self) -> u64 {
         self.tick
+    }
+    /// The largest force sent so far \[N\].
+    pub fn max_force(&self) -> f64 {
+        self.max_force
+    }
+    /// The energy the device has put into the user so far \[J\] (see the field).
+    pub fn energy_into_user(&self) -> f64 {
+        self.energy
     }
     pub fn dt(&self) -> f64 {
         self.dt

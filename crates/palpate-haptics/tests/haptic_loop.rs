@@ -364,3 +364,17 @@ fn servo_publishes_snapshots_and_stops() {
     assert!(report.stats.ticks >= s.tick);
     assert!(report.core.ticks() == report.stats.ticks);
 }
+
+/// The identity a recording carries is the model's content, not its build's timings: the same
+/// geometry built twice replays (a digest over the whole file refused it).
+#[test]
+fn identity_is_the_same_for_the_same_model_built_twice() {
+    let wall = || palpate_core::hybrid::shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap();
+    let a = palpate_core::hybrid::build(&wall(), &Default::default()).unwrap();
+    let b = palpate_core::hybrid::build(&wall(), &Default::default()).unwrap();
+    let opts = palpate_core::runtime::SimOptions::default();
+    let ia = palpate_haptics::HybridPhysics::new(a.clone(), material(), opts).unwrap().identity();
+    assert_eq!(ia, palpate_haptics::HybridPhysics::new(b, material(), opts).unwrap().identity());
+    let stiffer = palpate_core::Material::new(palpate_core::material::Elasticity::YoungPoisson { young: 6.0e4, poisson: 0.4 }, 1000.0, palpate_core::material::Damping::from_paper(0.5, 0.5)).unwrap();
+    assert_ne!(ia.digest, palpate_haptics::HybridPhysics::new(a, stiffer, opts).unwrap().identity().digest, "the material is part of it");
+}
