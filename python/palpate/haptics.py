@@ -150,12 +150,20 @@ def run_live(loop: "_p.HapticLoop", seconds: Optional[float], on_status: Optiona
     return report
 
 
+def per_second(times_s, elapsed_s: float) -> list:
+    """Counts of events per whole second of wall time since the start (``times_s`` [s])."""
+    n = max(1, int(math.ceil(elapsed_s)))
+    return np.bincount(np.minimum(np.asarray(times_s, dtype=np.float64).astype(np.int64), n - 1), minlength=n).tolist() \
+        if len(times_s) else [0] * n
+
+
 def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle: bool = True,
           name: str = "", on_status: Optional[Callable[[str], None]] = None) -> Dict[str, Any]:
     """``palpate bench haptic``: the loop at ``rate_hz`` on ``model`` for ``seconds`` [s] with a
     repeated scripted palpation (:func:`palpation_cycle`), then (``idle``) the idle loop (no
     simulation, same device, same length) on the same clock. Returns the loop's report
-    (:data:`BENCH_KEYS` and more), with ``idle`` the idle run's and the machine's description."""
+    (:data:`BENCH_KEYS` and more; ``overruns_per_s``: the overruns in each second of wall time,
+    from the first 100,000 logged), with ``idle`` the idle run's and the machine's description."""
     t, k = repeat(*palpation_cycle(model), seconds + 1.0)
     mat = material()
     loop = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz,
@@ -163,12 +171,14 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
     r = run_live(loop, None, on_status)
     r["model"] = name
     r["seconds"] = seconds
+    r["overruns_per_s"] = per_second(r.pop("overrun_times_s"), r["elapsed_s"])
     if idle:
         il = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz, idle=True,
                            max_ticks=int(round(seconds * rate_hz)))
         ir = run_live(il, None, None)
-        r["idle"] = {key: ir[key] for key in ("ticks", "achieved_hz", "period_us_p50", "period_us_p99", "period_us_max",
-                                              "compute_us_p99", "overruns", "overrun_times_s")}
+        r["idle"] = {key: ir[key] for key in ("ticks", "achieved_hz", "elapsed_s", "period_us_p50", "period_us_p99",
+                                              "period_us_max", "compute_us_p99", "overruns")}
+        r["idle"]["overruns_per_s"] = per_second(ir["overrun_times_s"], ir["elapsed_s"])
     r["cpu_count"] = os.cpu_count()
     r["machine"] = platform.processor() or platform.machine()
     r["load_avg"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None

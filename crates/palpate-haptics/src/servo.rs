@@ -304,7 +304,7 @@ impl HapticCore {
     pub fn run_offline(&mut self, device: &mut dyn Device, max_ticks: u64) -> u64 {
         let sink = device.sink();
         let mut n = 0;
-        while n < max_ticks && !device.finished(n, self.dt) {
+        while n < max_ticks && !device.finished(self.tick, self.dt) {
             let s = device.read(self.tick, self.dt);
             let out = self.step(s);
             if out.fault {
@@ -509,12 +509,15 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
     shared.heartbeat.store(shared.now_ns().max(1), Ordering::Release);
     let mut n: u64 = 0;
     loop {
-        if shared.stop.load(Ordering::Acquire) || cfg.max_ticks.is_some_and(|m| n >= m) || device.finished(n, core.dt) {
+        if shared.stop.load(Ordering::Acquire) || cfg.max_ticks.is_some_and(|m| n >= m) || device.finished(core.tick, core.dt) {
             break;
         }
         let t0 = Instant::now();
         let sample = device.read(core.tick, core.dt);
         let mut out = core.step(sample);
+        // The physics is back: beat before taking the watchdog's flag, or the watchdog would
+        // see the stale beat again while the fault path restores the state, and trip twice.
+        shared.heartbeat.store(shared.now_ns().max(1), Ordering::Release);
         if shared.tripped.swap(false, Ordering::AcqRel) {
             // The watchdog zeroed the force while this tick was stuck: the stale force is not sent.
             let stalled = shared.stall_ns.load(Ordering::Relaxed) as f64 * 1e-9;

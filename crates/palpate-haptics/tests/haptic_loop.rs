@@ -132,7 +132,8 @@ fn watchdog_zeroes_force_within_30ms_of_a_stall() {
     // The watchdog's 30 ms, one 1 ms tick, and 10 ms for a loaded machine to wake it.
     assert!(after <= 0.030 + 0.001 + 0.010, "force zeroed {:.1} ms after the stall began", after * 1e3);
     assert!(after >= 0.029, "zeroed before the timeout ({:.1} ms): the watchdog is too eager", after * 1e3);
-    assert_eq!(report.watchdog_trips, 1);
+    assert_eq!(report.watchdog_trips, 1, "one stall, one trip (not a second one while the state is restored)");
+    assert_eq!(report.core.faults(), 1);
     assert!(matches!(report.core.fault_log()[0].fault, Fault::Stall(s) if s >= 0.03));
     assert_eq!(restores.load(Ordering::Relaxed), 1, "the state is restored");
     // No non-zero force between the trip and the stalled tick's return, and the ramp restarts.
