@@ -304,6 +304,20 @@ impl PyHapticLoop {
         }
     }
 
+    /// The organ's surface (the skin's vertices, (n, 3) [m], world frame; fresh near the tool,
+    /// elsewhere at most 32 ticks old) as of the latest surface snapshot (every 32 ticks), and
+    /// its tick, or None before one. Never blocks the loop.
+    fn surface<'py>(&self, py: Python<'py>) -> Option<(u64, Bound<'py, numpy::PyArray2<f64>>)> {
+        let st = self.stage.lock().unwrap();
+        match &*st {
+            Stage::Running(h) => {
+                let (tick, pts) = h.surface();
+                (tick > 0).then(|| (tick, conv::vec3s_to_py(py, &pts)))
+            }
+            _ => None,
+        }
+    }
+
     /// Has the running loop stopped by itself (device finished or ``max_ticks``)?
     fn finished(&self) -> bool {
         let st = self.stage.lock().unwrap();

@@ -53,6 +53,9 @@ def test_replay_through_the_binding_is_bit_identical(model, tmp_path):
     # Live (the servo thread, the wall clock) and offline replays give the same bits.
     live = _p.HapticLoop(model, haptics.material(), "replay", recording=path, record_ticks=3000)
     live.start()
+    time.sleep(0.2)
+    got = live.surface()                 # a viewer's snapshot while the loop runs
+    assert got is not None and got[1].shape == (len(np.asarray(model.outer_points)), 3) and got[0] % 32 == 0
     assert live.wait(60)
     rep = live.stop()
     assert rep["ticks"] == 2000

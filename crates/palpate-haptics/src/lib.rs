@@ -33,5 +33,5 @@ pub use physics::{HybridPhysics, Identity, Idle, Physics, Wall};
 pub use record::{Recording, TickRecord};
 pub use safety::{Safety, SafetyParams};
 pub use servo::{Fault, FaultRecord, HapticCore, Servo, ServoConfig, ServoHandle, ServoReport, TickOut};
-pub use snapshot::{Snapshot, SnapshotCell, Vec3Cell};
+pub use snapshot::{Mailbox, Snapshot, SnapshotCell, Vec3Cell};
 pub use stats::Stats;

@@ -36,6 +36,13 @@ pub trait Physics: Send {
     fn checkpoint(&mut self);
     /// Goes back to the last good state (the initial state if no checkpoint was taken).
     fn restore(&mut self);
+    /// Points of the organ's surface a viewer draws (\[m\], world frame), copied into `out`
+    /// without allocating (its length is [`Physics::surface_len`]); default none.
+    fn surface(&self, _out: &mut [Vec3]) {}
+    /// How many points [`Physics::surface`] gives (0: none).
+    fn surface_len(&self) -> usize {
+        0
+    }
     /// Is every number of the state finite? (Checked by the servo only after a fault or at a
     /// checkpoint: it reads the whole state.)
     fn is_finite(&self) -> bool;
@@ -107,6 +114,16 @@ impl Physics for HybridPhysics {
     }
     fn checkpoint(&mut self) {
         self.good.clone_from(&self.state);
+    }
+    /// The skin as the state holds it: fresh within reach of the tool, elsewhere as of its last
+    /// whole update (every 32 ticks, `runtime::tick::SKIN_REFRESH_TICKS`): a copy, not the
+    /// whole skin's recomputation (`Sim::skin_positions`, too costly for the servo thread on a
+    /// 31,788-vertex skin).
+    fn surface(&self, out: &mut [Vec3]) {
+        out.copy_from_slice(&self.state.skin);
+    }
+    fn surface_len(&self) -> usize {
+        self.state.skin.len()
     }
     fn restore(&mut self) {
         self.state.clone_from(&self.good);

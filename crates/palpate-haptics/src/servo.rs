@@ -45,7 +45,7 @@ use crate::device::{Device, DeviceInput, ForceSink};
 use crate::physics::Physics;
 use crate::record::{Recording, TickRecord};
 use crate::safety::{Safety, SafetyParams};
-use crate::snapshot::{Snapshot, SnapshotCell};
+use crate::snapshot::{Mailbox, Snapshot, SnapshotCell};
 use crate::stats::{Stats, TickTimes};
 
 /// Rates the servo accepts \[Hz\].
@@ -105,11 +105,14 @@ pub struct ServoConfig {
     pub max_ticks: Option<u64>,
     /// The last part of each wait that is spun rather than slept \[s\] (default 200 us).
     pub spin: f64,
+    /// Ticks between surface snapshots for a viewer ([`ServoHandle::surface`]; default 32:
+    /// 31 Hz at 1 kHz; 0: none).
+    pub surface_every: u64,
 }
 
 impl Default for ServoConfig {
     fn default() -> Self {
-        ServoConfig { rate_hz: 1000.0, coupling: None, safety: None, checkpoint_every: 250, record_ticks: 0, stats_ticks: 600_000, max_ticks: None, spin: 200e-6 }
+        ServoConfig { rate_hz: 1000.0, coupling: None, safety: None, checkpoint_every: 250, record_ticks: 0, stats_ticks: 600_000, max_ticks: None, spin: 200e-6, surface_every: 32 }
     }
 }
 
@@ -375,6 +378,7 @@ struct Shared {
     stall_ns: AtomicU64,
     trips: AtomicU64,
     snapshot: SnapshotCell,
+    surface: Mailbox,
     epoch: Instant,
 }
 
@@ -417,6 +421,7 @@ impl Servo {
             stall_ns: AtomicU64::new(0),
             trips: AtomicU64::new(0),
             snapshot: SnapshotCell::default(),
+            surface: Mailbox::new(if config.surface_every > 0 { core.physics.surface_len() } else { 0 }),
             epoch: Instant::now(),
         });
         let sink = device.sink();
@@ -439,6 +444,11 @@ impl ServoHandle {
     /// The latest snapshot (never blocks the servo).
     pub fn snapshot(&self) -> Option<Snapshot> {
         self.shared.snapshot.latest()
+    }
+    /// The organ's surface as of the latest surface snapshot (\[m\], world frame; see
+    /// [`Physics::surface`]) and its tick (0: none yet). Never blocks the servo.
+    pub fn surface(&self) -> (u64, Vec<Vec3>) {
+        self.shared.surface.latest()
     }
     /// Has the servo stopped (device finished, `max_ticks` reached, or stopped)?
     pub fn is_finished(&self) -> bool {
@@ -503,6 +513,7 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
     let period = Duration::from_secs_f64(cfg.dt());
     let spin = Duration::from_secs_f64(cfg.spin);
     let mut times = TickTimes::new(cfg.stats_ticks, cfg.rate_hz);
+    let mut surface = vec![Vec3::zeros(); if cfg.surface_every > 0 { core.physics.surface_len() } else { 0 }];
     let start = Instant::now();
     let mut deadline = start;
     let mut last_start: Option<Instant> = None;
@@ -553,6 +564,10 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
             buttons: out.buttons,
         };
         shared.snapshot.publish(&snap);
+        if !surface.is_empty() && core.tick.is_multiple_of(cfg.surface_every) {
+            core.physics.surface(&mut surface);
+            shared.surface.publish(core.tick, &surface);
+        }
         if late > period {
             // More than a whole tick late: start again from now (no burst of catch-up ticks).
             deadline = t1;

@@ -8,6 +8,7 @@
 //! an `AtomicU64` (an `f64` by its bits); the sequence is odd while a write is in progress.
 
 use std::sync::atomic::{fence, AtomicU64, Ordering};
+use std::sync::Mutex;
 
 use palpate_core::Vec3;
 
@@ -162,6 +163,39 @@ impl SnapshotCell {
     }
 }
 
+/// A latest-only mailbox for a large snapshot (the organ's surface for a viewer): the writer
+/// copies into the shared slot only if no reader holds it (`try_lock`), so it never waits; a
+/// reader clones the slot out. A publish a reader is copying from is skipped (the next one
+/// lands): the loop's rule is that it never blocks, not that every frame is seen.
+#[derive(Debug, Default)]
+pub struct Mailbox {
+    slot: Mutex<(u64, Vec<Vec3>)>,
+}
+
+impl Mailbox {
+    /// A mailbox for `n` points (allocated now: a publish only copies).
+    pub fn new(n: usize) -> Mailbox {
+        Mailbox { slot: Mutex::new((0, vec![Vec3::zeros(); n])) }
+    }
+    /// Publishes `points` as of tick `tick` unless a reader holds the slot; returns whether it
+    /// did. Never blocks, never allocates (`points` must have the mailbox's length).
+    pub fn publish(&self, tick: u64, points: &[Vec3]) -> bool {
+        match self.slot.try_lock() {
+            Ok(mut g) if g.1.len() == points.len() => {
+                g.0 = tick;
+                g.1.copy_from_slice(points);
+                true
+            }
+            _ => false,
+        }
+    }
+    /// The last published points and their tick (tick 0: nothing published yet).
+    pub fn latest(&self) -> (u64, Vec<Vec3>) {
+        let g = self.slot.lock().unwrap_or_else(|e| e.into_inner());
+        (g.0, g.1.clone())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -186,6 +220,18 @@ mod tests {
         }
         writer.join().unwrap();
         assert_eq!(lock.read().0, [200_000; 16]);
+    }
+
+    #[test]
+    fn mailbox_never_blocks_the_writer() {
+        let m = Mailbox::new(4);
+        assert_eq!(m.latest().0, 0);
+        assert!(m.publish(3, &[Vec3::x(); 4]));
+        let held = m.slot.lock().unwrap();
+        assert!(!m.publish(4, &[Vec3::y(); 4]), "a reader holds the slot: skip, do not wait");
+        drop(held);
+        assert_eq!(m.latest(), (3, vec![Vec3::x(); 4]));
+        assert!(!m.publish(5, &[Vec3::y(); 3]), "wrong length: refused");
     }
 
     #[test]

@@ -379,3 +379,28 @@ fn identity_is_the_same_for_the_same_model_built_twice() {
     let stiffer = palpate_core::Material::new(palpate_core::material::Elasticity::YoungPoisson { young: 6.0e4, poisson: 0.4 }, 1000.0, palpate_core::material::Damping::from_paper(0.5, 0.5)).unwrap();
     assert_ne!(ia.digest, palpate_haptics::HybridPhysics::new(a, stiffer, opts).unwrap().identity().digest, "the material is part of it");
 }
+
+/// A viewer's surface snapshot while the servo runs: the skin, its length, and the press shows
+/// in it (a snapshot of the rest skin, or none, would not).
+#[test]
+fn servo_publishes_the_surface_for_a_viewer() {
+    let physics = hybrid();
+    let rest = physics.sim().hybrid.outer_points.clone();
+    let (p, n) = probe(&physics.sim().hybrid);
+    let r = physics.sim().options.tool.radius;
+    let (times, knots) = (vec![0.0, 0.4, 5.0], vec![p + n * (r + 0.002), p + n * (r - 0.004), p + n * (r - 0.004)]);
+    let dev = Scripted::new(times, knots).unwrap();
+    let cfg = ServoConfig { surface_every: 16, ..Default::default() };
+    let core = HapticCore::with_config(Box::new(physics), &cfg, &dev).unwrap();
+    let h = Servo::start(core, Box::new(dev), &cfg).unwrap();
+    let t0 = std::time::Instant::now();
+    while h.snapshot().map_or(0, |s| s.tick) < 700 && t0.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let (tick, skin) = h.surface();
+    h.stop();
+    assert!(tick >= 600 && tick % 16 == 0, "tick {tick}");
+    assert_eq!(skin.len(), rest.len());
+    let moved = skin.iter().zip(&rest).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+    assert!(moved > 0.001, "the press moves the skin in the snapshot: {moved} m");
+}
