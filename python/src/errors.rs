@@ -129,6 +129,13 @@ pub fn warn_fixed_load(py: Python<'_>, fixed: &[bool], loaded: impl IntoIterator
 
 static PARAMETER: pyo3::sync::PyOnceLock<Py<PyAny>> = pyo3::sync::PyOnceLock::new();
 
+create_exception!(
+    palpate,
+    HapticsError,
+    PalpateError,
+    "The haptic loop could not start or run: a device that cannot be opened (a bridge port in use), a recording of another model or version, a loop already started or stopped."
+);
+
 /// Register the classes on the module and give the detail attributes a class-level `None`.
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let py = m.py();
@@ -169,6 +176,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("ParameterError", &param_type)?;
     let _ = PARAMETER.set(py, param_type.unbind());
     install_panic_hook();
+    m.add("HapticsError", py.get_type::<HapticsError>())?;
     let surface = py.get_type::<SurfaceError>();
     surface.setattr("triangle", py.None())?;
     surface.setattr("vertex", py.None())?;

@@ -14,6 +14,7 @@
 //! | `particles.rs` | `ParticleBody`: the meshfree body (`palpate_core::meshfree`) |
 //! | `hybrid.rs` | `HybridModel`, `Projection`, `ventricle_surface` (`palpate_core::hybrid`) |
 //! | `hybrid_sim.rs` | `HybridSim`: the hybrid model you can touch (`palpate_core::runtime`; ticks release the GIL) |
+//! | `haptics.rs` | `HapticLoop`: the servo thread over a hybrid model with a device (`palpate_haptics`; never waits on Python) |
 //!
 //! The Pythonic layer (file IO, CLI, benchmarks, `palpate.defaults`) lives in `python/palpate/`.
 
@@ -21,6 +22,7 @@ mod body;
 mod conv;
 mod defaults;
 mod errors;
+mod haptics;
 mod hybrid;
 mod hybrid_sim;
 mod integrator;
@@ -46,6 +48,7 @@ fn _palpate(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<body::PyBody>()?;
     m.add_class::<particles::PyParticleBody>()?;
     m.add_class::<hybrid_sim::PyHybridSim>()?;
+    m.add_class::<haptics::PyHapticLoop>()?;
     m.add_function(wrap_pyfunction!(mesh::ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::truncated_ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::box_mesh, m)?)?;

@@ -1,5 +1,5 @@
 """The ``palpate`` command line (also ``python -m palpate``): one module per command (``run``,
-``bench``, ``build``, ``info``, ``touch``), shared helpers in ``_common``.
+``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``), shared helpers in ``_common``.
 
     palpate run SCENE.toml [--out DIR] [--steps N]
     palpate bench protocol MESH [--force F] [--steps N] [--json] [--integrator NAME] [--newton auto|on|off]
@@ -20,6 +20,13 @@
                   [--tool-radius M] [--tool-stiffness K] [--young E] [--poisson NU] [--density RHO]
                   [--phi P] [--psi P] [--free]
         (a scripted touch of a hybrid model: force.csv, force.png, touch.pvd; palpate/touch.py)
+    palpate haptic MODEL --device scripted:SCRIPT|replay:FILE|bridge:PORT|hand [--rate HZ] [--seconds S]
+                   [--record FILE] [--kind KIND] [--max-force N] [--host IP] [--quiet]
+        (the haptic loop, headless, with a live status line; palpate/haptics.py)
+    palpate soak MODEL --minutes N [--rate HZ] [--seed S] [--json]
+    palpate bench haptic MODEL [--seconds S] [--rate HZ] [--no-idle] [--json]
+    palpate device touch|forcedimension|haply|hapticmaster [--port P] [--host IP] [--scale S] [--offset X Y Z]
+        (a vendor device as a bridge client; each vendor SDK an optional extra)
 
 Exit codes: 0 success, 1 a simulation failed (e.g. a step diverged), a hybrid build failed on
 valid surfaces or an output could not be written, 2 bad input (arguments, scene file, mesh,
@@ -32,11 +39,11 @@ import sys
 from typing import List, Optional
 
 from .. import __version__
-from . import bench, build, info, run, touch
+from . import bench, build, device, haptic, info, run, soak, touch
 from ._common import Fail, Parser, run_guarded
 
 #: The commands, in the order of ``palpate --help``: each module adds its parser and handler.
-COMMANDS = (run, bench, build, info, touch)
+COMMANDS = (run, bench, build, info, touch, haptic, soak, device)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,6 +1,7 @@
-"""``palpate bench protocol|particles|hybrid``: the shared FEM probe case (:mod:`palpate.bench`),
+"""``palpate bench protocol|particles|hybrid|haptic``: the shared FEM probe case (:mod:`palpate.bench`),
 the per-tick cost of a particle body (:mod:`palpate.bench_particles`) and of the hybrid
-simulation at a chosen active count (:mod:`palpate.bench_hybrid`). The defaults are those
+simulation at a chosen active count (:mod:`palpate.bench_hybrid`), and the haptic loop's timing
+(:func:`palpate.haptics.bench`). The defaults are those
 modules' (the benchmarks' definitions)."""
 from __future__ import annotations
 
@@ -73,6 +74,51 @@ def add_parser(sub) -> None:
                    help="tool radius [m]: skip the calibration")
     h.add_argument("--json", action="store_true", help="one JSON object")
     h.set_defaults(func=cmd_bench_hybrid)
+    _add_haptic(bsub)
+
+
+def _add_haptic(bsub) -> None:
+    from .. import haptics
+
+    k = bsub.add_parser("haptic", help="the haptic loop's period, compute time and overruns on a scripted palpation",
+                        description="Run the haptic servo loop on MODEL (a model file or shape name) for --seconds with a "
+                                    "repeated scripted palpation, then the idle loop (no simulation) of the same length; "
+                                    "report the period and compute-time percentiles and the overruns.")
+    k.add_argument("model", metavar="MODEL")
+    k.add_argument("--seconds", type=float, default=10.0, metavar="S", help="length of each run [s] (default 10)")
+    k.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000)")
+    k.add_argument("--no-idle", action="store_true", help="skip the idle-loop run")
+    k.add_argument("--json", action="store_true", help="one JSON object (keys: " + ", ".join(haptics.BENCH_KEYS) + ", ...)")
+    k.set_defaults(func=cmd_bench_haptic)
+
+
+def cmd_bench_haptic(a) -> int:
+    from .. import haptics
+    from .haptic import load
+
+    if not (a.seconds > 0 and math.isfinite(a.seconds)):
+        raise Fail(f"palpate bench haptic: --seconds must be positive, got {a.seconds}")
+    if not 250 <= a.rate <= 4000:
+        raise Fail(f"palpate bench haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")
+    name, model = load(a.model, "bench haptic")
+    try:
+        r = haptics.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name)
+    except palpate_errors() as e:
+        raise Fail(f"palpate bench haptic: {type(e).__name__}: {e}", 1) from None
+    if a.json:
+        print(json.dumps(r), flush=True)
+    else:
+        print(f"palpate {__version__} bench haptic: {name}, {a.rate:g} Hz for {a.seconds:g} s, scripted palpation "
+              f"({r['cpu_count']} CPUs, load {r['load_avg']}, {r['date']})")
+        def row(label, x):
+            print(f"  {label:<7} ticks {x['ticks']:>7}  {x['achieved_hz']:8.1f} Hz  period p50 {x['period_us_p50']:7.1f} "
+                  f"p99 {x['period_us_p99']:8.1f} max {x['period_us_max']:8.1f} us  compute p99 {x['compute_us_p99']:8.1f} us  "
+                  f"overruns {x['overruns']}")
+        row("haptic", r)
+        if "idle" in r:
+            row("idle", r["idle"])
+        print(f"  max force {r['max_force_n']:.3f} N, faults {r['n_faults']}")
+    return 1 if r["n_faults"] else 0
 
 
 def _bench_cases(a):

@@ -1,0 +1,37 @@
+//! palpate's haptic loop over the hybrid runtime: the threads, clocks, devices and network that
+//! the core keeps out (see ARCHITECTURE.md).
+//!
+//! - [`servo`]: [`HapticCore`] (one deterministic tick: device sample in, force out) and
+//!   [`Servo`] (the native thread at 250 Hz-4 kHz, absolute-deadline pacing, a watchdog);
+//! - [`physics`]: what the servo steps ([`Physics`]): [`HybridPhysics`] (the hybrid runtime),
+//!   [`Wall`], [`Idle`];
+//! - [`coupling`]: the virtual coupling (device <-> simulated tool), why a proxy with a mass;
+//! - [`safety`]: force limit, force-rate limit, ramp;
+//! - [`device`], [`devices`]: the [`Device`] interface; scripted, replay, simulated hand;
+//! - [`bridge`]: the UDP bridge and its versioned binary protocol (`PROTOCOL.md`): vendor
+//!   devices connect through it as separate processes;
+//! - [`record`]: record and replay files; [`snapshot`]: non-blocking snapshots; [`stats`].
+//!
+//! Units: SI throughout (m, s, N, kg); positions and forces in the model's world frame; the force
+//! sent to a device is the force on the user's hand.
+
+
+pub mod bridge;
+pub mod coupling;
+pub mod device;
+pub mod devices;
+pub mod physics;
+pub mod record;
+pub mod safety;
+pub mod servo;
+pub mod snapshot;
+pub mod stats;
+
+pub use coupling::{CouplingParams, VirtualCoupling};
+pub use device::{Device, DeviceInput, DeviceKind, ForceCell, ForceSink};
+pub use physics::{HybridPhysics, Identity, Idle, Physics, Wall};
+pub use record::{Recording, TickRecord};
+pub use safety::{Safety, SafetyParams};
+pub use servo::{Fault, FaultRecord, HapticCore, Servo, ServoConfig, ServoHandle, ServoReport, TickOut};
+pub use snapshot::{Mailbox, Snapshot, SnapshotCell, Vec3Cell};
+pub use stats::Stats;

@@ -1,0 +1,193 @@
+//! Record and replay: an interaction's device inputs (and what the loop rendered from them) with
+//! the identity of the model and of the loop's parameters, in one binary file.
+//!
+//! Replaying the inputs through a loop with the same model and parameters gives bit-identical
+//! forces and positions: every tick is a function of the inputs and the tick count only (the
+//! simulation steps the nominal `dt`, the ramp counts ticks, not seconds). A watchdog trip (a
+//! physics stall, which depends on the machine's timing) breaks this, and is in the file's fault
+//! count.
+//!
+//! # File format, version 1 (little-endian)
+//! ```text
+//! magic     8 bytes  "PALPREC\0"
+//! version   u32      1
+//! rate_hz   f64      the loop's rate
+//! digest    u64      the simulation's Identity::digest
+//! desc_len  u32, desc  UTF-8, the Identity's description
+//! coupling  3 x f64  stiffness [N/m], damping [N s/m], proxy mass [kg]
+//! safety    4 x f64  max force [N], max rate [N/s], ramp [s], stall timeout [s]
+//! faults    u64      faults during the recording
+//! n         u64      ticks
+//! n records, 144 bytes each:
+//!   position 3 x f64 [m], orientation 4 x f64 (w, x, y, z), buttons u32, pad u32,
+//!   has_input u8 + 7 pad bytes (0: the device gave no sample that tick; the servo held the last),
+//!   force 3 x f64 [N] (sent), tool 3 x f64 [m] (the proxy), tissue 3 x f64 [N]
+//! ```
+
+use std::io::{Read, Write};
+
+use palpate_core::Vec3;
+
+use crate::coupling::CouplingParams;
+use crate::device::DeviceInput;
+use crate::physics::Identity;
+use crate::safety::SafetyParams;
+
+const MAGIC: &[u8; 8] = b"PALPREC\0";
+/// The format's version.
+pub const VERSION: u32 = 1;
+const RECORD_BYTES: usize = 144;
+
+/// One recorded tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TickRecord {
+    pub input: DeviceInput,
+    /// Did the device give a sample this tick?
+    pub has_input: bool,
+    pub force: Vec3,
+    pub tool: Vec3,
+    pub tissue: Vec3,
+}
+
+/// A recorded interaction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recording {
+    pub rate_hz: f64,
+    pub identity: Identity,
+    pub coupling: CouplingParams,
+    pub safety: SafetyParams,
+    pub faults: u64,
+    pub ticks: Vec<TickRecord>,
+}
+
+/// A file that is not a recording of this version (or is damaged).
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    #[error("{path}: {reason}")]
+    Format { path: String, reason: String },
+    #[error("{path}: {source}")]
+    Io { path: String, source: std::io::Error },
+}
+
+impl Recording {
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut b = Vec::with_capacity(128 + self.identity.description.len() + RECORD_BYTES * self.ticks.len());
+        b.extend_from_slice(MAGIC);
+        b.extend_from_slice(&VERSION.to_le_bytes());
+        b.extend_from_slice(&self.rate_hz.to_le_bytes());
+        b.extend_from_slice(&self.identity.digest.to_le_bytes());
+        b.extend_from_slice(&(self.identity.description.len() as u32).to_le_bytes());
+        b.extend_from_slice(self.identity.description.as_bytes());
+        let c = &self.coupling;
+        let s = &self.safety;
+        for v in [c.stiffness, c.damping, c.proxy_mass, s.max_force, s.max_rate, s.ramp, s.stall_timeout] {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        b.extend_from_slice(&self.faults.to_le_bytes());
+        b.extend_from_slice(&(self.ticks.len() as u64).to_le_bytes());
+        for t in &self.ticks {
+            let f = |b: &mut Vec<u8>, v: f64| b.extend_from_slice(&v.to_le_bytes());
+            t.input.position.iter().for_each(|&v| f(&mut b, v));
+            t.input.orientation.iter().for_each(|&v| f(&mut b, v));
+            b.extend_from_slice(&t.input.buttons.to_le_bytes());
+            b.extend_from_slice(&[0; 4]);
+            b.push(t.has_input as u8);
+            b.extend_from_slice(&[0; 7]);
+            for v in [&t.force, &t.tool, &t.tissue] {
+                v.iter().for_each(|&x| f(&mut b, x));
+            }
+        }
+        b
+    }
+
+    pub fn from_bytes(bytes: &[u8], path: &str) -> Result<Recording, RecordError> {
+        let bad = |reason: String| RecordError::Format { path: path.to_string(), reason };
+        let mut r = Reader { b: bytes, at: 0 };
+        if r.take(8).ok_or_else(|| bad("shorter than the header".into()))? != MAGIC {
+            return Err(bad("not a palpate recording (bad magic)".into()));
+        }
+        let short = || bad("truncated header".into());
+        let version = r.u32().ok_or_else(short)?;
+        if version != VERSION {
+            return Err(bad(format!("recording version {version}, this build reads version {VERSION}")));
+        }
+        let rate_hz = r.f64().ok_or_else(short)?;
+        let digest = r.u64().ok_or_else(short)?;
+        let n = r.u32().ok_or_else(short)? as usize;
+        let description = String::from_utf8(r.take(n).ok_or_else(short)?.to_vec()).map_err(|_| bad("description is not UTF-8".into()))?;
+        let mut v = [0.0; 7];
+        for x in &mut v {
+            *x = r.f64().ok_or_else(short)?;
+        }
+        let faults = r.u64().ok_or_else(short)?;
+        let n = r.u64().ok_or_else(short)?;
+        let rest = bytes.len() - r.at;
+        if n.checked_mul(RECORD_BYTES as u64) != Some(rest as u64) {
+            return Err(bad(format!("{n} ticks need {} bytes after the header, the file has {rest}", n.saturating_mul(RECORD_BYTES as u64))));
+        }
+        let mut ticks = Vec::with_capacity(n as usize);
+        for _ in 0..n {
+            let mut f = || r.f64().unwrap();
+            let position = Vec3::new(f(), f(), f());
+            let orientation = [f(), f(), f(), f()];
+            let buttons = r.u32().unwrap();
+            r.take(4);
+            let has_input = r.take(8).unwrap()[0] != 0;
+            let mut f = || r.f64().unwrap();
+            let force = Vec3::new(f(), f(), f());
+            let tool = Vec3::new(f(), f(), f());
+            let tissue = Vec3::new(f(), f(), f());
+            ticks.push(TickRecord { input: DeviceInput { position, orientation, buttons }, has_input, force, tool, tissue });
+        }
+        Ok(Recording {
+            rate_hz,
+            identity: Identity { digest, description },
+            coupling: CouplingParams::new(v[0], v[1], v[2]),
+            safety: SafetyParams { max_force: v[3], max_rate: v[4], ramp: v[5], stall_timeout: v[6] },
+            faults,
+            ticks,
+        })
+    }
+
+    pub fn save(&self, path: &std::path::Path) -> Result<(), RecordError> {
+        let io = |source| RecordError::Io { path: path.display().to_string(), source };
+        let mut f = std::fs::File::create(path).map_err(io)?;
+        f.write_all(&self.to_bytes()).map_err(io)
+    }
+
+    pub fn load(path: &std::path::Path) -> Result<Recording, RecordError> {
+        let io = |source| RecordError::Io { path: path.display().to_string(), source };
+        let mut b = Vec::new();
+        std::fs::File::open(path).map_err(io)?.read_to_end(&mut b).map_err(io)?;
+        Recording::from_bytes(&b, &path.display().to_string())
+    }
+}
+
+/// The first tick where two recordings' forces or tool positions differ in any bit (`None`:
+/// identical over the shorter; the lengths are the caller's to compare).
+pub fn compare(a: &Recording, b: &Recording) -> Option<usize> {
+    let bits = |v: &Vec3| [v.x.to_bits(), v.y.to_bits(), v.z.to_bits()];
+    a.ticks.iter().zip(&b.ticks).position(|(x, y)| bits(&x.force) != bits(&y.force) || bits(&x.tool) != bits(&y.tool) || bits(&x.input.position) != bits(&y.input.position))
+}
+
+struct Reader<'a> {
+    b: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize) -> Option<&'a [u8]> {
+        let s = self.b.get(self.at..self.at.checked_add(n)?)?;
+        self.at += n;
+        Some(s)
+    }
+    fn u32(&mut self) -> Option<u32> {
+        self.take(4).map(|s| u32::from_le_bytes(s.try_into().unwrap()))
+    }
+    fn u64(&mut self) -> Option<u64> {
+        self.take(8).map(|s| u64::from_le_bytes(s.try_into().unwrap()))
+    }
+    fn f64(&mut self) -> Option<f64> {
+        self.take(8).map(|s| f64::from_le_bytes(s.try_into().unwrap()))
+    }
+}

@@ -1,0 +1,242 @@
+//! Latest-only snapshots the servo thread publishes and any number of readers (a viewer, Python,
+//! a status line, logs) take without ever blocking the writer: a seqlock over atomic words.
+//!
+//! Why a seqlock, not a mutex or a channel: the writer never waits (a mutex held by a reader
+//! that the OS preempted would stall the servo tick), publishing costs a few relaxed stores, and
+//! a reader gets the newest consistent record or retries (it never sees half of one tick and
+//! half of the next). Written with atomics only, so the crate stays free of `unsafe`: each word is
+//! an `AtomicU64` (an `f64` by its bits); the sequence is odd while a write is in progress.
+
+use std::sync::atomic::{fence, AtomicU64, Ordering};
+use std::sync::Mutex;
+
+use palpate_core::Vec3;
+
+/// A seqlock over `N` 64-bit words: one writer, any readers.
+#[derive(Debug)]
+pub struct SeqLock<const N: usize> {
+    seq: AtomicU64,
+    words: [AtomicU64; N],
+}
+
+impl<const N: usize> Default for SeqLock<N> {
+    fn default() -> Self {
+        SeqLock { seq: AtomicU64::new(0), words: std::array::from_fn(|_| AtomicU64::new(0)) }
+    }
+}
+
+impl<const N: usize> SeqLock<N> {
+    /// Publishes `words` (single writer: the caller guarantees no concurrent `write`).
+    pub fn write(&self, words: &[u64; N]) {
+        let s = self.seq.load(Ordering::Relaxed);
+        self.seq.store(s.wrapping_add(1), Ordering::Relaxed);
+        // The odd sequence must be visible before any new word.
+        fence(Ordering::Release);
+        for (w, &v) in self.words.iter().zip(words) {
+            w.store(v, Ordering::Relaxed);
+        }
+        self.seq.store(s.wrapping_add(2), Ordering::Release);
+    }
+
+    /// The last complete record and its sequence number (even; 0: nothing published yet).
+    /// Retries while a write is in progress, yielding after a few spins (a reader may be
+    /// preempted; the writer never is on its behalf).
+    pub fn read(&self) -> ([u64; N], u64) {
+        let mut spins = 0u32;
+        loop {
+            let s1 = self.seq.load(Ordering::Acquire);
+            if s1 & 1 == 0 {
+                let out: [u64; N] = std::array::from_fn(|i| self.words[i].load(Ordering::Relaxed));
+                fence(Ordering::Acquire);
+                if self.seq.load(Ordering::Relaxed) == s1 {
+                    return (out, s1);
+                }
+            }
+            spins += 1;
+            if spins > 64 {
+                std::thread::yield_now();
+            } else {
+                std::hint::spin_loop();
+            }
+        }
+    }
+}
+
+/// A published vector cell (e.g. the simulated hand's target that a viewer drags), world frame.
+#[derive(Debug, Default)]
+pub struct Vec3Cell(SeqLock<3>);
+
+impl Vec3Cell {
+    pub fn new(v: Vec3) -> Vec3Cell {
+        let c = Vec3Cell::default();
+        c.set(&v);
+        c
+    }
+    /// Sets the value (single writer).
+    pub fn set(&self, v: &Vec3) {
+        self.0.write(&[v.x.to_bits(), v.y.to_bits(), v.z.to_bits()]);
+    }
+    pub fn get(&self) -> Vec3 {
+        let (w, _) = self.0.read();
+        Vec3::new(f64::from_bits(w[0]), f64::from_bits(w[1]), f64::from_bits(w[2]))
+    }
+}
+
+/// What the servo publishes each tick (world frame of the model; SI units).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Snapshot {
+    /// Ticks done, and the simulated time \[s\] (`tick * dt`).
+    pub tick: u64,
+    pub time: f64,
+    /// The device's position \[m\].
+    pub device: Vec3,
+    /// The simulated tool (the coupling's proxy) \[m\].
+    pub tool: Vec3,
+    /// The force sent to the device \[N\] (after the safety layer), and the coupling's force
+    /// before it.
+    pub force: Vec3,
+    pub raw_force: Vec3,
+    /// The tissue's force on the simulated tool \[N\].
+    pub tissue_force: Vec3,
+    /// The last tick's period (start to start) and compute time \[s\].
+    pub period: f64,
+    pub compute: f64,
+    /// Overruns so far (ticks that ended after their deadline) and faults so far.
+    pub overruns: u64,
+    pub faults: u64,
+    /// The device's buttons (bit mask).
+    pub buttons: u32,
+}
+
+/// Words in a [`Snapshot`].
+pub const SNAPSHOT_WORDS: usize = 24;
+
+impl Snapshot {
+    pub(crate) fn to_words(&self) -> [u64; SNAPSHOT_WORDS] {
+        let mut w = [0u64; SNAPSHOT_WORDS];
+        w[0] = self.tick;
+        w[1] = self.time.to_bits();
+        for (k, v) in [&self.device, &self.tool, &self.force, &self.raw_force, &self.tissue_force].into_iter().enumerate() {
+            for i in 0..3 {
+                w[2 + 3 * k + i] = v[i].to_bits();
+            }
+        }
+        w[17] = self.period.to_bits();
+        w[18] = self.compute.to_bits();
+        w[19] = self.overruns;
+        w[20] = self.faults;
+        w[21] = self.buttons as u64;
+        w
+    }
+
+    pub(crate) fn from_words(w: &[u64; SNAPSHOT_WORDS]) -> Snapshot {
+        let v = |k: usize| Vec3::new(f64::from_bits(w[2 + 3 * k]), f64::from_bits(w[3 + 3 * k]), f64::from_bits(w[4 + 3 * k]));
+        Snapshot {
+            tick: w[0],
+            time: f64::from_bits(w[1]),
+            device: v(0),
+            tool: v(1),
+            force: v(2),
+            raw_force: v(3),
+            tissue_force: v(4),
+            period: f64::from_bits(w[17]),
+            compute: f64::from_bits(w[18]),
+            overruns: w[19],
+            faults: w[20],
+            buttons: w[21] as u32,
+        }
+    }
+}
+
+/// The servo's published [`Snapshot`].
+#[derive(Debug, Default)]
+pub struct SnapshotCell(SeqLock<SNAPSHOT_WORDS>);
+
+impl SnapshotCell {
+    pub(crate) fn publish(&self, s: &Snapshot) {
+        self.0.write(&s.to_words());
+    }
+    /// The latest snapshot (`None` before the first tick).
+    pub fn latest(&self) -> Option<Snapshot> {
+        let (w, seq) = self.0.read();
+        (seq != 0).then(|| Snapshot::from_words(&w))
+    }
+}
+
+/// A latest-only mailbox for a large snapshot (the organ's surface for a viewer): the writer
+/// copies into the shared slot only if no reader holds it (`try_lock`), so it never waits; a
+/// reader clones the slot out. A publish a reader is copying from is skipped (the next one
+/// lands): the loop's rule is that it never blocks, not that every frame is seen.
+#[derive(Debug, Default)]
+pub struct Mailbox {
+    slot: Mutex<(u64, Vec<Vec3>)>,
+}
+
+impl Mailbox {
+    /// A mailbox for `n` points (allocated now: a publish only copies).
+    pub fn new(n: usize) -> Mailbox {
+        Mailbox { slot: Mutex::new((0, vec![Vec3::zeros(); n])) }
+    }
+    /// Publishes `points` as of tick `tick` unless a reader holds the slot; returns whether it
+    /// did. Never blocks, never allocates (`points` must have the mailbox's length).
+    pub fn publish(&self, tick: u64, points: &[Vec3]) -> bool {
+        match self.slot.try_lock() {
+            Ok(mut g) if g.1.len() == points.len() => {
+                g.0 = tick;
+                g.1.copy_from_slice(points);
+                true
+            }
+            _ => false,
+        }
+    }
+    /// The last published points and their tick (tick 0: nothing published yet).
+    pub fn latest(&self) -> (u64, Vec<Vec3>) {
+        let g = self.slot.lock().unwrap_or_else(|e| e.into_inner());
+        (g.0, g.1.clone())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+
+    /// A torn read would see words from two writes: each record here has all words equal.
+    #[test]
+    fn readers_never_see_a_torn_record() {
+        let lock = Arc::new(SeqLock::<16>::default());
+        let w = lock.clone();
+        let writer = std::thread::spawn(move || {
+            for k in 1..=200_000u64 {
+                w.write(&[k; 16]);
+            }
+        });
+        let mut last = 0;
+        while !writer.is_finished() {
+            let (words, _) = lock.read();
+            assert!(words.iter().all(|&x| x == words[0]), "torn read: {words:?}");
+            assert!(words[0] >= last, "went back in time");
+            last = words[0];
+        }
+        writer.join().unwrap();
+        assert_eq!(lock.read().0, [200_000; 16]);
+    }
+
+    #[test]
+    fn mailbox_never_blocks_the_writer() {
+        let m = Mailbox::new(4);
+        assert_eq!(m.latest().0, 0);
+        assert!(m.publish(3, &[Vec3::x(); 4]));
+        let held = m.slot.lock().unwrap();
+        assert!(!m.publish(4, &[Vec3::y(); 4]), "a reader holds the slot: skip, do not wait");
+        drop(held);
+        assert_eq!(m.latest(), (3, vec![Vec3::x(); 4]));
+        assert!(!m.publish(5, &[Vec3::y(); 3]), "wrong length: refused");
+    }
+
+    #[test]
+    fn snapshot_round_trips() {
+        let s = Snapshot { tick: 7, time: 0.007, device: Vec3::new(1.0, 2.0, 3.0), tool: Vec3::new(-1.0, 0.5, 1e-9), force: Vec3::new(0.1, 0.2, 0.3), raw_force: Vec3::new(4.0, 5.0, 6.0), tissue_force: Vec3::new(7.0, 8.0, 9.0), period: 1e-3, compute: 2e-4, overruns: 3, faults: 1, buttons: 5 };
+        assert_eq!(Snapshot::from_words(&s.to_words()), s);
+    }
+}

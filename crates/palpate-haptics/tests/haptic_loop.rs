@@ -1,0 +1,406 @@
+//! The haptic loop's promises, each a test that a wrong implementation fails.
+//!
+//! What a wrong implementation would do:
+//! - a tick that depends on the wall clock (a measured `dt`, a ramp in seconds of wall time), or
+//!   a recording that drops or rounds a field, replays with different bits (`replay_*`);
+//! - a watchdog in the servo thread itself (or none) zeroes the force only once the stalled tick
+//!   returns, hundreds of milliseconds later (`watchdog_zeroes_force_within_30ms_of_a_stall`);
+//! - a NaN from the physics that reaches the device, or a state left non-finite after it, or no
+//!   restore (`nan_*`);
+//! - a limit applied before the ramp or the rate limit, or a rate limit that ignores direction,
+//!   lets a step through (`force_limit_rate_and_ramp_hold_in_the_loop`);
+//! - the device's position sent straight to a stiff contact (no coupling), or a coupling spring
+//!   with the wrong sign, puts energy into the user over a press and release (`passivity_*`; the
+//!   direct rendering is checked to be active, so the measure can see it);
+//! - a hand that ignores the rendered force walks into the wall (`hand_*`).
+
+mod support;
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::Duration;
+
+use palpate_core::Vec3;
+use palpate_haptics::devices::{Hand, HandParams, Replay, Scripted};
+use palpate_haptics::record::compare;
+use palpate_haptics::{CouplingParams, Device, DeviceInput, DeviceKind, Fault, ForceSink, HapticCore, Physics, Recording, SafetyParams, Servo, ServoConfig, Wall};
+use support::*;
+
+fn wall() -> Wall {
+    // The plane z = 0, tissue-like stiffness with a little damping.
+    Wall::new(Vec3::zeros(), Vec3::z(), 2000.0, 2.0)
+}
+
+/// A device that presses down into the wall at `z(t)` and reports through `sink`.
+struct Pressing<F: Fn(f64) -> f64 + Send> {
+    z: F,
+    sink: Arc<dyn ForceSink>,
+    ticks: u64,
+}
+
+impl<F: Fn(f64) -> f64 + Send> Device for Pressing<F> {
+    fn read(&mut self, tick: u64, dt: f64) -> Option<DeviceInput> {
+        Some(DeviceInput::at(Vec3::new(0.0, 0.0, (self.z)((tick + 1) as f64 * dt))))
+    }
+    fn sink(&self) -> Arc<dyn ForceSink> {
+        self.sink.clone()
+    }
+    fn kind(&self) -> DeviceKind {
+        DeviceKind::Simulated
+    }
+    fn finished(&self, ticks: u64, _dt: f64) -> bool {
+        ticks >= self.ticks
+    }
+}
+
+fn fast_ramp() -> SafetyParams {
+    SafetyParams { ramp: 0.02, ..Default::default() }
+}
+
+#[test]
+fn replay_is_bit_identical_offline_and_from_a_file() {
+    let physics = hybrid();
+    let (p, n) = probe(&physics.sim().hybrid);
+    let r = physics.sim().options.tool.radius;
+    let (times, knots) = press_slide_release(p, n, r, 0.004, 0.004);
+    let mut dev = Scripted::new(times, knots).unwrap();
+    let (c, s) = DeviceKind::Simulated.defaults();
+    let mut core = HapticCore::new(Box::new(physics), 1000.0, c, s, 100, 2000);
+    let n_ticks = core.run_offline(&mut dev, 5000);
+    assert_eq!(n_ticks, 1100);
+    let rec = core.take_recording().unwrap();
+    assert_eq!(rec.faults, 0);
+    let fmax = rec.ticks.iter().map(|t| t.force.norm()).fold(0.0, f64::max);
+    assert!(fmax > 0.05, "the press must touch: max force {fmax} N");
+    let dir = std::env::temp_dir().join(format!("palpate-haptics-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("press.palprec");
+    rec.save(&path).unwrap();
+    let loaded = Recording::load(&path).unwrap();
+    assert_eq!(loaded, rec, "the file round-trips every field");
+    assert_eq!(loaded.identity, hybrid().identity(), "the identity is the model's");
+
+    let mut replay = Replay::new(&loaded);
+    let mut again = HapticCore::new(Box::new(hybrid()), loaded.rate_hz, loaded.coupling, loaded.safety, 100, 2000);
+    assert_eq!(again.run_offline(&mut replay, 5000), 1100);
+    let rep = again.take_recording().unwrap();
+    assert_eq!(rep.ticks.len(), rec.ticks.len());
+    assert_eq!(compare(&rec, &rep), None, "replay differs");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn replay_through_the_real_time_servo_is_bit_identical() {
+    // Same inputs through the thread (clock, pacing, watchdog) as offline: same bits.
+    let (times, knots) = (vec![0.0, 0.2, 0.4], vec![Vec3::new(0.0, 0.0, 0.002), Vec3::new(0.001, 0.0, -0.003), Vec3::new(0.0, 0.0, 0.002)]);
+    let cfg = ServoConfig { record_ticks: 1000, safety: Some(fast_ramp()), ..Default::default() };
+    let dev = Scripted::new(times.clone(), knots.clone()).unwrap();
+    let core = HapticCore::with_config(Box::new(wall()), &cfg, &dev).unwrap();
+    let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();
+    let mut live = report.core;
+    let live_rec = live.take_recording().unwrap();
+    assert_eq!(live_rec.ticks.len(), 400);
+    assert_eq!(report.watchdog_trips, 0);
+    let mut replay = Replay::new(&live_rec);
+    let mut off = HapticCore::new(Box::new(wall()), 1000.0, live_rec.coupling, live_rec.safety, 250, 1000);
+    off.run_offline(&mut replay, 10_000);
+    let off_rec = off.take_recording().unwrap();
+    assert_eq!(compare(&live_rec, &off_rec), None);
+    assert!(live_rec.ticks.iter().any(|t| t.force.norm() > 0.5), "the press must push");
+    assert!(report.stats.ticks == 400 && report.stats.period_max > 0.0);
+}
+
+#[test]
+fn watchdog_zeroes_force_within_30ms_of_a_stall() {
+    let mut faulty = Faulty::new(wall(), 300);
+    faulty.stall = Some(Duration::from_millis(300));
+    let (stalled_at, restores) = (faulty.stalled_at.clone(), faulty.restores.clone());
+    let log = Arc::new(LogSink::default());
+    log.0.lock().unwrap().reserve(10_000);
+    // Held 12 mm into the wall: the coupling (300 N/m) in series with the wall (2000 N/m), 3.1 N,
+    // capped at 3 N.
+    let dev = Pressing { z: |_t: f64| -0.012, sink: log.clone(), ticks: 600 };
+    let cfg = ServoConfig { safety: Some(fast_ramp()), ..Default::default() };
+    let core = HapticCore::with_config(Box::new(faulty), &cfg, &dev).unwrap();
+    let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();
+    let t_stall = stalled_at.lock().unwrap().expect("the stall happened");
+    let sends = log.0.lock().unwrap().clone();
+    let before = sends.iter().filter(|(t, _)| *t < t_stall).next_back().unwrap().1;
+    assert!(before.norm() > 1.0, "pressing before the stall: {before:?}");
+    let zero_at = sends.iter().find(|(t, f)| *t >= t_stall && *f == Vec3::zeros()).expect("a zero force after the stall").0;
+    let after = (zero_at - t_stall).as_secs_f64();
+    // The watchdog's 30 ms, one 1 ms tick, and 10 ms for a loaded machine to wake it.
+    assert!(after <= 0.030 + 0.001 + 0.010, "force zeroed {:.1} ms after the stall began", after * 1e3);
+    assert!(after >= 0.029, "zeroed before the timeout ({:.1} ms): the watchdog is too eager", after * 1e3);
+    assert_eq!(report.watchdog_trips, 1, "one stall, one trip (not a second one while the state is restored)");
+    assert_eq!(report.core.faults(), 1);
+    assert!(matches!(report.core.fault_log()[0].fault, Fault::Stall(s) if s >= 0.03));
+    assert_eq!(restores.load(Ordering::Relaxed), 1, "the state is restored");
+    // No non-zero force between the trip and the stalled tick's return, and the ramp restarts.
+    let resumed: Vec<Vec3> = sends.iter().filter(|(t, _)| *t > zero_at).map(|x| x.1).collect();
+    let first = resumed.iter().position(|f| *f != Vec3::zeros()).unwrap();
+    assert!(resumed[first].norm() <= 3.2 / 20.0, "force after the fault must ramp up: {:?}", resumed[first]);
+}
+
+#[test]
+fn nan_from_the_physics_never_reaches_the_device() {
+    let mut faulty = Faulty::new(wall(), 150);
+    faulty.nan = true;
+    let restores = faulty.restores.clone();
+    let sink: Arc<LogSink> = Arc::default();
+    let mut dev = Pressing { z: |_t: f64| -0.012, sink: sink.clone(), ticks: 300 };
+    let mut core = HapticCore::new(Box::new(faulty), 1000.0, CouplingParams::default(), fast_ramp(), 50, 300);
+    core.run_offline(&mut dev, 300);
+    let rec = core.take_recording().unwrap();
+    assert!(rec.ticks[149].force.norm() > 1.0);
+    assert_eq!(rec.ticks[150].force, Vec3::zeros(), "zero in the tick of the NaN");
+    assert!(rec.ticks.iter().all(|t| t.force.iter().all(|c| c.is_finite()) && t.tool.iter().all(|c| c.is_finite())));
+    assert!(sink.0.lock().unwrap().iter().all(|(_, f)| f.iter().all(|c| c.is_finite())));
+    assert_eq!(restores.load(Ordering::Relaxed), 1);
+    assert_eq!(core.faults(), 1);
+    assert!(matches!(core.fault_log()[0], palpate_haptics::FaultRecord { tick: 150, fault: Fault::NonFinite, .. }));
+    assert!(rec.ticks[299].force.norm() > 1.0, "pressing again after the ramp");
+}
+
+/// The hybrid physics with a NaN written into the core's positions before tick `at` (as a
+/// corrupted state would be).
+struct NanState {
+    inner: palpate_haptics::HybridPhysics,
+    at: u64,
+    ticks: u64,
+}
+
+impl Physics for NanState {
+    fn tick(&mut self, tool: &Vec3, dt: f64) -> Result<Vec3, palpate_core::StepError> {
+        if self.ticks == self.at {
+            self.inner.state_mut().core.x[0].x = f64::NAN;
+        }
+        self.ticks += 1;
+        self.inner.tick(tool, dt)
+    }
+    fn tool(&self) -> Option<Vec3> {
+        self.inner.tool()
+    }
+    fn max_tool_step(&self) -> f64 {
+        self.inner.max_tool_step()
+    }
+    fn checkpoint(&mut self) {
+        self.inner.checkpoint()
+    }
+    fn restore(&mut self) {
+        self.inner.restore()
+    }
+    fn is_finite(&self) -> bool {
+        self.inner.is_finite()
+    }
+    fn identity(&self) -> palpate_haptics::Identity {
+        self.inner.identity()
+    }
+}
+
+#[test]
+fn nan_in_the_hybrid_state_is_contained_and_restored() {
+    let physics = hybrid();
+    let (p, n) = probe(&physics.sim().hybrid);
+    let r = physics.sim().options.tool.radius;
+    let (times, knots) = press_slide_release(p, n, r, 0.004, 0.0);
+    let mut dev = Scripted::new(times, knots).unwrap();
+    let nan = NanState { inner: physics, at: 450, ticks: 0 };
+    let mut core = HapticCore::new(Box::new(nan), 1000.0, CouplingParams::default(), SafetyParams::default(), 100, 2000);
+    core.run_offline(&mut dev, 450);
+    assert_eq!(core.faults(), 0);
+    let before = core.recording().unwrap().ticks[449].force;
+    assert!(before.norm() > 0.05, "{before:?}");
+    core.run_offline(&mut dev, 1);
+    let rec = core.recording().unwrap();
+    assert_eq!(rec.ticks[450].force, Vec3::zeros(), "zero force the tick the NaN is met");
+    assert_eq!(core.faults(), 1, "{:?}", core.fault_log());
+    assert!(core.physics().is_finite(), "restored from the last good state");
+    core.run_offline(&mut dev, 5000);
+    let rec = core.recording().unwrap();
+    assert_eq!(core.faults(), 1);
+    assert!(rec.ticks.iter().all(|t| t.force.iter().all(|c| c.is_finite())));
+    assert!(rec.ticks[451..].iter().any(|t| t.force.norm() > 0.05), "touching again after the restore");
+}
+
+#[test]
+fn force_limit_rate_and_ramp_hold_in_the_loop() {
+    // A very stiff wall pressed deep: the coupling asks for far more than 3 N.
+    let stiff = Wall::new(Vec3::zeros(), Vec3::z(), 1e5, 5.0);
+    let sink: Arc<LogSink> = Arc::default();
+    let mut dev = Pressing { z: |t: f64| if t < 0.3 { 0.002 - 0.1 * t } else { 0.002 - 0.1 * (0.6 - t) }, sink, ticks: 600 };
+    let safety = SafetyParams::default();
+    let mut core = HapticCore::new(Box::new(stiff), 1000.0, CouplingParams::new(1000.0, 2.0, 0.01), safety, 250, 0);
+    let dt = 1e-3;
+    let ramp_ticks = (safety.ramp / dt).ceil();
+    let (mut prev, mut allowed, mut raw_max) = (Vec3::zeros(), 0.0f64, 0.0f64);
+    for k in 0..600u64 {
+        let out = core.step(dev.read(k, dt));
+        let f = out.force.norm();
+        raw_max = raw_max.max(out.raw_force.norm());
+        // The ramp: never more than the largest ramped request so far.
+        allowed = allowed.max(out.raw_force.norm() * ((k + 1) as f64 / ramp_ticks).min(1.0));
+        assert!(f <= safety.max_force + 1e-12, "tick {k}: {f} N over the limit");
+        assert!((out.force - prev).norm() <= safety.max_rate * dt + 1e-12, "tick {k}: rate");
+        assert!(f <= allowed + 1e-12, "tick {k}: {f} N over the ramp's {allowed} N");
+        prev = out.force;
+    }
+    assert!(raw_max > 10.0, "the coupling asks for more than the limit: {raw_max} N");
+    assert!((prev.norm() - 0.0).abs() < 3.0 && core.faults() == 0);
+}
+
+/// Presses 6 mm into a stiff wall and back out, 0.25 s each way, and returns the energy the
+/// device put into the user.
+fn press_cycle_energy(mut core: HapticCore) -> f64 {
+    let sink: Arc<LogSink> = Arc::default();
+    let z = |t: f64| if t < 0.25 { 0.002 - 0.032 * t } else { 0.002 - 0.032 * (0.5 - t).max(0.0) };
+    let mut dev = Pressing { z, sink, ticks: 600 };
+    core.run_offline(&mut dev, 600);
+    let rec = core.take_recording().unwrap();
+    let forces: Vec<Vec3> = rec.ticks.iter().map(|t| t.force).collect();
+    let xs: Vec<Vec3> = rec.ticks.iter().map(|t| t.input.position).collect();
+    energy_into_user(&forces, &xs)
+}
+
+#[test]
+fn passivity_the_coupling_puts_no_energy_into_the_user() {
+    let nolimit = SafetyParams { max_force: 100.0, max_rate: 1e6, ramp: 0.0, stall_timeout: 0.03 };
+    for rate in [250.0, 1000.0, 4000.0] {
+        // An undamped stiff wall (10,000 N/m): the contact alone is lossless, so any energy the
+        // loop adds shows.
+        let stiff = Wall::new(Vec3::zeros(), Vec3::z(), 1e4, 0.0);
+        let core = HapticCore::new(Box::new(stiff), rate, CouplingParams::default(), nolimit, 250, 10_000);
+        let e = press_cycle_energy(core);
+        assert!(e <= 0.0, "{rate} Hz: the device put {e} J into the user");
+    }
+}
+
+/// The measure can see an active loop: the same wall rendered directly from the sampled device
+/// position (no coupling), zero-order hold, is active (Colgate: `K T / 2` of negative damping).
+#[test]
+fn passivity_measure_detects_direct_rendering() {
+    // The proxy made massless and rigidly tied to the device (a huge coupling stiffness): the
+    // rendered force is the wall's at the device's last sampled position.
+    let nolimit = SafetyParams { max_force: 1e6, max_rate: 1e9, ramp: 0.0, stall_timeout: 0.03 };
+    let stiff = Wall::new(Vec3::zeros(), Vec3::z(), 1e4, 0.0);
+    let core = HapticCore::new(Box::new(stiff), 250.0, CouplingParams::new(1e9, 0.0, 1e-9), nolimit, 250, 10_000);
+    let e = press_cycle_energy(core);
+    assert!(e > 0.0, "direct rendering of a stiff wall at 250 Hz must be active, got {e} J");
+}
+
+#[test]
+fn passivity_on_the_hybrid_model() {
+    let physics = hybrid();
+    let (p, n) = probe(&physics.sim().hybrid);
+    let r = physics.sim().options.tool.radius;
+    let (mut times, mut knots) = press_slide_release(p, n, r, 0.005, 0.0);
+    // Clear of the surface until the ramp is over: a ramp scales the force over time, so a press
+    // during it is met by less force than its release (an active element by design).
+    times.iter_mut().for_each(|t| *t += 0.6);
+    times.insert(0, 0.0);
+    knots.insert(0, knots[0]);
+    let mut dev = Scripted::new(times, knots).unwrap();
+    let mut core = HapticCore::new(Box::new(physics), 1000.0, CouplingParams::default(), SafetyParams::default(), 250, 2000);
+    core.run_offline(&mut dev, 5000);
+    let rec = core.take_recording().unwrap();
+    assert_eq!(rec.faults, 0);
+    let forces: Vec<Vec3> = rec.ticks.iter().map(|t| t.force).collect();
+    let xs: Vec<Vec3> = rec.ticks.iter().map(|t| t.input.position).collect();
+    let e = energy_into_user(&forces, &xs);
+    let work_in: f64 = forces.iter().zip(xs.windows(2)).map(|(f, w)| f.dot(&(w[1] - w[0])).min(0.0)).sum();
+    let tools: Vec<Vec3> = rec.ticks.iter().map(|t| t.tool).collect();
+    let tissue: Vec<Vec3> = rec.ticks.iter().map(|t| t.tissue).collect();
+    // The tissue's force at tick k acted on the tool moving from tool[k-2] to tool[k-1] (the
+    // proxy sent at tick k is the one the coupling set at tick k-1).
+    let e_tissue: f64 = (2..tools.len()).map(|k| tissue[k].dot(&(tools[k - 1] - tools[k - 2]))).sum();
+    println!("hybrid press cycle: energy into the user {e:.3e} J (user's work in {:.3e} J); tissue's work on the tool {e_tissue:.3e} J", -work_in);
+    assert!(work_in < -1e-5, "the press must do work");
+    assert!(e <= 0.0, "the device put {e} J into the user");
+}
+
+#[test]
+fn hand_follows_its_target_and_feels_the_wall() {
+    let hand = Hand::new(HandParams::default(), Vec3::new(0.0, 0.0, 0.01));
+    let target = hand.target();
+    let mut core = HapticCore::new(Box::new(wall()), 1000.0, CouplingParams::default(), fast_ramp(), 250, 0);
+    let mut dev: Box<dyn Device> = Box::new(hand);
+    // Free space: 5 mm sideways.
+    target.set(&Vec3::new(0.005, 0.0, 0.01));
+    let sink = dev.sink();
+    let mut last = DeviceInput::at(Vec3::zeros());
+    for _ in 0..1000 {
+        last = dev.read(core.ticks(), 1e-3).unwrap();
+        let out = core.step(Some(last));
+        sink.send(&out.force);
+    }
+    assert!((last.position - Vec3::new(0.005, 0.0, 0.01)).norm() < 1e-4, "{:?}", last.position);
+    // A target 10 mm inside the wall: the hand stops where the arm's pull (200 N/m) meets the
+    // rendered force, short of the target.
+    target.set(&Vec3::new(0.005, 0.0, -0.01));
+    let mut out = core.step(Some(last));
+    for _ in 0..3000 {
+        last = dev.read(core.ticks(), 1e-3).unwrap();
+        out = core.step(Some(last));
+        sink.send(&out.force);
+    }
+    let pull = 200.0 * (-0.01 - last.position.z);
+    assert!(last.position.z > -0.005, "the wall holds the hand: z = {}", last.position.z);
+    assert!((out.force.z + pull).abs() < 0.05 * pull.abs(), "balance: force {} N vs arm {} N", out.force.z, pull);
+}
+
+#[test]
+fn servo_publishes_snapshots_and_stops() {
+    let hand = Hand::new(HandParams::default(), Vec3::new(0.0, 0.0, 0.005));
+    let target = hand.target();
+    let cfg = ServoConfig { rate_hz: 2000.0, safety: Some(fast_ramp()), ..Default::default() };
+    let core = HapticCore::with_config(Box::new(wall()), &cfg, &hand).unwrap();
+    let h = Servo::start(core, Box::new(hand), &cfg).unwrap();
+    target.set(&Vec3::new(0.0, 0.0, -0.005));
+    std::thread::sleep(Duration::from_millis(300));
+    let s = h.snapshot().expect("a snapshot");
+    assert!(s.tick > 100);
+    assert!(s.force.z > 0.1, "pushing the hand out of the wall: {:?}", s.force);
+    assert!((s.time - s.tick as f64 / 2000.0).abs() < 1e-12);
+    let report = h.stop();
+    assert!(report.stats.ticks >= s.tick);
+    assert!(report.core.ticks() == report.stats.ticks);
+}
+
+/// The identity a recording carries is the model's content, not its build's timings: the same
+/// geometry built twice replays (a digest over the whole file refused it).
+#[test]
+fn identity_is_the_same_for_the_same_model_built_twice() {
+    let wall = || palpate_core::hybrid::shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap();
+    let a = palpate_core::hybrid::build(&wall(), &Default::default()).unwrap();
+    let b = palpate_core::hybrid::build(&wall(), &Default::default()).unwrap();
+    let opts = palpate_core::runtime::SimOptions::default();
+    let ia = palpate_haptics::HybridPhysics::new(a.clone(), material(), opts).unwrap().identity();
+    assert_eq!(ia, palpate_haptics::HybridPhysics::new(b, material(), opts).unwrap().identity());
+    let stiffer = palpate_core::Material::new(palpate_core::material::Elasticity::YoungPoisson { young: 6.0e4, poisson: 0.4 }, 1000.0, palpate_core::material::Damping::from_paper(0.5, 0.5)).unwrap();
+    assert_ne!(ia.digest, palpate_haptics::HybridPhysics::new(a, stiffer, opts).unwrap().identity().digest, "the material is part of it");
+}
+
+/// A viewer's surface snapshot while the servo runs: the skin, its length, and the press shows
+/// in it (a snapshot of the rest skin, or none, would not).
+#[test]
+fn servo_publishes_the_surface_for_a_viewer() {
+    let physics = hybrid();
+    let rest = physics.sim().hybrid.outer_points.clone();
+    let (p, n) = probe(&physics.sim().hybrid);
+    let r = physics.sim().options.tool.radius;
+    let (times, knots) = (vec![0.0, 0.4, 5.0], vec![p + n * (r + 0.002), p + n * (r - 0.004), p + n * (r - 0.004)]);
+    let dev = Scripted::new(times, knots).unwrap();
+    let cfg = ServoConfig { surface_every: 16, ..Default::default() };
+    let core = HapticCore::with_config(Box::new(physics), &cfg, &dev).unwrap();
+    let h = Servo::start(core, Box::new(dev), &cfg).unwrap();
+    let t0 = std::time::Instant::now();
+    while h.snapshot().map_or(0, |s| s.tick) < 700 && t0.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let (tick, skin) = h.surface();
+    h.stop();
+    assert!(tick >= 600 && tick % 16 == 0, "tick {tick}");
+    assert_eq!(skin.len(), rest.len());
+    let moved = skin.iter().zip(&rest).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+    assert!(moved > 0.001, "the press moves the skin in the snapshot: {moved} m");
+}

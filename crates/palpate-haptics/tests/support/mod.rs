@@ -1,0 +1,110 @@
+//! Shared set-ups of the haptic tests: a small hybrid model (the paper's ellipsoids, built once
+//! per test binary), a probe point and a press-slide-release script on it, and physics wrappers
+//! that inject faults.
+#![allow(dead_code)]
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::{Duration, Instant};
+
+use palpate_core::hybrid::{build, shapes, HybridModel, HybridOptions};
+use palpate_core::material::{Damping, Elasticity};
+use palpate_core::runtime::SimOptions;
+use palpate_core::{Material, StepError, Vec3};
+use palpate_haptics::{ForceSink, HybridPhysics, Identity, Physics};
+
+/// The paper's concentric ellipsoids, at the default build options.
+pub fn ellipsoids() -> &'static HybridModel {
+    static M: OnceLock<HybridModel> = OnceLock::new();
+    M.get_or_init(|| build(&shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap(), &HybridOptions::default()).unwrap())
+}
+
+/// Myocardium-like, damped (the runtime tests' material).
+pub fn material() -> Material {
+    Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, Damping::from_paper(0.5, 0.5)).unwrap()
+}
+
+pub fn hybrid() -> HybridPhysics {
+    HybridPhysics::new(ellipsoids().clone(), material(), SimOptions::default()).unwrap()
+}
+
+/// The probe: the outer vertex with the largest x near z = -5 mm (below the equator, above the
+/// held lower 30%), and the outward normal there (radial in x, y).
+pub fn probe(m: &HybridModel) -> (Vec3, Vec3) {
+    let p = *m.outer_points.iter().filter(|q| q.z.abs() < 0.006).max_by(|a, b| a.x.total_cmp(&b.x)).unwrap();
+    (p, Vec3::new(p.x, p.y, 0.0).normalize())
+}
+
+/// Knots of a press to `depth` [m] over 0.3 s, a 0.2 s hold, a `slide` [m] along z over 0.3 s and
+/// a release to the start over 0.3 s, for a tool of `radius` starting 2 mm clear.
+pub fn press_slide_release(point: Vec3, normal: Vec3, radius: f64, depth: f64, slide: f64) -> (Vec<f64>, Vec<Vec3>) {
+    let c = |d: f64, s: f64| point + normal * (radius - d) + Vec3::z() * s;
+    (vec![0.0, 0.3, 0.5, 0.8, 1.1], vec![c(-0.002, 0.0), c(depth, 0.0), c(depth, 0.0), c(depth, slide), c(-0.002, slide)])
+}
+
+/// Forces sent, with when (a test sink; allocation is fine in a test).
+#[derive(Default)]
+pub struct LogSink(pub Mutex<Vec<(Instant, Vec3)>>);
+
+impl ForceSink for LogSink {
+    fn send(&self, f: &Vec3) {
+        self.0.lock().unwrap().push((Instant::now(), *f));
+    }
+}
+
+/// Wraps a physics and, at tick `at`, stalls for `stall` or returns a NaN force; counts restores.
+pub struct Faulty<P: Physics> {
+    pub inner: P,
+    pub at: u64,
+    pub stall: Option<Duration>,
+    pub nan: bool,
+    pub ticks: u64,
+    pub stalled_at: Arc<Mutex<Option<Instant>>>,
+    pub restores: Arc<AtomicU64>,
+}
+
+impl<P: Physics> Faulty<P> {
+    pub fn new(inner: P, at: u64) -> Faulty<P> {
+        Faulty { inner, at, stall: None, nan: false, ticks: 0, stalled_at: Arc::default(), restores: Arc::default() }
+    }
+}
+
+impl<P: Physics> Physics for Faulty<P> {
+    fn tick(&mut self, tool: &Vec3, dt: f64) -> Result<Vec3, StepError> {
+        let k = self.ticks;
+        self.ticks += 1;
+        if k == self.at {
+            if let Some(d) = self.stall {
+                *self.stalled_at.lock().unwrap() = Some(Instant::now());
+                std::thread::sleep(d);
+            }
+        }
+        let f = self.inner.tick(tool, dt)?;
+        Ok(if k == self.at && self.nan { Vec3::new(f64::NAN, f.y, f.z) } else { f })
+    }
+    fn tool(&self) -> Option<Vec3> {
+        self.inner.tool()
+    }
+    fn max_tool_step(&self) -> f64 {
+        self.inner.max_tool_step()
+    }
+    fn checkpoint(&mut self) {
+        self.inner.checkpoint()
+    }
+    fn restore(&mut self) {
+        self.restores.fetch_add(1, Ordering::Relaxed);
+        self.inner.restore()
+    }
+    fn is_finite(&self) -> bool {
+        self.inner.is_finite()
+    }
+    fn identity(&self) -> Identity {
+        self.inner.identity()
+    }
+}
+
+/// The energy the device put into the user [J]: the force held over each tick (zero-order hold)
+/// times the hand's displacement over it, `sum_k F_k . (x_{k+1} - x_k)`.
+pub fn energy_into_user(forces: &[Vec3], positions: &[Vec3]) -> f64 {
+    forces.iter().zip(positions.windows(2)).map(|(f, w)| f.dot(&(w[1] - w[0]))).sum()
+}

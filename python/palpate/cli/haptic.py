@@ -1,0 +1,140 @@
+"""``palpate haptic MODEL --device scripted:SCRIPT|replay:FILE|bridge:PORT|hand``: the haptic loop
+(a native servo thread, :class:`palpate.HapticLoop`) on a hybrid model, headless, with a live
+status line (rate, period, force, overruns). ``--record FILE`` writes the interaction for
+``--device replay:FILE``, which gives the same forces bit for bit."""
+from __future__ import annotations
+
+import math
+import sys
+
+from ._common import Fail, palpate_errors
+
+DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand"
+KINDS = ("simulated", "bridge", "touch", "forcedimension", "haply", "hapticmaster")
+
+
+def add_parser(sub) -> None:
+    h = sub.add_parser("haptic", help="run the haptic loop on a hybrid model with a device, headless",
+                       description="Run the haptic servo loop (250-4000 Hz) on MODEL (a palpate model file or a shape "
+                                   "name: ellipsoids, ventricle, rodero) with a device: " + DEVICES + ". Prints a live "
+                                   "status line; stops at the device's end, after --seconds, or on Ctrl-C.")
+    h.add_argument("model", metavar="MODEL")
+    h.add_argument("--device", required=True, metavar="DEVICE", help=DEVICES)
+    h.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000; 250 to 4000)")
+    h.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: the device's end; "
+                   "for bridge and hand, Ctrl-C)")
+    h.add_argument("--record", default=None, metavar="FILE", help="record the interaction (inputs, forces, model identity)")
+    h.add_argument("--host", default="127.0.0.1", help="bridge address to bind (default 127.0.0.1)")
+    h.add_argument("--kind", choices=KINDS, default=None, help="the device's make, for the coupling and safety defaults")
+    h.add_argument("--max-force", type=float, default=None, metavar="N", help="force limit [N] (default 3)")
+    h.add_argument("--tool-radius", type=float, default=0.005, metavar="M", help="tool sphere radius [m] (default 0.005)")
+    h.add_argument("--quiet", action="store_true", help="no status line")
+    h.set_defaults(func=cmd_haptic)
+
+
+def load(model_spec: str, cmd: str):
+    """``(name, model)`` of a model file or shape name, or :class:`Fail`."""
+    from .. import bench_hybrid as bh
+    from ..data import DataError
+
+    try:
+        return bh.load_model(model_spec)
+    except (ValueError, OSError) as e:
+        raise Fail(f"palpate {cmd}: {e}") from None
+    except DataError as e:
+        raise Fail(f"palpate {cmd}: {e}", 1) from None
+    except palpate_errors() as e:
+        raise Fail(f"palpate {cmd}: {model_spec}: {type(e).__name__}: {e}") from None
+
+
+def _positive(cmd: str, flag: str, v) -> None:
+    if v is not None and not (v > 0 and math.isfinite(v)):
+        raise Fail(f"palpate {cmd}: {flag} must be positive and finite, got {v}")
+
+
+def make_loop(a, model, record_ticks: int):
+    """The :class:`palpate.HapticLoop` for ``a.device``."""
+    from .. import _palpate as _p
+    from .. import haptics
+    from ..touch import ScriptError
+
+    kind, _, arg = a.device.partition(":")
+    common = dict(rate_hz=a.rate, record_ticks=record_ticks, max_force=a.max_force, tool_radius=a.tool_radius)
+    if a.kind is not None:
+        common["kind"] = a.kind
+    mat = haptics.material()
+    try:
+        if kind == "scripted":
+            if not arg:
+                raise Fail("palpate haptic: --device scripted:SCRIPT needs a script (.toml or .csv, as palpate touch)")
+            try:
+                t, k = haptics.script_trajectory(model, arg, a.tool_radius)
+            except ScriptError as e:
+                raise Fail(f"palpate haptic: {e}") from None
+            except OSError as e:
+                raise Fail(f"palpate haptic: {e}") from None
+            return _p.HapticLoop(model, mat, "scripted", times=t, knots=k, **common)
+        if kind == "replay":
+            common.pop("rate_hz")
+            return _p.HapticLoop(model, mat, "replay", recording=arg, **common)
+        if kind == "bridge":
+            try:
+                port = int(arg)
+            except ValueError:
+                raise Fail(f"palpate haptic: --device bridge:PORT needs a port number, got {arg!r}") from None
+            if not 0 <= port <= 65535:
+                raise Fail(f"palpate haptic: port {port} out of range")
+            return _p.HapticLoop(model, mat, "bridge", port=port, host=a.host, **common)
+        if kind == "hand":
+            import numpy as np
+            t, k = haptics.palpation_cycle(model, a.tool_radius)
+            return _p.HapticLoop(model, mat, "hand", hand_start=np.asarray(k[0]), **common)
+    except ValueError as e:
+        raise Fail(f"palpate haptic: {e}") from None
+    except _p.HapticsError as e:
+        raise Fail(f"palpate haptic: {e}") from None
+    except palpate_errors() as e:
+        raise Fail(f"palpate haptic: {type(e).__name__}: {e}", 1) from None
+    raise Fail(f"palpate haptic: unknown device {a.device!r}; expected {DEVICES}")
+
+
+def cmd_haptic(a) -> int:
+    from .. import haptics
+
+    if not 250 <= a.rate <= 4000:
+        raise Fail(f"palpate haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")
+    _positive("haptic", "--seconds", a.seconds)
+    _positive("haptic", "--max-force", a.max_force)
+    _positive("haptic", "--tool-radius", a.tool_radius)
+    name, model = load(a.model, "haptic")
+    record_ticks = 0
+    if a.record:
+        span = a.seconds if a.seconds is not None else 600.0
+        record_ticks = int(span * a.rate) + 1
+    loop = make_loop(a, model, record_ticks)
+    where = f" on {loop.bridge_address}" if loop.bridge_address else ""
+    print(f"palpate haptic: {name}, device {a.device}{where}, {loop.rate_hz:g} Hz", flush=True)
+    tty = sys.stdout.isatty()
+
+    def show(line: str) -> None:
+        if not a.quiet:
+            print(("\r" + line) if tty else line, end="" if tty else "\n", flush=True)
+
+    r = haptics.run_live(loop, a.seconds, show)
+    if tty and not a.quiet:
+        print()
+    print(f"  {r['ticks']} ticks in {r['elapsed_s']:.2f} s ({r['achieved_hz']:.1f} Hz): period p50 {r['period_us_p50']:.0f} us, "
+          f"p99 {r['period_us_p99']:.0f} us, max {r['period_us_max']:.0f} us; compute p99 {r['compute_us_p99']:.0f} us; "
+          f"overruns {r['overruns']}; max force {r['max_force_n']:.3f} N; faults {r['n_faults']}")
+    for f in r["faults"][:10]:
+        print(f"  fault at tick {f['tick']} (t = {f['time']:.3f} s): {f['reason']}")
+    bs = loop.bridge_stats()
+    if bs is not None:
+        print("  bridge: " + ", ".join(f"{k} {v}" for k, v in bs.items()))
+    if a.record:
+        try:
+            n = loop.save_recording(a.record)
+        except OSError as e:
+            raise Fail(f"palpate haptic: cannot write {a.record}: {e}", 1) from None
+        print(f"  recorded {n} ticks: {a.record}")
+    return 1 if r["n_faults"] else 0

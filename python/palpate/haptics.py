@@ -1,0 +1,186 @@
+"""The haptic loop from Python (issue 13): :class:`palpate.HapticLoop` (a native servo thread over
+a hybrid model, see ``crates/palpate-haptics``) and what the ``palpate haptic``, ``palpate soak``
+and ``palpate bench haptic`` commands build on it.
+
+Python never runs in the loop: it makes the device's trajectory (a ``palpate touch`` script,
+resolved against the model's outer surface: one script format for both commands), starts the
+loop, reads snapshots (which never block it) and stops it. Units SI, the model's world frame.
+"""
+from __future__ import annotations
+
+import math
+import os
+import platform
+import time
+from datetime import datetime, timezone
+from typing import Any, Callable, Dict, Optional, Tuple
+
+import numpy as np
+
+from . import _palpate as _p
+
+#: The material of the benchmark and the soak [Pa, -, kg/m^3, Pa s] (palpate.bench_hybrid's:
+#: myocardium-like with the paper's damping).
+YOUNG, POISSON, DENSITY, PHI, PSI = 3.0e4, 0.4, 1000.0, 1.0, 1.0
+#: The scripted palpation of the benchmark: press depth [m], slide [m], one cycle's length [s].
+PRESS_DEPTH, PRESS_SLIDE, CYCLE_S = 0.004, 0.006, 2.0
+#: JSON keys of ``palpate bench haptic`` (at least these).
+BENCH_KEYS = ("rate_hz", "ticks", "period_us_p50", "period_us_p99", "period_us_max", "compute_us_p99",
+              "overruns", "max_force_n")
+
+
+def material() -> "_p.Material":
+    return _p.Material(young=YOUNG, poisson=POISSON, density=DENSITY, phi=PHI, psi=PSI)
+
+
+def script_trajectory(model: "_p.HybridModel", script_path: str, tool_radius: float = 0.005) -> Tuple[np.ndarray, np.ndarray]:
+    """``(times (k,) [s], knots (k, 3) [m])`` of a ``palpate touch`` script (TOML segments or CSV,
+    :mod:`palpate.touch`) resolved on ``model``'s outer surface for a tool of ``tool_radius`` [m].
+    Raises :class:`palpate.touch.ScriptError` for a bad script."""
+    from .touch import parse_script
+
+    traj = parse_script(script_path).resolve(np.asarray(model.outer_points), np.asarray(model.outer_triangles), tool_radius)
+    return np.asarray(traj.times, dtype=np.float64), np.asarray(traj.knots, dtype=np.float64)
+
+
+def palpation_cycle(model: "_p.HybridModel", tool_radius: float = 0.005, depth: float = PRESS_DEPTH,
+                    slide: float = PRESS_SLIDE, gap: float = 0.002) -> Tuple[np.ndarray, np.ndarray]:
+    """One scripted palpation at the probe point (:func:`palpate.touch.probe_point`): from ``gap``
+    [m] clear, a press to ``depth`` [m] in 0.5 s, a 0.2 s hold, a ``slide`` [m] along the surface
+    in 0.6 s, a release in 0.5 s and 0.2 s clear: ``(times (k,) [s], knots (k, 3) [m])``."""
+    from .touch import probe_point, vertex_normals
+
+    s, tris = np.asarray(model.outer_points), np.asarray(model.outer_triangles)
+    v = probe_point(s, tris)
+    n = vertex_normals(s, tris)[v]
+    tangent = np.cross(n, [0.0, 0.0, 1.0])
+    if np.linalg.norm(tangent) < 1e-9:
+        tangent = np.cross(n, [1.0, 0.0, 0.0])
+    tangent /= np.linalg.norm(tangent)
+    c = lambda d, sl: s[v] + n * (tool_radius - d) + tangent * sl  # noqa: E731
+    times = np.array([0.0, 0.5, 0.7, 1.3, 1.8, 2.0])
+    knots = np.array([c(-gap, 0), c(depth, 0), c(depth, 0), c(depth, slide), c(-gap, slide), c(-gap, 0)])
+    return times, knots
+
+
+def repeat(times: np.ndarray, knots: np.ndarray, seconds: float) -> Tuple[np.ndarray, np.ndarray]:
+    """The trajectory repeated back to back until it lasts at least ``seconds`` [s] (it must end
+    where it starts)."""
+    d = float(times[-1] - times[0])
+    n = max(1, int(math.ceil(seconds / d)))
+    t = np.concatenate([times[:-1] + k * d for k in range(n)] + [[times[-1] + (n - 1) * d]])
+    k = np.concatenate([knots[:-1]] * n + [knots[-1:]])
+    return t - t[0], k
+
+
+def random_palpation(model: "_p.HybridModel", seconds: float, seed: int = 0, tool_radius: float = 0.005,
+                     clear: float = 0.010) -> Tuple[np.ndarray, np.ndarray]:
+    """A random scripted palpation lasting ``seconds`` [s]: presses at random outer vertices in
+    the upper 60 % of the model's height (above the held base) facing sideways, each from
+    ``clear`` [m] out along the normal: approach in 0.3 s, press 2-6 mm in 0.3-0.8 s, hold
+    0-0.3 s, slide 0-8 mm in 0.4 s, release in 0.3 s; ``(times, knots)`` [s], [m]."""
+    from .touch import vertex_normals
+
+    rng = np.random.default_rng(seed)
+    s, tris = np.asarray(model.outer_points), np.asarray(model.outer_triangles)
+    normals = vertex_normals(s, tris)
+    z = s[:, 2]
+    ok = (z > z.min() + 0.4 * (z.max() - z.min())) & (np.abs(normals[:, 2]) < 0.7)
+    ok[np.setdiff1d(np.arange(len(s)), np.unique(tris))] = False
+    cand = np.flatnonzero(ok)
+    if len(cand) == 0:
+        raise ValueError("no outer vertex suits a palpation (upper 60 %, facing sideways)")
+    times, knots = [0.0], []
+    t = 0.0
+
+    def add(dt: float, p: np.ndarray) -> None:
+        nonlocal t
+        t += dt
+        times.append(t)
+        knots.append(p)
+
+    first = True
+    while t < seconds:
+        v = int(rng.choice(cand))
+        n = normals[v]
+        tan = np.cross(n, rng.normal(size=3))
+        tan /= np.linalg.norm(tan)
+        depth = rng.uniform(0.002, 0.006)
+        slide = rng.uniform(0.0, 0.008)
+        out = s[v] + n * (tool_radius + clear)
+        at = lambda d, sl: s[v] + n * (tool_radius - d) + tan * sl  # noqa: E731
+        if first:
+            knots.append(out)
+            first = False
+        else:
+            add(0.3, out)
+        add(0.3, at(-0.001, 0.0))
+        add(rng.uniform(0.3, 0.8), at(depth, 0.0))
+        add(max(1e-3, rng.uniform(0.0, 0.3)), at(depth, 0.0))
+        add(0.4, at(depth, slide))
+        add(0.3, s[v] + n * (tool_radius + clear) + tan * slide)
+    return np.asarray(times), np.asarray(knots)
+
+
+def status_line(s: Optional[Dict[str, Any]], rate_hz: float) -> str:
+    """One line of a running loop's snapshot: time, rate, period, compute, force, overruns."""
+    if s is None:
+        return "waiting for the first tick"
+    hz = 1e6 / s["period_us"] if s["period_us"] > 0 else float("nan")
+    f = float(np.linalg.norm(s["force"]))
+    return (f"t {s['time']:8.3f} s | {hz:7.1f} Hz (of {rate_hz:g}) | period {s['period_us']:7.1f} us | compute "
+            f"{s['compute_us']:7.1f} us | force {f:6.3f} N | overruns {s['overruns']} | faults {s['faults']}")
+
+
+def run_live(loop: "_p.HapticLoop", seconds: Optional[float], on_status: Optional[Callable[[str], None]] = None,
+             every: float = 0.2) -> Dict[str, Any]:
+    """Starts ``loop``, calls ``on_status(line)`` every ``every`` [s] until it finishes or
+    ``seconds`` [s] pass, stops it and returns its report (:meth:`palpate.HapticLoop.stop`)."""
+    loop.start()
+    t0 = time.monotonic()
+    try:
+        while True:
+            done = loop.wait(every)
+            if on_status is not None:
+                on_status(status_line(loop.snapshot(), loop.rate_hz))
+            if done or (seconds is not None and time.monotonic() - t0 >= seconds):
+                break
+    finally:
+        report = loop.stop()
+    return report
+
+
+def per_second(times_s, elapsed_s: float) -> list:
+    """Counts of events per whole second of wall time since the start (``times_s`` [s])."""
+    n = max(1, int(math.ceil(elapsed_s)))
+    return np.bincount(np.minimum(np.asarray(times_s, dtype=np.float64).astype(np.int64), n - 1), minlength=n).tolist() \
+        if len(times_s) else [0] * n
+
+
+def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle: bool = True,
+          name: str = "", on_status: Optional[Callable[[str], None]] = None) -> Dict[str, Any]:
+    """``palpate bench haptic``: the loop at ``rate_hz`` on ``model`` for ``seconds`` [s] with a
+    repeated scripted palpation (:func:`palpation_cycle`), then (``idle``) the idle loop (no
+    simulation, same device, same length) on the same clock. Returns the loop's report
+    (:data:`BENCH_KEYS` and more; ``overruns_per_s``: the overruns in each second of wall time,
+    from the first 100,000 logged), with ``idle`` the idle run's and the machine's description."""
+    t, k = repeat(*palpation_cycle(model), seconds + 1.0)
+    mat = material()
+    loop = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz,
+                         max_ticks=int(round(seconds * rate_hz)))
+    r = run_live(loop, None, on_status)
+    r["model"] = name
+    r["seconds"] = seconds
+    r["overruns_per_s"] = per_second(r.pop("overrun_times_s"), r["elapsed_s"])
+    if idle:
+        il = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz, idle=True,
+                           max_ticks=int(round(seconds * rate_hz)))
+        ir = run_live(il, None, None)
+        r["idle"] = {key: ir[key] for key in ("ticks", "achieved_hz", "elapsed_s", "period_us_p50", "period_us_p99",
+                                              "period_us_max", "compute_us_p99", "overruns")}
+        r["idle"]["overruns_per_s"] = per_second(ir["overrun_times_s"], ir["elapsed_s"])
+    r["cpu_count"] = os.cpu_count()
+    r["machine"] = platform.processor() or platform.machine()
+    r["load_avg"] = list(os.getloadavg()) if hasattr(os, "getloadavg") else None
+    r["date"] = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    return r

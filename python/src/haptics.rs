@@ -1,0 +1,476 @@
+//! `palpate.HapticLoop`: the haptic loop (`palpate_haptics`) over a hybrid model: a native servo
+//! thread that reads a device, ticks the simulation and sends the force, never waiting on Python.
+//! Python only starts it, reads snapshots (a seqlock: never blocks the loop) and stops it;
+//! waiting and the offline run release the GIL.
+
+use std::net::{Ipv4Addr, SocketAddrV4};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use palpate_core::runtime::{SimOptions, Tool};
+use palpate_core::Vec3;
+use palpate_haptics::bridge::protocol::Reject;
+use palpate_haptics::bridge::{Bridge, BridgeStats};
+use palpate_haptics::devices::{Hand, HandParams, Replay, Scripted};
+use palpate_haptics::{CouplingParams, Device, DeviceKind, HapticCore, HybridPhysics, Idle, Physics, Recording, SafetyParams, Servo, ServoConfig, ServoHandle, ServoReport, Snapshot, Stats, Vec3Cell};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use crate::conv;
+use crate::errors::{self, HapticsError};
+use crate::hybrid::PyHybridModel;
+use crate::material::PyMaterial;
+
+enum Stage {
+    Ready(HapticCore, Box<dyn Device>),
+    Running(ServoHandle),
+    Done(ServoReport),
+    Taken,
+}
+
+/// The haptic loop over a hybrid model (issue 13): a servo thread at ``rate_hz`` (250 to 4000 Hz)
+/// that each tick reads ``device``, ticks the simulation (its tool driven through a virtual
+/// coupling) and sends the force through the safety layer (force limit, rate limit, ramp); a
+/// watchdog zeroes the force if the simulation misses ticks for ``stall_timeout``.
+///
+/// ``HapticLoop(model, material, device, *, rate_hz=1000.0, times=None, knots=None,
+/// recording=None, port=None, host="127.0.0.1", kind=None, hand_start=None, idle=False,
+/// tool_radius=None, tool_stiffness=None, hold=True, coupling_stiffness=None,
+/// coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None,
+/// stall_timeout=None, record_ticks=0, max_ticks=None, spin=None)``
+///
+/// Parameters
+/// ----------
+/// model : HybridModel
+/// material : Material
+/// device : str
+///     ``"scripted"`` (needs ``times`` (k,) [s], strictly increasing, and ``knots`` (k, 3) [m]:
+///     the tool-centre trajectory, e.g. a resolved ``palpate.touch`` script), ``"replay"``
+///     (needs ``recording``, a file written by :meth:`save_recording`; the loop takes its rate,
+///     coupling and safety parameters and refuses a recording of another model), ``"hand"`` (a
+///     simulated hand at ``hand_start`` (3,) [m] following :meth:`set_hand_target`), or
+///     ``"bridge"`` (UDP on ``host``:``port``, protocol in ``crates/palpate-haptics/PROTOCOL.md``;
+///     ``port=0`` picks a free one, see :attr:`bridge_address`).
+/// kind : str, optional
+///     The device's make for the coupling and safety defaults: ``simulated``, ``bridge``,
+///     ``touch``, ``forcedimension``, ``haply``, ``hapticmaster`` (default: ``bridge`` for a
+///     bridge, else ``simulated``).
+/// idle : bool
+///     No simulation (zero force): the idle loop the benchmark compares with.
+/// coupling_stiffness, coupling_damping, proxy_mass : float, optional
+///     The virtual coupling [N/m], [N s/m], [kg] (defaults: the device kind's).
+/// max_force, max_rate, ramp, stall_timeout : float, optional
+///     Safety: force limit [N] (default 3), force-rate limit [N/s] (1000), ramp-up [s] (0.5),
+///     watchdog timeout [s] (0.03).
+/// record_ticks : int
+///     Ticks to record for :meth:`save_recording` (0: none).
+/// max_ticks : int, optional
+///     Stop after this many ticks (a scripted or replayed device also stops at its end).
+///
+/// Positions in metres, forces in newtons (on the user's hand), the model's world frame.
+#[pyclass(module = "palpate", name = "HapticLoop")]
+pub struct PyHapticLoop {
+    stage: Mutex<Stage>,
+    config: ServoConfig,
+    hand: Option<Arc<Vec3Cell>>,
+    bridge: Option<(String, Arc<BridgeStats>)>,
+    identity: (u64, String),
+}
+
+fn kind_of(name: &str) -> PyResult<DeviceKind> {
+    Ok(match name {
+        "simulated" => DeviceKind::Simulated,
+        "bridge" => DeviceKind::Bridge,
+        "touch" => DeviceKind::Touch,
+        "forcedimension" => DeviceKind::ForceDimension,
+        "haply" => DeviceKind::Haply,
+        "hapticmaster" => DeviceKind::HapticMaster,
+        _ => return Err(PyValueError::new_err(format!("kind = {name:?}: expected simulated, bridge, touch, forcedimension, haply or hapticmaster"))),
+    })
+}
+
+fn positive(name: &str, v: Option<f64>, zero_ok: bool) -> PyResult<()> {
+    match v {
+        Some(x) if !(x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0))) => Err(PyValueError::new_err(format!("{name} = {x} must be {} and finite", if zero_ok { "non-negative" } else { "positive" }))),
+        _ => Ok(()),
+    }
+}
+
+fn haptics_error(msg: impl std::fmt::Display) -> PyErr {
+    HapticsError::new_err(msg.to_string())
+}
+
+fn snapshot_dict<'py>(py: Python<'py>, s: &Snapshot) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("tick", s.tick)?;
+    d.set_item("time", s.time)?;
+    d.set_item("device", conv::vec3_to_py(py, s.device))?;
+    d.set_item("tool", conv::vec3_to_py(py, s.tool))?;
+    d.set_item("force", conv::vec3_to_py(py, s.force))?;
+    d.set_item("raw_force", conv::vec3_to_py(py, s.raw_force))?;
+    d.set_item("tissue_force", conv::vec3_to_py(py, s.tissue_force))?;
+    d.set_item("period_us", s.period * 1e6)?;
+    d.set_item("compute_us", s.compute * 1e6)?;
+    d.set_item("overruns", s.overruns)?;
+    d.set_item("faults", s.faults)?;
+    d.set_item("buttons", s.buttons)?;
+    Ok(d)
+}
+
+fn core_dict<'py>(py: Python<'py>, core: &HapticCore, d: &Bound<'py, PyDict>) -> PyResult<()> {
+    d.set_item("ticks", core.ticks())?;
+    d.set_item("max_force_n", core.max_force())?;
+    d.set_item("energy_into_user_j", core.energy_into_user())?;
+    d.set_item("bad_inputs", core.bad_inputs())?;
+    let faults = PyList::empty(py);
+    for f in core.fault_log() {
+        let e = PyDict::new(py);
+        e.set_item("tick", f.tick)?;
+        e.set_item("time", f.time)?;
+        e.set_item("reason", f.fault.to_string())?;
+        faults.append(e)?;
+    }
+    d.set_item("n_faults", core.faults())?;
+    d.set_item("faults", faults)?;
+    Ok(())
+}
+
+fn stats_dict(d: &Bound<'_, PyDict>, s: &Stats) -> PyResult<()> {
+    d.set_item("rate_hz", s.rate_hz)?;
+    d.set_item("achieved_hz", s.achieved_hz)?;
+    d.set_item("elapsed_s", s.elapsed)?;
+    d.set_item("period_us_p50", s.period_p50 * 1e6)?;
+    d.set_item("period_us_p99", s.period_p99 * 1e6)?;
+    d.set_item("period_us_max", s.period_max * 1e6)?;
+    d.set_item("compute_us_p50", s.compute_p50 * 1e6)?;
+    d.set_item("compute_us_p99", s.compute_p99 * 1e6)?;
+    d.set_item("compute_us_max", s.compute_max * 1e6)?;
+    d.set_item("overruns", s.overruns)?;
+    d.set_item("overrun_times_s", s.overrun_at.iter().map(|x| x.1).collect::<Vec<f64>>())?;
+    Ok(())
+}
+
+#[pymethods]
+impl PyHapticLoop {
+    #[new]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = "127.0.0.1", kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = 0, max_ticks = None, spin = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        model: &PyHybridModel,
+        material: &PyMaterial,
+        device: &str,
+        rate_hz: f64,
+        times: Option<&Bound<'_, PyAny>>,
+        knots: Option<&Bound<'_, PyAny>>,
+        recording: Option<std::path::PathBuf>,
+        port: Option<u16>,
+        host: &str,
+        kind: Option<&str>,
+        hand_start: Option<&Bound<'_, PyAny>>,
+        idle: bool,
+        tool_radius: Option<f64>,
+        tool_stiffness: Option<f64>,
+        hold: bool,
+        coupling_stiffness: Option<f64>,
+        coupling_damping: Option<f64>,
+        proxy_mass: Option<f64>,
+        max_force: Option<f64>,
+        max_rate: Option<f64>,
+        ramp: Option<f64>,
+        stall_timeout: Option<f64>,
+        record_ticks: usize,
+        max_ticks: Option<u64>,
+        spin: Option<f64>,
+    ) -> PyResult<Self> {
+        for (n, v) in [("tool_radius", tool_radius), ("tool_stiffness", tool_stiffness), ("coupling_stiffness", coupling_stiffness), ("proxy_mass", proxy_mass), ("max_force", max_force), ("max_rate", max_rate), ("stall_timeout", stall_timeout)] {
+            positive(n, v, false)?;
+        }
+        for (n, v) in [("coupling_damping", coupling_damping), ("ramp", ramp), ("spin", spin)] {
+            positive(n, v, true)?;
+        }
+        let mut replay: Option<Recording> = None;
+        let mut rate_hz = rate_hz;
+        if device == "replay" {
+            let path = recording.as_ref().ok_or_else(|| PyValueError::new_err("device 'replay' needs recording=PATH"))?;
+            let r = Recording::load(path).map_err(haptics_error)?;
+            rate_hz = r.rate_hz;
+            replay = Some(r);
+        }
+        let kind = match kind {
+            Some(k) => kind_of(k)?,
+            None if device == "bridge" => DeviceKind::Bridge,
+            None => DeviceKind::Simulated,
+        };
+        let (dc, ds) = kind.defaults();
+        let coupling = match &replay {
+            Some(r) => r.coupling,
+            None => CouplingParams { stiffness: coupling_stiffness.unwrap_or(dc.stiffness), damping: coupling_damping.unwrap_or(dc.damping), proxy_mass: proxy_mass.unwrap_or(dc.proxy_mass) },
+        };
+        let safety = match &replay {
+            Some(r) => r.safety,
+            None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout) },
+        };
+        let defaults = ServoConfig::default();
+        let config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(defaults.spin), ..defaults };
+        config.check().map_err(PyValueError::new_err)?;
+
+        let mut hand = None;
+        let mut bridge = None;
+        let dev: Box<dyn Device> = match device {
+            "scripted" => {
+                let (Some(t), Some(k)) = (times, knots) else {
+                    return Err(PyValueError::new_err("device 'scripted' needs times=(k,) [s] and knots=(k, 3) [m]"));
+                };
+                let (t, _) = conv::reals_nd(t, "times")?;
+                let k = conv::vec3s(k, "knots", t.len(), true)?;
+                Box::new(Scripted::new(t, k).map_err(PyValueError::new_err)?)
+            }
+            "replay" => Box::new(Replay::new(replay.as_ref().unwrap())),
+            "hand" => {
+                let at = match hand_start {
+                    Some(p) => conv::vec3(p, "hand_start")?,
+                    None => return Err(PyValueError::new_err("device 'hand' needs hand_start=(3,) [m]")),
+                };
+                let h = Hand::new(HandParams::default(), at);
+                hand = Some(h.target());
+                Box::new(h)
+            }
+            "bridge" => {
+                let ip: Ipv4Addr = host.parse().map_err(|_| PyValueError::new_err(format!("host = {host:?} is not an IPv4 address")))?;
+                let port = port.ok_or_else(|| PyValueError::new_err("device 'bridge' needs port=N (0: any free port)"))?;
+                let b = Bridge::bind(SocketAddrV4::new(ip, port), kind).map_err(|e| haptics_error(format!("cannot open the bridge on {host}:{port}: {e}")))?;
+                let addr = b.local_addr().map_err(haptics_error)?.to_string();
+                bridge = Some((addr, b.stats()));
+                Box::new(b)
+            }
+            other => return Err(PyValueError::new_err(format!("device = {other:?}: expected scripted, replay, hand or bridge"))),
+        };
+
+        let physics: Box<dyn Physics> = if idle {
+            Box::new(Idle::default())
+        } else {
+            let mut options = SimOptions { hold, ..SimOptions::default() };
+            let mut tool = Tool::default();
+            if let Some(r) = tool_radius {
+                tool.radius = r;
+            }
+            if let Some(k) = tool_stiffness {
+                tool.stiffness = k;
+            }
+            options.tool = tool;
+            let (hm, mat) = (model.model.clone(), material.inner);
+            Box::new(py.detach(|| HybridPhysics::new(hm, mat, options)).map_err(errors::model_error)?)
+        };
+        let id = physics.identity();
+        if let Some(r) = &replay {
+            if r.identity.digest != id.digest {
+                return Err(haptics_error(format!(
+                    "the recording is of another simulation (digest {:016x}: {}), this loop's is {:016x} ({}): a replay would not give the recorded forces",
+                    r.identity.digest, r.identity.description, id.digest, id.description
+                )));
+            }
+        }
+        let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
+        Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description) })
+    }
+
+    /// Starts the servo thread. Raises ``HapticsError`` if already started.
+    fn start(&self) -> PyResult<()> {
+        let mut st = self.stage.lock().unwrap();
+        match std::mem::replace(&mut *st, Stage::Taken) {
+            Stage::Ready(core, dev) => {
+                let h = Servo::start(core, dev, &self.config).map_err(haptics_error)?;
+                *st = Stage::Running(h);
+                Ok(())
+            }
+            other => {
+                *st = other;
+                Err(haptics_error("the loop was already started"))
+            }
+        }
+    }
+
+    /// The latest snapshot (dict: ``tick``, ``time`` [s], ``device``, ``tool`` (3,) [m],
+    /// ``force``, ``raw_force``, ``tissue_force`` (3,) [N], ``period_us``, ``compute_us``,
+    /// ``overruns``, ``faults``, ``buttons``), or None before the first tick. Never blocks the
+    /// loop.
+    fn snapshot<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let st = self.stage.lock().unwrap();
+        match &*st {
+            Stage::Running(h) => h.snapshot().map(|s| snapshot_dict(py, &s)).transpose(),
+            _ => Ok(None),
+        }
+    }
+
+    /// The organ's surface (the skin's vertices, (n, 3) [m], world frame; fresh near the tool,
+    /// elsewhere at most 32 ticks old) as of the latest surface snapshot (every 32 ticks), and
+    /// its tick, or None before one. Never blocks the loop.
+    fn surface<'py>(&self, py: Python<'py>) -> Option<(u64, Bound<'py, numpy::PyArray2<f64>>)> {
+        let st = self.stage.lock().unwrap();
+        match &*st {
+            Stage::Running(h) => {
+                let (tick, pts) = h.surface();
+                (tick > 0).then(|| (tick, conv::vec3s_to_py(py, &pts)))
+            }
+            _ => None,
+        }
+    }
+
+    /// Has the running loop stopped by itself (device finished or ``max_ticks``)?
+    fn finished(&self) -> bool {
+        let st = self.stage.lock().unwrap();
+        match &*st {
+            Stage::Running(h) => h.is_finished(),
+            Stage::Done(_) => true,
+            _ => false,
+        }
+    }
+
+    /// Waits (GIL released) until the loop finishes by itself or ``timeout`` [s] passes;
+    /// returns whether it finished.
+    #[pyo3(signature = (timeout = None))]
+    fn wait(&self, py: Python<'_>, timeout: Option<f64>) -> PyResult<bool> {
+        let t0 = Instant::now();
+        loop {
+            if self.finished() {
+                return Ok(true);
+            }
+            if timeout.is_some_and(|t| t0.elapsed().as_secs_f64() >= t) {
+                return Ok(false);
+            }
+            py.detach(|| std::thread::sleep(Duration::from_millis(5)));
+            py.check_signals()?;
+        }
+    }
+
+    /// Stops the loop (its last act sends zero force) and returns its report: ``rate_hz``,
+    /// ``achieved_hz``, ``ticks``, ``elapsed_s``, ``period_us_p50`` / ``_p99`` / ``_max``,
+    /// ``compute_us_p50`` / ``_p99`` / ``_max``, ``overruns``, ``overrun_times_s`` (wall time
+    /// since the start of each logged overrun), ``max_force_n``, ``energy_into_user_j``,
+    /// ``bad_inputs``, ``n_faults``, ``faults`` (list of dicts ``tick``, ``time``, ``reason``),
+    /// ``watchdog_trips``.
+    fn stop<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let mut st = self.stage.lock().unwrap();
+        let report = match std::mem::replace(&mut *st, Stage::Taken) {
+            Stage::Running(h) => py.detach(|| h.stop()),
+            Stage::Done(r) => r,
+            other => {
+                *st = other;
+                return Err(haptics_error("the loop was not started"));
+            }
+        };
+        let d = PyDict::new(py);
+        stats_dict(&d, &report.stats)?;
+        core_dict(py, &report.core, &d)?;
+        d.set_item("watchdog_trips", report.watchdog_trips)?;
+        *st = Stage::Done(report);
+        Ok(d)
+    }
+
+    /// Runs the loop without a clock in this thread (GIL released) for at most ``max_ticks``
+    /// ticks or until the device ends, before or instead of :meth:`start`; returns ``ticks``,
+    /// ``max_force_n``, ``energy_into_user_j``, ``bad_inputs``, ``n_faults``, ``faults``.
+    /// Deterministic: a replay gives the recorded forces bit for bit.
+    #[pyo3(signature = (max_ticks = None))]
+    fn run<'py>(&self, py: Python<'py>, max_ticks: Option<u64>) -> PyResult<Bound<'py, PyDict>> {
+        let mut st = self.stage.lock().unwrap();
+        let Stage::Ready(core, dev) = &mut *st else {
+            return Err(haptics_error("run() is for a loop that was not started"));
+        };
+        let n = max_ticks.or(self.config.max_ticks).unwrap_or(u64::MAX);
+        py.detach(|| core.run_offline(dev.as_mut(), n));
+        let d = PyDict::new(py);
+        core_dict(py, core, &d)?;
+        Ok(d)
+    }
+
+    /// Writes the recording (``record_ticks`` > 0) to ``path``: the device inputs, forces and
+    /// tool positions per tick, and the model's identity (format: ``palpate_haptics::record``).
+    fn save_recording(&self, path: std::path::PathBuf) -> PyResult<usize> {
+        let st = self.stage.lock().unwrap();
+        let rec = match &*st {
+            Stage::Ready(core, _) => core.recording(),
+            Stage::Done(r) => r.core.recording(),
+            Stage::Running(_) => return Err(haptics_error("stop the loop before saving its recording")),
+            Stage::Taken => None,
+        };
+        let rec = rec.ok_or_else(|| haptics_error("nothing recorded: make the loop with record_ticks > 0"))?;
+        rec.save(&path).map_err(haptics_error)?;
+        Ok(rec.ticks.len())
+    }
+
+    /// The recorded forces (n, 3) [N] and tool positions (n, 3) [m] and device positions
+    /// (n, 3) [m], as a dict of arrays (``force``, ``tool``, ``device``).
+    fn recorded<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let st = self.stage.lock().unwrap();
+        let rec = match &*st {
+            Stage::Ready(core, _) => core.recording(),
+            Stage::Done(r) => r.core.recording(),
+            _ => None,
+        };
+        let rec = rec.ok_or_else(|| haptics_error("nothing recorded (record_ticks = 0, or the loop is running)"))?;
+        let d = PyDict::new(py);
+        let col = |f: &dyn Fn(&palpate_haptics::TickRecord) -> Vec3| rec.ticks.iter().map(f).collect::<Vec<Vec3>>();
+        d.set_item("force", conv::vec3s_to_py(py, &col(&|t| t.force)))?;
+        d.set_item("tool", conv::vec3s_to_py(py, &col(&|t| t.tool)))?;
+        d.set_item("device", conv::vec3s_to_py(py, &col(&|t| t.input.position)))?;
+        Ok(d)
+    }
+
+    /// Moves the simulated hand's target to ``p`` (3,) [m] (device ``"hand"`` only); never
+    /// blocks the loop.
+    fn set_hand_target(&self, p: &Bound<'_, PyAny>) -> PyResult<()> {
+        let v = conv::vec3(p, "target")?;
+        let h = self.hand.as_ref().ok_or_else(|| haptics_error("set_hand_target needs device 'hand'"))?;
+        h.set(&v);
+        Ok(())
+    }
+
+    /// The bridge's ``host:port`` (device ``"bridge"``), else None.
+    #[getter]
+    fn bridge_address(&self) -> Option<String> {
+        self.bridge.as_ref().map(|b| b.0.clone())
+    }
+
+    /// The bridge's counters (``received``, ``accepted``, ``sent``, ``send_errors``,
+    /// ``dropped`` and one per reason: ``short``, ``long``, ``bad_magic``, ``bad_version``,
+    /// ``bad_kind``, ``non_finite``, ``out_of_range``, ``out_of_order``), else None.
+    fn bridge_stats<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        use std::sync::atomic::Ordering::Relaxed;
+        let Some((_, s)) = &self.bridge else { return Ok(None) };
+        let d = PyDict::new(py);
+        d.set_item("received", s.received.load(Relaxed))?;
+        d.set_item("accepted", s.accepted.load(Relaxed))?;
+        d.set_item("sent", s.sent.load(Relaxed))?;
+        d.set_item("send_errors", s.send_errors.load(Relaxed))?;
+        d.set_item("dropped", s.dropped())?;
+        for r in Reject::ALL {
+            d.set_item(r.name(), s.rejected(r))?;
+        }
+        Ok(Some(d))
+    }
+
+    /// The simulation's identity: ``(digest, description)`` (a recording carries it).
+    #[getter]
+    fn identity(&self) -> (u64, String) {
+        self.identity.clone()
+    }
+
+    /// The loop's rate [Hz].
+    #[getter]
+    fn rate_hz(&self) -> f64 {
+        self.config.rate_hz
+    }
+
+    fn __repr__(&self) -> String {
+        let st = match &*self.stage.lock().unwrap() {
+            Stage::Ready(..) => "ready",
+            Stage::Running(_) => "running",
+            Stage::Done(_) => "stopped",
+            Stage::Taken => "failed",
+        };
+        format!("HapticLoop({} Hz, {st}; {})", self.config.rate_hz, self.identity.1)
+    }
+}
