@@ -1,8 +1,8 @@
 # palpate: one-command set-up on a fresh machine (needs python3 with venv, and cargo).
 #   make demo   set up .venv, build the extension (release), run the demo
-#   make test   set up, then cargo test --release (core), the release wheel and pytest
+#   make test   set up, then cargo test --release, the release wheel, pytest and make lint
 #   make wheel  the release wheel in dist/: abi3 (CPython >= 3.9), manylinux_2_28, stripped
-#   make lint   clippy -D warnings, cargo doc -D warnings, stubtest (the last also in make test)
+#   make lint   clippy -D warnings, cargo doc -D warnings, stubtest (all three in make test)
 # The set-up is stamp-file driven: a warm re-run is a no-op, an edit to any .rs / Cargo.toml /
 # pyproject.toml rebuilds the extension. Python sources are installed editable (maturin develop),
 # so edits to python/palpate/*.py need no rebuild.
@@ -67,9 +67,7 @@ wheel: $(VENV)/.wheel-deps
 	cd python && PATH=$(abspath $(BIN)):$$PATH $(abspath $(BIN))/maturin build -q --profile wheel --zig \
 	    --compatibility manylinux_2_28 -o $(abspath $(DIST))
 
-# `lint`'s clippy and rustdoc parts are not in `test` yet: they still warn in files other work is
-# changing (runtime/, mesh/, the binding's conv.rs and mesh.rs).
-test: cargo-test pytest stubtest
+test: cargo-test pytest lint
 
 cargo-test:
 	cargo test --release -q

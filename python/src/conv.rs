@@ -102,7 +102,7 @@ fn to_i64(a: &Bound<'_, PyUntypedArray>, what: &str) -> PyResult<Vec<i64>> {
 /// Check `a` has shape `(rows, cols)` (any `rows` if `None`); `form` describes it for the message.
 fn check_2d(a: &Bound<'_, PyUntypedArray>, what: &str, rows: Option<usize>, cols: usize, form: &str) -> PyResult<usize> {
     let shape = a.shape();
-    let ok = shape.len() == 2 && shape[1] == cols && rows.map_or(true, |r| shape[0] == r);
+    let ok = shape.len() == 2 && shape[1] == cols && rows.is_none_or(|r| shape[0] == r);
     if !ok {
         return Err(crate::errors::param_error_from(format!("{what} must have shape {form}, got {}", shape_str(shape))));
     }

@@ -254,7 +254,7 @@ pub fn box_mesh(py: Python<'_>, size: [f64; 3], cells: [i64; 3]) -> PyResult<PyT
     if !size.iter().all(|s| s.is_finite() && *s > 0.0) {
         return Err(crate::errors::param_error_from(format!("box size must be finite and positive [m], got {size:?}")));
     }
-    if cells.iter().any(|&c| c == 0) {
+    if cells.contains(&0) {
         return Err(crate::errors::param_error_from(format!("box needs at least one cell per axis, got {cells:?}")));
     }
     check_size(cells[0].checked_mul(cells[1]).and_then(|c| c.checked_mul(cells[2])).and_then(|c| c.checked_mul(6)))?;

@@ -112,7 +112,7 @@ pub struct Snapshot {
 pub const SNAPSHOT_WORDS: usize = 24;
 
 impl Snapshot {
-    pub(crate) fn to_words(&self) -> [u64; SNAPSHOT_WORDS] {
+    pub(crate) fn to_words(self) -> [u64; SNAPSHOT_WORDS] {
         let mut w = [0u64; SNAPSHOT_WORDS];
         w[0] = self.tick;
         w[1] = self.time.to_bits();

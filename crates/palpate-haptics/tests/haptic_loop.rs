@@ -125,7 +125,7 @@ fn watchdog_zeroes_force_within_30ms_of_a_stall() {
     let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();
     let t_stall = stalled_at.lock().unwrap().expect("the stall happened");
     let sends = log.0.lock().unwrap().clone();
-    let before = sends.iter().filter(|(t, _)| *t < t_stall).next_back().unwrap().1;
+    let before = sends.iter().rfind(|(t, _)| *t < t_stall).unwrap().1;
     assert!(before.norm() > 1.0, "pressing before the stall: {before:?}");
     let zero_at = sends.iter().find(|(t, f)| *t >= t_stall && *f == Vec3::zeros()).expect("a zero force after the stall").0;
     let after = (zero_at - t_stall).as_secs_f64();

@@ -293,7 +293,7 @@ fn check_edges(tris: &[[usize; 3]]) -> Result<(), SurfaceError> {
     // vertex numbering quirks more than necessary.
     let mut worst: Option<(usize, SurfaceError)> = None;
     let mut keep = |t: usize, e: SurfaceError| {
-        if worst.as_ref().map_or(true, |(w, _)| t < *w) {
+        if worst.as_ref().is_none_or(|(w, _)| t < *w) {
             worst = Some((t, e));
         }
     };

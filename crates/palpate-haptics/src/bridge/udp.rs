@@ -102,13 +102,9 @@ impl Bridge {
     pub fn poll(&mut self) -> Option<DeviceInput> {
         let mut newest = None;
         let stats = &self.sink.peer.stats;
-        loop {
-            let (n, from) = match self.socket.recv_from(&mut self.buf) {
-                Ok(x) => x,
-                // WouldBlock: drained. Other errors (an ICMP port-unreachable from a gone client
-                // on some systems) end this tick's drain too: the loop holds the last state.
-                Err(_) => break,
-            };
+        // Until WouldBlock (drained); other errors (an ICMP port-unreachable from a gone client on
+        // some systems) end this tick's drain too: the loop holds the last state.
+        while let Ok((n, from)) = self.socket.recv_from(&mut self.buf) {
             stats.received.fetch_add(1, Ordering::Relaxed);
             let state = match protocol::decode_state(&self.buf[..n]) {
                 Ok(s) => s,
