@@ -249,7 +249,10 @@ def cmd_bench_hybrid(a) -> int:
     if a.radius is not None and not (a.radius > 0 and math.isfinite(a.radius)):
         raise Fail(f"palpate bench hybrid: --radius must be a positive number of metres, got {a.radius}")
     try:
-        name, model = bh.load_model(a.model)
+        # The model's build and the calibration take seconds: a spinner on a terminal (the timed
+        # ticks measure the step call alone).
+        with _progress.task(f"bench hybrid {a.model}: building", quiet=a.json):
+            name, model = bh.load_model(a.model)
     except (ValueError, OSError) as e:
         raise Fail(f"palpate bench hybrid: {e}") from None
     except DataError as e:
@@ -257,7 +260,8 @@ def cmd_bench_hybrid(a) -> int:
     except palpate_errors() as e:
         raise Fail(f"palpate bench hybrid: {a.model}: {type(e).__name__}: {e}") from None
     try:
-        r = bh.run(model, a.active, a.ticks, radius=a.radius, name=name)
+        with _progress.task(f"bench hybrid {name}: calibrating and timing", quiet=a.json):
+            r = bh.run(model, a.active, a.ticks, radius=a.radius, name=name)
     except ValueError as e:
         raise Fail(f"palpate bench hybrid: {e}") from None
     except palpate_errors() as e:

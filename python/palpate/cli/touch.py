@@ -107,7 +107,9 @@ def cmd_touch(a) -> int:
           f"{fmt_mm(radius)} mm at point {[round(1e3 * float(v), 3) for v in traj.point]} mm, normal "
           f"{[round(float(v), 4) for v in traj.normal]}; E = {a.young:g} Pa, nu = {a.poisson:g}; output {a.out}", flush=True)
     try:
-        s = run_touch(sim, traj, a.out, dt=a.dt, every=a.every, title=f"palpate touch: {what}, {a.script}")
+        from .. import _progress
+        with _progress.task(f"palpate touch: {what}"):
+            s = run_touch(sim, traj, a.out, dt=a.dt, every=a.every, title=f"palpate touch: {what}, {a.script}")
     except TouchFailed as e:
         _report(e.summary, sim.options["max_tool_step"])
         raise Fail(f"{a.script}: simulation failed at tick {e.tick} (t = {e.summary['t_failed_s']:.4f} s): "
