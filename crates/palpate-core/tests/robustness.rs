@@ -11,7 +11,7 @@
 mod common;
 
 use common::*;
-use palpate_core::mesh::generate::{base_nodes, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
+use palpate_core::mesh::generate::{truncated_ellipsoid_wall, TruncatedEllipsoidWall};
 use palpate_core::meshfree;
 use palpate_core::{step, Integrator, Model, ModelBuilder, ModelError, SolveError, State, StepError, Vec3, Workspace};
 
@@ -21,29 +21,16 @@ mod alloc;
 mod press;
 use alloc::allocations;
 
-/// A small clamped wall with damping and gravity, so every code path of the step is exercised.
-fn model(integ: Integrator) -> Model {
-    let p = TruncatedEllipsoidWall::with_resolution(3);
-    let mesh = truncated_ellipsoid_wall(&p);
-    let fixed = base_nodes(&mesh, p.z_cut, 1e-9);
-    ModelBuilder::new(mesh, material(3.0e4, 0.4, 1000.0, 0.5, 0.5))
-        .fixed_nodes(fixed)
-        .gravity(Vec3::new(0.0, 0.0, -9.81))
-        .integrator(integ)
-        .build()
-        .unwrap()
-}
-
 /// Bitwise equality of two states (NaN-safe, unlike `==`).
 fn same_state(a: &State, b: &State) -> bool {
     let bits = |v: &[Vec3]| v.iter().flat_map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]).collect::<Vec<_>>();
     bits(&a.x) == bits(&b.x) && bits(&a.v) == bits(&b.v) && a.t.to_bits() == b.t.to_bits() && bits(&a.f_ext) == bits(&b.f_ext)
 }
 
-/// The small wall of `model(integ)` after one warm-up step (which allocates the lazy parts, e.g.
+/// The small wall of `clamped_wall(integ)` after one warm-up step (which allocates the lazy parts, e.g.
 /// the first factorisation), and its topmost node, where the tests press.
 fn warmed_up(integ: Integrator) -> (Model, State, Workspace, usize) {
-    let model = model(integ);
+    let model = clamped_wall(integ);
     let mut s = State::rest(&model);
     let mut ws = Workspace::new(&model);
     let pts = model.mesh().points();
@@ -130,7 +117,7 @@ fn allocation_counter_works() {
 #[test]
 fn non_finite_external_force_is_refused_and_state_unchanged() {
     for (name, integ) in SCHEMES {
-        let model = model(integ);
+        let model = clamped_wall(integ);
         let mut s = State::rest(&model);
         let mut ws = Workspace::new(&model);
         for _ in 0..3 {
@@ -153,7 +140,7 @@ fn non_finite_external_force_is_refused_and_state_unchanged() {
 #[test]
 fn bad_time_steps_are_refused() {
     for (name, integ) in SCHEMES {
-        let model = model(integ);
+        let model = clamped_wall(integ);
         let mut s = State::rest(&model);
         let mut ws = Workspace::new(&model);
         for dt in [0.0, -1e-3, f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -0.0] {
@@ -171,7 +158,7 @@ fn bad_time_steps_are_refused() {
 #[test]
 fn huge_forces_give_typed_errors_and_restore_the_state() {
     for (name, integ) in SCHEMES {
-        let model = model(integ);
+        let model = clamped_wall(integ);
         let mut s = State::rest(&model);
         let mut ws = Workspace::new(&model);
         let top = (0..model.n_nodes()).max_by(|&a, &b| model.mesh().points()[a].z.total_cmp(&model.mesh().points()[b].z)).unwrap();

@@ -12,20 +12,7 @@
 mod common;
 
 use common::*;
-use palpate_core::mesh::generate::{base_nodes, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
-use palpate_core::{step, Integrator, Model, ModelBuilder, State, Vec3, Workspace};
-
-fn model(integ: Integrator) -> Model {
-    let p = TruncatedEllipsoidWall::with_resolution(3);
-    let mesh = truncated_ellipsoid_wall(&p);
-    let fixed = base_nodes(&mesh, p.z_cut, 1e-9);
-    ModelBuilder::new(mesh, material(3.0e4, 0.4, 1000.0, 0.5, 0.5))
-        .fixed_nodes(fixed)
-        .gravity(Vec3::new(0.0, 0.0, -9.81))
-        .integrator(integ)
-        .build()
-        .unwrap()
-}
+use palpate_core::{step, Integrator, Model, State, Vec3, Workspace};
 
 fn bits(v: &[Vec3]) -> Vec<u64> {
     v.iter().flat_map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]).collect()
@@ -41,7 +28,7 @@ fn press(model: &Model, s: &mut State) {
 #[test]
 fn restored_state_and_memory_repeat_the_steps_bit_for_bit() {
     for integ in [Integrator::quasi_newton(), Integrator::newton(), Integrator::BackwardEulerLinear, Integrator::semi_implicit()] {
-        let model = model(integ);
+        let model = clamped_wall(integ);
         let dt = if matches!(integ, Integrator::SemiImplicit { .. }) { 1e-4 } else { 1e-3 };
         let mut s = State::rest(&model);
         let mut ws = Workspace::new(&model);
@@ -83,7 +70,7 @@ fn restored_state_and_memory_repeat_the_steps_bit_for_bit() {
 
 #[test]
 fn alternating_two_dt_refactorises_only_the_first_time_and_changes_nothing() {
-    let model = model(Integrator::quasi_newton());
+    let model = clamped_wall(Integrator::quasi_newton());
     let (dts, n) = ([1e-3, 7e-4], 20);
     let mut s = State::rest(&model);
     let mut ws = Workspace::new(&model);
@@ -111,7 +98,7 @@ fn alternating_two_dt_refactorises_only_the_first_time_and_changes_nothing() {
 
 #[test]
 fn prepare_factorises_ahead_without_changing_the_next_steps() {
-    let model = model(Integrator::quasi_newton());
+    let model = clamped_wall(Integrator::quasi_newton());
     let mut ws = Workspace::new(&model);
     let mut s = State::rest(&model);
     press(&model, &mut s);

@@ -101,6 +101,23 @@ def palpate_errors():
     return (_p.PalpateError,)
 
 
+def load_hybrid_model(model_spec: str, cmd: str):
+    """``(name, model)`` of a hybrid model file or shape name (``bench_hybrid.load_model``), or a
+    :class:`Fail` naming ``palpate CMD``: exit 2 for a bad name or file, 1 for data that cannot be
+    fetched."""
+    from .. import bench_hybrid as bh
+    from ..data import DataError
+
+    try:
+        return bh.load_model(model_spec)
+    except (ValueError, OSError) as e:
+        raise Fail(f"palpate {cmd}: {e}") from None
+    except DataError as e:
+        raise Fail(f"palpate {cmd}: {e}", 1) from None
+    except palpate_errors() as e:
+        raise Fail(f"palpate {cmd}: {model_spec}: {type(e).__name__}: {e}") from None
+
+
 def model_lines(info: dict) -> List[str]:
     """The description of a hybrid model's info() dict, shared by build and info."""
     i = info

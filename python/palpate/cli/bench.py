@@ -14,7 +14,7 @@ from .. import _progress
 from .. import bench
 from .. import bench_hybrid as bh
 from .. import bench_particles as bp
-from ._common import Fail, fmt_mm, num, palpate_errors
+from ._common import Fail, fmt_mm, load_hybrid_model, num, palpate_errors
 
 
 def add_parser(sub) -> None:
@@ -94,13 +94,12 @@ def _add_haptic(bsub) -> None:
 
 def cmd_bench_haptic(a) -> int:
     from .. import haptics
-    from .haptic import load
 
     if not (a.seconds > 0 and math.isfinite(a.seconds)):
         raise Fail(f"palpate bench haptic: --seconds must be positive, got {a.seconds}")
     if not 250 <= a.rate <= 4000:
         raise Fail(f"palpate bench haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")
-    name, model = load(a.model, "bench haptic")
+    name, model = load_hybrid_model(a.model, "bench haptic")
     try:
         r = haptics.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name)
     except palpate_errors() as e:
@@ -240,25 +239,16 @@ def _particles_row(a, n) -> bool:
 
 
 def cmd_bench_hybrid(a) -> int:
-    from ..data import DataError
-
     if a.active <= 0:
         raise Fail(f"palpate bench hybrid: --active must be a positive number of particles, got {a.active}")
     if a.ticks < bh.MIN_TICKS:
         raise Fail(f"palpate bench hybrid: --ticks must be at least {bh.MIN_TICKS}, got {a.ticks}")
     if a.radius is not None and not (a.radius > 0 and math.isfinite(a.radius)):
         raise Fail(f"palpate bench hybrid: --radius must be a positive number of metres, got {a.radius}")
-    try:
-        # The model's build and the calibration take seconds: a spinner on a terminal (the timed
-        # ticks measure the step call alone).
-        with _progress.task(f"bench hybrid {a.model}: building", quiet=a.json):
-            name, model = bh.load_model(a.model)
-    except (ValueError, OSError) as e:
-        raise Fail(f"palpate bench hybrid: {e}") from None
-    except DataError as e:
-        raise Fail(f"palpate bench hybrid: {e}", 1) from None
-    except palpate_errors() as e:
-        raise Fail(f"palpate bench hybrid: {a.model}: {type(e).__name__}: {e}") from None
+    # The model's build and the calibration take seconds: a spinner on a terminal (the timed
+    # ticks measure the step call alone).
+    with _progress.task(f"bench hybrid {a.model}: building", quiet=a.json):
+        name, model = load_hybrid_model(a.model, "bench hybrid")
     try:
         with _progress.task(f"bench hybrid {name}: calibrating and timing", quiet=a.json):
             r = bh.run(model, a.active, a.ticks, radius=a.radius, name=name)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import sys
 
-from ._common import Fail, palpate_errors
+from ._common import Fail, load_hybrid_model, palpate_errors
 
 DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand"
 KINDS = ("simulated", "bridge", "touch", "forcedimension", "haply", "hapticmaster")
@@ -30,21 +30,6 @@ def add_parser(sub) -> None:
     h.add_argument("--tool-radius", type=float, default=0.005, metavar="M", help="tool sphere radius [m] (default 0.005)")
     h.add_argument("--quiet", action="store_true", help="no status line")
     h.set_defaults(func=cmd_haptic)
-
-
-def load(model_spec: str, cmd: str):
-    """``(name, model)`` of a model file or shape name, or :class:`Fail`."""
-    from .. import bench_hybrid as bh
-    from ..data import DataError
-
-    try:
-        return bh.load_model(model_spec)
-    except (ValueError, OSError) as e:
-        raise Fail(f"palpate {cmd}: {e}") from None
-    except DataError as e:
-        raise Fail(f"palpate {cmd}: {e}", 1) from None
-    except palpate_errors() as e:
-        raise Fail(f"palpate {cmd}: {model_spec}: {type(e).__name__}: {e}") from None
 
 
 def _positive(cmd: str, flag: str, v) -> None:
@@ -106,7 +91,7 @@ def cmd_haptic(a) -> int:
     _positive("haptic", "--seconds", a.seconds)
     _positive("haptic", "--max-force", a.max_force)
     _positive("haptic", "--tool-radius", a.tool_radius)
-    name, model = load(a.model, "haptic")
+    name, model = load_hybrid_model(a.model, "haptic")
     record_ticks = 0
     if a.record:
         span = a.seconds if a.seconds is not None else 600.0

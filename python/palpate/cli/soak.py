@@ -8,8 +8,7 @@ import json
 import math
 import sys
 
-from ._common import Fail, palpate_errors
-from .haptic import load
+from ._common import Fail, load_hybrid_model, palpate_errors
 
 
 def add_parser(sub) -> None:
@@ -31,7 +30,7 @@ def cmd_soak(a) -> int:
         raise Fail(f"palpate soak: --minutes must be positive, got {a.minutes}")
     if not 250 <= a.rate <= 4000:
         raise Fail(f"palpate soak: --rate must be within 250 to 4000 Hz, got {a.rate}")
-    name, model = load(a.model, "soak")
+    name, model = load_hybrid_model(a.model, "soak")
     seconds = 60.0 * a.minutes
     t, k = haptics.random_palpation(model, seconds + 1.0, seed=a.seed)
     try:

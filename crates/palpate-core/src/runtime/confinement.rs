@@ -279,15 +279,10 @@ impl Confinement {
             return 0.0;
         }
         let h = grid.h;
-        let mut c = [0isize; 3];
-        for a in 0..3 {
-            let f = ((x0[a] - grid.origin[a]) / h).floor();
-            if !(f >= 0.0 && f < grid.dims[a] as f64) {
-                return 0.0; // past the grid: the search's clamped cell, not worth a bound
-            }
-            c[a] = f as isize;
-        }
-        if !allowed(owner[grid.index(c[0] as usize, c[1] as usize, c[2] as usize)], tri_count) {
+        // Past the grid: the search's clamped cell, not worth a bound.
+        let Some(cell) = grid.cell_of(x0) else { return 0.0 };
+        let c = cell.map(|i| i as isize);
+        if !allowed(owner[grid.index_of(cell)], tri_count) {
             return self.outside_free_radius(grid, owner, tri_count, x0, slack);
         }
         // Per axis and offset -1, 0, +1: the squared gap from x0 to that slab.

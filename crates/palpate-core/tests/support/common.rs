@@ -219,3 +219,18 @@ pub const SCHEMES: [(&str, palpate_core::Integrator); 5] = [
     ("BE quasi-Newton (default)", palpate_core::Integrator::quasi_newton()),
     ("semi-implicit, stable filter", palpate_core::Integrator::SemiImplicit { filter: palpate_core::integrate::Filter::Stable }),
 ];
+
+/// A small wall clamped at its base, damped (the paper's 0.5, 0.5) and under gravity, so every
+/// code path of the FEM step is exercised (tests/robustness.rs, tests/state_memory.rs).
+pub fn clamped_wall(integ: palpate_core::Integrator) -> Model {
+    use palpate_core::mesh::generate::{base_nodes, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
+    let p = TruncatedEllipsoidWall::with_resolution(3);
+    let mesh = truncated_ellipsoid_wall(&p);
+    let fixed = base_nodes(&mesh, p.z_cut, 1e-9);
+    palpate_core::ModelBuilder::new(mesh, material(3.0e4, 0.4, 1000.0, 0.5, 0.5))
+        .fixed_nodes(fixed)
+        .gravity(Vec3::new(0.0, 0.0, -9.81))
+        .integrator(integ)
+        .build()
+        .unwrap()
+}
