@@ -12,7 +12,11 @@ use std::sync::Mutex;
 
 use palpate_core::Vec3;
 
-/// A seqlock over `N` 64-bit words: one writer, any readers.
+/// A seqlock over `N` 64-bit words: any writers, any readers. One writer is the rule (the servo);
+/// a second (the watchdog zeroing the force while the servo is stuck in a tick) is allowed: a
+/// writer claims the record by moving the sequence from even to odd with a compare-and-swap, so
+/// two writes never interleave (with plain stores, two racing writers could leave the sequence odd
+/// for good, and every reader would spin forever).
 #[derive(Debug)]
 pub struct SeqLock<const N: usize> {
     seq: AtomicU64,
@@ -26,10 +30,22 @@ impl<const N: usize> Default for SeqLock<N> {
 }
 
 impl<const N: usize> SeqLock<N> {
-    /// Publishes `words` (single writer: the caller guarantees no concurrent `write`).
+    /// Publishes `words`. With a single writer the claim never waits; a second writer waits only
+    /// for the first one's `N` stores.
     pub fn write(&self, words: &[u64; N]) {
-        let s = self.seq.load(Ordering::Relaxed);
-        self.seq.store(s.wrapping_add(1), Ordering::Relaxed);
+        let mut spins = 0u32;
+        let s = loop {
+            let s = self.seq.load(Ordering::Relaxed);
+            if s & 1 == 0 && self.seq.compare_exchange_weak(s, s.wrapping_add(1), Ordering::Relaxed, Ordering::Relaxed).is_ok() {
+                break s;
+            }
+            spins += 1;
+            if spins > 64 {
+                std::thread::yield_now();
+            } else {
+                std::hint::spin_loop();
+            }
+        };
         // The odd sequence must be visible before any new word.
         fence(Ordering::Release);
         for (w, &v) in self.words.iter().zip(words) {
@@ -72,7 +88,7 @@ impl Vec3Cell {
         c.set(&v);
         c
     }
-    /// Sets the value (single writer).
+    /// Sets the value.
     pub fn set(&self, v: &Vec3) {
         self.0.write(&[v.x.to_bits(), v.y.to_bits(), v.z.to_bits()]);
     }
@@ -220,6 +236,33 @@ mod tests {
         }
         writer.join().unwrap();
         assert_eq!(lock.read().0, [200_000; 16]);
+    }
+
+    /// Two writers (the servo and the watchdog both send forces): with plain stores, one writer
+    /// reading the other's odd sequence and both adding 2 left it odd for good (every reader then
+    /// spun forever). Each record is whole, and the sequence ends even, 2 per write.
+    #[test]
+    fn two_writers_never_leave_the_lock_half_written() {
+        let lock = Arc::new(SeqLock::<4>::default());
+        let writers: Vec<_> = (0..2u64)
+            .map(|id| {
+                let w = lock.clone();
+                std::thread::spawn(move || {
+                    for k in 0..100_000u64 {
+                        w.write(&[2 * k + id; 4]);
+                    }
+                })
+            })
+            .collect();
+        while !writers.iter().all(|w| w.is_finished()) {
+            let (words, seq) = lock.read();
+            assert!(words.iter().all(|&x| x == words[0]), "torn read: {words:?}");
+            assert_eq!(seq % 2, 0);
+        }
+        for w in writers {
+            w.join().unwrap();
+        }
+        assert_eq!(lock.seq.load(Ordering::Acquire), 2 * 200_000, "a write was lost or left half done");
     }
 
     #[test]
