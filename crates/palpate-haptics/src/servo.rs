@@ -67,7 +67,7 @@ impl std::fmt::Display for Fault {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Fault::Step(e) => write!(f, "the simulation's tick failed: {e}"),
-            Fault::NonFinite => write!(f, "non-finite force or tool position"),
+            Fault::NonFinite => write!(f, "non-finite force, tool position or state"),
             Fault::Stall(s) => write!(f, "the simulation missed ticks for {:.1} ms", s * 1e3),
         }
     }
@@ -249,8 +249,15 @@ impl HapticCore {
         match fault {
             Some(f) => self.fault(f, &mut out),
             None => {
-                if self.tick.is_multiple_of(self.checkpoint_every) && self.physics.is_finite() {
-                    self.physics.checkpoint();
+                // A state gone non-finite where the tick does not look (it returned a finite
+                // force) is met here: a fault, not a skipped checkpoint (the last good state would
+                // grow stale while the bad one ran on).
+                if self.tick.is_multiple_of(self.checkpoint_every) {
+                    if self.physics.is_finite() {
+                        self.physics.checkpoint();
+                    } else {
+                        self.fault(Fault::NonFinite, &mut out);
+                    }
                 }
             }
         }

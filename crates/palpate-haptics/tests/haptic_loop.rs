@@ -131,7 +131,9 @@ fn watchdog_zeroes_force_within_30ms_of_a_stall() {
     let after = (zero_at - t_stall).as_secs_f64();
     // The watchdog's 30 ms, one 1 ms tick, and 10 ms for a loaded machine to wake it.
     assert!(after <= 0.030 + 0.001 + 0.010, "force zeroed {:.1} ms after the stall began", after * 1e3);
-    assert!(after >= 0.029, "zeroed before the timeout ({:.1} ms): the watchdog is too eager", after * 1e3);
+    // Not too eager: the watchdog measures from the servo's last heartbeat, which precedes the
+    // stall's start by however long the scheduler held the servo in between (a lower bound on
+    // `after` failed on a loaded machine for that reason); the stall it reports is what it saw.
     assert_eq!(report.watchdog_trips, 1, "one stall, one trip (not a second one while the state is restored)");
     assert_eq!(report.core.faults(), 1);
     assert!(matches!(report.core.fault_log()[0].fault, Fault::Stall(s) if s >= 0.03));
@@ -221,6 +223,55 @@ fn nan_in_the_hybrid_state_is_contained_and_restored() {
     assert_eq!(core.faults(), 1);
     assert!(rec.ticks.iter().all(|t| t.force.iter().all(|c| c.is_finite())));
     assert!(rec.ticks[451..].iter().any(|t| t.force.norm() > 0.05), "touching again after the restore");
+}
+
+/// A NaN where the tick does not look (its force stays finite): the servo meets it at the next
+/// checkpoint and takes the fault path (before, it skipped the checkpoint and ran on).
+struct HiddenNan {
+    inner: Wall,
+    bad_from: u64,
+    ticks: u64,
+    restores: u64,
+}
+
+impl Physics for HiddenNan {
+    fn tick(&mut self, tool: &Vec3, dt: f64) -> Result<Vec3, palpate_core::StepError> {
+        self.ticks += 1;
+        self.inner.tick(tool, dt)
+    }
+    fn tool(&self) -> Option<Vec3> {
+        self.inner.tool()
+    }
+    fn max_tool_step(&self) -> f64 {
+        self.inner.max_tool_step()
+    }
+    fn checkpoint(&mut self) {
+        self.inner.checkpoint()
+    }
+    fn restore(&mut self) {
+        self.restores += 1;
+        self.ticks = 0;
+        self.inner.restore()
+    }
+    fn is_finite(&self) -> bool {
+        self.ticks < self.bad_from
+    }
+    fn identity(&self) -> palpate_haptics::Identity {
+        self.inner.identity()
+    }
+}
+
+#[test]
+fn a_non_finite_state_behind_a_finite_force_is_a_fault_at_the_next_checkpoint() {
+    let sink: Arc<LogSink> = Arc::default();
+    let mut dev = Pressing { z: |_t: f64| -0.004, sink, ticks: 400 };
+    let physics = HiddenNan { inner: wall(), bad_from: 120, ticks: 0, restores: 0 };
+    let mut core = HapticCore::new(Box::new(physics), 1000.0, CouplingParams::default(), fast_ramp(), 50, 400);
+    core.run_offline(&mut dev, 160);
+    assert_eq!(core.faults(), 1, "{:?}", core.fault_log());
+    // Bad from its 120th tick, met at the checkpoint of tick 150 (every 50).
+    assert!(matches!(core.fault_log()[0], palpate_haptics::FaultRecord { tick: 149, fault: Fault::NonFinite, .. }), "{:?}", core.fault_log());
+    assert_eq!(core.recording().unwrap().ticks[149].force, Vec3::zeros(), "zero force the tick it is met");
 }
 
 #[test]
