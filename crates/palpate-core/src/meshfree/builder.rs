@@ -38,13 +38,14 @@ pub struct ParticleModelBuilder {
     hourglass: f64,
     min_weight: f64,
     fix_unsupported: bool,
+    mass_scaling: Option<f64>,
 }
 
 impl ParticleModelBuilder {
     /// Particles at rest positions `positions` \[m\] with masses `masses` \[kg\], of `material`,
     /// interacting within the kernel support radius `support` \[m\] (typically 1.5 - 2 particle spacings).
     pub fn new(positions: Vec<Vec3>, masses: Vec<f64>, material: Material, support: f64) -> Self {
-        ParticleModelBuilder { positions, masses, material, support, kernel: Kernel::default(), fixed: vec![], gravity: Vec3::zeros(), hourglass: DEFAULT_HOURGLASS, min_weight: DEFAULT_MIN_WEIGHT, fix_unsupported: false }
+        ParticleModelBuilder { positions, masses, material, support, kernel: Kernel::default(), fixed: vec![], gravity: Vec3::zeros(), hourglass: DEFAULT_HOURGLASS, min_weight: DEFAULT_MIN_WEIGHT, fix_unsupported: false, mass_scaling: None }
     }
     /// Kernel (default Wendland C2).
     pub fn kernel(mut self, k: Kernel) -> Self {
@@ -75,6 +76,14 @@ impl ParticleModelBuilder {
         self.fix_unsupported = on;
         self
     }
+    /// Selective mass scaling (`mass_scaling.rs`, off by default): the free particles whose
+    /// Gershgorin rate `G_i / m_i` is above the `quantile` (in (0, 1]) of all of them get the mass
+    /// that brings them down to it, which bounds the body's `omega_max^2` by that rate and lengthens
+    /// its stable step. [`ParticleModel::mass_scaling`] reports the mass added.
+    pub fn mass_scaling(mut self, quantile: f64) -> Self {
+        self.mass_scaling = Some(quantile);
+        self
+    }
     /// Hourglass-control stiffness `kappa` \[-\] (0 disables the safeguard).
     pub fn hourglass(mut self, kappa: f64) -> Self {
         self.hourglass = kappa;
@@ -88,7 +97,7 @@ impl ParticleModelBuilder {
     /// not St. Venant-Kirchhoff (the only law of the particle hot loop for now); invalid particles,
     /// parameters, fixed indices or gravity.
     pub fn build(self) -> Result<ParticleModel, ModelError> {
-        let ParticleModelBuilder { positions: rest, masses, material, support: h, kernel, fixed, gravity, hourglass, min_weight, fix_unsupported } = self;
+        let ParticleModelBuilder { positions: rest, masses, material, support: h, kernel, fixed, gravity, hourglass, min_weight, fix_unsupported, mass_scaling } = self;
         // The pair loop (pair_loop/, with its AVX2 copy) evaluates the St. Venant-Kirchhoff
         // stress only: refuse any other law rather than silently simulate SVK.
         if material.law() != Law::StVenantKirchhoff {
@@ -106,6 +115,16 @@ impl ParticleModelBuilder {
         }
         if !(0.0..0.5).contains(&min_weight) {
             return Err(ModelError::Parameter { name: "minimum relative kernel weight", value: min_weight, reason: "must lie in [0, 0.5)" });
+        }
+        if let Some(q) = mass_scaling {
+            if !(q > 0.0 && q <= 1.0) {
+                return Err(ModelError::Parameter { name: "mass scaling quantile", value: q, reason: "must lie in (0, 1]" });
+            }
+            // Added mass is inertia, not weight: with gravity the scaled particles would weigh
+            // more. Not needed by the hybrid shell (no gravity), so refused rather than half done.
+            if gravity != Vec3::zeros() {
+                return Err(ModelError::Parameter { name: "mass scaling quantile", value: q, reason: "mass scaling with gravity is not supported (the added mass would weigh)" });
+            }
         }
         if !(hourglass >= 0.0 && hourglass.is_finite()) {
             return Err(ModelError::Parameter { name: "hourglass kappa", value: hourglass, reason: "must be non-negative and finite" });
@@ -262,8 +281,12 @@ impl ParticleModelBuilder {
             stable_dt: 0.0,
             omega_max: 0.0,
             damping_max: 0.0,
+            scaling: Default::default(),
         };
         model.compute_stable_dt();
+        if let Some(q) = mass_scaling {
+            model.scale_masses_if_worth_it(q);
+        }
         // An extreme stiffness or mass (E = 1e150 Pa) overflows the frequency bound to inf or
         // NaN, which made the stable step infinite: one sub-step of any dt, silently wrong.
         if !(model.stable_dt > 0.0 && model.stable_dt.is_finite() && model.omega_max.is_finite()) {

@@ -59,6 +59,7 @@
 //! and the per-call overhead (see [`step_with_substeps`]).
 
 mod builder;
+mod mass_scaling;
 pub mod kernel;
 mod model;
 pub mod neighbors;
@@ -69,6 +70,7 @@ mod step;
 
 pub use builder::{ParticleModelBuilder, DEFAULT_HOURGLASS, DEFAULT_MIN_WEIGHT};
 pub use kernel::Kernel;
+pub use mass_scaling::{MassScaling, WORTH_IT};
 pub use model::{barrier_energy_density, ParticleModel};
 
 /// `det F` below which a particle's St. Venant-Kirchhoff stress gets a compression barrier, the

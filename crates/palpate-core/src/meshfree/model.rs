@@ -43,6 +43,8 @@ pub struct ParticleModel {
     pub(crate) stable_dt: f64,
     pub(crate) omega_max: f64,
     pub(crate) damping_max: f64,
+    /// Selective mass scaling applied at build (`mass_scaling.rs`).
+    pub(crate) scaling: super::mass_scaling::MassScaling,
 }
 
 impl ParticleModel {

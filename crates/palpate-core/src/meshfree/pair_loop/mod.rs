@@ -152,3 +152,14 @@ pub(crate) fn all_forces(m: &ParticleModel, u: &[P4], v: Option<&[P4]>, linear: 
     }
     passes::all_forces_impl(Baseline, m, u, v, linear, b, gamma, out)
 }
+
+/// Pass 1 for one particle (portable copy): its `B_i` from displacements `u` (no velocity).
+/// For the stiffness probes of [`super::ParticleModel::stiffness_row_sums`].
+pub(crate) fn stress_of(m: &ParticleModel, i: usize, u: &[P4], linear: bool) -> Cols {
+    passes::particle_stress(m, i, u, None, linear)
+}
+
+/// Pass 2 for one particle (portable copy): the internal force it receives from `B` and `gamma`.
+pub(crate) fn force_of(m: &ParticleModel, i: usize, u: &[P4], b: &[Cols], gamma: &[f64]) -> P4 {
+    passes::particle_force(m, i, u, b, gamma)
+}
