@@ -201,11 +201,13 @@ def _stats_ms(times: List[float]) -> Dict[str, Optional[float]]:
 
 
 def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] = None,
-        name: Optional[str] = None) -> Dict[str, Any]:
+        name: Optional[str] = None, mass_scaling: Optional[float] = None) -> Dict[str, Any]:
     """Calibrate the tool radius for about ``active`` particles (unless ``radius`` [m] is given),
     then time the scripted press and slide; returns the report (see ``palpate bench hybrid
     --help`` and the module docs). ``model_spec``: a shape name, a model file path or a
-    :class:`palpate.HybridModel` (named ``name``). Raises ``ValueError`` for bad arguments."""
+    :class:`palpate.HybridModel` (named ``name``); ``mass_scaling``: the shell's mass-scaling
+    quantile (``HybridSim``'s default if ``None``; 1.0 scales nothing). Raises ``ValueError`` for
+    bad arguments."""
     if isinstance(active, bool) or not isinstance(active, (int, np.integer)) or active <= 0:
         raise ValueError(f"active must be a positive number of particles, got {active}")
     if radius is not None and not (radius > 0 and math.isfinite(radius)):
@@ -230,10 +232,11 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
     cal_s = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    sim = _p.HybridSim(model, mat, tool_radius=radius)
+    sim = _p.HybridSim(model, mat, tool_radius=radius, mass_scaling=mass_scaling)
     setup_s = time.perf_counter() - t0
     times: List[float] = []
     act: List[int] = []
+    subs: List[int] = []
     fmax = 0.0
     error = failed_tick = None
     perf = time.perf_counter
@@ -252,6 +255,7 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
             break
         fmax = max(fmax, float(np.linalg.norm(f)))
         act.append(int(sim.last["active"]))
+        subs.append(int(sim.last["substeps"]))
     if error is None and not np.all(np.isfinite(sim.surface)):
         error, failed_tick = "non-finite skin after the script", ticks - 1
 
@@ -268,6 +272,9 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
         "stable": error is None, "error": error, "failed_tick": failed_tick,
         "failed_phase": None if failed_tick is None else PHASES[int(phase[failed_tick])][0],
         "max_force_n": fmax,
+        "substeps_mean": float(np.mean([k for k in subs if k > 0])) if any(subs) else None,
+        "mass_scaling": sim.options["mass_scaling"], "mass_scaling_applied": sim.options["mass_scaling_applied"],
+        "added_mass_fraction": sim.options["added_mass_fraction"],
         "probe_vertex": v, "probe_point_m": p.tolist(), "press_direction": n_in.tolist(),
         "slide_direction": tangent.tolist(), "depth_m": DEPTH, "slide_m": SLIDE,
         "calibration": [[rr, cc] for rr, cc in tried], "calibration_s": cal_s, "setup_s": setup_s,

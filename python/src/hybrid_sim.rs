@@ -18,7 +18,8 @@ use crate::material::PyMaterial;
 /// not yet at its speed target (BENCHMARKS.md).
 ///
 /// ``HybridSim(model, material, *, tool_radius=0.005, tool_stiffness=None, hold=True,
-/// activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None)``
+/// activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None,
+/// mass_scaling=None)``
 ///
 /// Parameters
 /// ----------
@@ -41,6 +42,12 @@ use crate::material::PyMaterial;
 ///     Ticks a region stays active after its last contact (default 100).
 /// max_substeps : int, optional
 ///     Cap of the particle sub-steps a tick takes (default 64).
+/// mass_scaling : float, optional
+///     Selective mass scaling of the shell, a quantile in (0, 1] (default 0.95; 1.0 scales
+///     nothing): the particles stiffer than that quantile of them get the mass that brings them
+///     down to it, kept only if that lowers the shell's top frequency by 10%. Fewer sub-steps a
+///     tick on irregular lattices (Rodero: 16 -> 9 at rest for 0.9% added mass); statics
+///     unchanged. ``options`` reports what was added.
 ///
 /// Positions in metres, forces in newtons, world frame of the model.
 #[pyclass(module = "palpate", name = "HybridSim")]
@@ -54,7 +61,7 @@ pub struct PyHybridSim {
 #[pymethods]
 impl PyHybridSim {
     #[new]
-    #[pyo3(signature = (model, material, *, tool_radius = None, tool_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None))]
+    #[pyo3(signature = (model, material, *, tool_radius = None, tool_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -67,6 +74,7 @@ impl PyHybridSim {
         max_tool_step: Option<f64>,
         linger_ticks: Option<u64>,
         max_substeps: Option<usize>,
+        mass_scaling: Option<f64>,
     ) -> PyResult<Self> {
         let mut tool = Tool::default();
         if let Some(r) = tool_radius {
@@ -102,6 +110,12 @@ impl PyHybridSim {
                 return Err(crate::errors::param_error_from("max_substeps must be at least 1"));
             }
             options.max_substeps = k;
+        }
+        if let Some(q) = mass_scaling {
+            if !(q > 0.0 && q <= 1.0) {
+                return Err(crate::errors::param_error_from(format!("mass_scaling = {q} must be a quantile in (0, 1]")));
+            }
+            options.mass_scaling = Some(q);
         }
         let (hm, mat) = (model.model.clone(), material.inner);
         let sim = errors::guard("HybridSim", || py.detach(|| Sim::new(hm, mat, options)).map_err(errors::model_error))?;
@@ -218,8 +232,10 @@ impl PyHybridSim {
 
     /// The options the simulation was made with: ``tool_radius`` [m], ``tool_stiffness`` [N/m],
     /// ``tool_damping`` [N s/m], ``activation_margin`` [m], ``max_tool_step`` [m],
-    /// ``linger_ticks``, ``max_substeps``, ``hold``, and the resolved ``coupling_stiffness``
-    /// [N/m], ``coupling_damping`` [N s/m] and ``confinement_stiffness`` [N/m].
+    /// ``linger_ticks``, ``max_substeps``, ``hold``, ``mass_scaling`` (the quantile), the resolved
+    /// ``coupling_stiffness`` [N/m], ``coupling_damping`` [N s/m] and ``confinement_stiffness``
+    /// [N/m], and what the mass scaling did: ``mass_scaling_applied``, ``added_mass_fraction``
+    /// (of the shell's mass), ``scaled_particles``, ``omega_max`` [rad/s] of the shell at rest.
     #[getter]
     fn options<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let o = &self.sim.options;
@@ -235,6 +251,12 @@ impl PyHybridSim {
         d.set_item("coupling_stiffness", self.sim.coupling.stiffness)?;
         d.set_item("coupling_damping", self.sim.coupling.damping)?;
         d.set_item("confinement_stiffness", self.sim.confinement.stiffness)?;
+        let ms = self.sim.particles.mass_scaling();
+        d.set_item("mass_scaling", o.mass_scaling)?;
+        d.set_item("mass_scaling_applied", ms.applied)?;
+        d.set_item("added_mass_fraction", if ms.applied { ms.added_fraction } else { 0.0 })?;
+        d.set_item("scaled_particles", if ms.applied { ms.scaled } else { 0 })?;
+        d.set_item("omega_max", self.sim.particles.omega_max())?;
         Ok(d)
     }
 

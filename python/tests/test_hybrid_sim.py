@@ -110,6 +110,22 @@ def test_options_tool_position_and_reset(ventricle, material):
             palpate.HybridSim(ventricle, material, **bad)
 
 
+def test_mass_scaling_is_reported_and_can_be_turned_off(material):
+    """The shell's selective mass scaling (default quantile 0.95): on the paper's ellipsoids it
+    adds about 1% of the shell's mass and lowers its top frequency; quantile 1.0 scales nothing;
+    on the synthetic ventricle's regular lattice it is not worth it and the masses stay physical."""
+    ell = palpate.build_shape("ellipsoids")
+    on = palpate.HybridSim(ell, material).options
+    off = palpate.HybridSim(ell, material, mass_scaling=1.0).options
+    assert on["mass_scaling"] == 0.95 and on["mass_scaling_applied"], on
+    assert 0.0 < on["added_mass_fraction"] < 0.03 and on["scaled_particles"] > 0
+    assert not off["mass_scaling_applied"] and off["added_mass_fraction"] == 0.0 and off["scaled_particles"] == 0
+    assert on["omega_max"] < 0.95 * off["omega_max"], (on["omega_max"], off["omega_max"])
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="mass_scaling"):
+            palpate.HybridSim(ell, material, mass_scaling=bad)
+
+
 def _deep_press(sim, m, depth, ticks, force_cap=None):
     """Press along the inward normal at the probe point (palpate.touch.probe_point) to ``depth``
     [m] over ``ticks`` ticks, then hold 100 ticks; with ``force_cap`` [N], stop advancing once the

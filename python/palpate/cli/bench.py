@@ -72,6 +72,8 @@ def add_parser(sub) -> None:
                    help=f"ticks of {num(bh.DT * 1e3)} ms in the timed script (default {bh.TICKS}, at least {bh.MIN_TICKS})")
     h.add_argument("--radius", type=float, default=None, metavar="M",
                    help="tool radius [m]: skip the calibration")
+    h.add_argument("--mass-scaling", type=float, default=None, metavar="Q",
+                   help="the shell's mass-scaling quantile in (0, 1] (default: HybridSim's, 0.95; 1 scales nothing)")
     h.add_argument("--json", action="store_true", help="one JSON object")
     h.set_defaults(func=cmd_bench_hybrid)
     _add_haptic(bsub)
@@ -251,7 +253,7 @@ def cmd_bench_hybrid(a) -> int:
         name, model = load_hybrid_model(a.model, "bench hybrid")
     try:
         with _progress.task(f"bench hybrid {name}: calibrating and timing", quiet=a.json):
-            r = bh.run(model, a.active, a.ticks, radius=a.radius, name=name)
+            r = bh.run(model, a.active, a.ticks, radius=a.radius, name=name, mass_scaling=a.mass_scaling)
     except ValueError as e:
         raise Fail(f"palpate bench hybrid: {e}") from None
     except palpate_errors() as e:
