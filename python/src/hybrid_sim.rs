@@ -8,6 +8,7 @@ use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+use crate::body::sig4;
 
 use crate::conv;
 use crate::errors;
@@ -367,13 +368,19 @@ impl PyHybridSim {
     }
 
     fn __repr__(&self) -> String {
+        let m = self.sim.core.material();
         format!(
-            "HybridSim(core_tets={}, particles={}, regions={}, tool_radius={} m, time={} s)",
+            "<palpate.HybridSim: {} core tets, {} particles ({} active), {} regions; E = {} Pa, nu = {}, {} kg/m^3; tool radius {} m; t = {} s, {} ticks>",
             self.sim.core.n_tets(),
             self.sim.n_particles(),
+            self.state.particles.active.len(),
             self.sim.hybrid.n_regions(),
-            self.sim.options.tool.radius,
-            self.state.time()
+            sig4(m.young()),
+            sig4(m.poisson()),
+            sig4(m.density()),
+            sig4(self.sim.options.tool.radius),
+            self.state.time(),
+            self.state.ticks
         )
     }
 }

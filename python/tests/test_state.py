@@ -146,7 +146,7 @@ def test_particle_state_round_trip_and_copy(material):
     assert np.array_equal(body.gravity, [0, 0, -9.81]) and body.min_relative_weight >= 0
 
 
-def test_reprs_say_what_it_is():
+def test_reprs_say_what_it_is(tmp_path):
     body = bar()
     r = repr(body)
     assert r.startswith("<palpate.Body: 99 nodes, 240 tets, 9 fixed;") and "backward Euler, quasi-Newton" in r
@@ -154,12 +154,34 @@ def test_reprs_say_what_it_is():
     assert "quasi-Newton" not in repr(bar(palpate.SemiImplicit())) and "semi-implicit" in repr(bar(palpate.SemiImplicit()))
     m = palpate.Material(lame_lambda=5.5, lame_mu=2.5)
     assert "0.39999" not in repr(palpate.Material(young=3e4, poisson=0.4)) and repr(m).startswith("Material(")
-    # No Rust debug print ({ ... } struct syntax, CamelCase variant names) in any public repr.
+    g = np.arange(4) * 1e-3
+    particles = palpate.ParticleBody(np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3),
+                                     np.full(64, 1e-6), palpate.Material(young=3e4, poisson=0.4), 1.8e-3)
+    r = repr(particles)
+    assert r.startswith("<palpate.ParticleBody: 64 particles (64 active, 0 fixed)") and "Wendland C2" in r, r
+    assert "E = 30000 Pa, nu = 0.4" in r, r
+    sim, _ = ellipsoids_sim()
+    model = sim.model
+    r = repr(model)
+    assert r.startswith(f"HybridModel({len(model.core_tets)} core tets, {len(model.particles)} particles at "), r
+    r = repr(sim)
+    assert r.startswith(f"<palpate.HybridSim: {len(model.core_tets)} core tets, {sim.n_particles} particles (0 active)"), r
+    assert "E = 10000 Pa, nu = 0.4, 1060 kg/m^3" in r and "tool radius 0.008 m" in r and "0 ticks" in r, r
+    series = palpate.VtuSeries(tmp_path, body.mesh.tets)
+    assert repr(series) == f"<palpate.VtuSeries: 0 frames of 240 tets; {series.pvd_path}>"
+    series.write_body(body)
+    body.step(2)
+    series.write_body(body)
+    assert repr(series).startswith("<palpate.VtuSeries: 2 frames of 240 tets, t = 0 to 0.002 s; "), repr(series)
+    # No Rust debug print ({ ... } struct syntax, CamelCase variant names) nor Python's default
+    # (<... object at 0x...>) in any public repr.
     objs = [body, body.mesh, body.material, body.integrator, palpate.SemiImplicit(), palpate.Law.NEO_HOOKEAN,
-            palpate.ellipsoid_surface((0.01, 0.01, 0.02), 2), palpate.Kernel.WENDLAND_C2]
+            palpate.ellipsoid_surface((0.01, 0.01, 0.02), 2), palpate.Kernel.WENDLAND_C2, particles, model, sim,
+            series]
     for o in objs:
         r = repr(o)
         assert "{" not in r and "BackwardEulerQuasiNewton" not in r and "WendlandC2" not in r, r
+        assert " object at 0x" not in r and "PyHybrid" not in r, r
 
 
 def test_hybrid_sim_copy_repeats_the_ticks():
