@@ -12,6 +12,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 PYPROJECT = tomllib.loads((REPO / "python" / "pyproject.toml").read_text())["project"]
+REPOSITORY = "https://github.com/palpate-sim/palpate"
 
 
 def test_licence_files_and_data_attribution():
@@ -48,12 +49,26 @@ def test_import_needs_no_extra():
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
+def test_pyproject_urls():
+    urls = PYPROJECT["urls"]
+    assert set(urls) >= {"Homepage", "Repository", "Documentation", "Issues"}
+    assert urls["Repository"] == REPOSITORY and urls["Issues"].startswith(REPOSITORY)
+
+
 def test_cargo_metadata():
     ws = tomllib.loads((REPO / "Cargo.toml").read_text())["workspace"]["package"]
     assert ws["rust-version"] == "1.89"   # nalgebra 0.35's own rust-version
-    for key in ("license", "authors", "readme"):
+    for key in ("license", "authors", "readme", "keywords", "categories"):
         assert ws.get(key), key
-    for crate in ("crates/palpate-core/Cargo.toml", "python/Cargo.toml"):
-        pkg = tomllib.loads((REPO / crate).read_text())["package"]
-        for key in ("license", "authors", "readme", "rust-version"):
+    assert ws["repository"] == REPOSITORY and ws["homepage"] == REPOSITORY
+    for crate in ("crates/palpate-core", "crates/palpate-haptics", "python"):
+        pkg = tomllib.loads((REPO / crate / "Cargo.toml").read_text())["package"]
+        assert pkg.get("description"), crate
+        for key in ("license", "authors", "readme", "keywords", "categories", "rust-version", "repository"):
             assert pkg.get(key) == {"workspace": True}, (crate, key)
+    # A published crate carries the licence texts beside its manifest (cargo package takes only
+    # files under the crate's folder).
+    for crate in ("crates/palpate-core", "crates/palpate-haptics"):
+        for name in ("LICENSE-MIT", "LICENSE-APACHE"):
+            assert (REPO / crate / name).read_text() == (REPO / name).read_text(), (crate, name)
+
