@@ -1,6 +1,7 @@
 """What a user installing palpate sees before running it: the licence texts and the data
 attribution, the metadata, and a core install of numpy and meshio (plotting and the reference FEM
 are extras)."""
+import importlib.util
 import subprocess
 import sys
 
@@ -72,3 +73,21 @@ def test_cargo_metadata():
         for name in ("LICENSE-MIT", "LICENSE-APACHE"):
             assert (REPO / crate / name).read_text() == (REPO / name).read_text(), (crate, name)
 
+
+def test_plots_without_matplotlib_name_the_extra(monkeypatch, capsys, tmp_path):
+    # A core install has no matplotlib: the demo and palpate touch say which extra brings the plot.
+    import numpy as np
+
+    from palpate import demo, touch
+
+    curves = [("bar", np.arange(3) * 1e-3, np.zeros(3))]
+    monkeypatch.setitem(sys.modules, "matplotlib", None)     # `import matplotlib` raises ImportError
+    assert demo.plot_probe(curves, str(tmp_path)) is None
+    touch.plot_force(np.zeros((0, len(touch.COLUMNS))), str(tmp_path / "force.png"))
+    said = capsys.readouterr().out.splitlines()
+    assert len(said) == 2 and all("matplotlib not installed" in s and "pip install 'palpate[plot]'" in s for s in said)
+    assert not list(tmp_path.iterdir())
+    monkeypatch.undo()
+    if importlib.util.find_spec("matplotlib") is not None:   # with the extra: the plot
+        assert demo.plot_probe(curves, str(tmp_path)) == str(tmp_path / "demo_probe.png")
+        assert (tmp_path / "demo_probe.png").stat().st_size > 0
