@@ -199,6 +199,25 @@ class ParticleState(TypedDict):
     time: float
     active: _IntArray
 
+class HybridSimState(TypedDict):
+    time: float
+    ticks: int
+    core_positions: _FloatArray
+    core_velocities: _FloatArray
+    factored_dt: float
+    refreshed_at: Optional[_FloatArray]
+    excess_iterations: int
+    particle_positions: _FloatArray
+    particle_velocities: _FloatArray
+    tool: Optional[_FloatArray]
+    region_last_touched: _IntArray
+    active_regions: _IntArray
+    skin: _FloatArray
+    skin_live: Optional[_IntArray]
+    skin_carried: _IntArray
+    skin_reference: _FloatArray
+    skin_reference_tool: _FloatArray
+
 @final
 class Body:
     def __new__(
@@ -508,6 +527,12 @@ class HybridSim:
     def __copy__(self) -> HybridSim: ...
     def __deepcopy__(self, memo: Any) -> HybridSim: ...
     def reset(self) -> None: ...
+    def get_state(self) -> HybridSimState: ...
+    def set_state(self, state: HybridSimState) -> None: ...
+    @property
+    def model(self) -> HybridModel: ...
+    @property
+    def material(self) -> Material: ...
     @property
     def tool_radius(self) -> float: ...
     @property

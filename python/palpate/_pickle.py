@@ -5,7 +5,9 @@ code of their own: each object is rebuilt from what its public getters return, t
 constructor, then (bodies) its state restored with ``set_state``. That makes a pickle of a body
 carry its mesh, material, fixed nodes, gravity, integrator and state (with the integrator's
 memory: an unpickled body steps on bit for bit as the original); its model (orderings, symbolic
-factorisation) is recompiled on unpickling. A ``HybridModel`` travels as its model-file bytes.
+factorisation) is recompiled on unpickling. A ``HybridModel`` travels as its model-file bytes, a
+``HybridSim`` as its model, material, constructor options and ``get_state()`` (recompiled, then
+restored: its ticks go on bit for bit as the original's).
 """
 from __future__ import annotations
 
@@ -45,6 +47,23 @@ def _particle_body(args: Dict[str, Any], state: Dict[str, Any]) -> Any:
     return b
 
 
+def _hybrid_sim(model: Any, material: Any, options: Dict[str, Any], state: Dict[str, Any]) -> Any:
+    s = _ext.HybridSim(model, material, **options)
+    s.set_state(state)
+    return s
+
+
+# The constructor's keywords; the other entries of HybridSim.options are resolved from these and
+# the model (coupling, confinement), so rebuilding from these remakes the same simulation.
+_HYBRID_SIM_OPTIONS = ("tool_radius", "tool_stiffness", "hold", "activation_margin", "max_tool_step", "linger_ticks",
+                       "max_substeps")
+
+
+def _reduce_hybrid_sim(s: Any):
+    o = s.options
+    return _hybrid_sim, (s.model, s.material, {k: o[k] for k in _HYBRID_SIM_OPTIONS}, s.get_state())
+
+
 def _reduce_backward_euler(i: Any):
     kw = {k: getattr(i, k) for k in ("max_iterations", "tolerance", "history") if getattr(i, k) is not None}
     return _backward_euler, (i.solver, kw)
@@ -68,3 +87,4 @@ def register() -> None:
     copyreg.pickle(_ext.Body, lambda b: (_body, (b.mesh, b.material, b.fixed, b.gravity, b.integrator, b.get_state())))
     copyreg.pickle(_ext.ParticleBody, _reduce_particle_body)
     copyreg.pickle(_ext.HybridModel, lambda m: (_ext.HybridModel.from_bytes, (m.to_bytes(),)))
+    copyreg.pickle(_ext.HybridSim, _reduce_hybrid_sim)

@@ -10,9 +10,21 @@ from contextlib import contextmanager
 from typing import Callable, Iterator, Optional
 
 
+#: Set by a command's ``--quiet`` (:func:`set_quiet`): no display in this process, also for work
+#: nested in the command (a download inside a model build) that does not know of the flag.
+_quiet = False
+
+
+def set_quiet(quiet: bool) -> None:
+    """Silence (or not) every progress display of this process (the CLI's ``--quiet``)."""
+    global _quiet
+    _quiet = bool(quiet)
+
+
 def shown(quiet: bool = False) -> bool:
-    """Whether progress is displayed: not ``quiet``, stderr a terminal, and ``TERM`` not ``dumb``."""
-    if quiet or os.environ.get("TERM") == "dumb":
+    """Whether progress is displayed: not ``quiet`` (nor :func:`set_quiet`), stderr a terminal, and
+    ``TERM`` not ``dumb``."""
+    if quiet or _quiet or os.environ.get("TERM") == "dumb":
         return False
     try:
         return sys.stderr.isatty()

@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from typing import Optional
 
 import numpy as np
 
@@ -212,27 +213,36 @@ def main(argv=None) -> int:
     models = _hybrid_summary()
     _touch(models, a)
     if not a.no_plot:
-        try:
-            import matplotlib
-            matplotlib.use("Agg")
-            import matplotlib.pyplot as plt
-        except ImportError:  # pragma: no cover
-            print("(matplotlib not installed: no plot)")
-            return 0
-        os.makedirs(a.out, exist_ok=True)
-        fig, ax = plt.subplots(figsize=(8, 4.5))
-        for label, t, u in curves:
-            ax.plot(t, u, label=label, lw=1.2)
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel("loaded nodes' mean |u| [mm]")
-        ax.set_title(f"palpate demo: {bench.FORCE} N probe ramped over {bench.RAMP} s")
-        ax.legend(fontsize=7)
-        ax.grid(alpha=0.3)
-        path = os.path.join(a.out, "demo_probe.png")
-        fig.tight_layout()
-        fig.savefig(path, dpi=120)
-        print(f"plot: {path}")
+        path = plot_probe(curves, a.out)
+        if path:
+            print(f"plot: {path}")
     return 0
+
+
+def plot_probe(curves, out: str) -> Optional[str]:
+    """``out/demo_probe.png``: the loaded nodes' mean |u| [mm] against time [s], one curve per
+    ``(label, t, u)``; its path, or None (said on stdout) without matplotlib."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:  # an extra (palpate[plot]): the table above holds the numbers
+        print("(matplotlib not installed: no plot; pip install 'palpate[plot]')")
+        return None
+    os.makedirs(out, exist_ok=True)
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for label, t, u in curves:
+        ax.plot(t, u, label=label, lw=1.2)
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("loaded nodes' mean |u| [mm]")
+    ax.set_title(f"palpate demo: {bench.FORCE} N probe ramped over {bench.RAMP} s")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    path = os.path.join(out, "demo_probe.png")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
 
 
 if __name__ == "__main__":

@@ -324,6 +324,11 @@ class VtuSeries:
     def pvd_path(self) -> str:
         return os.path.join(self.outdir, f"{self.stem}.pvd")
 
+    def __repr__(self) -> str:
+        n = len(self.entries)
+        span = f", t = {self.entries[0][0]:g} to {self.entries[-1][0]:g} s" if n else ""
+        return f"<palpate.VtuSeries: {n} frame{'' if n == 1 else 's'} of {len(self.tets)} tets{span}; {self.pvd_path}>"
+
     def write(self, time: float, positions: np.ndarray, displacement: np.ndarray, velocity: np.ndarray,
               point_data: Optional[Dict[str, np.ndarray]] = None,
               cell_data: Optional[Dict[str, np.ndarray]] = None) -> str:

@@ -62,7 +62,7 @@ import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 import numpy as np
 
@@ -397,8 +397,10 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
                  dict(mesh=m.get("file") or m.get("generator"), integrator=kind))
 
 
-def run_scene(scene: Scene, write: bool = True, log=print) -> Dict[str, Any]:
-    """Run a scene, writing a VTU series; returns a summary dict.
+def run_scene(scene: Scene, write: bool = True, log=print,
+              advance: Optional[Callable[[int], None]] = None) -> Dict[str, Any]:
+    """Run a scene, writing a VTU series; returns a summary dict. ``advance(k)``, if given, is
+    called after each chunk of ``k`` steps (a progress display: ``palpate run``).
 
     Frames (deformed positions, the fields of :meth:`VtuSeries.write_body`: displacement,
     velocity, fixed and loaded flags per node; von Mises stress, strain energy density, det F and
@@ -426,6 +428,8 @@ def run_scene(scene: Scene, write: bool = True, log=print) -> Dict[str, Any]:
         wall += r["wall_s"]
         umax = max(umax, r["max_disp_m"])
         done += r["steps"]
+        if advance is not None:
+            advance(r["steps"])
         if r["error"] is not None:
             raise _p.StepError(f"scene {scene.path}: {r['error']}")
         frame()

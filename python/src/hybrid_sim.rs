@@ -2,10 +2,13 @@
 //! in, force out. Ticks release the GIL.
 
 use numpy::{PyArray1, PyArray2};
-use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace, TickReport, Tool};
-use palpate_core::Vec3;
+use palpate_core::runtime::{tick, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, TickReport, Tool};
+use palpate_core::{StepMemory, Vec3};
+use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+
+use crate::body::sig4;
 
 use crate::conv;
 use crate::errors;
@@ -48,6 +51,10 @@ use crate::material::PyMaterial;
 ///     down to it, kept only if that lowers the shell's top frequency by 10%. Fewer sub-steps a
 ///     tick on irregular lattices (Rodero: 16 -> 9 at rest for 0.9% added mass); statics
 ///     unchanged. ``options`` reports what was added.
+///
+/// ``get_state()`` / ``set_state(s)`` save and restore everything a tick carries to the next (the
+/// ticks after a restore repeat the original's bit for bit); a ``HybridSim`` pickles (its model,
+/// material, options and state: ``multiprocessing``, Dask) and copies (``copy()``).
 ///
 /// Positions in metres, forces in newtons, world frame of the model.
 #[pyclass(module = "palpate", name = "HybridSim")]
@@ -260,6 +267,105 @@ impl PyHybridSim {
         Ok(d)
     }
 
+    /// The model it simulates (a copy: a ``HybridModel`` is immutable).
+    #[getter]
+    fn model(&self) -> PyHybridModel {
+        PyHybridModel { model: self.sim.hybrid.clone() }
+    }
+
+    /// The material of the core and the shell.
+    #[getter]
+    fn material(&self) -> PyMaterial {
+        PyMaterial { inner: *self.sim.core.material() }
+    }
+
+    /// The state as a dict of copies, everything a tick carries to the next: ``time`` [s],
+    /// ``ticks``; ``core_positions`` [m] and ``core_velocities`` [m/s] (n_core, 3) with the core
+    /// integrator's memory (``factored_dt`` [s], ``refreshed_at`` [m] or None,
+    /// ``excess_iterations``: as ``Body.get_state``); ``particle_positions`` [m] and
+    /// ``particle_velocities`` [m/s] (n_particles, 3) (the inactive ones where the last tick left
+    /// them); ``tool`` [m] (3,) or None; the activation's hysteresis, ``region_last_touched``
+    /// (per region the tick of its last contact, -1: never) and ``active_regions`` (in the
+    /// runtime's order); ``skin`` [m] (n_outer, 3) as stored (fresh near the tool, within 5 mm
+    /// elsewhere); and the bookkeeping of the work a tick skips, which changes no force (kept so
+    /// that a restored simulation also does the same work): ``skin_live`` (the vertices a tick
+    /// looks at, None before the first whole update), ``skin_carried`` (those placed by
+    /// particles), ``skin_reference`` [m] (core positions at the last whole update) and
+    /// ``skin_reference_tool`` [m]. Positions world frame. Plain Python and numpy values: it
+    /// pickles.
+    fn get_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.state.snapshot(&self.ws);
+        let d = PyDict::new(py);
+        d.set_item("time", s.time)?;
+        d.set_item("ticks", s.ticks)?;
+        d.set_item("core_positions", conv::vec3s_to_py(py, &s.core_x))?;
+        d.set_item("core_velocities", conv::vec3s_to_py(py, &s.core_v))?;
+        d.set_item("factored_dt", s.core_memory.factored_dt)?;
+        d.set_item("refreshed_at", s.core_memory.refreshed_at.as_ref().map(|x| conv::vec3s_to_py(py, x)))?;
+        d.set_item("excess_iterations", s.core_memory.excess_iterations)?;
+        d.set_item("particle_positions", conv::vec3s_to_py(py, &s.particle_x))?;
+        d.set_item("particle_velocities", conv::vec3s_to_py(py, &s.particle_v))?;
+        d.set_item("tool", s.tool.map(|c| conv::vec3_to_py(py, c)))?;
+        let last: Vec<i64> = s.last_touched.iter().map(|&t| i64::try_from(t).unwrap_or(-1)).collect();
+        d.set_item("region_last_touched", PyArray1::from_vec(py, last))?;
+        d.set_item("active_regions", conv::u32s_to_py(py, &s.regions))?;
+        d.set_item("skin", conv::vec3s_to_py(py, &s.skin))?;
+        d.set_item("skin_live", s.live.as_ref().map(|l| conv::u32s_to_py(py, l)))?;
+        d.set_item("skin_carried", conv::flagged_to_py(py, &s.carried))?;
+        d.set_item("skin_reference", conv::vec3s_to_py(py, &s.live_ref_x))?;
+        d.set_item("skin_reference_tool", conv::vec3_to_py(py, s.live_ref_tool))?;
+        Ok(d)
+    }
+
+    /// Restore a state from :meth:`get_state` (of this simulation, a copy, or one made from the
+    /// same model, material and options: an unpickled one): the next ticks repeat those that
+    /// followed it bit for bit. Remakes the core's factor (one factorisation); the last tick's
+    /// report (``last``) is cleared. Raises ``KeyError`` for a missing entry, ``ValueError`` for
+    /// a wrong shape, index or non-finite value, ``StepError`` for a state that does not fit
+    /// this simulation or a failed factorisation; the simulation is unchanged then.
+    fn set_state(&mut self, py: Python<'_>, state: &Bound<'_, PyDict>) -> PyResult<()> {
+        let item = |key: &str| state.get_item(key)?.ok_or_else(|| PyKeyError::new_err(format!("state has no {key:?} (a dict from get_state())")));
+        let (n_core, n_p, n_skin) = (self.sim.core.n_nodes(), self.sim.n_particles(), self.sim.hybrid.outer_points.len());
+        let skin_items = conv::Items { item: "point", owner: "the skin" };
+        let opt = |key: &str| -> PyResult<Option<Bound<'_, PyAny>>> { item(key).map(|v| (!v.is_none()).then_some(v)) };
+        let unsigned = |key: &str, never: bool| -> PyResult<Vec<i64>> {
+            let v = conv::codes(&item(key)?, key, "a 1-D integer array")?;
+            match v.iter().find(|&&t| t < if never { -1 } else { 0 }) {
+                Some(t) => Err(errors::param_error_from(format!("{key}: {t} is negative"))),
+                None => Ok(v),
+            }
+        };
+        let mut carried = vec![false; n_skin];
+        for v in conv::indices(&item("skin_carried")?, "skin_carried", n_skin, skin_items, true)? {
+            carried[v] = true;
+        }
+        let snap = SimSnapshot {
+            time: item("time")?.extract()?,
+            ticks: item("ticks")?.extract()?,
+            core_x: conv::vec3s(&item("core_positions")?, "core_positions", n_core, true)?,
+            core_v: conv::vec3s(&item("core_velocities")?, "core_velocities", n_core, true)?,
+            core_memory: StepMemory {
+                factored_dt: item("factored_dt")?.extract()?,
+                refreshed_at: opt("refreshed_at")?.map(|x| conv::vec3s(&x, "refreshed_at", n_core, true)).transpose()?,
+                excess_iterations: item("excess_iterations")?.extract()?,
+            },
+            particle_x: conv::vec3s(&item("particle_positions")?, "particle_positions", n_p, true)?,
+            particle_v: conv::vec3s(&item("particle_velocities")?, "particle_velocities", n_p, true)?,
+            skin: conv::vec3s(&item("skin")?, "skin", n_skin, true)?,
+            tool: opt("tool")?.map(|c| conv::vec3(&c, "tool")).transpose()?,
+            last_touched: unsigned("region_last_touched", true)?.iter().map(|&t| u64::try_from(t).unwrap_or(u64::MAX)).collect(),
+            regions: unsigned("active_regions", false)?.iter().map(|&s| u32::try_from(s).unwrap_or(u32::MAX)).collect(),
+            live: opt("skin_live")?.map(|l| conv::indices(&l, "skin_live", n_skin, skin_items, true)).transpose()?.map(|l| l.iter().map(|&v| v as u32).collect()),
+            carried,
+            live_ref_x: conv::vec3s(&item("skin_reference")?, "skin_reference", n_core, true)?,
+            live_ref_tool: conv::vec3(&item("skin_reference_tool")?, "skin_reference_tool")?,
+        };
+        let sim = &self.sim;
+        let (state, ws) = py.detach(|| SimState::restore(sim, &snap)).map_err(|e| errors::step_error(e, "in set_state"))?;
+        (self.state, self.ws, self.last) = (state, ws, TickReport::default());
+        Ok(())
+    }
+
     /// Back to rest: the core and the shell undeformed, nothing active, time and ticks zero, no
     /// tool (the compiled model is kept: cheaper than a new ``HybridSim``).
     fn reset(&mut self) {
@@ -284,13 +390,19 @@ impl PyHybridSim {
     }
 
     fn __repr__(&self) -> String {
+        let m = self.sim.core.material();
         format!(
-            "HybridSim(core_tets={}, particles={}, regions={}, tool_radius={} m, time={} s)",
+            "<palpate.HybridSim: {} core tets, {} particles ({} active), {} regions; E = {} Pa, nu = {}, {} kg/m^3; tool radius {} m; t = {} s, {} ticks>",
             self.sim.core.n_tets(),
             self.sim.n_particles(),
+            self.state.particles.active.len(),
             self.sim.hybrid.n_regions(),
-            self.sim.options.tool.radius,
-            self.state.time()
+            sig4(m.young()),
+            sig4(m.poisson()),
+            sig4(m.density()),
+            sig4(self.sim.options.tool.radius),
+            self.state.time(),
+            self.state.ticks
         )
     }
 }

@@ -1,6 +1,7 @@
 """What a user installing palpate sees before running it: the licence texts and the data
 attribution, the metadata, and a core install of numpy and meshio (plotting and the reference FEM
 are extras)."""
+import importlib.util
 import subprocess
 import sys
 
@@ -12,6 +13,7 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 PYPROJECT = tomllib.loads((REPO / "python" / "pyproject.toml").read_text())["project"]
+REPOSITORY = "https://github.com/palpate-sim/palpate"
 
 
 def test_licence_files_and_data_attribution():
@@ -48,12 +50,44 @@ def test_import_needs_no_extra():
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
+def test_pyproject_urls():
+    urls = PYPROJECT["urls"]
+    assert set(urls) >= {"Homepage", "Repository", "Documentation", "Issues"}
+    assert urls["Repository"] == REPOSITORY and urls["Issues"].startswith(REPOSITORY)
+
+
 def test_cargo_metadata():
     ws = tomllib.loads((REPO / "Cargo.toml").read_text())["workspace"]["package"]
     assert ws["rust-version"] == "1.89"   # nalgebra 0.35's own rust-version
-    for key in ("license", "authors", "readme"):
+    for key in ("license", "authors", "readme", "keywords", "categories"):
         assert ws.get(key), key
-    for crate in ("crates/palpate-core/Cargo.toml", "python/Cargo.toml"):
-        pkg = tomllib.loads((REPO / crate).read_text())["package"]
-        for key in ("license", "authors", "readme", "rust-version"):
+    assert ws["repository"] == REPOSITORY and ws["homepage"] == REPOSITORY
+    for crate in ("crates/palpate-core", "crates/palpate-haptics", "python"):
+        pkg = tomllib.loads((REPO / crate / "Cargo.toml").read_text())["package"]
+        assert pkg.get("description"), crate
+        for key in ("license", "authors", "readme", "keywords", "categories", "rust-version", "repository"):
             assert pkg.get(key) == {"workspace": True}, (crate, key)
+    # A published crate carries the licence texts beside its manifest (cargo package takes only
+    # files under the crate's folder).
+    for crate in ("crates/palpate-core", "crates/palpate-haptics"):
+        for name in ("LICENSE-MIT", "LICENSE-APACHE"):
+            assert (REPO / crate / name).read_text() == (REPO / name).read_text(), (crate, name)
+
+
+def test_plots_without_matplotlib_name_the_extra(monkeypatch, capsys, tmp_path):
+    # A core install has no matplotlib: the demo and palpate touch say which extra brings the plot.
+    import numpy as np
+
+    from palpate import demo, touch
+
+    curves = [("bar", np.arange(3) * 1e-3, np.zeros(3))]
+    monkeypatch.setitem(sys.modules, "matplotlib", None)     # `import matplotlib` raises ImportError
+    assert demo.plot_probe(curves, str(tmp_path)) is None
+    touch.plot_force(np.zeros((0, len(touch.COLUMNS))), str(tmp_path / "force.png"))
+    said = capsys.readouterr().out.splitlines()
+    assert len(said) == 2 and all("matplotlib not installed" in s and "pip install 'palpate[plot]'" in s for s in said)
+    assert not list(tmp_path.iterdir())
+    monkeypatch.undo()
+    if importlib.util.find_spec("matplotlib") is not None:   # with the extra: the plot
+        assert demo.plot_probe(curves, str(tmp_path)) == str(tmp_path / "demo_probe.png")
+        assert (tmp_path / "demo_probe.png").stat().st_size > 0

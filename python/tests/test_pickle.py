@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import palpate
-from test_state import bar
+from test_state import bar, ellipsoids_sim, same_state
 
 
 def test_body_pickles_and_steps_on_bit_identically():
@@ -89,3 +89,32 @@ def test_bodies_cross_processes():
         done = pool.apply(_advance, (body,))
     _advance(body)
     assert np.array_equal(done.positions, body.positions)
+
+
+def test_hybrid_sim_pickles_and_ticks_on_bit_identically():
+    sim, path = ellipsoids_sim(tool_stiffness=80.0, max_tool_step=4e-4)
+    for c in path[:56]:
+        sim.step(c)
+    back = pickle.loads(pickle.dumps(sim))
+    # Rebuilt from its model, material and constructor options, then its state restored.
+    assert back.model.to_bytes() == sim.model.to_bytes() and back.material == sim.material
+    assert back.options == sim.options and back.options["max_tool_step"] == 4e-4
+    assert same_state(back.get_state(), sim.get_state())
+    for c in path[56:]:
+        assert np.array_equal(back.step(c), sim.step(c))
+        assert np.array_equal(back.particle_positions(), sim.particle_positions())
+    assert np.array_equal(back.surface, sim.surface) and back.ticks == sim.ticks
+
+
+def _tick_on(sim, path):
+    return np.array([sim.step(c) for c in path]), sim.particle_positions()
+
+
+def test_hybrid_sims_cross_processes():
+    sim, path = ellipsoids_sim()
+    for c in path[:20]:
+        sim.step(c)
+    with mp.get_context("spawn").Pool(1) as pool:
+        forces, x = pool.apply(_tick_on, (sim, path[20:]))
+    here, y = _tick_on(sim, path[20:])
+    assert np.abs(here).max() > 0 and np.array_equal(forces, here) and np.array_equal(x, y)

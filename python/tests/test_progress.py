@@ -1,5 +1,6 @@
-"""Progress display (issue 16, item 7): long work shows a progress display on a terminal and
-nothing when its output goes to a pipe or a log, or with --quiet / --json.
+"""Progress display (issue 16, item 7): long work (model builds, scene runs, touches, benchmark
+sweeps) shows a progress display on a terminal and nothing when its output goes to a pipe or a
+log, or with --quiet / --json.
 
 What a wrong implementation would do: a bar drawn whatever stderr is (escape codes in every log
 and CI transcript: caught by the pipe runs), or one never drawn (caught by the pseudo-terminal
@@ -65,6 +66,53 @@ def test_bench_sweep_progress_terminal_only(tmp_path):
     assert code == 0 and "\x1b[" not in out, out   # JSON lines stay parseable on a terminal too
 
 
+SCENE = REPO / "scenes" / "ellipsoid_probe.toml"
+SCRIPT = """
+[probe]
+vertex = "probe"
+gap = 0.001
+[[segment]]
+kind = "press"
+depth = 0.001
+duration = 0.05
+[[segment]]
+kind = "release"
+duration = 0.05
+"""
+
+
+def test_scene_run_shows_progress_on_a_terminal_only(tmp_path):
+    cmd = [sys.executable, "-m", "palpate", "run", str(SCENE), "--steps", "60", "--out", str(tmp_path / "o")]
+    code, out = on_pty(cmd, tmp_path)
+    assert code == 0, out
+    assert "running the scene" in out and "\x1b[" in out, out[-2000:]
+    code, out = on_pipe(cmd, tmp_path)
+    assert code == 0, out
+    assert "running the scene" not in out and "\x1b[" not in out, out[-2000:]
+
+
+def _commands(tmp_path):
+    """One run of each command with a progress display, each short."""
+    (tmp_path / "touch.toml").write_text(SCRIPT)
+    return {
+        "build": BUILD + ["-o", str(tmp_path / "q.palpate")],
+        "bench protocol": [sys.executable, "-m", "palpate", "bench", "protocol", "ellipsoid_192", "--steps", "20"],
+        "touch": [sys.executable, "-m", "palpate", "touch", "--shape", "ellipsoids", "--script",
+                  str(tmp_path / "touch.toml"), "--out", str(tmp_path / "touch"), "--every", "50"],
+        "run": [sys.executable, "-m", "palpate", "run", str(SCENE), "--steps", "60", "--out", str(tmp_path / "o")],
+    }
+
+
+@pytest.mark.parametrize("command", ["build", "bench protocol", "touch", "run"])
+def test_quiet_silences_the_display_on_a_terminal(tmp_path, command):
+    cmd = _commands(tmp_path)[command]
+    code, out = on_pty(cmd, tmp_path)
+    assert code == 0 and "\x1b[" in out, out[-2000:]    # the display is there without --quiet
+    code, out = on_pty(cmd + ["--quiet"], tmp_path)
+    assert code == 0, out
+    assert "\x1b[" not in out and "palpate" in out, out[-2000:]   # the results, without the display
+
+
 def test_shown_follows_stderr_and_quiet(monkeypatch):
     from palpate import _progress
 
@@ -77,8 +125,14 @@ def test_shown_follows_stderr_and_quiet(monkeypatch):
     assert _progress.shown() and not _progress.shown(quiet=True)
     monkeypatch.setenv("TERM", "dumb")
     assert not _progress.shown()
-    monkeypatch.setattr(sys, "stderr", open(os.devnull, "w"))
     monkeypatch.delenv("TERM")
+    _progress.set_quiet(True)                  # a command's --quiet: for work nested in it too
+    try:
+        assert not _progress.shown()
+    finally:
+        _progress.set_quiet(False)
+    assert _progress.shown()
+    monkeypatch.setattr(sys, "stderr", open(os.devnull, "w"))
     assert not _progress.shown()
 
 

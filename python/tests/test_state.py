@@ -146,7 +146,7 @@ def test_particle_state_round_trip_and_copy(material):
     assert np.array_equal(body.gravity, [0, 0, -9.81]) and body.min_relative_weight >= 0
 
 
-def test_reprs_say_what_it_is():
+def test_reprs_say_what_it_is(tmp_path):
     body = bar()
     r = repr(body)
     assert r.startswith("<palpate.Body: 99 nodes, 240 tets, 9 fixed;") and "backward Euler, quasi-Newton" in r
@@ -154,12 +154,34 @@ def test_reprs_say_what_it_is():
     assert "quasi-Newton" not in repr(bar(palpate.SemiImplicit())) and "semi-implicit" in repr(bar(palpate.SemiImplicit()))
     m = palpate.Material(lame_lambda=5.5, lame_mu=2.5)
     assert "0.39999" not in repr(palpate.Material(young=3e4, poisson=0.4)) and repr(m).startswith("Material(")
-    # No Rust debug print ({ ... } struct syntax, CamelCase variant names) in any public repr.
+    g = np.arange(4) * 1e-3
+    particles = palpate.ParticleBody(np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3),
+                                     np.full(64, 1e-6), palpate.Material(young=3e4, poisson=0.4), 1.8e-3)
+    r = repr(particles)
+    assert r.startswith("<palpate.ParticleBody: 64 particles (64 active, 0 fixed)") and "Wendland C2" in r, r
+    assert "E = 30000 Pa, nu = 0.4" in r, r
+    sim, _ = ellipsoids_sim()
+    model = sim.model
+    r = repr(model)
+    assert r.startswith(f"HybridModel({len(model.core_tets)} core tets, {len(model.particles)} particles at "), r
+    r = repr(sim)
+    assert r.startswith(f"<palpate.HybridSim: {len(model.core_tets)} core tets, {sim.n_particles} particles (0 active)"), r
+    assert "E = 10000 Pa, nu = 0.4, 1060 kg/m^3" in r and "tool radius 0.008 m" in r and "0 ticks" in r, r
+    series = palpate.VtuSeries(tmp_path, body.mesh.tets)
+    assert repr(series) == f"<palpate.VtuSeries: 0 frames of 240 tets; {series.pvd_path}>"
+    series.write_body(body)
+    body.step(2)
+    series.write_body(body)
+    assert repr(series).startswith("<palpate.VtuSeries: 2 frames of 240 tets, t = 0 to 0.002 s; "), repr(series)
+    # No Rust debug print ({ ... } struct syntax, CamelCase variant names) nor Python's default
+    # (<... object at 0x...>) in any public repr.
     objs = [body, body.mesh, body.material, body.integrator, palpate.SemiImplicit(), palpate.Law.NEO_HOOKEAN,
-            palpate.ellipsoid_surface((0.01, 0.01, 0.02), 2), palpate.Kernel.WENDLAND_C2]
+            palpate.ellipsoid_surface((0.01, 0.01, 0.02), 2), palpate.Kernel.WENDLAND_C2, particles, model, sim,
+            series]
     for o in objs:
         r = repr(o)
         assert "{" not in r and "BackwardEulerQuasiNewton" not in r and "WendlandC2" not in r, r
+        assert " object at 0x" not in r and "PyHybrid" not in r, r
 
 
 def test_hybrid_sim_copy_repeats_the_ticks():
@@ -177,3 +199,99 @@ def test_hybrid_sim_copy_repeats_the_ticks():
     assert np.array_equal(np.array(forces), np.array(again))
     assert np.array_equal(sim.core_positions, snap.core_positions) and sim.time == snap.time
     assert copy.deepcopy(sim).ticks == sim.ticks
+
+
+def ellipsoids_sim(**kw):
+    """A HybridSim of the concentric ellipsoids (semi-axes 20/20/30 and 30/30/40 mm; coarse: it
+    builds in tens of ms), E = 10 kPa, tool radius 8 mm, regions lingering 5 ticks; and a path
+    of tool centres [m]: a press from 1 mm above the top to 12 mm deep (26 ticks), then the device
+    jumps 20 mm above the top and stays (40 ticks; the simulated tool follows at 0.5 mm a tick:
+    contact ends at tick 51, the two active regions are last touched at ticks 52 and 54 and leave
+    5 ticks later)."""
+    inner, outer = (palpate.ellipsoid_surface(a, 2) for a in ((0.02, 0.02, 0.03), (0.03, 0.03, 0.04)))
+    model = palpate.HybridModel.build_nested(inner, outer, particles=1000, field_voxels=3000)
+    sim = palpate.HybridSim(model, palpate.Material(young=1e4, poisson=0.4, density=1060.0),
+                            **dict(dict(tool_radius=0.008, linger_ticks=5), **kw))
+    top = outer.points[np.argmax(outer.points[:, 2])]
+    path = [top + (0, 0, 0.001 - 0.0005 * k) for k in range(26)] + [top + (0, 0, 0.02)] * 40
+    return sim, path
+
+
+def same_state(a, b):
+    """Two get_state() dicts equal entry by entry, bit for bit (None where the other is None)."""
+    assert a.keys() == b.keys()
+    for k in a:
+        if a[k] is None or b[k] is None:
+            assert a[k] is None and b[k] is None, k
+        else:
+            assert np.array_equal(np.asarray(a[k]), np.asarray(b[k])), k
+    return True
+
+
+def _ticks(sim, path):
+    """Force [N], active count and every particle's position [m] after each tick of ``path``."""
+    out = []
+    for c in path:
+        f = sim.step(c)
+        out.append((f, len(sim.active), sim.particle_positions()))
+    return out
+
+
+@pytest.mark.parametrize("at", [20, 56], ids=["pressing", "lingering"])
+def test_hybrid_sim_state_round_trip_is_bit_identical(at):
+    # At tick 20 the tool presses (forces to repeat); at 56 it has left and two regions linger
+    # (their last-touch ticks decide when their particles leave).
+    sim, path = ellipsoids_sim()
+    for c in path[:at]:
+        sim.step(c)
+    saved = sim.get_state()
+    assert saved["tool"] is not None and len(saved["active_regions"]) > 0 and saved["skin_live"] is not None
+    # Restored into a simulation with another history (its own active regions, skin lists,
+    # integrator memory and workspace marks): nothing of that may leak into the ticks after.
+    other, _ = ellipsoids_sim()
+    for c in path[::-3]:
+        other.step(c)
+    other.set_state(saved)
+    assert same_state(other.get_state(), saved)    # nothing lost on the way through the binding
+    assert np.array_equal(other.active, sim.active) and (other.ticks, other.time) == (sim.ticks, sim.time)
+    first, again = _ticks(sim, path[at:]), _ticks(other, path[at:])
+    if at == 20:
+        assert max(np.abs(f).max() for f, _, _ in first) > 0.05
+    else:
+        assert len({n for _, n, _ in first}) > 1      # the active set shrinks as the regions leave
+    for (f, n, x), (g, m, y) in zip(first, again):
+        assert np.array_equal(f, g) and n == m and np.array_equal(x, y)
+    assert np.array_equal(sim.surface, other.surface) and np.array_equal(sim.core_positions, other.core_positions)
+    assert same_state(sim.get_state(), other.get_state())
+    # Back to the saved state (the dict is a copy): the same ticks again.
+    sim.set_state(saved)
+    assert sim.ticks == at and all(np.array_equal(a[2], b[2]) for a, b in zip(_ticks(sim, path[at:]), first))
+
+
+def test_hybrid_sim_set_state_refuses_what_does_not_fit():
+    sim, path = ellipsoids_sim()
+    for c in path[:12]:
+        sim.step(c)
+    saved = sim.get_state()
+    before = sim.get_state()
+    bad = dict(saved)
+    del bad["skin_live"]
+    with pytest.raises(KeyError, match="skin_live"):
+        sim.set_state(bad)
+    with pytest.raises(ValueError, match="core_positions"):
+        sim.set_state(dict(saved, core_positions=saved["core_positions"][:-1]))
+    with pytest.raises(ValueError, match="particle_velocities"):
+        sim.set_state(dict(saved, particle_velocities=np.full_like(saved["particle_velocities"], np.nan)))
+    with pytest.raises(ValueError, match="skin_live"):
+        sim.set_state(dict(saved, skin_live=np.array([10 ** 6])))
+    with pytest.raises(palpate.StepError, match="region"):      # an active region never touched
+        sim.set_state(dict(saved, region_last_touched=np.full_like(saved["region_last_touched"], -1)))
+    with pytest.raises(palpate.StepError, match="region"):
+        sim.set_state(dict(saved, active_regions=np.array([10 ** 6])))
+    assert same_state(sim.get_state(), before)                 # a refused state changes nothing
+    # The state of another model: the sizes differ.
+    inner, outer = (palpate.ellipsoid_surface(a, 3) for a in ((0.02, 0.02, 0.03), (0.03, 0.03, 0.04)))
+    other = palpate.HybridSim(palpate.HybridModel.build_nested(inner, outer, particles=2000, field_voxels=3000),
+                              palpate.Material(young=3e4, poisson=0.4))
+    with pytest.raises(ValueError):
+        other.set_state(saved)

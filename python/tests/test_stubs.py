@@ -7,7 +7,7 @@ import palpate._palpate as ext
 
 STUB = Path(palpate.__file__).with_name("_palpate.pyi")
 TYPED_DICTS = {"StepStats", "ProbeRun", "ParticleStepStats", "TimedRun", "RegionField", "HybridInfo", "BodyState",
-               "ParticleState"}
+               "ParticleState", "HybridSimState"}
 
 
 def test_stub_matches_extension():

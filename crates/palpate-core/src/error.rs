@@ -131,6 +131,10 @@ pub enum StepError {
     NonFiniteForce { node: usize },
     #[error("the tool's position is not finite")]
     NonFiniteTool,
+    /// A saved hybrid-simulation state that does not fit the simulation it is restored into
+    /// (`runtime::SimState::restore`).
+    #[error("the saved state does not fit this simulation: {0}")]
+    Snapshot(String),
     /// A time step that needs more sub-steps than the cap (a dt far above the stable one, or a
     /// material so stiff that its stable step is tiny): refused instead of running for minutes.
     #[error("dt = {dt} s needs {substeps:.3e} sub-steps of the stable {stable_dt:e} s, over the cap of {cap} per step: take a smaller dt (or check the material's stiffness and the masses)")]

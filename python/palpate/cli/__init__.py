@@ -1,13 +1,13 @@
 """The ``palpate`` command line (also ``python -m palpate``): one module per command (``run``,
 ``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``), shared helpers in ``_common``.
 
-    palpate run SCENE.toml [--out DIR] [--steps N]
+    palpate run SCENE.toml [--out DIR] [--steps N] [--quiet]
     palpate bench protocol MESH [--force F] [--steps N] [--json] [--integrator NAME] [--newton auto|on|off]
     palpate bench protocol --all [--force F] [--steps N] [--json] [--integrator NAME]
     palpate bench particles N [--spacing S] [--kernel wendland|cubic|lj] [--ticks T] [--json]
     palpate bench particles --all [...]
     palpate bench hybrid MODEL --active N [--ticks T] [--radius M] [--json]
-    palpate build INNER OUTER -o MODEL [--unit m|cm|mm] [build options]
+    palpate build INNER OUTER -o MODEL [--unit m|cm|mm] [--quiet] [build options]
     palpate build --tagged SURFACE -o MODEL [--unit m|cm|mm] [--tag-array NAME] [--inner 1,2] [--outer 3]
                   [--base 4,5] [build options]
     palpate build --shape ellipsoids|ventricle|rodero -o MODEL [build options]
@@ -18,7 +18,7 @@
     palpate info MESH [--unit m|cm|mm]  (a tet mesh file)
     palpate touch MODEL|--shape NAME --script SCRIPT.toml|SCRIPT.csv [--out DIR] [--every K] [--dt S]
                   [--tool-radius M] [--tool-stiffness K] [--young E] [--poisson NU] [--density RHO]
-                  [--phi P] [--psi P] [--free]
+                  [--phi P] [--psi P] [--free] [--quiet]
         (a scripted touch of a hybrid model: force.csv, force.png, touch.pvd; palpate/touch.py)
     palpate haptic MODEL --device scripted:SCRIPT|replay:FILE|bridge:PORT|hand [--rate HZ] [--seconds S]
                    [--record FILE] [--kind KIND] [--max-force N] [--host IP] [--quiet]
@@ -27,6 +27,10 @@
     palpate bench haptic MODEL [--seconds S] [--rate HZ] [--no-idle] [--json]
     palpate device touch|forcedimension|haply|hapticmaster [--port P] [--host IP] [--scale S] [--offset X Y Z]
         (a vendor device as a bridge client; each vendor SDK an optional extra)
+
+Long work (a model build, a scene run, a touch, a benchmark sweep) shows a progress display on
+stderr when it is a terminal, nothing otherwise; ``--quiet`` (run, build, touch, bench protocol,
+particles and hybrid) turns it off there too.
 
 Exit codes: 0 success, 1 a simulation failed (e.g. a step diverged), a hybrid build failed on
 valid surfaces or an output could not be written, 2 bad input (arguments, scene file, mesh,
@@ -68,6 +72,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         return quiet_pipe()
     if getattr(a, "steps", None) is not None and a.steps <= 0:
         ap.error("--steps must be positive")
+    from .. import _progress
+    _progress.set_quiet(getattr(a, "quiet", False))   # each call: main may run more than once in a process
     import warnings
 
     def one_line(message, category, filename, lineno, file=None, line=None):

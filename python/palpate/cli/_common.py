@@ -74,6 +74,11 @@ def quiet_pipe() -> int:
     return 141
 
 
+def add_quiet(parser) -> None:
+    """``--quiet``: no progress display (the display is drawn only on a terminal anyway)."""
+    parser.add_argument("--quiet", action="store_true", help="no progress display (shown on a terminal only)")
+
+
 def fmt_mm(v) -> str:
     """A length [m] in millimetres, ``-`` for None / NaN."""
     return "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{1e3 * v:.4f}"

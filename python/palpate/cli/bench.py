@@ -14,7 +14,7 @@ from .. import _progress
 from .. import bench
 from .. import bench_hybrid as bh
 from .. import bench_particles as bp
-from ._common import Fail, fmt_mm, load_hybrid_model, num, palpate_errors
+from ._common import Fail, add_quiet, fmt_mm, load_hybrid_model, num, palpate_errors
 
 
 def add_parser(sub) -> None:
@@ -30,6 +30,7 @@ def add_parser(sub) -> None:
     p.add_argument("--steps", type=int, default=bench.STEPS,
                    help=f"steps of {num(bench.DT * 1e3)} ms (default {bench.STEPS})")
     p.add_argument("--json", action="store_true", help="one JSON object per mesh (JSON lines)")
+    add_quiet(p)
     p.add_argument("--integrator", default="backward-euler", choices=list(bench.INTEGRATORS),
                    help="backward-euler (the default: quasi-Newton), newton, linearised, semi-implicit, "
                         "semi-implicit-stable")
@@ -55,6 +56,7 @@ def add_parser(sub) -> None:
                    help=f"kernel support radius in lattice spacings (default {num(bp.SUPPORT_FACTOR)})")
     q.add_argument("--ticks", type=int, default=bp.TICKS, help=f"ticks of 1 ms to time (default {bp.TICKS})")
     q.add_argument("--json", action="store_true", help="one JSON object per N (JSON lines)")
+    add_quiet(q)
     q.add_argument("--max-wall", type=float, default=None, metavar="S",
                    help="stop a case after S seconds of ticks (default: no cap)")
     q.set_defaults(func=cmd_bench_particles)
@@ -75,6 +77,7 @@ def add_parser(sub) -> None:
     h.add_argument("--mass-scaling", type=float, default=None, metavar="Q",
                    help="the shell's mass-scaling quantile in (0, 1] (default: HybridSim's, 0.95; 1 scales nothing)")
     h.add_argument("--json", action="store_true", help="one JSON object")
+    add_quiet(h)
     h.set_defaults(func=cmd_bench_hybrid)
     _add_haptic(bsub)
 

@@ -9,7 +9,7 @@ from typing import Optional
 from .. import _palpate as _p
 from .. import _progress
 from .. import defaults
-from ._common import Fail, mb, model_lines, num
+from ._common import Fail, add_quiet, mb, model_lines, num
 
 #: --projection: the Projection, a description and a note of each choice.
 _PROJECTIONS = {
@@ -32,6 +32,7 @@ def add_parser(sub) -> None:
                    help="ellipsoids: the paper's concentric ellipsoids; ventricle: the benchmark's truncated "
                         "ventricle; rodero: the real left ventricle of Rodero et al. (fetched on first use)")
     h.add_argument("-o", "--output", required=True, metavar="MODEL", help="model file to write")
+    add_quiet(h)
     h.add_argument("--unit", choices=["m", "cm", "mm"], help="length unit of the surface files (default m)")
     h.add_argument("--tag-array", metavar="NAME", help="integer cell array holding the tags (default surface-id)")
     h.add_argument("--inner", metavar="T[,T...]", help="tag values of the inner surface")

@@ -1,7 +1,8 @@
-"""``palpate run SCENE.toml [--out DIR] [--steps N]``: a scene file, headless, to a VTU series."""
+"""``palpate run SCENE.toml [--out DIR] [--steps N] [--quiet]``: a scene file, headless, to a VTU
+series, with a progress bar over the steps on a terminal."""
 from __future__ import annotations
 
-from ._common import Fail, fmt_mm
+from ._common import Fail, add_quiet, fmt_mm
 
 
 def add_parser(sub) -> None:
@@ -9,6 +10,7 @@ def add_parser(sub) -> None:
     r.add_argument("scene", metavar="SCENE.toml")
     r.add_argument("--out", help="output folder (overrides [run] output)")
     r.add_argument("--steps", type=int, help="number of steps (overrides [run] steps)")
+    add_quiet(r)
     r.set_defaults(func=cmd_run)
 
 
@@ -23,8 +25,11 @@ def cmd_run(a) -> int:
     print(f"palpate run: {a.scene}: {scene.body.n_nodes} nodes, {scene.body.n_tets} tets, "
           f"{scene.steps} steps of {scene.dt:g} s, integrator {scene.description['integrator']}, "
           f"output {scene.output}", flush=True)
+    from .. import _progress
     try:
-        s = run_scene(scene)
+        # A bar over the steps, advanced between the chunks of steps that end at a frame.
+        with _progress.task("running the scene", total=scene.steps) as advance:   # a terminal only
+            s = run_scene(scene, advance=advance)
     except _p.StepError as e:
         raise Fail(f"{a.scene}: simulation failed: {e}", 1) from None
     except OSError as e:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from ._common import Fail, fmt_mm, num
+from ._common import Fail, add_quiet, fmt_mm, num
 
 #: Material defaults [Pa, -, kg/m^3]: those of the hybrid tests and the benchmark.
 YOUNG, POISSON, DENSITY = 3.0e4, 0.4, 1000.0
@@ -31,6 +31,7 @@ def add_parser(sub) -> None:
     t.add_argument("--tool-stiffness", type=float, default=None, metavar="K",
                    help="penalty stiffness per skin vertex in contact [N/m] (default the core's)")
     t.add_argument("--free", action="store_true", help="do not hold the core at its base (or lower 30%%)")
+    add_quiet(t)
     t.add_argument("--dt", type=float, default=1e-3, metavar="S", help="tick [s] (default 1e-3)")
     t.add_argument("--every", type=int, default=None, metavar="K",
                    help="write a VTU frame every K ticks (default: about 80 frames)")

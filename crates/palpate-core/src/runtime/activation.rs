@@ -297,6 +297,47 @@ impl Activation {
     /// [`super::confinement`] reads.
     pub fn triangle_counts(&self) -> &[u32] { &self.tri_count }
 
+    /// Per region: the tick of its last contact (`u64::MAX`: never touched).
+    pub fn last_touched(&self) -> &[u64] { &self.last_touched }
+
+    /// Bring the activation to the one whose [`Activation::last_touched`] and
+    /// [`Activation::active_regions`] (in that order: the order decides nothing but is kept, so
+    /// that the next updates repeat the saved activation's bit for bit) these are, as after an
+    /// update: the triangle counts and the active particles follow from them, nothing is pending
+    /// and nothing entered or left. Errors (the activation unchanged): a wrong length, an active
+    /// region out of range, repeated or never touched.
+    pub fn restore(&mut self, last_touched: &[u64], regions: &[u32]) -> Result<(), String> {
+        let n = self.n_regions();
+        if last_touched.len() != n {
+            return Err(format!("last contacts of {} regions, the model has {n}", last_touched.len()));
+        }
+        let mut seen = vec![false; n];
+        for &s in regions {
+            let s = s as usize;
+            if s >= n || seen[s] || last_touched[s] == NEVER {
+                return Err(format!("active region {s} is out of range ({n} regions), repeated or never touched"));
+            }
+            seen[s] = true;
+        }
+        self.clear();
+        self.last_touched.copy_from_slice(last_touched);
+        self.is_active = seen;
+        self.regions.extend_from_slice(regions);
+        for &s in regions {
+            for &t in self.region_tris.get(s as usize) {
+                self.tri_count[t as usize] += 1;
+            }
+        }
+        // Particles are sorted by the triangle above them: in triangle order, the union comes
+        // out sorted, as update's merge keeps it.
+        for (t, &c) in self.tri_count.iter().enumerate() {
+            if c > 0 {
+                self.active.extend(self.tri_particle_ptr[t] as usize..self.tri_particle_ptr[t + 1] as usize);
+            }
+        }
+        Ok(())
+    }
+
     /// Deactivate everything at once (e.g. on a reset); the next update reports no change.
     pub fn clear(&mut self) {
         for &s in &self.regions {

@@ -11,7 +11,8 @@
 //! - [`coupling`]: damped springs between the first-layer active particles and their core faces,
 //!   momentum-exact (where and why this departs from the paper: see the module);
 //! - [`stability`]: how many particle sub-steps a tick needs (stretch, springs, contact);
-//! - [`sim`], [`state`]: the compiled simulation, its state and workspace;
+//! - [`sim`], [`state`]: the compiled simulation, its state and workspace, and the state as
+//!   plain values to save and restore ([`SimSnapshot`]);
 //! - [`tick`](mod@tick): the one ordered tick, tool in, force out.
 //!
 //! **Status (issue 12, in progress).** Each exchange is exact: the tick conserves linear
@@ -48,6 +49,6 @@ pub use coupling::Coupling;
 pub use embed::Embedding;
 pub use sim::{Sim, SimOptions};
 pub use stability::Shell;
-pub use state::{SimState, SimWorkspace};
+pub use state::{SimSnapshot, SimState, SimWorkspace};
 pub use tick::{tick, TickReport};
 pub use tool::{ContactSum, PointContact, Tool};

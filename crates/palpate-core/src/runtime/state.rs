@@ -4,7 +4,8 @@
 
 use super::activation::Activation;
 use super::sim::Sim;
-use crate::fem::{State, Workspace};
+use crate::error::StepError;
+use crate::fem::{State, StepMemory, Workspace};
 use crate::math::Vec3;
 use crate::meshfree::{ParticleState, ParticleWorkspace};
 
@@ -165,6 +166,127 @@ impl SimState {
     pub fn time(&self) -> f64 {
         self.core.t
     }
+
+    /// What this state and the workspace `ws` that ticked it carry to the next tick, as plain
+    /// values ([`SimSnapshot`]): [`SimState::restore`] makes a state and workspace whose ticks
+    /// repeat those that followed it bit for bit.
+    pub fn snapshot(&self, ws: &SimWorkspace) -> SimSnapshot {
+        SimSnapshot {
+            time: self.core.t,
+            ticks: self.ticks,
+            core_x: self.core.x.clone(),
+            core_v: self.core.v.clone(),
+            core_memory: ws.core.memory(),
+            particle_x: self.particles.x.clone(),
+            particle_v: self.particles.v.clone(),
+            skin: self.skin.clone(),
+            tool: self.tool,
+            last_touched: self.activation.last_touched().to_vec(),
+            regions: self.activation.active_regions().to_vec(),
+            live: self.live.valid.then(|| self.live.list.clone()),
+            carried: self.live.carried.clone(),
+            live_ref_x: self.live.ref_x.clone(),
+            live_ref_tool: self.live.ref_tool,
+        }
+    }
+
+    /// The state and workspace of `snap` (from [`SimState::snapshot`] of a simulation compiled
+    /// from the same model, material and options): one factorisation of the core's matrix (see
+    /// [`Workspace::restore_memory`]), the rest copies. What a snapshot leaves out is either
+    /// scratch a tick rewrites before reading it or follows from what it keeps (the active
+    /// particles from the active regions, the skin's reference frames from its reference
+    /// positions: the same function of the same values). Errors: a size that does not fit `sim`,
+    /// an index out of range, a non-finite position, a failed factorisation.
+    pub fn restore(sim: &Sim, snap: &SimSnapshot) -> Result<(SimState, SimWorkspace), StepError> {
+        let bad = |what: String| StepError::Snapshot(what);
+        let (n_core, n_p, n_skin) = (sim.core.n_nodes(), sim.n_particles(), sim.hybrid.outer_points.len());
+        let sizes = [("core positions", snap.core_x.len(), n_core), ("core velocities", snap.core_v.len(), n_core), ("particle positions", snap.particle_x.len(), n_p),
+            ("particle velocities", snap.particle_v.len(), n_p), ("skin", snap.skin.len(), n_skin), ("skin flags", snap.carried.len(), n_skin), ("skin reference", snap.live_ref_x.len(), n_core)];
+        for (what, got, want) in sizes {
+            if got != want {
+                return Err(bad(format!("{what}: {got} rows, the simulation has {want}")));
+            }
+        }
+        for (what, v) in [("core positions", &snap.core_x), ("core velocities", &snap.core_v), ("particle positions", &snap.particle_x), ("particle velocities", &snap.particle_v), ("skin", &snap.skin), ("skin reference", &snap.live_ref_x)] {
+            if let Some(i) = v.iter().position(|x| !x.iter().all(|c| c.is_finite())) {
+                return Err(bad(format!("{what}: row {i} is not finite")));
+            }
+        }
+        if !snap.time.is_finite() || !snap.tool.is_none_or(|c| c.iter().all(|x| x.is_finite())) || !snap.live_ref_tool.iter().all(|x| x.is_finite()) {
+            return Err(bad("time or tool position not finite".into()));
+        }
+        if let Some(list) = &snap.live {
+            if let Some(&v) = list.iter().find(|&&v| v as usize >= n_skin) {
+                return Err(bad(format!("live skin vertex {v} out of range ({n_skin} vertices)")));
+            }
+        }
+        let mut state = SimState::rest(sim);
+        state.activation.restore(&snap.last_touched, &snap.regions).map_err(bad)?;
+        let mut ws = SimWorkspace::new(sim);
+        ws.core.restore_memory(&sim.core, &snap.core_memory)?;
+        state.core.x.clone_from(&snap.core_x);
+        state.core.v.clone_from(&snap.core_v);
+        state.core.t = snap.time;
+        state.particles.x.clone_from(&snap.particle_x);
+        state.particles.v.clone_from(&snap.particle_v);
+        state.particles.t = snap.time;
+        state.particles.active.extend_from_slice(state.activation.active());
+        for &p in &state.particles.active {
+            state.is_active[p] = true;
+        }
+        state.skin.clone_from(&snap.skin);
+        state.tool = snap.tool;
+        state.ticks = snap.ticks;
+        let live = &mut state.live;
+        live.carried.clone_from(&snap.carried);
+        live.ref_x.clone_from(&snap.live_ref_x);
+        live.ref_tool = snap.live_ref_tool;
+        if let Some(list) = &snap.live {
+            for &v in list {
+                if !live.member[v as usize] {
+                    live.member[v as usize] = true;
+                    live.list.push(v);
+                }
+            }
+            live.list.sort_unstable();
+            live.valid = true;
+            super::embed::face_frames(&live.ref_x, &sim.hybrid.core_faces, &mut live.ref_frames);
+        }
+        Ok((state, ws))
+    }
+}
+
+/// A hybrid simulation's state as plain values ([`SimState::snapshot`], [`SimState::restore`]):
+/// what a tick carries to the next. Positions \[m\], velocities \[m/s\], world frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimSnapshot {
+    /// Simulated time \[s\] and ticks taken.
+    pub time: f64,
+    pub ticks: u64,
+    /// The core's nodes, and its integrator's memory.
+    pub core_x: Vec<Vec3>,
+    pub core_v: Vec<Vec3>,
+    pub core_memory: StepMemory,
+    /// Every particle (the inactive ones where the last tick left them).
+    pub particle_x: Vec<Vec3>,
+    pub particle_v: Vec<Vec3>,
+    /// The stored skin ([`SimState::skin`]: stale within a margin away from the tool).
+    pub skin: Vec<Vec3>,
+    /// The simulated tool's centre (`None` before the first tick).
+    pub tool: Option<Vec3>,
+    /// The activation's hysteresis: each region's last contact tick (`u64::MAX`: never) and the
+    /// active regions in their order ([`Activation::last_touched`], [`Activation::active_regions`]).
+    pub last_touched: Vec<u64>,
+    pub regions: Vec<u32>,
+    /// The skin's bookkeeping (`LiveSkin`): the vertices a tick looks at (`None` before the
+    /// first whole update: all), per vertex whether particles carry it, the core's positions at
+    /// the last whole update and the tool's centre at the last rebuild of the list. What it
+    /// skips is proven not to change a force; it is kept so that a restored tick does the same
+    /// work as the original (without it, the first tick would update the whole skin).
+    pub live: Option<Vec<u32>>,
+    pub carried: Vec<bool>,
+    pub live_ref_x: Vec<Vec3>,
+    pub live_ref_tool: Vec3,
 }
 
 /// Scratch space of [`super::tick()`].
