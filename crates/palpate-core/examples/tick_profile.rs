@@ -45,8 +45,20 @@ fn main() {
         let c = p + n_in * (d - radius) + tangent * s;
         let t0 = Instant::now();
         let rep = tick(&sim, &mut st, &mut ws, c, 1e-3).unwrap();
-        times.push(t0.elapsed().as_secs_f64() * 1e3);
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        times.push(ms);
+        if std::env::var("SPIKES").is_ok() && ms > 1.5 {
+            println!("tick {k}: {ms:.2} ms active {} (+{} -{}) substeps {} core iterations {} contacts {}+{}+{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.particle_contacts, rep.skin_contacts, rep.core_contacts);
+        }
         subs += rep.substeps;
+    }
+    if std::env::var("SPIKES").is_ok() {
+        let mut out = vec![Vec3::zeros(); sim.hybrid.outer_points.len()];
+        let t0 = Instant::now();
+        for _ in 0..20 {
+            sim.skin_positions(&st, &mut out);
+        }
+        println!("whole fresh skin ({} vertices): {:.3} ms", out.len(), t0.elapsed().as_secs_f64() * 1e3 / 20.0);
     }
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);

@@ -6,7 +6,8 @@
 //! an immutable [`ParticleModel`] (`model.rs`; its stable time step in `stability.rs`),
 //! [`ParticleState`] and [`ParticleWorkspace`] (`state.rs`) hold what changes, and
 //! [`step`]`(&model, &mut state, &mut workspace, dt)` (`step.rs`) advances it with the hot loop
-//! of `pair_loop/`.
+//! of `pair_loop/`. `mass_scaling.rs`: optional selective mass scaling of the stiffest particles
+//! (a longer stable step for the same statics; the hybrid shell uses it).
 //!
 //! ## Formulation (total Lagrangian, moving least squares)
 //! Particle `i` has rest position `X_i`, mass `m_i`, density `rho_i` and volume `V_i = m_i / rho_i`

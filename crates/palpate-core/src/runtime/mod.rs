@@ -26,10 +26,11 @@
 //! compression barrier in the particle law (`crate::meshfree::COMPRESSION_FLOOR`). Measured: 15 mm presses, a press toward
 //! 2 N over 20 mm of travel, a 0.5 m/s slide, a 5 mm jump after a stall and a 10 mm jab stay
 //! finite on the synthetic ventricle and the paper's ellipsoids, damped or not; a slow slide over
-//! 50 region changes moves the force by at most 20% of the 0.01 N allowance per tick. Not yet: the
-//! tick is 2-4x over its targets (0.25 ms at 200 active particles, 0.5 ms at 600; BENCHMARKS.md:
-//! the explicit shell's sub-steps are most of it, see [`stability`] for what was measured about
-//! lowering their count), deep presses activate more than 600, and a press toward 5 N diverges
+//! 50 region changes moves the force by at most 20% of the 0.01 N allowance per tick. The shell's
+//! selective mass scaling (`crate::meshfree` `mass_scaling.rs`) takes 40% of the sub-steps off
+//! the Rodero ventricle's and 30% off the ellipsoids' ticks. Not yet: the tick is still over its
+//! targets (0.25 ms at 200 active particles, 0.5 ms at 600; BENCHMARKS.md: the explicit shell's
+//! sub-steps are most of it, see [`stability`]), deep presses activate more than 600, and a press toward 5 N diverges
 //! (contained) past ~22 mm of travel on the synthetic ventricle, also with twice the sub-steps
 //! (so not a time-step limit: St. Venant-Kirchhoff particles collapse under that compression).
 

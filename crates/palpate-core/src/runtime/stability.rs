@@ -30,8 +30,14 @@
 //! The count is capped ([`super::SimOptions::max_substeps`]): past it a tick costs more than a
 //! haptic tick has, and a tick that still diverges is contained (restored and reported).
 //!
+//! **Adopted since: selective mass scaling** (`crate::meshfree` `mass_scaling.rs`, on by default
+//! through [`super::SimOptions::mass_scaling`]): the few poorly supported particles below get the
+//! mass that brings their Gershgorin rate to the 95th percentile's, which lowers `omega_max^2`
+//! (the `omega2` this module starts from) by 42% on the ellipsoids and 58% on the Rodero
+//! ventricle, and by 2% on the synthetic ventricle (not kept there).
+//!
 //! **Where a lower count could come from** (measured 2026-11-25 on the paper's ellipsoids, 28,210
-//! particles; not adopted). The rest-linearised `omega_max^2` is the whole shell's: its top mode
+//! particles, before mass scaling). The rest-linearised `omega_max^2` is the whole shell's: its top mode
 //! sits on ~10 poorly supported lattice particles (6-9 neighbours, 95% of the mode's mass-weighted
 //! energy) in one spot, and a ball of the shell restricted to itself (the rest frozen, as an
 //! active set is) has 0.30-0.47 of that eigenvalue at 4 mm and 0.52-0.67 at 8 mm, i.e. 20-45%
