@@ -47,6 +47,13 @@ fn main() {
         let rep = tick(&sim, &mut st, &mut ws, c, 1e-3).unwrap();
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         times.push(ms);
+        if std::env::var("WHY").is_ok() && k % 100 == 0 && rep.active > 0 {
+            let held = sim.particles.fixed();
+            let s2 = st.particles.active.iter().filter(|&&p| !held[p]).map(|&p| palpate_core::runtime::stability::stretch_bound(&sim.particles.deformation_gradient(p, &st.particles.x))).fold(1.0, f64::max);
+            let rest = sim.shell.substeps(1e-3, 1.0, 0.0, 0.0, 64);
+            let stretched = sim.shell.substeps(1e-3, s2, 0.0, 0.0, 64);
+            println!("tick {k}: substeps {} (rest {rest}, with the stretch s^2 = {s2:.3}: {stretched}; the rest is contact)", rep.substeps);
+        }
         if std::env::var("SPIKES").is_ok() && ms > 1.5 {
             println!("tick {k}: {ms:.2} ms active {} (+{} -{}) substeps {} core iterations {} contacts {}+{}+{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.particle_contacts, rep.skin_contacts, rep.core_contacts);
         }
