@@ -68,6 +68,8 @@ def _read_surface(path: PathLike, unit: str) -> Tuple[np.ndarray, np.ndarray, Di
     if size == 0:
         raise SurfaceError(f"{name}: empty file")
     _header_precheck(path, fmt, size)
+    if fmt == "vtk":
+        _readers.vtk_legacy_precheck(path, SurfaceError)
     if fmt == "vtu":
         _readers.vtk_xml_inflated_precheck(path, SurfaceError)
     if fmt == "vtp":

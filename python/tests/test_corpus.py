@@ -55,10 +55,14 @@ def verdict(case, r):
     if o == "error" and (r.get("type") == "InternalError" or "InternalError" in r.get("mro", [])):
         # A caught Rust panic is typed, but it is a palpate bug, not a refusal of the input.
         return f"internal error (a caught panic): {r.get('message', '')[:300]}"
+    want = case.get("contains")
+    want = [want] if isinstance(want, str) else want
     if case["kind"] == "cli":
         lines = [ln for ln in r["stderr"].splitlines() if ln.strip()]
         if "internal error" in r["stderr"].lower():
             return f"the CLI reported an internal error (a caught panic): {r['stderr'][-500:]!r}"
+        if want and not any(w in r["stderr"] for w in want):
+            return f"stderr does not say any of {want}: {r['stderr'][-500:]!r}"
         if r["code"] not in case["codes"]:
             return f"exit code {r['code']}, expected one of {case['codes']}; stderr {r['stderr'][-500:]!r}"
         if "Traceback" in r["stderr"] or len(lines) != 1 or not lines[0].startswith("palpate"):
@@ -68,6 +72,8 @@ def verdict(case, r):
         return f"outcome {o} ({r.get('type')}: {r.get('message', '')[:300]}), expected {case['expect']}"
     if o == "error" and case.get("types") and r["type"] not in case["types"] and not set(case["types"]) & set(r.get("mro", [])):
         return f"error {r['type']} ({r['message'][:300]}), expected one of {case['types']}"
+    if o == "error" and want and not any(w in r["message"] for w in want):
+        return f"error {r['type']} ({r['message'][:300]}) does not say any of {want}"
     if o == "error" and r["type"] != "ParameterError":  # a bad argument is not about a file
         msg = r["message"]
         files = case.get("names") or [a for a in case.get("code", "").split("'") if "." in a and "/" not in a and " " not in a]
@@ -112,6 +118,17 @@ def test_verdict_can_fail():
     anyerr = {"kind": "api", "expect": ["error"], "types": None, "code": ""}
     assert verdict(anyerr, {"outcome": "error", "type": "InternalError", "message": "x", "mro": ["InternalError", "PalpateError"]})
     assert verdict(anyerr, {"outcome": "error", "type": "ParameterError", "message": "x", "mro": ["ParameterError", "PalpateError"]}) is None
+    # A case that names its check: the same type from another check (after building) fails.
+    pre = {"kind": "api", "expect": ["error"], "types": ["MeshError"], "code": "", "contains": "refused before building"}
+    assert verdict(pre, {"outcome": "error", "type": "MeshError", "message": "g: fails validation", "mro": ["MeshError"]})
+    assert verdict(pre, {"outcome": "error", "type": "MeshError", "message": "g: refused before building: x", "mro": ["MeshError"]}) is None
+    # A bomb or oversized header refused by some later MeshError (the pre-check lost) fails.
+    bomb = {"kind": "api", "expect": ["error"], "types": ["LimitError"], "code": ""}
+    assert verdict(bomb, {"outcome": "error", "type": "MeshError", "message": "x.vtu: cannot read as VTU", "mro": ["MeshError", "PalpateError"]})
+    header = {"kind": "api", "expect": ["error"], "types": ["MeshError", "LimitError"], "code": "", "contains": corpus_cases.PRECHECK}
+    assert verdict(header, {"outcome": "error", "type": "MeshError", "message": "x.vtk: cannot read as VTK (ValueError: cannot reshape)", "mro": ["MeshError"]})
+    assert verdict(header, {"outcome": "error", "type": "MeshError", "message": "x.vtk: byte 9: POINTS announces 9; the file has 90", "mro": ["MeshError"]}) is None
+    assert verdict({"kind": "cli", "codes": [2], "contains": "LimitError"}, {"outcome": "exit", "code": 2, "stderr": "palpate: error: MeshError: x\n"})
     cli = {"kind": "cli", "codes": [2]}
     assert verdict(cli, {"outcome": "exit", "code": 1, "stderr": "palpate: error: x\n"})
     assert verdict(cli, {"outcome": "exit", "code": 2, "stderr": "Traceback (most recent call last):\n...\n"})
