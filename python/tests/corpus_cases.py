@@ -165,6 +165,7 @@ def make(folder):
     _reader_cases(c)
     _generator_cases(c)
     _body_cases(c)
+    _binding_cases(c)
     _cli_cases(c)
     return c.cases
 
@@ -471,6 +472,59 @@ def _body_cases(c: Corpus):
         name, klass, code, expect = entry[:4]
         types = entry[4] if len(entry) > 4 else None
         c.api(name, klass, code, expect, types)
+
+
+_MODEL = "m = palpate.HybridModel.load(os.path.join(D, 'seed.palpate'))\n"
+
+
+def _binding_cases(c: Corpus):
+    """The binding's other entries: crafted model bytes through ``from_bytes`` and through a
+    pickle (loads as ``HybridModel.load`` does, under the panic guard), negative counts and
+    indices (pyo3 raised OverflowError for an argument typed ``usize``), and the Python modules'
+    own errors (ParameterError, ScriptError: PalpateErrors)."""
+    crafted = sorted(n for n in os.listdir(c.folder) if n.startswith(("model_crafted", "model_count", "model_nan_", "model_trunc")))
+    for n in crafted[::4]:
+        read = f"data = open(os.path.join(D, {n!r}), 'rb').read()\n"
+        c.api(f"from_bytes_{n}", "mutation", read + "palpate.HybridModel.from_bytes(data)", TYPED, ["ModelFileError", "LimitError"], names=["<bytes>"])
+        # A pickle of the seed model with its file bytes swapped for the crafted ones.
+        c.api(f"pickle_{n}", "mutation", read + "import pickle\nclass Crafted:\n    def __reduce__(self):\n"
+              "        return (palpate.HybridModel.from_bytes, (data,))\npickle.loads(pickle.dumps(Crafted()))",
+              TYPED, ["ModelFileError", "LimitError"], names=["<bytes>"])
+    c.api("from_bytes_empty", "mutation", "palpate.HybridModel.from_bytes(b'')", ["error"], ["ModelFileError"], names=["<bytes>"])
+    c.api("pickle_seed", "seed", _MODEL + "import pickle\nassert pickle.loads(pickle.dumps(m)).to_bytes() == m.to_bytes()", ["ok"])
+    par = ["ParameterError"]
+    negative = [
+        ("neg_ellipsoid_surface", "palpate.ellipsoid_surface((0.01, 0.01, 0.01), -1)"),
+        ("neg_ellipsoid_wall_subdivisions", "palpate.ellipsoid_wall(subdivisions=-1)"),
+        ("neg_ellipsoid_wall_layers", "palpate.ellipsoid_wall(layers=-2)"),
+        ("neg_truncated_wall_circumferential", "palpate.truncated_ellipsoid_wall(circumferential=-3)"),
+        ("neg_truncated_wall_longitudinal", "palpate.truncated_ellipsoid_wall(longitudinal=-1)"),
+        ("neg_truncated_wall_layers", "palpate.truncated_ellipsoid_wall(layers=-1)"),
+        ("neg_static_solve_iterations", _BODY + "body().static_solve(max_iterations=-1)"),
+        ("neg_static_solve_load_steps", _BODY + "body().static_solve(load_steps=-1)"),
+        ("neg_backward_euler_iterations", "palpate.BackwardEuler(max_iterations=-1)"),
+        ("neg_backward_euler_history", "palpate.BackwardEuler(history=-1)"),
+        ("neg_hybrid_sim_substeps", _MODEL + "palpate.HybridSim(m, palpate.Material.myocardium(), max_substeps=-1)"),
+        ("neg_hybrid_sim_linger", _MODEL + "palpate.HybridSim(m, palpate.Material.myocardium(), linger_ticks=-1)"),
+        ("neg_region_particles", _MODEL + "m.region_particles(-1)"),
+        ("neg_region_field", _MODEL + "m.region_field(-2)"),
+        ("neg_region_curve", _MODEL + "m.region_curve(-(2**62))"),
+        ("neg_particle_neighbours", _PB + "pb().neighbours(-1)"),
+        ("particle_neighbours_past_end", _PB + "pb().neighbours(64)"),
+        ("neg_build_particles", "palpate.build_shape('ellipsoids', particles=-5)"),
+        ("neg_build_field_voxels", "palpate.build_shape('ellipsoids', field_voxels=-1)"),
+        ("neg_record_ticks", _MODEL + "palpate.HapticLoop(m, palpate.Material.myocardium(), 'scripted', times=[0, 1], knots=[[0, 0, 0.05], [0, 0, 0.06]], record_ticks=-1)"),
+        ("neg_max_ticks", _MODEL + "palpate.HapticLoop(m, palpate.Material.myocardium(), 'scripted', times=[0, 1], knots=[[0, 0, 0.05], [0, 0, 0.06]], max_ticks=-1)"),
+        ("bridge_port_out_of_range", _MODEL + "palpate.HapticLoop(m, palpate.Material.myocardium(), 'bridge', port=70000)"),
+        ("haptic_device_unknown", _MODEL + "palpate.HapticLoop(m, palpate.Material.myocardium(), 'nothing')"),
+        ("build_shape_unknown", "palpate.build_shape('cube')"),
+        ("bench_hybrid_unknown_model", "import palpate.bench_hybrid as b; b.load_model('no such model')"),
+        ("repair_surface_bad_shape", "palpate.repair_surface(np.zeros((4, 2)), [[0, 1, 2]])"),
+    ]
+    for name, code in negative:
+        c.api(name, "untyped", code, ["error"], par)
+    n = c.write("touch_garbage.toml", "[[segment]]\nkind = 'press'\ndepth = -1\n")
+    c.api("touch_script_bad", "untyped", f"import palpate.touch as t; t.parse_script(os.path.join(D, {n!r}))", ["error"], ["ScriptError"])
 
 
 def _cli_cases(c: Corpus):

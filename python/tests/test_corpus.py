@@ -13,6 +13,7 @@ import sys
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import corpus_cases
@@ -152,3 +153,21 @@ def test_cli_is_quiet_on_a_closed_pipe(args):
     assert p.stderr.strip() == "" or (p.stderr.count("\n") <= 1 and "Traceback" not in p.stderr
                                       and "BrokenPipe" not in p.stderr and "Exception ignored" not in p.stderr), p.stderr
     assert "Traceback" not in p.stderr and "BrokenPipe" not in p.stderr, p.stderr
+
+
+def test_python_errors_are_palpate_errors():
+    """The Python modules' own errors are in the one tree (issue 15), keeping the base that
+    callers caught before as a second one."""
+    import palpate
+    import palpate.data
+    import palpate.scene
+    import palpate.touch
+
+    for cls, old in ((palpate.touch.ScriptError, ValueError), (palpate.touch.TouchFailed, RuntimeError),
+                     (palpate.data.DataError, RuntimeError), (palpate.scene.SceneError, ValueError),
+                     (palpate.ParameterError, ValueError)):
+        assert issubclass(cls, palpate.PalpateError) and issubclass(cls, old), cls
+    with pytest.raises(palpate.ParameterError):
+        palpate.build_shape("cube")
+    with pytest.raises(palpate.ParameterError):
+        palpate.repair_surface(np.zeros((4, 2)), [[0, 1, 2]])
