@@ -100,6 +100,15 @@ fn haptics_error(msg: impl std::fmt::Display) -> PyErr {
     HapticsError::new_err(msg.to_string())
 }
 
+/// A recording that cannot be loaded: over the memory budget a `palpate.LimitError` (as every
+/// size refused before allocation), anything else a `HapticsError`.
+fn record_error(e: palpate_haptics::record::RecordError) -> PyErr {
+    match e {
+        palpate_haptics::record::RecordError::Limit { path, source } => errors::limit_error(&source, Some(&path)),
+        other => haptics_error(other),
+    }
+}
+
 fn snapshot_dict<'py>(py: Python<'py>, s: &Snapshot) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("tick", s.tick)?;
@@ -203,7 +212,7 @@ impl PyHapticLoop {
             let mut rate_hz = rate_hz;
             if device == "replay" {
                 let path = recording.as_ref().ok_or_else(|| errors::param_error_from("device 'replay' needs recording=PATH"))?;
-                let r = Recording::load(path).map_err(haptics_error)?;
+                let r = Recording::load(path).map_err(record_error)?;
                 rate_hz = r.rate_hz;
                 replay = Some(r);
             }
