@@ -477,7 +477,7 @@ pub fn truncated_ellipsoid_wall(p: &TruncatedEllipsoidWall) -> TetMesh {
 }
 
 /// [`truncated_ellipsoid_wall`] for input from outside: parameters and size checked first, then
-/// every tet measured before the mesh is built ([`check_shell`]: the validation cannot be
+/// every tet measured before the mesh is built (`check_shell`: the validation cannot be
 /// predicted in closed form here, since the apex fan and the crowded rings near it set the
 /// thinnest tet), so a fine resolution inside the documented ranges is refused up front with the
 /// reason; a mesh that still failed validation would be an error too (not a panic).
