@@ -2,7 +2,7 @@
 #   make demo   set up .venv, build the extension (release), run the demo
 #   make test   set up, then cargo test --release, the release wheel, pytest and make lint
 #   make wheel  the release wheel in dist/: abi3 (CPython >= 3.9), manylinux_2_28, stripped
-#   make lint   clippy -D warnings, cargo doc -D warnings, stubtest (all three in make test)
+#   make lint   clippy -D warnings, cargo doc -D warnings, stubtest, the fuzz targets compiled (all in make test)
 # The set-up is stamp-file driven: a warm re-run is a no-op, an edit to any .rs / Cargo.toml /
 # pyproject.toml rebuilds the extension. Python sources are installed editable (maturin develop),
 # so edits to python/palpate/*.py need no rebuild.
@@ -27,7 +27,7 @@ RUST_INPUTS := $(shell find crates python/src -name '*.rs' 2>/dev/null) \
 
 export MPLBACKEND ?= Agg
 
-.PHONY: all setup demo test cargo-test pytest wheel lint clippy rustdoc stubtest clean distclean
+.PHONY: all setup demo test cargo-test pytest wheel lint clippy rustdoc stubtest fuzz-check clean distclean
 
 all: setup
 
@@ -79,13 +79,21 @@ $(VENV)/.lint-deps: $(VENV)/.deps
 	$(BIN)/python -m pip install -q --disable-pip-version-check $(LINT_DEPS)
 	touch $@
 
-lint: clippy rustdoc stubtest
+lint: clippy rustdoc stubtest fuzz-check
 
 clippy:
 	cargo clippy --workspace --all-targets -- -D warnings
 
 rustdoc:
 	RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --workspace
+
+# The fuzz targets (fuzz/: their own workspace, built by cargo-fuzz on nightly) compiled on stable,
+# so that a change of the core's API cannot break them unnoticed between `make fuzz` runs.
+# CUSTOM_LIBFUZZER_PATH points libfuzzer-sys's build script at a library instead of compiling
+# libFuzzer's C++ (a check never links it, so the path need not exist). ~20 s cold (palpate-core
+# checked once more, in fuzz/target), under a second warm.
+fuzz-check:
+	CUSTOM_LIBFUZZER_PATH=$(CURDIR)/fuzz/target/none/libfuzzer.a cargo check --locked --manifest-path fuzz/Cargo.toml --bins
 
 # Names only the stub has (the TypedDicts of returned dicts) are listed in the allowlist.
 stubtest: setup $(VENV)/.lint-deps

@@ -291,6 +291,49 @@ def gmsh_binary_precheck(path: str) -> None:
         check_budget(f"{what} of {n} entries", n * 64.0, name)
 
 
+# ---------------------------------------------------------------------------------------------
+# VTK legacy (read by meshio)
+# ---------------------------------------------------------------------------------------------
+
+_VTK_SIZES = {"bit": 1, "unsigned_char": 1, "char": 1, "unsigned_short": 2, "short": 2, "unsigned_int": 4,
+              "int": 4, "unsigned_long": 8, "long": 8, "vtktypeint64": 8, "vtktypeuint64": 8, "float": 4,
+              "double": 8}
+
+
+def vtk_legacy_precheck(path: str, error: Type[Exception] = MeshError) -> None:
+    """A legacy VTK file's POINTS and CELLS counts against the file's size and the budget, before
+    meshio trusts them: its binary reader asks numpy for the announced count up front (a 200-byte
+    file announcing 4e8 points asked for 9.6 GB). Binary data takes the type's size per number,
+    ASCII at least 2 bytes (a digit and a separator)."""
+    name = os.path.basename(path)
+    size = os.path.getsize(path)
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    lines = head.split(b"\n")
+    binary = any(line.strip().upper() == b"BINARY" for line in lines[:4])
+    offset = 0
+    for line in lines:
+        t = line.split()
+        offset += len(line) + 1
+        if not t or t[0].upper() not in (b"POINTS", b"CELLS"):
+            continue
+        key = t[0].upper().decode()
+        try:
+            n = int(t[1])
+            if key == "POINTS":
+                numbers, per = 3 * n, _VTK_SIZES.get(t[2].decode("latin-1").lower(), 8) if len(t) > 2 else 8
+            else:  # CELLS n size (VTK 4) or CELLS n_offsets n_connectivity (VTK 5): ints, or int64
+                numbers, per = int(t[2]) if len(t) > 2 else n, 4
+        except (ValueError, IndexError):
+            continue  # meshio's own error names a malformed line
+        need = numbers * (per if binary else 2)
+        if n < 0 or numbers < 0 or need > size:
+            raise error(f"{name}: byte {offset - len(line) - 1}: {key} announces {n} "
+                        f"{'points' if key == 'POINTS' else 'cells'} ({numbers} numbers), which need at least "
+                        f"{need} bytes; the file has {size} (truncated or corrupt header)")
+        check_budget(f"{key} of {n} entries", numbers * 8.0 * 3, name)
+
+
 def read_gmsh_ascii(path: str, version: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:
     """Read an ASCII gmsh MSH 2.2 or 4.1 file (nodes and elements; other sections are skipped)."""
     f = _Lines(path, read_text(path))

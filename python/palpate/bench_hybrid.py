@@ -86,8 +86,9 @@ def material() -> "_p.Material":
 
 def load_model(spec: str) -> Tuple[str, "_p.HybridModel"]:
     """``(name, model)`` for a shape name (:data:`palpate.hybrid.SHAPES`) or a model file path.
-    Raises ``ValueError`` for neither, :class:`palpate.ModelFileError` / ``OSError`` for a bad
-    file and :class:`palpate.data.DataError` when the Rodero data cannot be fetched."""
+    Raises :class:`palpate.ParameterError` (a ``ValueError``) for neither,
+    :class:`palpate.ModelFileError` / ``OSError`` for a bad file and :class:`palpate.data.DataError`
+    when the Rodero data cannot be fetched."""
     from .hybrid import SHAPES, build_shape, is_model_file
 
     if spec in SHAPES:
@@ -96,9 +97,9 @@ def load_model(spec: str) -> Tuple[str, "_p.HybridModel"]:
             return spec, build_shape(spec)
     if os.path.isfile(spec):
         if not is_model_file(spec):
-            raise ValueError(f"{spec} is not a palpate model file (write one with palpate build)")
+            raise _p.ParameterError(f"{spec} is not a palpate model file (write one with palpate build)")
         return os.path.basename(spec), _p.HybridModel.load(spec)
-    raise ValueError(f"{spec!r} is neither a model file nor a shape ({', '.join(SHAPES)})")
+    raise _p.ParameterError(f"{spec!r} is neither a model file nor a shape ({', '.join(SHAPES)})")
 
 
 def probe(model: "_p.HybridModel", name: str = "") -> Tuple[int, np.ndarray, np.ndarray, np.ndarray]:
@@ -125,7 +126,7 @@ def script(ticks: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per tick: the tool's depth [m] below the skin, its slide [m] along the tangent, and the
     phase index into :data:`PHASES`."""
     if ticks < MIN_TICKS:
-        raise ValueError(f"ticks must be at least {MIN_TICKS}, got {ticks}")
+        raise _p.ParameterError(f"ticks must be at least {MIN_TICKS}, got {ticks}")
     counts = [max(1, int(round(f * ticks))) for _, f in PHASES[:-1]]
     counts.append(ticks - sum(counts))
     depth, slide, phase = [], [], []
@@ -206,12 +207,12 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
     then time the scripted press and slide; returns the report (see ``palpate bench hybrid
     --help`` and the module docs). ``model_spec``: a shape name, a model file path or a
     :class:`palpate.HybridModel` (named ``name``); ``mass_scaling``: the shell's mass-scaling
-    quantile (``HybridSim``'s default if ``None``; 1.0 scales nothing). Raises ``ValueError`` for
-    bad arguments."""
+    quantile (``HybridSim``'s default if ``None``; 1.0 scales nothing). Raises
+    :class:`palpate.ParameterError` (a ``ValueError``) for bad arguments."""
     if isinstance(active, bool) or not isinstance(active, (int, np.integer)) or active <= 0:
-        raise ValueError(f"active must be a positive number of particles, got {active}")
+        raise _p.ParameterError(f"active must be a positive number of particles, got {active}")
     if radius is not None and not (radius > 0 and math.isfinite(radius)):
-        raise ValueError(f"radius must be positive and finite, got {radius}")
+        raise _p.ParameterError(f"radius must be positive and finite, got {radius}")
     depth, slide, phase = script(ticks)
     if isinstance(model_spec, _p.HybridModel):
         name, model = name or "model", model_spec
@@ -219,7 +220,7 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
         name, model = load_model(str(model_spec))
     info = model.info()
     if active > info["particles"]:
-        raise ValueError(f"active = {active} exceeds the model's {info['particles']} particles")
+        raise _p.ParameterError(f"active = {active} exceeds the model's {info['particles']} particles")
     mat = material()
     v, p, n_in, tangent = probe(model, name)
 

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Optional, Union
 
 from . import _progress
+from ._palpate import PalpateError
 
 RODERO_PACKAGE = "ansys-health-heart"
 RODERO_VERSION = "0.16.2"
@@ -39,8 +40,9 @@ RODERO_SHA256 = {
 }
 
 
-class DataError(RuntimeError):
-    """A data set could not be fetched (no network, pip failed, unexpected content)."""
+class DataError(PalpateError, RuntimeError):
+    """A data set could not be fetched (no network, pip failed, unexpected content). A
+    :class:`palpate.PalpateError` (and a ``RuntimeError``, as before)."""
 
 
 def _source_tree_data() -> Optional[Path]:

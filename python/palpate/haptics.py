@@ -89,7 +89,7 @@ def random_palpation(model: "_p.HybridModel", seconds: float, seed: int = 0, too
     ok[np.setdiff1d(np.arange(len(s)), np.unique(tris))] = False
     cand = np.flatnonzero(ok)
     if len(cand) == 0:
-        raise ValueError("no outer vertex suits a palpation (upper 60 %, facing sideways)")
+        raise _p.ParameterError("no outer vertex suits a palpation (upper 60 %, facing sideways)")
     times, knots = [0.0], []
     t = 0.0
 

@@ -27,7 +27,7 @@ from typing import Any, Optional, Tuple, Union
 
 import numpy as np
 
-from ._palpate import HybridModel
+from ._palpate import HybridModel, ParameterError
 from ._palpate import ventricle_surface as _ventricle_surface
 from .surfaces import load_surface, read_tagged_surface
 
@@ -122,4 +122,4 @@ def build_shape(name: str, **opts) -> HybridModel:
             warnings.simplefilter("ignore", MeshWarning)
             points, triangles, part = read_tagged_surface(path, unit="mm")
         return HybridModel.build_tagged(points, triangles, part, **opts)
-    raise ValueError(f"unknown shape {name!r}; expected one of {', '.join(SHAPES)}")
+    raise ParameterError(f"unknown shape {name!r}; expected one of {', '.join(SHAPES)}")

@@ -50,6 +50,8 @@ def _read_meshio(path: str, fmt: str):
     if fmt == "vtu":
         _vtu_precheck(path)
         _readers.vtk_xml_inflated_precheck(path, MeshError)
+    if fmt == "vtk":
+        _readers.vtk_legacy_precheck(path, MeshError)
     if fmt == "gmsh" and _readers.gmsh_format(path)[1]:
         _readers.gmsh_binary_precheck(path)
     # The format's own reader, not meshio.read: that one prints and calls sys.exit(1) on a ReadError.

@@ -15,7 +15,7 @@ from typing import Dict, Iterable, Optional, Tuple, Union
 import numpy as np
 
 from . import _readers
-from ._palpate import MeshWarning, SurfaceError, TriSurface
+from ._palpate import MeshWarning, ParameterError, SurfaceError, TriSurface
 from .io import unit_scale
 from .vtp import read_vtp
 
@@ -68,6 +68,8 @@ def _read_surface(path: PathLike, unit: str) -> Tuple[np.ndarray, np.ndarray, Di
     if size == 0:
         raise SurfaceError(f"{name}: empty file")
     _header_precheck(path, fmt, size)
+    if fmt == "vtk":
+        _readers.vtk_legacy_precheck(path, SurfaceError)
     if fmt == "vtu":
         _readers.vtk_xml_inflated_precheck(path, SurfaceError)
     if fmt == "vtp":
@@ -217,8 +219,8 @@ def load_surface(path: PathLike, unit: str = "m", repair: bool = False) -> TriSu
     SurfaceError
         Missing, unreadable or empty file, non-triangle cells, or an invalid surface (open,
         non-manifold, degenerate ...); the message names the file and the culprit.
-    ValueError
-        ``unit`` is not one of the above.
+    ParameterError
+        ``unit`` is not one of the above (also a ``ValueError``).
     """
     path = os.fspath(path)
     points, triangles, _ = _read_surface(path, unit)
@@ -310,7 +312,7 @@ def _as_tags(v: _Tags, what: str):
     try:
         out = {int(x) for x in v}
     except (TypeError, ValueError):
-        raise ValueError(f"{what} must be an integer tag value or a sequence of them, got {v!r}") from None
+        raise ParameterError(f"{what} must be an integer tag value or a sequence of them, got {v!r}") from None
     return out
 
 
@@ -560,16 +562,16 @@ def repair_surface(points, triangles, part=None):
     pts = np.asarray(points, dtype=np.float64)
     tris = np.array(triangles, dtype=np.int64, copy=True)
     if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f"points must have shape (n, 3), got {pts.shape}")
+        raise ParameterError(f"points must have shape (n, 3), got {pts.shape}")
     if tris.ndim != 2 or tris.shape[1] != 3:
-        raise ValueError(f"triangles must have shape (m, 3), got {tris.shape}")
+        raise ParameterError(f"triangles must have shape (m, 3), got {tris.shape}")
     n, m = len(pts), len(tris)
     if m and (tris.min() < 0 or tris.max() >= n):
-        raise ValueError(f"triangle vertex indices must lie in [0, {n}), got [{tris.min()}, {tris.max()}]")
+        raise ParameterError(f"triangle vertex indices must lie in [0, {n}), got [{tris.min()}, {tris.max()}]")
     if part is not None:
         part = np.asarray(part)
         if len(part) != m:
-            raise ValueError(f"part has {len(part)} entries, expected one per triangle ({m})")
+            raise ParameterError(f"part has {len(part)} entries, expected one per triangle ({m})")
     report = {"flipped": 0, "components": 0, "split_vertices": 0, "added_vertices": 0,
               "nonmanifold_edges": [], "removed_triangles": 0, "duplicate_triangles": 0,
               "zero_area_triangles": 0}

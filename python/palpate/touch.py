@@ -76,6 +76,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 import numpy as np
 
 from ._fields import FieldChecker
+from ._palpate import PalpateError, ParameterError
 from ._readers import read_text
 from .io import remove_frames, write_pvd
 
@@ -102,11 +103,12 @@ _SEGMENT_KEYS = {
 _PROBE_KEYS = {"point", "vertex", "normal", "gap"}
 
 
-class ScriptError(ValueError):
-    """A touch script that cannot be used: one line naming the file and the entry."""
+class ScriptError(PalpateError, ValueError):
+    """A touch script that cannot be used: one line naming the file and the entry. A
+    :class:`palpate.PalpateError` (and a ``ValueError``, as before)."""
 
 
-class TouchFailed(RuntimeError):
+class TouchFailed(PalpateError, RuntimeError):
     """A tick failed during :func:`run_touch` (a :class:`palpate.StepError`); what was done so far
     is written. ``tick`` (1-based), ``reason`` and ``summary`` (as :func:`run_touch` returns)."""
 
@@ -502,7 +504,7 @@ def run_touch(sim, script: Union[Script, "Trajectory"], out_dir: PathLike, *, dt
     from ._palpate import StepError
 
     if not (dt > 0 and math.isfinite(dt)):
-        raise ValueError(f"dt = {dt} s must be positive and finite")
+        raise ParameterError(f"dt = {dt} s must be positive and finite")
     out_dir = os.fspath(out_dir)
     os.makedirs(out_dir, exist_ok=True)
     traj = script if isinstance(script, Trajectory) else script.resolve(
@@ -511,7 +513,7 @@ def run_touch(sim, script: Union[Script, "Trajectory"], out_dir: PathLike, *, dt
     n = len(times)
     every = default_every(n) if every is None else int(every)
     if every < 1:
-        raise ValueError(f"every = {every} must be at least 1")
+        raise ParameterError(f"every = {every} must be at least 1")
     depths = traj.depth(centres)
     series = _Series(out_dir, sim, traj.radius)
     series.write(0.0, traj.knots[0])

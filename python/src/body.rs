@@ -304,7 +304,7 @@ impl PyBody {
     /// stress for an inverted element), ``energy_density`` [J/m^3] (strain energy per rest
     /// volume), ``det_f`` [-] (volume ratio; <= 0: inverted).
     fn element_fields<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let f = py.detach(|| self.model.element_fields(&self.state.x));
+        let f = errors::guard("Body.element_fields", || Ok(py.detach(|| self.model.element_fields(&self.state.x))))?;
         let d = PyDict::new(py);
         d.set_item("von_mises", conv::f64s_to_py(py, &f.von_mises))?;
         d.set_item("energy_density", conv::f64s_to_py(py, &f.energy_density))?;
@@ -335,10 +335,11 @@ impl PyBody {
         &self,
         py: Python<'py>,
         forces: Option<&Bound<'py, PyAny>>,
-        max_iterations: Option<usize>,
+        max_iterations: Option<i64>,
         tolerance: Option<f64>,
-        load_steps: Option<usize>,
+        load_steps: Option<i64>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let (max_iterations, load_steps) = (errors::count_opt(max_iterations, "max_iterations")?, errors::count_opt(load_steps, "load_steps")?);
         let d = StaticOptions::default();
         let (max_iterations, tolerance, load_steps) =
             (max_iterations.unwrap_or(d.max_iterations), tolerance.unwrap_or(d.tolerance), load_steps.unwrap_or(d.load_steps));
@@ -471,7 +472,7 @@ impl PyBody {
             excess_iterations: item(state, "excess_iterations")?.extract()?,
         };
         let (model, ws) = (&self.model, &mut self.ws);
-        py.detach(|| ws.restore_memory(model, &mem)).map_err(|e| errors::step_error(e, "in set_state"))?;
+        errors::guard("Body.set_state", || py.detach(|| ws.restore_memory(model, &mem)).map_err(|e| errors::step_error(e, "in set_state")))?;
         self.state = State { x, v, t, f_ext };
         Ok(())
     }
@@ -498,7 +499,7 @@ impl PyBody {
     /// which has no factor). Raises ``StepError`` for a bad ``dt`` or a failed factorisation.
     fn prepare(&mut self, py: Python<'_>, dt: f64) -> PyResult<bool> {
         let (model, ws) = (&self.model, &mut self.ws);
-        py.detach(|| ws.prepare(model, dt)).map_err(|e| errors::step_error(e, "in prepare"))
+        errors::guard("Body.prepare", || py.detach(|| ws.prepare(model, dt)).map_err(|e| errors::step_error(e, "in prepare")))
     }
 
     /// An independent copy: the same model (shared mesh and material objects, which are

@@ -84,6 +84,19 @@ pub fn count(v: i64, name: &str) -> PyResult<usize> {
     usize::try_from(v).map_err(|_| param_error(format!("{name} = {v}: must be a count, 0 or more")))
 }
 
+/// [`count`] of an optional argument (None: the default).
+pub fn count_opt(v: Option<i64>, name: &str) -> PyResult<Option<usize>> {
+    v.map(|v| count(v, name)).transpose()
+}
+
+/// An index argument `i` into `n` items: a negative one is a `palpate.ParameterError` (pyo3's
+/// conversion to `usize` raised OverflowError); `Ok(None)` when it is past the end, for the
+/// caller's own out-of-range error.
+pub fn index(i: i64, n: usize, name: &str) -> PyResult<Option<usize>> {
+    let i = usize::try_from(i).map_err(|_| param_error(format!("{name} = {i}: must be an index, 0 or more")))?;
+    Ok((i < n).then_some(i))
+}
+
 /// A bad argument value as `palpate.ParameterError`: a PalpateError that is also a ValueError.
 pub fn param_error(msg: String) -> PyErr {
     Python::attach(|py| match PARAMETER.get(py) {

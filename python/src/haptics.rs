@@ -13,7 +13,6 @@ use palpate_haptics::bridge::protocol::Reject;
 use palpate_haptics::bridge::{Bridge, BridgeStats};
 use palpate_haptics::devices::{Hand, HandParams, Replay, Scripted};
 use palpate_haptics::{CouplingParams, Device, DeviceKind, HapticCore, HybridPhysics, Idle, Physics, Recording, SafetyParams, Servo, ServoConfig, ServoHandle, ServoReport, Snapshot, Stats, Vec3Cell};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -86,19 +85,28 @@ fn kind_of(name: &str) -> PyResult<DeviceKind> {
         "forcedimension" => DeviceKind::ForceDimension,
         "haply" => DeviceKind::Haply,
         "hapticmaster" => DeviceKind::HapticMaster,
-        _ => return Err(PyValueError::new_err(format!("kind = {name:?}: expected simulated, bridge, touch, forcedimension, haply or hapticmaster"))),
+        _ => return Err(errors::param_error_from(format!("kind = {name:?}: expected simulated, bridge, touch, forcedimension, haply or hapticmaster"))),
     })
 }
 
 fn positive(name: &str, v: Option<f64>, zero_ok: bool) -> PyResult<()> {
     match v {
-        Some(x) if !(x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0))) => Err(PyValueError::new_err(format!("{name} = {x} must be {} and finite", if zero_ok { "non-negative" } else { "positive" }))),
+        Some(x) if !(x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0))) => Err(errors::param_error_from(format!("{name} = {x} must be {} and finite", if zero_ok { "non-negative" } else { "positive" }))),
         _ => Ok(()),
     }
 }
 
 fn haptics_error(msg: impl std::fmt::Display) -> PyErr {
     HapticsError::new_err(msg.to_string())
+}
+
+/// A recording that cannot be loaded: over the memory budget a `palpate.LimitError` (as every
+/// size refused before allocation), anything else a `HapticsError`.
+fn record_error(e: palpate_haptics::record::RecordError) -> PyErr {
+    match e {
+        palpate_haptics::record::RecordError::Limit { path, source } => errors::limit_error(&source, Some(&path)),
+        other => haptics_error(other),
+    }
 }
 
 fn snapshot_dict<'py>(py: Python<'py>, s: &Snapshot) -> PyResult<Bound<'py, PyDict>> {
@@ -165,7 +173,7 @@ impl PyHapticLoop {
         times: Option<&Bound<'_, PyAny>>,
         knots: Option<&Bound<'_, PyAny>>,
         recording: Option<std::path::PathBuf>,
-        port: Option<u16>,
+        port: Option<i64>,
         host: &str,
         kind: Option<&str>,
         hand_start: Option<&Bound<'_, PyAny>>,
@@ -180,100 +188,111 @@ impl PyHapticLoop {
         max_rate: Option<f64>,
         ramp: Option<f64>,
         stall_timeout: Option<f64>,
-        record_ticks: usize,
-        max_ticks: Option<u64>,
+        record_ticks: i64,
+        max_ticks: Option<i64>,
         spin: Option<f64>,
     ) -> PyResult<Self> {
-        for (n, v) in [("tool_radius", tool_radius), ("tool_stiffness", tool_stiffness), ("coupling_stiffness", coupling_stiffness), ("proxy_mass", proxy_mass), ("max_force", max_force), ("max_rate", max_rate), ("stall_timeout", stall_timeout)] {
-            positive(n, v, false)?;
-        }
-        for (n, v) in [("coupling_damping", coupling_damping), ("ramp", ramp), ("spin", spin)] {
-            positive(n, v, true)?;
-        }
-        let mut replay: Option<Recording> = None;
-        let mut rate_hz = rate_hz;
-        if device == "replay" {
-            let path = recording.as_ref().ok_or_else(|| PyValueError::new_err("device 'replay' needs recording=PATH"))?;
-            let r = Recording::load(path).map_err(haptics_error)?;
-            rate_hz = r.rate_hz;
-            replay = Some(r);
-        }
-        let kind = match kind {
-            Some(k) => kind_of(k)?,
-            None if device == "bridge" => DeviceKind::Bridge,
-            None => DeviceKind::Simulated,
+        // Counts as i64: a negative one is a ParameterError (pyo3's usize / u16 conversions raised
+        // OverflowError). The rest runs under the panic guard: a panic while opening a recording,
+        // a device or the physics is an InternalError, not pyo3's PanicException.
+        let record_ticks = errors::count(record_ticks, "record_ticks")?;
+        let max_ticks = errors::count_opt(max_ticks, "max_ticks")?.map(|n| n as u64);
+        let port = match port {
+            Some(p) => Some(u16::try_from(p).map_err(|_| errors::param_error_from(format!("port = {p}: must be 0 to 65535")))?),
+            None => None,
         };
-        let (dc, ds) = kind.defaults();
-        let coupling = match &replay {
-            Some(r) => r.coupling,
-            None => CouplingParams { stiffness: coupling_stiffness.unwrap_or(dc.stiffness), damping: coupling_damping.unwrap_or(dc.damping), proxy_mass: proxy_mass.unwrap_or(dc.proxy_mass) },
-        };
-        let safety = match &replay {
-            Some(r) => r.safety,
-            None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout) },
-        };
-        let defaults = ServoConfig::default();
-        let config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(defaults.spin), ..defaults };
-        config.check().map_err(PyValueError::new_err)?;
+        errors::guard("HapticLoop", || {
+            for (n, v) in [("tool_radius", tool_radius), ("tool_stiffness", tool_stiffness), ("coupling_stiffness", coupling_stiffness), ("proxy_mass", proxy_mass), ("max_force", max_force), ("max_rate", max_rate), ("stall_timeout", stall_timeout)] {
+                positive(n, v, false)?;
+            }
+            for (n, v) in [("coupling_damping", coupling_damping), ("ramp", ramp), ("spin", spin)] {
+                positive(n, v, true)?;
+            }
+            let mut replay: Option<Recording> = None;
+            let mut rate_hz = rate_hz;
+            if device == "replay" {
+                let path = recording.as_ref().ok_or_else(|| errors::param_error_from("device 'replay' needs recording=PATH"))?;
+                let r = Recording::load(path).map_err(record_error)?;
+                rate_hz = r.rate_hz;
+                replay = Some(r);
+            }
+            let kind = match kind {
+                Some(k) => kind_of(k)?,
+                None if device == "bridge" => DeviceKind::Bridge,
+                None => DeviceKind::Simulated,
+            };
+            let (dc, ds) = kind.defaults();
+            let coupling = match &replay {
+                Some(r) => r.coupling,
+                None => CouplingParams { stiffness: coupling_stiffness.unwrap_or(dc.stiffness), damping: coupling_damping.unwrap_or(dc.damping), proxy_mass: proxy_mass.unwrap_or(dc.proxy_mass) },
+            };
+            let safety = match &replay {
+                Some(r) => r.safety,
+                None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout) },
+            };
+            let defaults = ServoConfig::default();
+            let config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(defaults.spin), ..defaults };
+            config.check().map_err(errors::param_error_from)?;
 
-        let mut hand = None;
-        let mut bridge = None;
-        let dev: Box<dyn Device> = match device {
-            "scripted" => {
-                let (Some(t), Some(k)) = (times, knots) else {
-                    return Err(PyValueError::new_err("device 'scripted' needs times=(k,) [s] and knots=(k, 3) [m]"));
-                };
-                let (t, _) = conv::reals_nd(t, "times")?;
-                let k = conv::vec3s(k, "knots", t.len(), true)?;
-                Box::new(Scripted::new(t, k).map_err(PyValueError::new_err)?)
-            }
-            "replay" => Box::new(Replay::new(replay.as_ref().unwrap())),
-            "hand" => {
-                let at = match hand_start {
-                    Some(p) => conv::vec3(p, "hand_start")?,
-                    None => return Err(PyValueError::new_err("device 'hand' needs hand_start=(3,) [m]")),
-                };
-                let h = Hand::new(HandParams::default(), at);
-                hand = Some(h.target());
-                Box::new(h)
-            }
-            "bridge" => {
-                let ip: Ipv4Addr = host.parse().map_err(|_| PyValueError::new_err(format!("host = {host:?} is not an IPv4 address")))?;
-                let port = port.ok_or_else(|| PyValueError::new_err("device 'bridge' needs port=N (0: any free port)"))?;
-                let b = Bridge::bind(SocketAddrV4::new(ip, port), kind).map_err(|e| haptics_error(format!("cannot open the bridge on {host}:{port}: {e}")))?;
-                let addr = b.local_addr().map_err(haptics_error)?.to_string();
-                bridge = Some((addr, b.stats()));
-                Box::new(b)
-            }
-            other => return Err(PyValueError::new_err(format!("device = {other:?}: expected scripted, replay, hand or bridge"))),
-        };
+            let mut hand = None;
+            let mut bridge = None;
+            let dev: Box<dyn Device> = match device {
+                "scripted" => {
+                    let (Some(t), Some(k)) = (times, knots) else {
+                        return Err(errors::param_error_from("device 'scripted' needs times=(k,) [s] and knots=(k, 3) [m]"));
+                    };
+                    let (t, _) = conv::reals_nd(t, "times")?;
+                    let k = conv::vec3s(k, "knots", t.len(), true)?;
+                    Box::new(Scripted::new(t, k).map_err(errors::param_error_from)?)
+                }
+                "replay" => Box::new(Replay::new(replay.as_ref().unwrap())),
+                "hand" => {
+                    let at = match hand_start {
+                        Some(p) => conv::vec3(p, "hand_start")?,
+                        None => return Err(errors::param_error_from("device 'hand' needs hand_start=(3,) [m]")),
+                    };
+                    let h = Hand::new(HandParams::default(), at);
+                    hand = Some(h.target());
+                    Box::new(h)
+                }
+                "bridge" => {
+                    let ip: Ipv4Addr = host.parse().map_err(|_| errors::param_error_from(format!("host = {host:?} is not an IPv4 address")))?;
+                    let port = port.ok_or_else(|| errors::param_error_from("device 'bridge' needs port=N (0: any free port)"))?;
+                    let b = Bridge::bind(SocketAddrV4::new(ip, port), kind).map_err(|e| haptics_error(format!("cannot open the bridge on {host}:{port}: {e}")))?;
+                    let addr = b.local_addr().map_err(haptics_error)?.to_string();
+                    bridge = Some((addr, b.stats()));
+                    Box::new(b)
+                }
+                other => return Err(errors::param_error_from(format!("device = {other:?}: expected scripted, replay, hand or bridge"))),
+            };
 
-        let physics: Box<dyn Physics> = if idle {
-            Box::new(Idle::default())
-        } else {
-            let mut options = SimOptions { hold, ..SimOptions::default() };
-            let mut tool = Tool::default();
-            if let Some(r) = tool_radius {
-                tool.radius = r;
+            let physics: Box<dyn Physics> = if idle {
+                Box::new(Idle::default())
+            } else {
+                let mut options = SimOptions { hold, ..SimOptions::default() };
+                let mut tool = Tool::default();
+                if let Some(r) = tool_radius {
+                    tool.radius = r;
+                }
+                if let Some(k) = tool_stiffness {
+                    tool.stiffness = k;
+                }
+                options.tool = tool;
+                let (hm, mat) = (model.model.clone(), material.inner);
+                Box::new(py.detach(|| HybridPhysics::new(hm, mat, options)).map_err(errors::model_error)?)
+            };
+            let id = physics.identity();
+            if let Some(r) = &replay {
+                if r.identity.digest != id.digest {
+                    return Err(haptics_error(format!(
+                        "the recording is of another simulation (digest {:016x}: {}), this loop's is {:016x} ({}): a replay would not give the recorded forces",
+                        r.identity.digest, r.identity.description, id.digest, id.description
+                    )));
+                }
             }
-            if let Some(k) = tool_stiffness {
-                tool.stiffness = k;
-            }
-            options.tool = tool;
-            let (hm, mat) = (model.model.clone(), material.inner);
-            Box::new(py.detach(|| HybridPhysics::new(hm, mat, options)).map_err(errors::model_error)?)
-        };
-        let id = physics.identity();
-        if let Some(r) = &replay {
-            if r.identity.digest != id.digest {
-                return Err(haptics_error(format!(
-                    "the recording is of another simulation (digest {:016x}: {}), this loop's is {:016x} ({}): a replay would not give the recorded forces",
-                    r.identity.digest, r.identity.description, id.digest, id.description
-                )));
-            }
-        }
-        let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
-        Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description) })
+            let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
+            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description) })
+        })
     }
 
     /// Starts the servo thread. Raises ``HapticsError`` if already started.
@@ -374,13 +393,14 @@ impl PyHapticLoop {
     /// ``max_force_n``, ``energy_into_user_j``, ``bad_inputs``, ``n_faults``, ``faults``.
     /// Deterministic: a replay gives the recorded forces bit for bit.
     #[pyo3(signature = (max_ticks = None))]
-    fn run<'py>(&self, py: Python<'py>, max_ticks: Option<u64>) -> PyResult<Bound<'py, PyDict>> {
+    fn run<'py>(&self, py: Python<'py>, max_ticks: Option<i64>) -> PyResult<Bound<'py, PyDict>> {
+        let max_ticks = errors::count_opt(max_ticks, "max_ticks")?.map(|n| n as u64);
         let mut st = self.stage.lock().unwrap();
         let Stage::Ready(core, dev) = &mut *st else {
             return Err(haptics_error("run() is for a loop that was not started"));
         };
         let n = max_ticks.or(self.config.max_ticks).unwrap_or(u64::MAX);
-        py.detach(|| core.run_offline(dev.as_mut(), n));
+        errors::guard("HapticLoop.run", || Ok(py.detach(|| core.run_offline(dev.as_mut(), n))))?;
         let d = PyDict::new(py);
         core_dict(py, core, &d)?;
         Ok(d)

@@ -101,13 +101,14 @@ fn options(kw: Option<&Bound<'_, PyDict>>) -> PyResult<HybridOptions> {
         match key.as_str() {
             "projection" => o.projection = v.extract::<PyProjection>().map_err(|e| arg(e.into()))?.into(),
             "core_fraction" => o.core_fraction = v.extract().map_err(arg)?,
-            "core_triangles" => o.core_triangles = v.extract().map_err(arg)?,
-            "core_layers" => o.core_layers = v.extract().map_err(arg)?,
+            // Counts as i64 first: a negative one is a ParameterError, not pyo3's OverflowError.
+            "core_triangles" => o.core_triangles = errors::count(v.extract().map_err(arg)?, "core_triangles")?,
+            "core_layers" => o.core_layers = errors::count(v.extract().map_err(arg)?, "core_layers")?,
             "spacing" => spacing = v.extract::<Option<f64>>().map_err(arg)?,
-            "particles" => particles = Some(v.extract::<usize>().map_err(arg)?),
+            "particles" => particles = Some(errors::count(v.extract().map_err(arg)?, "particles")?),
             "density" => o.density = v.extract().map_err(arg)?,
-            "min_region_particles" => o.min_region_particles = v.extract().map_err(arg)?,
-            "field_voxels" => o.field_voxels = v.extract().map_err(arg)?,
+            "min_region_particles" => o.min_region_particles = errors::count(v.extract().map_err(arg)?, "min_region_particles")?,
+            "field_voxels" => o.field_voxels = errors::count(v.extract().map_err(arg)?, "field_voxels")?,
             _ => return Err(PyTypeError::new_err(format!("unexpected keyword argument '{key}' (the build options are {})", OPTION_NAMES.join(", ")))),
         }
     }
@@ -225,7 +226,7 @@ impl PyHybridModel {
     /// model unpickles. Raises :class:`ModelFileError` as :meth:`load` does.
     #[staticmethod]
     fn from_bytes(py: Python<'_>, data: &[u8]) -> PyResult<PyHybridModel> {
-        let model = py.detach(|| hybrid::file::from_bytes(data, "<bytes>")).map_err(file_error)?;
+        let model = errors::guard("HybridModel.from_bytes", || py.detach(|| hybrid::file::from_bytes(data, "<bytes>")).map_err(file_error))?;
         Ok(PyHybridModel { model })
     }
 
@@ -292,31 +293,31 @@ impl PyHybridModel {
     fn shell_volume(&self) -> f64 { self.model.shell_volume() }
 
     /// RV(p_s): indices of the particles of region ``s``, int64.
-    fn region_particles<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
-        self.check_region(s)?;
+    fn region_particles<'py>(&self, py: Python<'py>, s: i64) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let s = self.check_region(s)?;
         let v: Vec<i64> = self.model.region_particle_ranges(s).into_iter().flat_map(|r| r.map(|i| i as i64)).collect();
         Ok(PyArray1::from_vec(py, v))
     }
     /// nv(p_s): the outer triangles of region ``s``, int64.
-    fn region_triangles<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
-        self.check_region(s)?;
+    fn region_triangles<'py>(&self, py: Python<'py>, s: i64) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let s = self.check_region(s)?;
         Ok(conv::u32s_to_py(py, &self.model.region_triangles(s)))
     }
     /// The core faces under RV(p_s), int64.
-    fn region_core_faces<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
-        self.check_region(s)?;
+    fn region_core_faces<'py>(&self, py: Python<'py>, s: i64) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let s = self.check_region(s)?;
         Ok(conv::u32s_to_py(py, &self.model.region_core_faces(s)))
     }
     /// C(p_s): the projections on the core of nv(p_s)'s boundary vertices [m], (k, 3).
-    fn region_curve<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        self.check_region(s)?;
+    fn region_curve<'py>(&self, py: Python<'py>, s: i64) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let s = self.check_region(s)?;
         Ok(conv::vec3s_to_py(py, &self.model.region_curve(s)))
     }
     /// B(p_s): ``{"origin": (3,) [m], "h": voxel edge [m], "label": (nz, ny, nx) uint8 (0
     /// outside, 1 inside, 2 boundary), "gradient": (nz, ny, nx, 3) float32 unit vectors to the
     /// nearest interior voxel (zero inside)}``.
-    fn region_field<'py>(&self, py: Python<'py>, s: usize) -> PyResult<Bound<'py, PyDict>> {
-        self.check_region(s)?;
+    fn region_field<'py>(&self, py: Python<'py>, s: i64) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.check_region(s)?;
         let f = self.model.region_field(s);
         let [nx, ny, nz] = f.dims;
         let d = PyDict::new(py);
@@ -378,10 +379,12 @@ impl PyHybridModel {
 }
 
 impl PyHybridModel {
-    fn check_region(&self, s: usize) -> PyResult<()> {
-        if s >= self.model.n_regions() {
-            return Err(pyo3::exceptions::PyIndexError::new_err(format!("region {s} out of range ({} regions)", self.model.n_regions())));
+    /// The region index `s`: a negative one is a ParameterError, one past the end an IndexError
+    /// (as for a sequence).
+    fn check_region(&self, s: i64) -> PyResult<usize> {
+        match errors::index(s, self.model.n_regions(), "region")? {
+            Some(s) => Ok(s),
+            None => Err(pyo3::exceptions::PyIndexError::new_err(format!("region {s} out of range ({} regions)", self.model.n_regions()))),
         }
-        Ok(())
     }
 }

@@ -79,10 +79,11 @@ impl PyHybridSim {
         hold: bool,
         activation_margin: Option<f64>,
         max_tool_step: Option<f64>,
-        linger_ticks: Option<u64>,
-        max_substeps: Option<usize>,
+        linger_ticks: Option<i64>,
+        max_substeps: Option<i64>,
         mass_scaling: Option<f64>,
     ) -> PyResult<Self> {
+        let (linger_ticks, max_substeps) = (errors::count_opt(linger_ticks, "linger_ticks")?, errors::count_opt(max_substeps, "max_substeps")?);
         let mut tool = Tool::default();
         if let Some(r) = tool_radius {
             if !(r > 0.0 && r.is_finite()) {
@@ -110,7 +111,7 @@ impl PyHybridSim {
             options.max_tool_step = d;
         }
         if let Some(l) = linger_ticks {
-            options.linger_ticks = l;
+            options.linger_ticks = l as u64;
         }
         if let Some(k) = max_substeps {
             if k == 0 {

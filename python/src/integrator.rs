@@ -140,7 +140,8 @@ impl PyBackwardEuler {
 impl PyBackwardEuler {
     #[new]
     #[pyo3(signature = (solver = PySolver::QuasiNewton, *, max_iterations = None, tolerance = None, history = None))]
-    fn new(solver: PySolver, max_iterations: Option<usize>, tolerance: Option<f64>, history: Option<usize>) -> PyResult<Self> {
+    fn new(solver: PySolver, max_iterations: Option<i64>, tolerance: Option<f64>, history: Option<i64>) -> PyResult<Self> {
+        let (max_iterations, history) = (crate::errors::count_opt(max_iterations, "max_iterations")?, crate::errors::count_opt(history, "history")?);
         if solver == PySolver::Linearised && (max_iterations.is_some() || tolerance.is_some() || history.is_some()) {
             return Err(crate::errors::param_error_from("the LINEARISED solver takes no max_iterations, tolerance or history"));
         }

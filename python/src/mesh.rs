@@ -161,9 +161,10 @@ pub fn ellipsoid_wall(
     py: Python<'_>,
     inner: Option<[f64; 3]>,
     outer: Option<[f64; 3]>,
-    subdivisions: Option<usize>,
-    layers: Option<usize>,
+    subdivisions: Option<i64>,
+    layers: Option<i64>,
 ) -> PyResult<PyTetMesh> {
+    let (subdivisions, layers) = (errors::count_opt(subdivisions, "subdivisions")?, errors::count_opt(layers, "layers")?);
     let d = EllipsoidWall::default();
     let p = EllipsoidWall {
         inner: axes(inner, d.inner, "inner")?,
@@ -200,10 +201,12 @@ pub fn truncated_ellipsoid_wall(
     inner: Option<[f64; 3]>,
     outer: Option<[f64; 3]>,
     z_cut: Option<f64>,
-    circumferential: Option<usize>,
-    longitudinal: Option<usize>,
-    layers: Option<usize>,
+    circumferential: Option<i64>,
+    longitudinal: Option<i64>,
+    layers: Option<i64>,
 ) -> PyResult<PyTetMesh> {
+    let (circumferential, longitudinal, layers) =
+        (errors::count_opt(circumferential, "circumferential")?, errors::count_opt(longitudinal, "longitudinal")?, errors::count_opt(layers, "layers")?);
     let d = TruncatedEllipsoidWall::default();
     let p = TruncatedEllipsoidWall {
         inner: axes(inner, d.inner, "inner")?,

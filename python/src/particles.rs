@@ -366,10 +366,10 @@ impl PyParticleBody {
     }
 
     /// Neighbours of particle ``i`` at rest, int64, ascending.
-    fn neighbours<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray1<i64>>> {
-        if i >= self.model.n_particles() {
+    fn neighbours<'py>(&self, py: Python<'py>, i: i64) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let Some(i) = errors::index(i, self.model.n_particles(), "i")? else {
             return Err(crate::errors::param_error_from(format!("particle index {i} out of range (the body has {} particles)", self.model.n_particles())));
-        }
+        };
         Ok(conv::usizes_to_py(py, self.model.neighbours(i)))
     }
 

@@ -67,7 +67,7 @@ impl PyTriSurface {
     fn new(py: Python<'_>, points: &Bound<'_, PyAny>, triangles: &Bound<'_, PyAny>, source: Option<String>) -> PyResult<Self> {
         let p = conv::points(points, "points")?;
         let t = conv::index_rows::<3>(triangles, "triangles")?;
-        let (surface, warnings) = py.detach(|| TriSurface::from_arrays(&p, &t)).map_err(|e| match &source {
+        let (surface, warnings) = errors::guard("TriSurface", || Ok(py.detach(|| TriSurface::from_arrays(&p, &t))))?.map_err(|e| match &source {
             Some(s) => surface_error(e.in_file(s.clone())),
             None => surface_error(e),
         })?;
@@ -153,7 +153,8 @@ impl PyTriSurface {
 /// ``8 * 4**subdivisions`` triangles (default 4: 2048); the volume converges to 4/3 pi a b c.
 #[pyfunction]
 #[pyo3(signature = (semi_axes = [0.026, 0.026, 0.042], subdivisions = 4))]
-pub fn ellipsoid_surface(py: Python<'_>, semi_axes: [f64; 3], subdivisions: usize) -> PyResult<PyTriSurface> {
+pub fn ellipsoid_surface(py: Python<'_>, semi_axes: [f64; 3], subdivisions: i64) -> PyResult<PyTriSurface> {
+    let subdivisions = crate::errors::count(subdivisions, "subdivisions")?;
     if !semi_axes.iter().all(|a| a.is_finite() && *a > 0.0) {
         return Err(crate::errors::param_error_from(format!("semi_axes must be finite and positive [m], got {semi_axes:?}")));
     }
@@ -173,7 +174,7 @@ type Sampled<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>);
 #[pyfunction]
 pub fn sample_inside<'py>(py: Python<'py>, surface: &Bound<'py, PyTriSurface>, spacing: f64, density: f64) -> PyResult<Sampled<'py>> {
     let s = &surface.get().inner;
-    let set = py.detach(|| mesh::sample_inside(s, spacing, density)).map_err(surface_error)?;
+    let set = crate::errors::guard("sample_inside", || py.detach(|| mesh::sample_inside(s, spacing, density)).map_err(surface_error))?;
     Ok((conv::vec3s_to_py(py, &set.positions), conv::f64s_to_py(py, &set.masses)))
 }
 
@@ -189,6 +190,6 @@ pub fn sample_between<'py>(
     density: f64,
 ) -> PyResult<Sampled<'py>> {
     let (i, o) = (&inner.get().inner, &outer.get().inner);
-    let set = py.detach(|| mesh::sample_between(i, o, spacing, density)).map_err(surface_error)?;
+    let set = crate::errors::guard("sample_between", || py.detach(|| mesh::sample_between(i, o, spacing, density)).map_err(surface_error))?;
     Ok((conv::vec3s_to_py(py, &set.positions), conv::f64s_to_py(py, &set.masses)))
 }

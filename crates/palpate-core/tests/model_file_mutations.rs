@@ -105,3 +105,71 @@ fn nan_fields_are_refused() {
         assert!(e.to_string().contains("nan.palpate"), "{e}");
     }
 }
+
+/// The bytes of the corpus's model (python/tests/corpus_cases.py: the paper's ellipsoids, 400
+/// particles, 8192 outer triangles), on which crafted ring counts made a load take 20-55 s.
+fn ellipsoids_model() -> Vec<u8> {
+    let wall = shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).expect("the ellipsoid wall");
+    let o = HybridOptions { spacing: Spacing::Count(400), field_voxels: 20_000, ..Default::default() };
+    to_bytes(&build(&wall, &o).expect("the ellipsoids model builds"))
+}
+
+/// `bytes` with every region's ring count (one byte per outer vertex, after its u64 length) set
+/// to `rings`, checksum refreshed: a crafted file.
+fn with_rings(bytes: &[u8], rings: u8) -> Vec<u8> {
+    let m = from_bytes(bytes, "base").expect("loads");
+    let mut section = (m.region_rings.len() as u64).to_le_bytes().to_vec();
+    section.extend_from_slice(&m.region_rings);
+    let at = bytes.windows(section.len()).position(|w| w == section.as_slice()).expect("the region rings in the file") + 8;
+    let mut b = bytes.to_vec();
+    b[at..at + m.region_rings.len()].fill(rings);
+    refresh(b)
+}
+
+/// Load `bytes` as `HybridModel.load` does: (the model or None, seconds). A refusal must name the
+/// file and the rings.
+fn timed_load(bytes: &[u8]) -> (Option<palpate_core::hybrid::HybridModel>, f64) {
+    let t = std::time::Instant::now();
+    let r = from_bytes(bytes, "rings.palpate");
+    let secs = t.elapsed().as_secs_f64();
+    match r {
+        Ok(m) => (Some(m), secs),
+        Err(e) => {
+            assert!(e.to_string().contains("rings.palpate") && e.to_string().contains("rings"), "{e}");
+            (None, secs)
+        }
+    }
+}
+
+/// Seconds to regrow the first `n` regions (their triangles, curve and field), as the runtime
+/// does for each region a tool activates.
+fn regrow(m: &palpate_core::hybrid::HybridModel, n: usize) -> f64 {
+    let t = std::time::Instant::now();
+    for s in 0..n.min(m.n_regions()) {
+        let _ = m.region_len(s);
+        let _ = m.region_curve(s);
+        let _ = m.region_field(s);
+    }
+    t.elapsed().as_secs_f64()
+}
+
+/// Issue 15's crafted files that took 20-55 s: every region ring count set to 255. Refused on
+/// load, at once (the builder makes at most MAX_RINGS; the loader takes up to twice that); a
+/// file at the largest count accepted loads at once, and a region of it costs about what one
+/// the builder made costs to regrow (this model's regions all have MAX_RINGS rings already).
+#[test]
+fn crafted_ring_counts_are_refused_or_bounded() {
+    let base = ellipsoids_model();
+    let most = (2 * palpate_core::hybrid::options::MAX_RINGS) as u8;
+    for rings in [255, most + 1] {
+        let (m, secs) = timed_load(&with_rings(&base, rings));
+        assert!(m.is_none(), "{rings} rings everywhere loaded");
+        assert!(secs < 2.0, "{rings} rings everywhere: refusing took {secs:.1} s");
+    }
+    let (built, _) = timed_load(&base);
+    let (crafted, secs) = timed_load(&with_rings(&base, most));
+    let crafted = crafted.expect("the largest ring count accepted loads");
+    assert!(secs < 2.0, "{most} rings everywhere: loading took {secs:.1} s");
+    let (t_built, t_crafted) = (regrow(&built.expect("loads"), 20), regrow(&crafted, 20));
+    assert!(t_crafted < 4.0 * t_built + 0.5, "{most} rings: 20 regions regrown in {t_crafted:.2} s, {t_built:.2} s as built");
+}

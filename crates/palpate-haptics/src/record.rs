@@ -67,6 +67,9 @@ pub enum RecordError {
     Format { path: String, reason: String },
     #[error("{path}: {source}")]
     Io { path: String, source: std::io::Error },
+    /// A file larger than the memory budget (`palpate_core::limits`), refused before reading.
+    #[error("{path}: {source}")]
+    Limit { path: String, source: palpate_core::LimitError },
 }
 
 impl Recording {
@@ -155,11 +158,23 @@ impl Recording {
         f.write_all(&self.to_bytes()).map_err(io)
     }
 
+    /// Load from `path`: a regular file within the memory budget (`PALPATE_MAX_MEMORY`). A FIFO,
+    /// socket or device is refused before it is opened (the read would block for ever, or never
+    /// end), and so is a file whose bytes and ticks would not fit the budget (its bytes, then
+    /// its ticks as records: about twice its size) before anything is read.
     pub fn load(path: &std::path::Path) -> Result<Recording, RecordError> {
-        let io = |source| RecordError::Io { path: path.display().to_string(), source };
+        let name = path.display().to_string();
+        let io = |source| RecordError::Io { path: name.clone(), source };
+        let meta = std::fs::metadata(path).map_err(io)?;
+        if !meta.is_file() {
+            let kind = if meta.is_dir() { "a directory" } else { "not a regular file (a FIFO, socket or device?)" };
+            return Err(io(std::io::Error::new(std::io::ErrorKind::InvalidInput, format!("{kind}: a recording must be a regular file"))));
+        }
+        palpate_core::limits::check("recording", meta.len() as f64, 2.0).map_err(|source| RecordError::Limit { path: name.clone(), source })?;
         let mut b = Vec::new();
-        std::fs::File::open(path).map_err(io)?.read_to_end(&mut b).map_err(io)?;
-        Recording::from_bytes(&b, &path.display().to_string())
+        // At most the size checked above (the file may grow while it is read).
+        std::fs::File::open(path).map_err(io)?.take(meta.len()).read_to_end(&mut b).map_err(io)?;
+        Recording::from_bytes(&b, &name)
     }
 }
 

@@ -217,10 +217,7 @@ fn extrude_shell(inner: &[Vec3], outer: &[Vec3], triangles: &[[usize; 3]], layer
 
     let mut points = Vec::with_capacity(nv * (layers + 1));
     for l in 0..=layers {
-        let t = l as f64 / layers as f64;
-        // `p + t (q - p)`, not `(1-t) p + t q`: where `p == q` in a component (the base ring's z)
-        // it stays exactly `p`.
-        points.extend(inner.iter().zip(outer).map(|(p, q)| p + (q - p) * t));
+        points.extend(inner.iter().zip(outer).map(|(p, q)| layer_point(p, q, l, layers)));
     }
 
     let mut tets = Vec::with_capacity(3 * layers * triangles.len());
@@ -231,6 +228,47 @@ fn extrude_shell(inner: &[Vec3], outer: &[Vec3], triangles: &[[usize; 3]], layer
         }
     }
     (points, tets)
+}
+
+/// Layer `l` of `layers` between the inner point `p` and the outer point `q`: `p + t (q - p)`,
+/// not `(1-t) p + t q`, so that where `p == q` in a component (the base ring's z) it stays
+/// exactly `p`. One function for [`extrude_shell`] and [`check_shell`], so that the check sees
+/// the very points the mesh will have.
+fn layer_point(p: &Vec3, q: &Vec3, l: usize, layers: usize) -> Vec3 {
+    p + (q - p) * (l as f64 / layers as f64)
+}
+
+/// Refuse, before the shell is built, parameters whose mesh would fail validation: every tet that
+/// [`extrude_shell`] would make, in its order, is measured as [`TetMesh::from_arrays`] measures it
+/// (same points, same arithmetic) and the first one that is inverted or thinner than the
+/// validator's bound is an error naming it. It streams over the prisms without allocating: a
+/// small fraction of the build's time (no arrays, no duplicate-tet map), and it stops at the
+/// first bad tet. (An over-fine ventricle, e.g. 96 x 600 points, has its thin tets at the apex,
+/// where the rings crowd together; they cannot be found from the parameters in closed form.)
+fn check_shell(generator: &'static str, inner: &[Vec3], outer: &[Vec3], triangles: &[[usize; 3]], layers: usize) -> Result<(), MeshError> {
+    let nv = inner.len();
+    let point = |g: usize| layer_point(&inner[g % nv], &outer[g % nv], g / nv, layers);
+    let mut t = 0usize;
+    for l in 0..layers {
+        for tri in triangles {
+            for tet in split_prism(tri.map(|i| l * nv + i), nv, TetOrder::SmallestFirst) {
+                let [a, b, c, d] = tet.map(point);
+                let (volume, relative) = super::tet_mesh::volume_and_relative(&a, &b, &c, &d);
+                if !(volume > 0.0 && relative >= super::tet_mesh::DEGENERATE_RELATIVE_VOLUME) {
+                    return Err(MeshError::Generator {
+                        generator,
+                        reason: format!(
+                            "refused before building: these parameters give tet {t} (layer {l}) {} (volume {volume:.3e} m^3, {relative:.1e} of its longest edge cubed; the validator needs {:.0e}): its cells are too thin or too small; use fewer points along the crowded direction, fewer layers or a thicker wall",
+                            if volume > 0.0 { "too thin" } else { "inverted or flat" },
+                            super::tet_mesh::DEGENERATE_RELATIVE_VOLUME
+                        ),
+                    });
+                }
+                t += 1;
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The point where the ray from the centre along `d` meets the ellipsoid of semi-axes `axes`.
@@ -307,11 +345,20 @@ pub fn try_ellipsoid_wall(p: &EllipsoidWall) -> Result<TetMesh, MeshError> {
     param(G, p.layers > 0 && p.subdivisions <= 12, || format!("layers must be at least 1 and subdivisions at most 12, got {} and {}", p.layers, p.subdivisions))?;
     let t = 8.0 * 4f64.powi(p.subdivisions as i32);
     check_size(G, (p.layers as f64 + 1.0) * (t / 2.0 + 2.0), 3.0 * p.layers as f64 * t)?;
-    let (points, tets) = ellipsoid_wall_arrays(p);
+    let (inner, outer, triangles) = ellipsoid_wall_surfaces(p);
+    check_shell(G, &inner, &outer, &triangles, p.layers)?;
+    let (points, tets) = extrude_shell(&inner, &outer, &triangles, p.layers);
     try_finish(G, &points, &tets)
 }
 
 fn ellipsoid_wall_arrays(p: &EllipsoidWall) -> (Vec<Vec3>, Vec<[usize; 4]>) {
+    let (inner, outer, triangles) = ellipsoid_wall_surfaces(p);
+    extrude_shell(&inner, &outer, &triangles, p.layers)
+}
+
+/// The inner and outer surfaces of an [`EllipsoidWall`] (one geodesic sphere, mapped onto each
+/// ellipsoid) and their shared triangles.
+fn ellipsoid_wall_surfaces(p: &EllipsoidWall) -> (Vec<Vec3>, Vec<Vec3>, Vec<[usize; 3]>) {
     check_axes("inner", p.inner);
     check_axes("outer", p.outer);
     // Larger on every axis means the outer ellipsoid is further out along every ray.
@@ -319,7 +366,7 @@ fn ellipsoid_wall_arrays(p: &EllipsoidWall) -> (Vec<Vec3>, Vec<[usize; 4]>) {
     let (dirs, triangles) = geodesic_sphere(p.subdivisions);
     let inner: Vec<Vec3> = dirs.iter().map(|d| onto_ellipsoid(d, p.inner)).collect();
     let outer: Vec<Vec3> = dirs.iter().map(|d| onto_ellipsoid(d, p.outer)).collect();
-    extrude_shell(&inner, &outer, &triangles, p.layers)
+    (inner, outer, triangles)
 }
 
 /// Unit sphere triangulated from the octahedron by `subdivisions` 1-to-4 splits: unit vertices and
@@ -429,10 +476,11 @@ pub fn truncated_ellipsoid_wall(p: &TruncatedEllipsoidWall) -> TetMesh {
     finish(&points, &tets)
 }
 
-/// [`truncated_ellipsoid_wall`] for input from outside: parameters and size checked first, a
-/// mesh that fails validation an error (not a panic). The validation cannot be predicted in
-/// closed form here (the apex fan and the crowded rings near it set the thinnest tet), so a fine
-/// resolution inside the documented ranges is refused after it is built, with the reason.
+/// [`truncated_ellipsoid_wall`] for input from outside: parameters and size checked first, then
+/// every tet measured before the mesh is built (`check_shell`: the validation cannot be
+/// predicted in closed form here, since the apex fan and the crowded rings near it set the
+/// thinnest tet), so a fine resolution inside the documented ranges is refused up front with the
+/// reason; a mesh that still failed validation would be an error too (not a panic).
 pub fn try_truncated_ellipsoid_wall(p: &TruncatedEllipsoidWall) -> Result<TetMesh, MeshError> {
     const G: &str = "truncated_ellipsoid_wall";
     axes_ok(G, "inner", p.inner)?;
@@ -444,11 +492,20 @@ pub fn try_truncated_ellipsoid_wall(p: &TruncatedEllipsoidWall) -> Result<TetMes
     })?;
     let (c, l, n) = (p.circumferential as f64, p.longitudinal as f64, p.layers as f64);
     check_size(G, (n + 1.0) * (c * l + 1.0), 3.0 * n * c * (2.0 * l - 1.0))?;
-    let (points, tets) = truncated_ellipsoid_wall_arrays(p);
+    let (inner, outer, triangles) = truncated_ellipsoid_wall_surfaces(p);
+    check_shell(G, &inner, &outer, &triangles, p.layers)?;
+    let (points, tets) = extrude_shell(&inner, &outer, &triangles, p.layers);
     try_finish(G, &points, &tets)
 }
 
 fn truncated_ellipsoid_wall_arrays(p: &TruncatedEllipsoidWall) -> (Vec<Vec3>, Vec<[usize; 4]>) {
+    let (inner, outer, triangles) = truncated_ellipsoid_wall_surfaces(p);
+    extrude_shell(&inner, &outer, &triangles, p.layers)
+}
+
+/// The inner and outer surfaces of a [`TruncatedEllipsoidWall`] (the same angular grid on each
+/// ellipsoid) and their shared triangles.
+fn truncated_ellipsoid_wall_surfaces(p: &TruncatedEllipsoidWall) -> (Vec<Vec3>, Vec<Vec3>, Vec<[usize; 3]>) {
     check_axes("inner", p.inner);
     check_axes("outer", p.outer);
     assert!((0..3).all(|i| p.outer[i] > p.inner[i]), "outer semi-axes {:?} must exceed inner {:?}", p.outer, p.inner);
@@ -492,7 +549,7 @@ fn truncated_ellipsoid_wall_arrays(p: &TruncatedEllipsoidWall) -> (Vec<Vec3>, Ve
     for j in 0..nc {
         triangles.push([id(nl - 1, j), id(nl - 1, j + 1), apex]);
     }
-    extrude_shell(&inner, &outer, &triangles, p.layers)
+    (inner, outer, triangles)
 }
 
 /// Nodes with `z <= z_cut + tol`, ascending: the base of a [`truncated_ellipsoid_wall`], to be
@@ -675,5 +732,31 @@ mod tests {
             assert!(errors.windows(2).all(|w| w[1] < w[0]), "z_cut {z_cut}: errors not decreasing: {errors:?}");
             assert!(errors[3] < 0.02, "z_cut {z_cut}: errors {errors:?}");
         }
+    }
+
+    /// The check before building agrees with the validator: where it passes, the built mesh
+    /// validates without a warning; where it refuses, the arrays built anyway are refused too.
+    /// The refusals are the corpus's ventricles inside the documented ranges (issue 15: a
+    /// `PanicException`, then a `MeshError` after seconds of building) and a wall 0.1 um thick.
+    #[test]
+    fn generate_shell_check_before_building_agrees_with_validation() {
+        let d = TruncatedEllipsoidWall::default();
+        for (c, l, layers, ok) in [(20, 6, 2, true), (96, 24, 1, true), (96, 600, 1, false), (3, 4096, 1, false), (3, 50, 2, true), (400, 3, 1, true)] {
+            let p = TruncatedEllipsoidWall { circumferential: c, longitudinal: l, layers, ..d.clone() };
+            let (inner, outer, triangles) = truncated_ellipsoid_wall_surfaces(&p);
+            let checked = check_shell("t", &inner, &outer, &triangles, layers);
+            let (pts, tets) = truncated_ellipsoid_wall_arrays(&p);
+            let (a, t) = to_arrays(&pts, &tets);
+            let validated = matches!(TetMesh::from_arrays(&a, &t), Ok((_, w)) if w.is_empty());
+            assert_eq!((checked.is_ok(), validated), (ok, ok), "({c}, {l}, {layers}): {checked:?}");
+            if !ok {
+                let e = try_truncated_ellipsoid_wall(&p).unwrap_err().to_string();
+                assert!(e.contains("refused before building"), "({c}, {l}): {e}");
+            }
+        }
+        let thin = EllipsoidWall { inner: [0.02, 0.02, 0.035], outer: [0.0200000001, 0.0200000001, 0.0350000001], ..EllipsoidWall::default() };
+        let e = try_ellipsoid_wall(&thin).unwrap_err().to_string();
+        assert!(e.contains("refused before building"), "{e}");
+        assert!(try_ellipsoid_wall(&EllipsoidWall { subdivisions: 3, layers: 3, ..EllipsoidWall::default() }).is_ok());
     }
 }

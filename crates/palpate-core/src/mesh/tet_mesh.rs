@@ -43,6 +43,18 @@ pub fn signed_volume(a: &Vec3, b: &Vec3, c: &Vec3, d: &Vec3) -> f64 {
     (b - a).cross(&(c - a)).dot(&(d - a)) / 6.0
 }
 
+/// The signed volume of a tet and `|volume| / (longest edge)^3`, the measure the validator
+/// refuses below [`DEGENERATE_RELATIVE_VOLUME`]: one function, so that the generators' checks
+/// before building ([`super::generate`]) agree with [`TetMesh::from_arrays`] to the last bit.
+#[inline]
+pub(crate) fn volume_and_relative(a: &Vec3, b: &Vec3, c: &Vec3, d: &Vec3) -> (f64, f64) {
+    let vol = signed_volume(a, b, c, d);
+    let edges = [b - a, c - a, d - a, c - b, d - b, d - c];
+    let lmax = edges.iter().map(|e| e.norm()).fold(0.0, f64::max);
+    let relative = if lmax > 0.0 { vol.abs() / (lmax * lmax * lmax) } else { 0.0 };
+    (vol, relative)
+}
+
 impl TetMesh {
     /// Validate a mesh given as points `(n_nodes, 3)` \[m\] and tets `(n_tets, 4)` node indices
     /// (signed, so that negative indices from a file are reported rather than wrapped).
@@ -79,10 +91,7 @@ impl TetMesh {
                 }
             }
             let [a, b, c, d] = idx.map(|i| pts[i]);
-            let vol = signed_volume(&a, &b, &c, &d);
-            let edges = [b - a, c - a, d - a, c - b, d - b, d - c];
-            let lmax = edges.iter().map(|e| e.norm()).fold(0.0, f64::max);
-            let relative = if lmax > 0.0 { vol.abs() / (lmax * lmax * lmax) } else { 0.0 };
+            let (vol, relative) = volume_and_relative(&a, &b, &c, &d);
             if !(relative >= DEGENERATE_RELATIVE_VOLUME) {
                 return Err(MeshError::Degenerate { tet: t, volume: vol, relative });
             }
