@@ -150,6 +150,38 @@ fn watchdog_zeroes_force_within_30ms_of_a_stall() {
     assert!(resumed[first].norm() <= 3.2 / 20.0, "force after the fault must ramp up: {:?}", resumed[first]);
 }
 
+/// A run longer than its recording buffer: the recording is the run's beginning, and the ticks
+/// that did not fit are counted (silently dropped, a truncated file looked like a whole run);
+/// a stall after the buffer filled does not rewrite the last recorded tick (an older one).
+#[test]
+fn ticks_past_the_recording_buffer_are_counted() {
+    let sink: Arc<LogSink> = Arc::default();
+    let mut dev = Pressing { z: |_t: f64| -0.012, sink: sink.clone(), ticks: 150 };
+    let mut core = HapticCore::new(Box::new(wall()), 1000.0, CouplingParams::default(), fast_ramp(), 250, 100);
+    assert_eq!(core.run_offline(&mut dev, 1000), 150);
+    assert_eq!(core.recording().unwrap().ticks.len(), 100);
+    assert_eq!(core.recording_dropped(), 50);
+    let mut full = HapticCore::new(Box::new(wall()), 1000.0, CouplingParams::default(), fast_ramp(), 250, 150);
+    full.run_offline(&mut Pressing { z: |_t: f64| -0.012, sink, ticks: 150 }, 1000);
+    assert_eq!(full.recording_dropped(), 0);
+    assert_eq!(compare(core.recording().unwrap(), full.recording().unwrap()), None, "the kept ticks are the run's first");
+
+    // The real-time servo: the buffer fills at tick 100, the physics stalls at tick 200.
+    let mut faulty = Faulty::new(wall(), 200);
+    faulty.stall = Some(Duration::from_millis(100));
+    let dev = Pressing { z: |_t: f64| -0.012, sink: Arc::new(LogSink::default()), ticks: 300 };
+    let cfg = ServoConfig { record_ticks: 100, safety: Some(fast_ramp()), ..Default::default() };
+    let core = HapticCore::with_config(Box::new(faulty), &cfg, &dev).unwrap();
+    let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();
+    assert!(report.watchdog_trips >= 1, "the 100 ms stall trips the watchdog");
+    assert_eq!(report.core.recording_dropped(), 200);
+    let rec = report.core.recording().unwrap();
+    assert_eq!(rec.ticks.len(), 100);
+    // Pressed 12 mm for 100 ticks past a 20 ms ramp: ~3 N. The stall's fault path zeroed the
+    // record of tick 99 when it took "the last record" for the stalled tick's.
+    assert!(rec.ticks[99].force.norm() > 1.0, "the last recorded tick keeps its force: {:?}", rec.ticks[99].force);
+}
+
 #[test]
 fn nan_from_the_physics_never_reaches_the_device() {
     let mut faulty = Faulty::new(wall(), 150);
