@@ -9,7 +9,8 @@ What a wrong implementation would do:
   wrongly (the Rust bridge refuses it: no accepted packet, no force back);
 - a vendor adapter that imports its SDK at import time (``palpate`` then needs every SDK), or
   maps millimetres as metres, or swaps axes (``test_*_adapter_maps_*`` with fake vendor modules);
-- commands that crash without a vendor SDK instead of saying what to install.
+- commands that crash without a vendor SDK instead of saying what to install;
+- a binding that holds its lock while the GIL is released (a deadlock with ``snapshot()``).
 """
 from __future__ import annotations
 
@@ -116,6 +117,55 @@ def test_loop_runs_while_python_sleeps_and_the_hand_follows(model):
     assert r["ticks"] >= s2["tick"] and r["n_faults"] == r["watchdog_trips"]
     with pytest.raises(_p.HapticsError):
         loop.start()
+
+
+def test_snapshot_from_another_thread_while_stop_or_run_releases_the_gil():
+    # stop() and run() release the GIL for their wait; if the loop's lock were still held then, a
+    # thread calling snapshot() (a viewer, a status line) would take the GIL and wait on the lock,
+    # and stop() could never take the GIL back: a deadlock. A deadlocked process cannot be
+    # stopped from inside, so the threads run in a child with a time limit.
+    code = textwrap.dedent("""
+        import sys, threading, time
+        sys.setswitchinterval(1e-5)          # hand the GIL over as often as possible
+        import palpate
+        from palpate import _palpate as _p, haptics
+        model = palpate.hybrid.build_shape("ellipsoids")
+        t, k = haptics.palpation_cycle(model)
+        calls = [0]
+
+        def hammer(loop, done):
+            while not done.is_set():
+                loop.snapshot(); loop.surface(); loop.finished()
+                calls[0] += 1
+
+        def with_hammer(loop, action):
+            done = threading.Event()
+            th = threading.Thread(target=hammer, args=(loop, done))
+            th.start()
+            time.sleep(0.005)
+            try:
+                return action()
+            finally:
+                done.set()
+                th.join()
+
+        for _ in range(20):
+            loop = _p.HapticLoop(model, haptics.material(), "hand", hand_start=k[0], idle=True)
+            loop.start()
+            r = with_hammer(loop, loop.stop)
+            assert r["ticks"] > 0, r
+        for _ in range(5):
+            loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, idle=True)
+            r = with_hammer(loop, loop.run)
+            assert r["ticks"] == 2000, r
+        print("OK", calls[0])
+    """)
+    try:
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail("deadlock: stop() or run() and snapshot() from another thread never returned")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("OK"), out.stdout
 
 
 def test_bridge_with_the_reference_client_in_a_second_process(model):
