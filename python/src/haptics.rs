@@ -75,7 +75,9 @@ fn busy(what: &str) -> PyErr {
 ///     Safety: force limit [N] (default 3), force-rate limit [N/s] (1000), ramp-up [s] (0.5),
 ///     watchdog timeout [s] (0.03).
 /// record_ticks : int
-///     Ticks to record for :meth:`save_recording` (0: none).
+///     Ticks to record for :meth:`save_recording` (0: none). The buffer is allocated at start
+///     (144 bytes a tick; a replay's or a script's is at most its length); ticks past it are
+///     not recorded but counted (the report's ``recording_dropped_ticks``).
 /// max_ticks : int, optional
 ///     Stop after this many ticks (a scripted or replayed device also stops at its end).
 ///
@@ -134,6 +136,7 @@ fn core_dict<'py>(py: Python<'py>, core: &HapticCore, d: &Bound<'py, PyDict>) ->
     d.set_item("max_force_n", core.max_force())?;
     d.set_item("energy_into_user_j", core.energy_into_user())?;
     d.set_item("bad_inputs", core.bad_inputs())?;
+    d.set_item("recording_dropped_ticks", core.recording_dropped())?;
     let faults = PyList::empty(py);
     for f in core.fault_log() {
         let e = PyDict::new(py);
@@ -233,11 +236,13 @@ impl PyHapticLoop {
             None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout) },
         };
         let defaults = ServoConfig::default();
-        let config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(defaults.spin), ..defaults };
+        let mut config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(defaults.spin), ..defaults };
         config.check().map_err(PyValueError::new_err)?;
 
         let mut hand = None;
         let mut bridge = None;
+        // Ticks a finite device gives (a script's, a replay's): no recording needs more.
+        let mut device_ticks: Option<usize> = None;
         let dev: Box<dyn Device> = match device {
             "scripted" => {
                 let (Some(t), Some(k)) = (times, knots) else {
@@ -245,9 +250,14 @@ impl PyHapticLoop {
                 };
                 let (t, _) = conv::reals_nd(t, "times")?;
                 let k = conv::vec3s(k, "knots", t.len(), true)?;
-                Box::new(Scripted::new(t, k).map_err(PyValueError::new_err)?)
+                let s = Scripted::new(t, k).map_err(PyValueError::new_err)?;
+                device_ticks = Some((s.duration() * rate_hz).ceil() as usize + 1);
+                Box::new(s)
             }
-            "replay" => Box::new(Replay::new(replay.as_ref().unwrap())),
+            "replay" => {
+                device_ticks = replay.as_ref().map(|r| r.ticks.len());
+                Box::new(Replay::new(replay.as_ref().unwrap()))
+            }
             "hand" => {
                 let at = match hand_start {
                     Some(p) => conv::vec3(p, "hand_start")?,
@@ -292,6 +302,11 @@ impl PyHapticLoop {
                 )));
             }
         }
+        // The recording buffer is allocated at start (the servo never allocates): no longer than a
+        // finite device can fill, so that a generous default (the CLI's, sized for open-ended
+        // devices) costs a short script nothing.
+        let record_ticks = device_ticks.map_or(record_ticks, |n| record_ticks.min(n));
+        config.record_ticks = record_ticks;
         let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
         Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description) })
     }
@@ -374,7 +389,8 @@ impl PyHapticLoop {
     /// ``compute_us_p50`` / ``_p99`` / ``_max``, ``overruns``, ``overrun_times_s`` (wall time
     /// since the start of each logged overrun), ``max_force_n``, ``energy_into_user_j``,
     /// ``bad_inputs``, ``n_faults``, ``faults`` (list of dicts ``tick``, ``time``, ``reason``),
-    /// ``watchdog_trips``.
+    /// ``watchdog_trips``, ``recording_dropped_ticks`` (ticks past the recording buffer, not
+    /// recorded: nonzero means the recording holds only the run's beginning).
     fn stop<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         // Out of the mutex before the GIL is released (see the module).
         let taken = std::mem::replace(&mut *self.stage.lock().unwrap(), Stage::Busy("stopping"));
@@ -397,7 +413,8 @@ impl PyHapticLoop {
 
     /// Runs the loop without a clock in this thread (GIL released) for at most ``max_ticks``
     /// ticks or until the device ends, before or instead of :meth:`start`; returns ``ticks``,
-    /// ``max_force_n``, ``energy_into_user_j``, ``bad_inputs``, ``n_faults``, ``faults``.
+    /// ``max_force_n``, ``energy_into_user_j``, ``bad_inputs``, ``n_faults``, ``faults``,
+    /// ``recording_dropped_ticks``.
     /// Deterministic: a replay gives the recorded forces bit for bit.
     #[pyo3(signature = (max_ticks = None))]
     fn run<'py>(&self, py: Python<'py>, max_ticks: Option<u64>) -> PyResult<Bound<'py, PyDict>> {

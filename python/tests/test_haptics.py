@@ -10,7 +10,8 @@ What a wrong implementation would do:
 - a vendor adapter that imports its SDK at import time (``palpate`` then needs every SDK), or
   maps millimetres as metres, or swaps axes (``test_*_adapter_maps_*`` with fake vendor modules);
 - commands that crash without a vendor SDK instead of saying what to install;
-- a binding that holds its lock while the GIL is released (a deadlock with ``snapshot()``).
+- a binding that holds its lock while the GIL is released (a deadlock with ``snapshot()``);
+- a recording cut short without a word (``test_haptic_command_*_recording_*``).
 """
 from __future__ import annotations
 
@@ -85,6 +86,18 @@ def test_a_recording_of_another_model_is_refused(model, tmp_path):
     (tmp_path / "bad.palprec").write_bytes(b"PALPREC\0" + b"\x02\x00\x00\x00" + b"\0" * 40)
     with pytest.raises(_p.HapticsError, match="version 2"):
         _p.HapticLoop(model, haptics.material(), "replay", recording=str(tmp_path / "bad.palprec"))
+
+
+def test_ticks_past_the_recording_buffer_are_reported(model):
+    t, k = cycle(model)
+    loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, record_ticks=100, idle=True)
+    r = loop.run()
+    assert r["ticks"] == 2000
+    assert len(loop.recorded()["force"]) == 100
+    assert r["recording_dropped_ticks"] == 1900, "the ticks that did not fit are counted"
+    # A buffer larger than the script is cut to it (allocated at start: no use for the rest).
+    loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, record_ticks=10**9, idle=True)
+    assert loop.run()["recording_dropped_ticks"] == 0
 
 
 def test_bad_parameters_raise_value_errors(model):
@@ -416,6 +429,43 @@ def test_haptic_command_scripted_record_and_replay(tmp_path, capsys):
     assert "500 ticks" in out and "Hz" in out and "overruns" in out
     assert main(["haptic", "ellipsoids", "--device", "joystick"]) == 2
     assert "unknown device" in capsys.readouterr().err
+
+
+def test_haptic_command_warns_of_a_recording_cut_short(tmp_path, capsys, monkeypatch):
+    from palpate.cli import haptic as cli_haptic
+    from palpate.cli import main
+
+    script = tmp_path / "press.toml"
+    script.write_text('[probe]\nvertex = "probe"\n[[segment]]\nkind = "press"\ndepth = 0.003\nduration = 0.3\n'
+                      '[[segment]]\nkind = "release"\nduration = 0.2\n')
+    rec = tmp_path / "press.palprec"
+    # The default buffer (no --seconds) made smaller than the 500-tick script.
+    monkeypatch.setattr(cli_haptic, "DEFAULT_RECORD_TICKS", 200)
+    assert main(["haptic", "ellipsoids", "--device", f"scripted:{script}", "--record", str(rec), "--quiet"]) in (0, 1)
+    cap = capsys.readouterr()
+    assert "recorded 200 ticks" in cap.out, cap.out
+    warning = [line for line in cap.err.splitlines() if "warning" in line]
+    assert len(warning) == 1 and "the last 300 of 500 ticks were not recorded" in warning[0], cap.err
+
+
+def test_haptic_command_seconds_records_every_tick(tmp_path, capsys):
+    from palpate.cli import haptic as cli_haptic
+    from palpate.cli import main
+
+    # --seconds: the loop stops itself after S seconds of ticks, all in the buffer (stopped at
+    # the next status line instead, it ran on past a buffer of S seconds and lost the rest).
+    rec = tmp_path / "hand.palprec"
+    assert main(["haptic", "ellipsoids", "--device", "hand", "--seconds", "0.3", "--record", str(rec), "--quiet"]) in (0, 1)
+    cap = capsys.readouterr()
+    assert "300 ticks" in cap.out and "recorded 300 ticks" in cap.out, cap.out
+    assert "warning" not in cap.err, cap.err
+    # Without --seconds: a bridge or a hand (no end) gets the default; a replay, at any rate, up
+    # to 4 kHz for S seconds (the loop cuts the buffer to the recording).
+    args = lambda **kw: types.SimpleNamespace(**{"record": "f", "seconds": None, "device": "hand", "rate": 1000.0, **kw})  # noqa: E731
+    assert cli_haptic.record_ticks(args()) == cli_haptic.DEFAULT_RECORD_TICKS == 300_000
+    assert cli_haptic.record_ticks(args(seconds=2.0, rate=2000.0)) == 4001
+    assert cli_haptic.record_ticks(args(seconds=2.0, device="replay:x")) == 8001
+    assert cli_haptic.record_ticks(args(record=None)) == 0
 
 
 def test_soak_and_bench_haptic_commands(capsys):
