@@ -10,6 +10,8 @@ What a wrong implementation would do:
 - a vendor adapter that imports its SDK at import time (``palpate`` then needs every SDK), or
   maps millimetres as metres, or swaps axes (``test_*_adapter_maps_*`` with fake vendor modules);
 - commands that crash without a vendor SDK instead of saying what to install;
+- an adapter loop that does not zero the device when the loop goes silent, or zeroes it before
+  30 ms of silence (``test_run_adapter_*``);
 - a binding that holds its lock while the GIL is released (a deadlock with ``snapshot()``);
 - a recording cut short without a word (``test_haptic_command_*_recording_*``).
 """
@@ -20,6 +22,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 import types
 
@@ -179,6 +182,90 @@ def test_snapshot_from_another_thread_while_stop_or_run_releases_the_gil():
         pytest.fail("deadlock: stop() or run() and snapshot() from another thread never returned")
     assert out.returncode == 0, out.stderr
     assert out.stdout.startswith("OK"), out.stdout
+
+
+def test_run_adapter_against_the_loop_and_its_silence_rule(model, monkeypatch):
+    # The loop a vendor adapter runs (palpate device NAME), with a fake device, against a running
+    # loop on the bridge: its positions reach the loop, the loop's forces reach the device, and
+    # once the loop stops (silent), the device's force is zeroed, once, after SILENCE_S (30 ms)
+    # without a force packet and not before.
+    from palpate.devices import bridge as br
+
+    t, k = cycle(model)
+    events = []                                  # ("packet" | "write", time [s], force [N])
+
+    class Fake(br.Adapter):
+        name = "fake"
+
+        def __init__(self):
+            self.t0, self.closed, self.reads = None, False, set()
+
+        def open(self):
+            self.t0 = time.monotonic()
+
+        def read(self):
+            # From 2 mm clear to the press's depth over 0.3 s, then held.
+            s = min(1.0, (time.monotonic() - self.t0) / 0.3)
+            p = k[0] + s * (k[1] - k[0])
+            self.reads.add(tuple(p))
+            return p, (1.0, 0.0, 0.0, 0.0), 2
+
+        def write(self, force):
+            events.append(("write", time.monotonic(), np.array(force, dtype=np.float64)))
+
+        def close(self):
+            self.closed = True
+
+    latest = br.BridgeClient.latest
+
+    def logged_latest(self):
+        f = latest(self)
+        if f is not None:
+            events.append(("packet", time.monotonic(), f.force.copy()))
+        return f
+
+    monkeypatch.setattr(br.BridgeClient, "latest", logged_latest)
+    loop = _p.HapticLoop(model, haptics.material(), "bridge", port=0, record_ticks=60_000)
+    host, port = loop.bridge_address.split(":")
+    loop.start()
+    adapter, stats = Fake(), {}
+    th = threading.Thread(target=lambda: stats.update(br.run_adapter(adapter, host, int(port), 1000.0, seconds=1.3)))
+    th.start()
+    try:
+        time.sleep(0.8)
+    finally:
+        t_stop = time.monotonic()
+        loop.stop()
+        th.join(60)
+    assert not th.is_alive() and adapter.closed
+    bs = loop.bridge_stats()
+    rec = loop.recorded()
+    assert stats["sent"] > 100 and stats["forces"] > 50, stats
+    assert bs["accepted"] > 50 and bs["dropped"] == 0, bs
+    assert stats["max_force_n"] > 0.01, f"the device felt the tissue: {stats}"
+    # The loop's device positions are the adapter's, its forces what the device got, bit for bit.
+    assert all(tuple(p) in adapter.reads for p in rec["device"])
+    sent = {tuple(f) for f in rec["force"]} | {(0.0, 0.0, 0.0)}   # the loop's last act: zero
+    # Each write right after a packet is that packet's force; the others are the silence rule's
+    # zeros and, last, run_adapter's own zero on the way out.
+    packets, silences, last_packet, prev = [], [], adapter.t0, None
+    for e in events[:-1]:
+        if e[0] == "packet":
+            last_packet = e[1]
+        elif prev is not None and prev[0] == "packet":
+            assert tuple(e[2]) in sent and np.array_equal(e[2], prev[2])
+            packets.append(e)
+        else:
+            silences.append((e, e[1] - last_packet))
+        prev = e
+    assert events[-1][0] == "write" and not events[-1][2].any(), "zero force on the way out"
+    assert len(packets) == stats["forces"] and len(silences) == stats["silences"], (stats, len(packets), len(silences))
+    for (e, gap) in silences:
+        assert not e[2].any(), "a silence writes zero force"
+        assert gap > br.SILENCE_S, f"zeroed after only {gap * 1e3:.1f} ms of silence"
+    after = [gap for (e, gap) in silences if e[1] > t_stop]
+    assert len(after) == 1, f"one zeroing once the loop went silent, got {len(after)} (gaps [s] {after[:5]})"
+    assert after[0] < br.SILENCE_S + 0.25, f"zeroed {after[0] * 1e3:.0f} ms after the last force"
 
 
 def test_bridge_with_the_reference_client_in_a_second_process(model):
