@@ -2,6 +2,11 @@
 //! thread that reads a device, ticks the simulation and sends the force, never waiting on Python.
 //! Python only starts it, reads snapshots (a seqlock: never blocks the loop) and stops it;
 //! waiting and the offline run release the GIL.
+//!
+//! The loop's stage sits behind a mutex, which no method holds while the GIL is released or
+//! while it calls into Python: `stop` and `run` take what they need out of it first (leaving
+//! [`Stage::Busy`]) and put it back after. Holding it across a GIL release deadlocked: another
+//! thread's `snapshot()` took the GIL and waited on the mutex, and `stop()` waited for the GIL.
 
 use std::net::{Ipv4Addr, SocketAddrV4};
 use std::sync::{Arc, Mutex};
@@ -25,7 +30,14 @@ enum Stage {
     Ready(HapticCore, Box<dyn Device>),
     Running(ServoHandle),
     Done(ServoReport),
+    /// Taken out of the mutex by a call that releases the GIL (`stop`, `run`): what it is doing.
+    Busy(&'static str),
+    /// Consumed: stopped and reported, or a panic left the core unusable.
     Taken,
+}
+
+fn busy(what: &str) -> PyErr {
+    haptics_error(format!("the loop is {what} in another thread"))
 }
 
 /// The haptic loop over a hybrid model (issue 13): a servo thread at ``rate_hz`` (250 to 4000 Hz)
@@ -63,7 +75,9 @@ enum Stage {
 ///     Safety: force limit [N] (default 3), force-rate limit [N/s] (1000), ramp-up [s] (0.5),
 ///     watchdog timeout [s] (0.03).
 /// record_ticks : int
-///     Ticks to record for :meth:`save_recording` (0: none).
+///     Ticks to record for :meth:`save_recording` (0: none). The buffer is allocated at start
+///     (144 bytes a tick; a replay's or a script's is at most its length); ticks past it are
+///     not recorded but counted (the report's ``recording_dropped_ticks``).
 /// max_ticks : int, optional
 ///     Stop after this many ticks (a scripted or replayed device also stops at its end).
 ///
@@ -131,6 +145,7 @@ fn core_dict<'py>(py: Python<'py>, core: &HapticCore, d: &Bound<'py, PyDict>) ->
     d.set_item("max_force_n", core.max_force())?;
     d.set_item("energy_into_user_j", core.energy_into_user())?;
     d.set_item("bad_inputs", core.bad_inputs())?;
+    d.set_item("recording_dropped_ticks", core.recording_dropped())?;
     let faults = PyList::empty(py);
     for f in core.fault_log() {
         let e = PyDict::new(py);
@@ -157,6 +172,15 @@ fn stats_dict(d: &Bound<'_, PyDict>, s: &Stats) -> PyResult<()> {
     d.set_item("overruns", s.overruns)?;
     d.set_item("overrun_times_s", s.overrun_at.iter().map(|x| x.1).collect::<Vec<f64>>())?;
     Ok(())
+}
+
+/// `stop()`'s dict of a finished run.
+fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    stats_dict(&d, &r.stats)?;
+    core_dict(py, &r.core, &d)?;
+    d.set_item("watchdog_trips", r.watchdog_trips)?;
+    Ok(d)
 }
 
 #[pymethods]
@@ -231,11 +255,13 @@ impl PyHapticLoop {
                 None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout) },
             };
             let defaults = ServoConfig::default();
-            let config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(defaults.spin), ..defaults };
+            let mut config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(defaults.spin), ..defaults };
             config.check().map_err(errors::param_error_from)?;
 
             let mut hand = None;
             let mut bridge = None;
+            // Ticks a finite device gives (a script's, a replay's): no recording needs more.
+            let mut device_ticks: Option<usize> = None;
             let dev: Box<dyn Device> = match device {
                 "scripted" => {
                     let (Some(t), Some(k)) = (times, knots) else {
@@ -243,9 +269,14 @@ impl PyHapticLoop {
                     };
                     let (t, _) = conv::reals_nd(t, "times")?;
                     let k = conv::vec3s(k, "knots", t.len(), true)?;
-                    Box::new(Scripted::new(t, k).map_err(errors::param_error_from)?)
+                    let s = Scripted::new(t, k).map_err(errors::param_error_from)?;
+                    device_ticks = Some((s.duration() * rate_hz).ceil() as usize + 1);
+                    Box::new(s)
                 }
-                "replay" => Box::new(Replay::new(replay.as_ref().unwrap())),
+                "replay" => {
+                    device_ticks = replay.as_ref().map(|r| r.ticks.len());
+                    Box::new(Replay::new(replay.as_ref().unwrap()))
+                }
                 "hand" => {
                     let at = match hand_start {
                         Some(p) => conv::vec3(p, "hand_start")?,
@@ -290,6 +321,11 @@ impl PyHapticLoop {
                     )));
                 }
             }
+            // The recording buffer is allocated at start (the servo never allocates): no longer than a
+            // finite device can fill, so that a generous default (the CLI's, sized for open-ended
+            // devices) costs a short script nothing.
+            let record_ticks = device_ticks.map_or(record_ticks, |n| record_ticks.min(n));
+            config.record_ticks = record_ticks;
             let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
             Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description) })
         })
@@ -304,6 +340,10 @@ impl PyHapticLoop {
                 *st = Stage::Running(h);
                 Ok(())
             }
+            Stage::Busy(what) => {
+                *st = Stage::Busy(what);
+                Err(busy(what))
+            }
             other => {
                 *st = other;
                 Err(haptics_error("the loop was already started"))
@@ -316,25 +356,25 @@ impl PyHapticLoop {
     /// ``overruns``, ``faults``, ``buttons``), or None before the first tick. Never blocks the
     /// loop.
     fn snapshot<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let st = self.stage.lock().unwrap();
-        match &*st {
-            Stage::Running(h) => h.snapshot().map(|s| snapshot_dict(py, &s)).transpose(),
-            _ => Ok(None),
-        }
+        // The snapshot is copied out and the mutex released before any Python object is made
+        // (making one can run Python code, e.g. the garbage collector's, which can hand the GIL
+        // to a thread that then waits on the mutex).
+        let snap = match &*self.stage.lock().unwrap() {
+            Stage::Running(h) => h.snapshot(),
+            _ => None,
+        };
+        snap.map(|s| snapshot_dict(py, &s)).transpose()
     }
 
     /// The organ's surface (the skin's vertices, (n, 3) [m], world frame; fresh near the tool,
     /// elsewhere at most 32 ticks old) as of the latest surface snapshot (every 32 ticks), and
     /// its tick, or None before one. Never blocks the loop.
     fn surface<'py>(&self, py: Python<'py>) -> Option<(u64, Bound<'py, numpy::PyArray2<f64>>)> {
-        let st = self.stage.lock().unwrap();
-        match &*st {
-            Stage::Running(h) => {
-                let (tick, pts) = h.surface();
-                (tick > 0).then(|| (tick, conv::vec3s_to_py(py, &pts)))
-            }
+        let got = match &*self.stage.lock().unwrap() {
+            Stage::Running(h) => Some(h.surface()),
             _ => None,
-        }
+        };
+        got.and_then(|(tick, pts)| (tick > 0).then(|| (tick, conv::vec3s_to_py(py, &pts))))
     }
 
     /// Has the running loop stopped by itself (device finished or ``max_ticks``)?
@@ -369,41 +409,59 @@ impl PyHapticLoop {
     /// ``compute_us_p50`` / ``_p99`` / ``_max``, ``overruns``, ``overrun_times_s`` (wall time
     /// since the start of each logged overrun), ``max_force_n``, ``energy_into_user_j``,
     /// ``bad_inputs``, ``n_faults``, ``faults`` (list of dicts ``tick``, ``time``, ``reason``),
-    /// ``watchdog_trips``.
+    /// ``watchdog_trips``, ``recording_dropped_ticks`` (ticks past the recording buffer, not
+    /// recorded: nonzero means the recording holds only the run's beginning).
     fn stop<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let mut st = self.stage.lock().unwrap();
-        let report = match std::mem::replace(&mut *st, Stage::Taken) {
+        // Out of the mutex before the GIL is released (see the module).
+        let taken = std::mem::replace(&mut *self.stage.lock().unwrap(), Stage::Busy("stopping"));
+        let report = match taken {
             Stage::Running(h) => py.detach(|| h.stop()),
             Stage::Done(r) => r,
             other => {
-                *st = other;
-                return Err(haptics_error("the loop was not started"));
+                let err = match &other {
+                    Stage::Busy(what) => busy(what),
+                    _ => haptics_error("the loop was not started"),
+                };
+                *self.stage.lock().unwrap() = other;
+                return Err(err);
             }
         };
-        let d = PyDict::new(py);
-        stats_dict(&d, &report.stats)?;
-        core_dict(py, &report.core, &d)?;
-        d.set_item("watchdog_trips", report.watchdog_trips)?;
-        *st = Stage::Done(report);
-        Ok(d)
+        let d = report_dict(py, &report);
+        *self.stage.lock().unwrap() = Stage::Done(report);
+        d
     }
 
     /// Runs the loop without a clock in this thread (GIL released) for at most ``max_ticks``
     /// ticks or until the device ends, before or instead of :meth:`start`; returns ``ticks``,
-    /// ``max_force_n``, ``energy_into_user_j``, ``bad_inputs``, ``n_faults``, ``faults``.
+    /// ``max_force_n``, ``energy_into_user_j``, ``bad_inputs``, ``n_faults``, ``faults``,
+    /// ``recording_dropped_ticks``.
     /// Deterministic: a replay gives the recorded forces bit for bit.
     #[pyo3(signature = (max_ticks = None))]
     fn run<'py>(&self, py: Python<'py>, max_ticks: Option<i64>) -> PyResult<Bound<'py, PyDict>> {
         let max_ticks = errors::count_opt(max_ticks, "max_ticks")?.map(|n| n as u64);
-        let mut st = self.stage.lock().unwrap();
-        let Stage::Ready(core, dev) = &mut *st else {
-            return Err(haptics_error("run() is for a loop that was not started"));
+        // Out of the mutex before the GIL is released (see the module).
+        let taken = std::mem::replace(&mut *self.stage.lock().unwrap(), Stage::Busy("running offline"));
+        let (mut core, mut dev) = match taken {
+            Stage::Ready(core, dev) => (core, dev),
+            other => {
+                let err = match &other {
+                    Stage::Busy(what) => busy(what),
+                    _ => haptics_error("run() is for a loop that was not started"),
+                };
+                *self.stage.lock().unwrap() = other;
+                return Err(err);
+            }
         };
         let n = max_ticks.or(self.config.max_ticks).unwrap_or(u64::MAX);
-        errors::guard("HapticLoop.run", || Ok(py.detach(|| core.run_offline(dev.as_mut(), n))))?;
+        if let Err(e) = errors::guard("HapticLoop.run", || Ok(py.detach(|| core.run_offline(dev.as_mut(), n)))) {
+            // A panic mid-run leaves the core in an unknown state: the loop is not usable again.
+            *self.stage.lock().unwrap() = Stage::Taken;
+            return Err(e);
+        }
         let d = PyDict::new(py);
-        core_dict(py, core, &d)?;
-        Ok(d)
+        let filled = core_dict(py, &core, &d);
+        *self.stage.lock().unwrap() = Stage::Ready(core, dev);
+        filled.map(|_| d)
     }
 
     /// Writes the recording (``record_ticks`` > 0) to ``path``: the device inputs, forces and
@@ -414,6 +472,7 @@ impl PyHapticLoop {
             Stage::Ready(core, _) => core.recording(),
             Stage::Done(r) => r.core.recording(),
             Stage::Running(_) => return Err(haptics_error("stop the loop before saving its recording")),
+            Stage::Busy(what) => return Err(busy(what)),
             Stage::Taken => None,
         };
         let rec = rec.ok_or_else(|| haptics_error("nothing recorded: make the loop with record_ticks > 0"))?;
@@ -424,18 +483,22 @@ impl PyHapticLoop {
     /// The recorded forces (n, 3) [N] and tool positions (n, 3) [m] and device positions
     /// (n, 3) [m], as a dict of arrays (``force``, ``tool``, ``device``).
     fn recorded<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let st = self.stage.lock().unwrap();
-        let rec = match &*st {
-            Stage::Ready(core, _) => core.recording(),
-            Stage::Done(r) => r.core.recording(),
-            _ => None,
+        // The columns are copied out under the mutex, the arrays made after (see `snapshot`).
+        let cols = {
+            let st = self.stage.lock().unwrap();
+            let rec = match &*st {
+                Stage::Ready(core, _) => core.recording(),
+                Stage::Done(r) => r.core.recording(),
+                _ => None,
+            };
+            let rec = rec.ok_or_else(|| haptics_error("nothing recorded (record_ticks = 0, or the loop is running)"))?;
+            let col = |f: &dyn Fn(&palpate_haptics::TickRecord) -> Vec3| rec.ticks.iter().map(f).collect::<Vec<Vec3>>();
+            [("force", col(&|t| t.force)), ("tool", col(&|t| t.tool)), ("device", col(&|t| t.input.position))]
         };
-        let rec = rec.ok_or_else(|| haptics_error("nothing recorded (record_ticks = 0, or the loop is running)"))?;
         let d = PyDict::new(py);
-        let col = |f: &dyn Fn(&palpate_haptics::TickRecord) -> Vec3| rec.ticks.iter().map(f).collect::<Vec<Vec3>>();
-        d.set_item("force", conv::vec3s_to_py(py, &col(&|t| t.force)))?;
-        d.set_item("tool", conv::vec3s_to_py(py, &col(&|t| t.tool)))?;
-        d.set_item("device", conv::vec3s_to_py(py, &col(&|t| t.input.position)))?;
+        for (k, v) in cols {
+            d.set_item(k, conv::vec3s_to_py(py, &v))?;
+        }
         Ok(d)
     }
 
@@ -489,6 +552,7 @@ impl PyHapticLoop {
             Stage::Ready(..) => "ready",
             Stage::Running(_) => "running",
             Stage::Done(_) => "stopped",
+            Stage::Busy(what) => what,
             Stage::Taken => "failed",
         };
         format!("HapticLoop({} Hz, {st}; {})", self.config.rate_hz, self.identity.1)

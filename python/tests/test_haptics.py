@@ -9,7 +9,11 @@ What a wrong implementation would do:
   wrongly (the Rust bridge refuses it: no accepted packet, no force back);
 - a vendor adapter that imports its SDK at import time (``palpate`` then needs every SDK), or
   maps millimetres as metres, or swaps axes (``test_*_adapter_maps_*`` with fake vendor modules);
-- commands that crash without a vendor SDK instead of saying what to install.
+- commands that crash without a vendor SDK instead of saying what to install;
+- an adapter loop that does not zero the device when the loop goes silent, or zeroes it before
+  30 ms of silence (``test_run_adapter_*``);
+- a binding that holds its lock while the GIL is released (a deadlock with ``snapshot()``);
+- a recording cut short without a word (``test_haptic_command_*_recording_*``).
 """
 from __future__ import annotations
 
@@ -18,6 +22,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 import types
 
@@ -86,6 +91,18 @@ def test_a_recording_of_another_model_is_refused(model, tmp_path):
         _p.HapticLoop(model, haptics.material(), "replay", recording=str(tmp_path / "bad.palprec"))
 
 
+def test_ticks_past_the_recording_buffer_are_reported(model):
+    t, k = cycle(model)
+    loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, record_ticks=100, idle=True)
+    r = loop.run()
+    assert r["ticks"] == 2000
+    assert len(loop.recorded()["force"]) == 100
+    assert r["recording_dropped_ticks"] == 1900, "the ticks that did not fit are counted"
+    # A buffer larger than the script is cut to it (allocated at start: no use for the rest).
+    loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, record_ticks=10**9, idle=True)
+    assert loop.run()["recording_dropped_ticks"] == 0
+
+
 def test_bad_parameters_raise_value_errors(model):
     t, k = cycle(model)
     m = haptics.material()
@@ -116,6 +133,139 @@ def test_loop_runs_while_python_sleeps_and_the_hand_follows(model):
     assert r["ticks"] >= s2["tick"] and r["n_faults"] == r["watchdog_trips"]
     with pytest.raises(_p.HapticsError):
         loop.start()
+
+
+def test_snapshot_from_another_thread_while_stop_or_run_releases_the_gil():
+    # stop() and run() release the GIL for their wait; if the loop's lock were still held then, a
+    # thread calling snapshot() (a viewer, a status line) would take the GIL and wait on the lock,
+    # and stop() could never take the GIL back: a deadlock. A deadlocked process cannot be
+    # stopped from inside, so the threads run in a child with a time limit.
+    code = textwrap.dedent("""
+        import sys, threading, time
+        sys.setswitchinterval(1e-5)          # hand the GIL over as often as possible
+        import palpate
+        from palpate import _palpate as _p, haptics
+        model = palpate.hybrid.build_shape("ellipsoids")
+        t, k = haptics.palpation_cycle(model)
+        calls = [0]
+
+        def hammer(loop, done):
+            while not done.is_set():
+                loop.snapshot(); loop.surface(); loop.finished()
+                calls[0] += 1
+
+        def with_hammer(loop, action):
+            done = threading.Event()
+            th = threading.Thread(target=hammer, args=(loop, done))
+            th.start()
+            time.sleep(0.005)
+            try:
+                return action()
+            finally:
+                done.set()
+                th.join()
+
+        for _ in range(20):
+            loop = _p.HapticLoop(model, haptics.material(), "hand", hand_start=k[0], idle=True)
+            loop.start()
+            r = with_hammer(loop, loop.stop)
+            assert r["ticks"] > 0, r
+        for _ in range(5):
+            loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, idle=True)
+            r = with_hammer(loop, loop.run)
+            assert r["ticks"] == 2000, r
+        print("OK", calls[0])
+    """)
+    try:
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        pytest.fail("deadlock: stop() or run() and snapshot() from another thread never returned")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith("OK"), out.stdout
+
+
+def test_run_adapter_against_the_loop_and_its_silence_rule(model, monkeypatch):
+    # The loop a vendor adapter runs (palpate device NAME), with a fake device, against a running
+    # loop on the bridge: its positions reach the loop, the loop's forces reach the device, and
+    # once the loop stops (silent), the device's force is zeroed, once, after SILENCE_S (30 ms)
+    # without a force packet and not before.
+    from palpate.devices import bridge as br
+
+    t, k = cycle(model)
+    events = []                                  # ("packet" | "write", time [s], force [N])
+
+    class Fake(br.Adapter):
+        name = "fake"
+
+        def __init__(self):
+            self.t0, self.closed, self.reads = None, False, set()
+
+        def open(self):
+            self.t0 = time.monotonic()
+
+        def read(self):
+            # From 2 mm clear to the press's depth over 0.3 s, then held.
+            s = min(1.0, (time.monotonic() - self.t0) / 0.3)
+            p = k[0] + s * (k[1] - k[0])
+            self.reads.add(tuple(p))
+            return p, (1.0, 0.0, 0.0, 0.0), 2
+
+        def write(self, force):
+            events.append(("write", time.monotonic(), np.array(force, dtype=np.float64)))
+
+        def close(self):
+            self.closed = True
+
+    latest = br.BridgeClient.latest
+
+    def logged_latest(self):
+        f = latest(self)
+        if f is not None:
+            events.append(("packet", time.monotonic(), f.force.copy()))
+        return f
+
+    monkeypatch.setattr(br.BridgeClient, "latest", logged_latest)
+    loop = _p.HapticLoop(model, haptics.material(), "bridge", port=0, record_ticks=60_000)
+    host, port = loop.bridge_address.split(":")
+    loop.start()
+    adapter, stats = Fake(), {}
+    th = threading.Thread(target=lambda: stats.update(br.run_adapter(adapter, host, int(port), 1000.0, seconds=1.3)))
+    th.start()
+    try:
+        time.sleep(0.8)
+    finally:
+        t_stop = time.monotonic()
+        loop.stop()
+        th.join(60)
+    assert not th.is_alive() and adapter.closed
+    bs = loop.bridge_stats()
+    rec = loop.recorded()
+    assert stats["sent"] > 100 and stats["forces"] > 50, stats
+    assert bs["accepted"] > 50 and bs["dropped"] == 0, bs
+    assert stats["max_force_n"] > 0.01, f"the device felt the tissue: {stats}"
+    # The loop's device positions are the adapter's, its forces what the device got, bit for bit.
+    assert all(tuple(p) in adapter.reads for p in rec["device"])
+    sent = {tuple(f) for f in rec["force"]} | {(0.0, 0.0, 0.0)}   # the loop's last act: zero
+    # Each write right after a packet is that packet's force; the others are the silence rule's
+    # zeros and, last, run_adapter's own zero on the way out.
+    packets, silences, last_packet, prev = [], [], adapter.t0, None
+    for e in events[:-1]:
+        if e[0] == "packet":
+            last_packet = e[1]
+        elif prev is not None and prev[0] == "packet":
+            assert tuple(e[2]) in sent and np.array_equal(e[2], prev[2])
+            packets.append(e)
+        else:
+            silences.append((e, e[1] - last_packet))
+        prev = e
+    assert events[-1][0] == "write" and not events[-1][2].any(), "zero force on the way out"
+    assert len(packets) == stats["forces"] and len(silences) == stats["silences"], (stats, len(packets), len(silences))
+    for (e, gap) in silences:
+        assert not e[2].any(), "a silence writes zero force"
+        assert gap > br.SILENCE_S, f"zeroed after only {gap * 1e3:.1f} ms of silence"
+    after = [gap for (e, gap) in silences if e[1] > t_stop]
+    assert len(after) == 1, f"one zeroing once the loop went silent, got {len(after)} (gaps [s] {after[:5]})"
+    assert after[0] < br.SILENCE_S + 0.25, f"zeroed {after[0] * 1e3:.0f} ms after the last force"
 
 
 def test_bridge_with_the_reference_client_in_a_second_process(model):
@@ -366,6 +516,43 @@ def test_haptic_command_scripted_record_and_replay(tmp_path, capsys):
     assert "500 ticks" in out and "Hz" in out and "overruns" in out
     assert main(["haptic", "ellipsoids", "--device", "joystick"]) == 2
     assert "unknown device" in capsys.readouterr().err
+
+
+def test_haptic_command_warns_of_a_recording_cut_short(tmp_path, capsys, monkeypatch):
+    from palpate.cli import haptic as cli_haptic
+    from palpate.cli import main
+
+    script = tmp_path / "press.toml"
+    script.write_text('[probe]\nvertex = "probe"\n[[segment]]\nkind = "press"\ndepth = 0.003\nduration = 0.3\n'
+                      '[[segment]]\nkind = "release"\nduration = 0.2\n')
+    rec = tmp_path / "press.palprec"
+    # The default buffer (no --seconds) made smaller than the 500-tick script.
+    monkeypatch.setattr(cli_haptic, "DEFAULT_RECORD_TICKS", 200)
+    assert main(["haptic", "ellipsoids", "--device", f"scripted:{script}", "--record", str(rec), "--quiet"]) in (0, 1)
+    cap = capsys.readouterr()
+    assert "recorded 200 ticks" in cap.out, cap.out
+    warning = [line for line in cap.err.splitlines() if "warning" in line]
+    assert len(warning) == 1 and "the last 300 of 500 ticks were not recorded" in warning[0], cap.err
+
+
+def test_haptic_command_seconds_records_every_tick(tmp_path, capsys):
+    from palpate.cli import haptic as cli_haptic
+    from palpate.cli import main
+
+    # --seconds: the loop stops itself after S seconds of ticks, all in the buffer (stopped at
+    # the next status line instead, it ran on past a buffer of S seconds and lost the rest).
+    rec = tmp_path / "hand.palprec"
+    assert main(["haptic", "ellipsoids", "--device", "hand", "--seconds", "0.3", "--record", str(rec), "--quiet"]) in (0, 1)
+    cap = capsys.readouterr()
+    assert "300 ticks" in cap.out and "recorded 300 ticks" in cap.out, cap.out
+    assert "warning" not in cap.err, cap.err
+    # Without --seconds: a bridge or a hand (no end) gets the default; a replay, at any rate, up
+    # to 4 kHz for S seconds (the loop cuts the buffer to the recording).
+    args = lambda **kw: types.SimpleNamespace(**{"record": "f", "seconds": None, "device": "hand", "rate": 1000.0, **kw})  # noqa: E731
+    assert cli_haptic.record_ticks(args()) == cli_haptic.DEFAULT_RECORD_TICKS == 300_000
+    assert cli_haptic.record_ticks(args(seconds=2.0, rate=2000.0)) == 4001
+    assert cli_haptic.record_ticks(args(seconds=2.0, device="replay:x")) == 8001
+    assert cli_haptic.record_ticks(args(record=None)) == 0
 
 
 def test_soak_and_bench_haptic_commands(capsys):

@@ -96,7 +96,9 @@ pub struct ServoConfig {
     /// Ticks between last-good checkpoints (default 250: a quarter second at 1 kHz; a checkpoint
     /// of the hybrid state allocates, see [`crate::HybridPhysics`]).
     pub checkpoint_every: u64,
-    /// Ticks recorded for replay (0: none; the buffer is allocated at start).
+    /// Ticks recorded for replay (0: none; the buffer is allocated at start, so that the servo
+    /// never allocates; ticks past it are not recorded but counted,
+    /// [`HapticCore::recording_dropped`]).
     pub record_ticks: usize,
     /// Ticks whose period and compute time are kept for the percentiles (the latest, a ring;
     /// default 600,000: 10 min at 1 kHz, 4.8 MB).
@@ -172,6 +174,9 @@ pub struct HapticCore {
     fault_log: Vec<FaultRecord>,
     bad_inputs: u64,
     recording: Option<Recording>,
+    /// Ticks that found the recording's buffer full (not recorded: the recording is the run's
+    /// first `record_ticks` ticks).
+    recording_dropped: u64,
     /// The largest force sent \[N\], and the energy the device has put into the user \[J\]:
     /// `sum F_k . (x_{k+1} - x_k)` (the force held over a tick times the hand's move; negative
     /// for a passive loop: the user does the work).
@@ -198,6 +203,7 @@ impl HapticCore {
             fault_log: Vec::with_capacity(FAULT_LOG),
             bad_inputs: 0,
             recording,
+            recording_dropped: 0,
             max_force: 0.0,
             energy: 0.0,
             last_sent: None,
@@ -265,8 +271,13 @@ impl HapticCore {
         out.tool = self.coupling.proxy;
         self.account(&out);
         if let Some(r) = &mut self.recording {
+            // Within the buffer sized at start only (a push past it would allocate in the servo
+            // thread); what does not fit is counted, so that a truncated recording is reported
+            // rather than passed off as the whole run.
             if r.ticks.len() < r.ticks.capacity() {
                 r.ticks.push(TickRecord { input, has_input: sample.is_some(), force: out.force, tool: out.tool, tissue: out.tissue });
+            } else {
+                self.recording_dropped += 1;
             }
         }
         out
@@ -304,8 +315,12 @@ impl HapticCore {
         self.last_sent = Some((out.force, out.device));
         out.tool = self.coupling.proxy;
         out.tissue = Vec3::zeros();
-        if let Some(last) = self.recording.as_mut().and_then(|r| r.ticks.last_mut()) {
-            (last.force, last.tool, last.tissue) = (out.force, out.tool, out.tissue);
+        // The stalled tick's record, if it has one: once the buffer is full the last record is an
+        // older tick's, which must keep what was sent then.
+        if self.recording_dropped == 0 {
+            if let Some(last) = self.recording.as_mut().and_then(|r| r.ticks.last_mut()) {
+                (last.force, last.tool, last.tissue) = (out.force, out.tool, out.tissue);
+            }
         }
     }
 
@@ -369,6 +384,11 @@ impl HapticCore {
     }
     pub fn take_recording(&mut self) -> Option<Recording> {
         self.recording.take()
+    }
+    /// Ticks that were not recorded because the recording's buffer (`record_ticks`) was full:
+    /// nonzero means the recording holds only the run's beginning.
+    pub fn recording_dropped(&self) -> u64 {
+        self.recording_dropped
     }
 }
 

@@ -93,14 +93,20 @@ fn replay_is_bit_identical_offline_and_from_a_file() {
 fn replay_through_the_real_time_servo_is_bit_identical() {
     // Same inputs through the thread (clock, pacing, watchdog) as offline: same bits.
     let (times, knots) = (vec![0.0, 0.2, 0.4], vec![Vec3::new(0.0, 0.0, 0.002), Vec3::new(0.001, 0.0, -0.003), Vec3::new(0.0, 0.0, 0.002)]);
-    let cfg = ServoConfig { record_ticks: 1000, safety: Some(fast_ramp()), ..Default::default() };
+    // A watchdog trip takes the fault path (zero, restore, ramp) on the machine's timing, which a
+    // replay cannot repeat; on a loaded 2-core machine the scheduler alone can hold the servo
+    // 30 ms. A 10 s stall timeout keeps the watchdog running (its thread, its checks) while
+    // preemption cannot trip it, so the bit-identity claim is checked on every run (the
+    // watchdog's own promise is `watchdog_zeroes_force_within_30ms_of_a_stall`'s).
+    let safety = SafetyParams { stall_timeout: 10.0, ..fast_ramp() };
+    let cfg = ServoConfig { record_ticks: 1000, safety: Some(safety), ..Default::default() };
     let dev = Scripted::new(times.clone(), knots.clone()).unwrap();
     let core = HapticCore::with_config(Box::new(wall()), &cfg, &dev).unwrap();
     let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();
     let mut live = report.core;
     let live_rec = live.take_recording().unwrap();
     assert_eq!(live_rec.ticks.len(), 400);
-    assert_eq!(report.watchdog_trips, 0);
+    assert_eq!(report.watchdog_trips, 0, "a 10 s stall timeout cannot trip on a 0.4 s run");
     let mut replay = Replay::new(&live_rec);
     let mut off = HapticCore::new(Box::new(wall()), 1000.0, live_rec.coupling, live_rec.safety, 250, 1000);
     off.run_offline(&mut replay, 10_000);
@@ -142,6 +148,38 @@ fn watchdog_zeroes_force_within_30ms_of_a_stall() {
     let resumed: Vec<Vec3> = sends.iter().filter(|(t, _)| *t > zero_at).map(|x| x.1).collect();
     let first = resumed.iter().position(|f| *f != Vec3::zeros()).unwrap();
     assert!(resumed[first].norm() <= 3.2 / 20.0, "force after the fault must ramp up: {:?}", resumed[first]);
+}
+
+/// A run longer than its recording buffer: the recording is the run's beginning, and the ticks
+/// that did not fit are counted (silently dropped, a truncated file looked like a whole run);
+/// a stall after the buffer filled does not rewrite the last recorded tick (an older one).
+#[test]
+fn ticks_past_the_recording_buffer_are_counted() {
+    let sink: Arc<LogSink> = Arc::default();
+    let mut dev = Pressing { z: |_t: f64| -0.012, sink: sink.clone(), ticks: 150 };
+    let mut core = HapticCore::new(Box::new(wall()), 1000.0, CouplingParams::default(), fast_ramp(), 250, 100);
+    assert_eq!(core.run_offline(&mut dev, 1000), 150);
+    assert_eq!(core.recording().unwrap().ticks.len(), 100);
+    assert_eq!(core.recording_dropped(), 50);
+    let mut full = HapticCore::new(Box::new(wall()), 1000.0, CouplingParams::default(), fast_ramp(), 250, 150);
+    full.run_offline(&mut Pressing { z: |_t: f64| -0.012, sink, ticks: 150 }, 1000);
+    assert_eq!(full.recording_dropped(), 0);
+    assert_eq!(compare(core.recording().unwrap(), full.recording().unwrap()), None, "the kept ticks are the run's first");
+
+    // The real-time servo: the buffer fills at tick 100, the physics stalls at tick 200.
+    let mut faulty = Faulty::new(wall(), 200);
+    faulty.stall = Some(Duration::from_millis(100));
+    let dev = Pressing { z: |_t: f64| -0.012, sink: Arc::new(LogSink::default()), ticks: 300 };
+    let cfg = ServoConfig { record_ticks: 100, safety: Some(fast_ramp()), ..Default::default() };
+    let core = HapticCore::with_config(Box::new(faulty), &cfg, &dev).unwrap();
+    let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();
+    assert!(report.watchdog_trips >= 1, "the 100 ms stall trips the watchdog");
+    assert_eq!(report.core.recording_dropped(), 200);
+    let rec = report.core.recording().unwrap();
+    assert_eq!(rec.ticks.len(), 100);
+    // Pressed 12 mm for 100 ticks past a 20 ms ramp: ~3 N. The stall's fault path zeroed the
+    // record of tick 99 when it took "the last record" for the stalled tick's.
+    assert!(rec.ticks[99].force.norm() > 1.0, "the last recorded tick keeps its force: {:?}", rec.ticks[99].force);
 }
 
 #[test]

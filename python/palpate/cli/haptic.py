@@ -1,7 +1,13 @@
 """``palpate haptic MODEL --device scripted:SCRIPT|replay:FILE|bridge:PORT|hand``: the haptic loop
 (a native servo thread, :class:`palpate.HapticLoop`) on a hybrid model, headless, with a live
 status line (rate, period, force, overruns). ``--record FILE`` writes the interaction for
-``--device replay:FILE``, which gives the same forces bit for bit."""
+``--device replay:FILE``, which gives the same forces bit for bit.
+
+The recording's buffer is allocated when the loop starts (the servo thread never allocates), 144
+bytes a tick: with ``--seconds S``, S seconds of ticks (the loop then stops itself after that
+many); without, the device's length (a script's, a replay's) up to :data:`DEFAULT_RECORD_TICKS`
+(5 minutes at 1 kHz, 43 MB; a bridge or a hand, which have no end, get that). Ticks past the
+buffer are not recorded: the command says how many, in one warning line on stderr."""
 from __future__ import annotations
 
 import math
@@ -11,6 +17,10 @@ from ._common import Fail, load_hybrid_model, palpate_errors
 
 DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand"
 KINDS = ("simulated", "bridge", "touch", "forcedimension", "haply", "hapticmaster")
+#: The recording buffer without ``--seconds`` [ticks]: 5 min at 1 kHz, 75 s at 4 kHz (43 MB).
+DEFAULT_RECORD_TICKS = 300_000
+#: The fastest a loop (and so a recording to replay) runs [Hz].
+MAX_RATE_HZ = 4000.0
 
 
 def add_parser(sub) -> None:
@@ -23,7 +33,10 @@ def add_parser(sub) -> None:
     h.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000; 250 to 4000)")
     h.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: the device's end; "
                    "for bridge and hand, Ctrl-C)")
-    h.add_argument("--record", default=None, metavar="FILE", help="record the interaction (inputs, forces, model identity)")
+    h.add_argument("--record", default=None, metavar="FILE",
+                   help="record the interaction (inputs, forces, model identity); the buffer holds --seconds S of ticks, "
+                        f"else the device's length up to {DEFAULT_RECORD_TICKS:,} ticks (5 min at 1 kHz; 144 bytes a tick): "
+                        "ticks past it are not recorded, and a warning says how many")
     h.add_argument("--host", default="127.0.0.1", help="bridge address to bind (default 127.0.0.1)")
     h.add_argument("--kind", choices=KINDS, default=None, help="the device's make, for the coupling and safety defaults")
     h.add_argument("--max-force", type=float, default=None, metavar="N", help="force limit [N] (default 3)")
@@ -37,8 +50,22 @@ def _positive(cmd: str, flag: str, v) -> None:
         raise Fail(f"palpate {cmd}: {flag} must be positive and finite, got {v}")
 
 
+def record_ticks(a) -> int:
+    """The recording buffer for ``a`` [ticks] (0 without ``--record``; see the module)."""
+    if not a.record:
+        return 0
+    if a.seconds is None:
+        return DEFAULT_RECORD_TICKS         # the loop cuts it to a script's or a replay's length
+    # A replay runs at its recording's rate, whatever --rate says (the loop cuts the buffer to
+    # the recording's length).
+    rate = MAX_RATE_HZ if a.device.startswith("replay:") else a.rate
+    return int(math.ceil(a.seconds * rate)) + 1
+
+
 def make_loop(a, model, record_ticks: int):
-    """The :class:`palpate.HapticLoop` for ``a.device``."""
+    """The :class:`palpate.HapticLoop` for ``a.device``; with ``--seconds S`` (but for a replay,
+    whose rate is the recording's), the loop stops itself after S seconds of ticks, which the
+    recording buffer holds (stopped from here, it would run on until the next status line)."""
     from .. import _palpate as _p
     from .. import haptics
     from ..touch import ScriptError
@@ -47,6 +74,8 @@ def make_loop(a, model, record_ticks: int):
     common = dict(rate_hz=a.rate, record_ticks=record_ticks, max_force=a.max_force, tool_radius=a.tool_radius)
     if a.kind is not None:
         common["kind"] = a.kind
+    if a.seconds is not None and kind != "replay":
+        common["max_ticks"] = int(math.ceil(a.seconds * a.rate))
     mat = haptics.material()
     try:
         if kind == "scripted":
@@ -92,11 +121,7 @@ def cmd_haptic(a) -> int:
     _positive("haptic", "--max-force", a.max_force)
     _positive("haptic", "--tool-radius", a.tool_radius)
     name, model = load_hybrid_model(a.model, "haptic")
-    record_ticks = 0
-    if a.record:
-        span = a.seconds if a.seconds is not None else 600.0
-        record_ticks = int(span * a.rate) + 1
-    loop = make_loop(a, model, record_ticks)
+    loop = make_loop(a, model, record_ticks(a))
     where = f" on {loop.bridge_address}" if loop.bridge_address else ""
     print(f"palpate haptic: {name}, device {a.device}{where}, {loop.rate_hz:g} Hz", flush=True)
     tty = sys.stdout.isatty()
@@ -122,4 +147,8 @@ def cmd_haptic(a) -> int:
         except OSError as e:
             raise Fail(f"palpate haptic: cannot write {a.record}: {e}", 1) from None
         print(f"  recorded {n} ticks: {a.record}")
+        if r["recording_dropped_ticks"]:
+            print(f"palpate haptic: warning: the recording buffer was full: the last {r['recording_dropped_ticks']} of "
+                  f"{n + r['recording_dropped_ticks']} ticks were not recorded (--seconds S sizes it; 144 bytes a tick)",
+                  file=sys.stderr)
     return 1 if r["n_faults"] else 0

@@ -194,9 +194,22 @@ impl Client {
     pub fn send_raw(&self, b: &[u8]) -> std::io::Result<usize> {
         self.socket.send(b)
     }
+    /// The next valid force packet if one is waiting (never blocks).
+    pub fn try_recv(&self) -> std::io::Result<Option<protocol::Force>> {
+        // Non-blocking rather than a tiny timeout: Linux rounds a socket's timeout up to whole
+        // scheduler ticks (1-4 ms), no shorter than the loop's period, so "drain what is
+        // waiting" with a timeout may never end while forces keep coming.
+        self.socket.set_nonblocking(true)?;
+        let got = self.recv_valid();
+        self.socket.set_nonblocking(false)?;
+        got
+    }
     /// The next valid force packet, waiting at most `timeout` (`None` on timeout).
     pub fn recv(&self, timeout: Duration) -> std::io::Result<Option<protocol::Force>> {
         self.socket.set_read_timeout(Some(timeout))?;
+        self.recv_valid()
+    }
+    fn recv_valid(&self) -> std::io::Result<Option<protocol::Force>> {
         let mut b = [0u8; FORCE_BYTES + 1];
         loop {
             match self.socket.recv(&mut b) {
