@@ -14,6 +14,8 @@ BIN := $(VENV)/bin
 # Versions that build together on this machine (see shared/design/stack-notes.md).
 PY_DEPS := maturin==1.16.0 numpy==2.4.6 meshio==5.3.5 matplotlib==3.11.2 pytest==9.2.0 \
            scipy==1.17.1 scikit-fem==12.0.2  # the last two: independent reference in python/tests
+# Batch studies (palpate sweep / fit; the `study` extra), pinned to versions that install together.
+STUDY_DEPS := dask==2026.8.0 distributed==2026.8.0 pyarrow==26.0.1
 # `make wheel` only: zig as the linker, against glibc 2.28's symbols, so that the wheel installs on
 # common Linux systems (a plain build here needs glibc 2.34: manylinux_2_34).
 WHEEL_DEPS := ziglang==0.17.1
@@ -41,7 +43,7 @@ $(BIN)/python:
 
 $(VENV)/.deps: $(BIN)/python Makefile
 	$(BIN)/python -m pip install -q --disable-pip-version-check --upgrade pip
-	$(BIN)/python -m pip install -q --disable-pip-version-check $(PY_DEPS)
+	$(BIN)/python -m pip install -q --disable-pip-version-check $(PY_DEPS) $(STUDY_DEPS)
 	touch $@
 
 $(VENV)/.built: $(VENV)/.deps $(RUST_INPUTS)

@@ -33,23 +33,32 @@ def shown(quiet: bool = False) -> bool:
 
 
 @contextmanager
-def task(description: str, total: Optional[int] = None, quiet: bool = False) -> Iterator[Callable[[int], None]]:
+def task(description: str, total: Optional[int] = None, quiet: bool = False,
+         eta: bool = False) -> Iterator[Callable[..., None]]:
     """``with task("building", total=n) as advance: ... advance(1)``: a bar over ``total`` units
-    (or a spinner if None) on a terminal; ``advance`` is a no-op otherwise."""
+    (or a spinner if None) on a terminal; ``advance`` is a no-op otherwise. ``eta``: also the
+    estimated time left; ``advance(k, description)`` replaces the description."""
     if not shown(quiet):
-        yield lambda k=1: None
+        yield lambda k=1, description=None: None
         return
     try:
         from rich.console import Console
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn,
-                                   TimeElapsedColumn)
+                                   TimeElapsedColumn, TimeRemainingColumn)
     except ImportError:
-        yield lambda k=1: None
+        yield lambda k=1, description=None: None
         return
     cols = [SpinnerColumn(), TextColumn("{task.description}")]
     if total is not None:
         cols += [BarColumn(), MofNCompleteColumn()]
     cols.append(TimeElapsedColumn())
+    if eta and total is not None:
+        cols.append(TimeRemainingColumn())
     with Progress(*cols, console=Console(stderr=True), transient=True) as p:
         t = p.add_task(description, total=total)
-        yield lambda k=1: p.advance(t, k)
+
+        def advance(k: int = 1, description: Optional[str] = None) -> None:
+            if description is not None:
+                p.update(t, description=description)
+            p.advance(t, k)
+        yield advance

@@ -72,10 +72,13 @@ def newton_reference():
                             tolerance=defaults.newton.tolerance)
 
 
-def probe_point():
-    """Probe point P (mesh units) on the outer ellipsoid and the inward unit normal there."""
-    x = OUTER[0] * np.sqrt(1 - (PROBE_Z / OUTER[2]) ** 2)
-    p = np.array([x, 0.0, PROBE_Z])
+def probe_point(z: float = PROBE_Z):
+    """Probe point P (mesh units) on the outer ellipsoid at height ``z`` (mesh units, on the +x
+    side; the protocol's 2.0 by default) and the inward unit normal there."""
+    if not 0.0 <= z < OUTER[2]:
+        raise _p.ParameterError(f"probe height z = {z} mesh units must be within [0, {OUTER[2]})")
+    x = OUTER[0] * np.sqrt(1 - (z / OUTER[2]) ** 2)
+    p = np.array([x, 0.0, z])
     n = p / OUTER ** 2
     n /= np.linalg.norm(n)
     return p, -n
@@ -95,13 +98,16 @@ class Case:
     total_force: np.ndarray   # [N], (3,)
 
 
-def setup(name: str, points_mu: np.ndarray, tets: np.ndarray, force: float = FORCE) -> Case:
-    """Fixed and loaded nodes from points in mesh units, as common.setup does."""
+def setup(name: str, points_mu: np.ndarray, tets: np.ndarray, force: float = FORCE,
+          probe_z: float = PROBE_Z, mesh: "Optional[_p.TetMesh]" = None) -> Case:
+    """Fixed and loaded nodes from points in mesh units, as common.setup does; ``probe_z``: the
+    probe's height (mesh units; :func:`probe_point`); ``mesh``: the already made
+    :class:`palpate.TetMesh` of these points (x ``SCALE``) and tets, reused rather than rebuilt."""
     p = np.asarray(points_mu, dtype=np.float64)
     fixed = np.flatnonzero(p[:, 2] <= BASE_TOL)
     level = np.sqrt(((p / OUTER) ** 2).sum(1))
     outer = np.flatnonzero(np.abs(level - 1) < 1e-3)
-    P, n = probe_point()
+    P, n = probe_point(probe_z)
     d = np.linalg.norm(p[outer] - P, axis=1)
     loaded = outer[d <= PROBE_R]
     if len(outer) == 0 or len(fixed) == 0:
@@ -111,7 +117,8 @@ def setup(name: str, points_mu: np.ndarray, tets: np.ndarray, force: float = FOR
                            "palpate bench protocol needs the shared lv_* meshes or a mesh of the same geometry")
     if len(loaded) == 0:
         loaded = outer[[int(np.argmin(d))]]
-    mesh = _p.TetMesh(p * SCALE, tets, source=name)
+    if mesh is None:
+        mesh = _p.TetMesh(p * SCALE, tets, source=name)
     return Case(name, mesh, fixed, loaded, force * n)
 
 

@@ -1,5 +1,5 @@
 """The ``palpate`` command line (also ``python -m palpate``): one module per command (``run``,
-``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``), shared helpers in ``_common``.
+``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``, ``sweep``, ``fit``), shared helpers in ``_common``.
 
     palpate run SCENE.toml [--out DIR] [--steps N] [--quiet]
     palpate bench protocol MESH [--force F] [--steps N] [--json] [--integrator NAME] [--newton auto|on|off]
@@ -27,6 +27,10 @@
     palpate bench haptic MODEL [--seconds S] [--rate HZ] [--no-idle] [--json]
     palpate device touch|forcedimension|haply|hapticmaster [--port P] [--host IP] [--scale S] [--offset X Y Z]
         (a vendor device as a bridge client; each vendor SDK an optional extra)
+    palpate sweep SPEC.toml [--out DIR] [--workers N | --scheduler ADDRESS] [--resume] [--json] [--quiet]
+        (a batch study on Dask: results.parquet, a row per scenario; palpate/sweep/)
+    palpate fit SPEC.toml --measured CURVE.csv [--params young,poisson,phi,psi] [--plot PNG] [--workers N]
+        (the material that reproduces a measured force-depth curve)
 
 Long work (a model build, a scene run, a touch, a benchmark sweep) shows a progress display on
 stderr when it is a terminal, nothing otherwise; ``--quiet`` (run, build, touch, bench protocol,
@@ -43,11 +47,11 @@ import sys
 from typing import List, Optional
 
 from .. import __version__
-from . import bench, build, device, haptic, info, run, soak, touch
+from . import bench, build, device, fit, haptic, info, run, soak, sweep, touch
 from ._common import Fail, Parser, run_guarded
 
 #: The commands, in the order of ``palpate --help``: each module adds its parser and handler.
-COMMANDS = (run, bench, build, info, touch, haptic, soak, device)
+COMMANDS = (run, bench, build, info, touch, haptic, soak, device, sweep, fit)
 
 
 def build_parser() -> argparse.ArgumentParser:

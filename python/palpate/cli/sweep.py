@@ -1,0 +1,38 @@
+"""``palpate sweep SPEC.toml``: a batch study on Dask (:mod:`palpate.sweep`): the scenarios of the
+spec as tasks on a ``LocalCluster`` of this machine's cores or on an existing scheduler, their
+outcomes one Parquet table."""
+from __future__ import annotations
+
+import json
+
+from ._common import Fail, add_quiet
+
+
+def add_parser(sub) -> None:
+    s = sub.add_parser("sweep", help="run a batch study (a spec of parameters to vary) on Dask: one Parquet table",
+                       description="Run the study SPEC (TOML: palpate.sweep.spec) as Dask tasks and write its table "
+                                   "(results.parquet, a row per scenario), its parts as they finish and a manifest to --out.")
+    s.add_argument("spec", metavar="SPEC.toml")
+    s.add_argument("--out", metavar="DIR", help="output folder (default: sweep-<study name>)")
+    s.add_argument("--workers", type=int, metavar="N",
+                   help="local worker processes (default: one per core; 0: in this process, no Dask)")
+    s.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (tcp://host:8786) instead of a local cluster")
+    s.add_argument("--resume", action="store_true", help="continue the study in --out, running only scenarios without a row")
+    s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    add_quiet(s)
+    s.set_defaults(func=cmd_sweep)
+
+
+def cmd_sweep(a) -> int:
+    from ..sweep import sweep
+
+    if a.workers is not None and a.workers < 0:
+        raise Fail("palpate sweep: --workers must be 0 or more")
+    if a.scheduler is not None and a.workers is not None:
+        raise Fail("palpate sweep: --workers is for the local cluster; a --scheduler has its own workers")
+    r = sweep(a.spec, a.out, scheduler=a.scheduler, workers=a.workers, resume=a.resume, quiet=a.quiet or a.json,
+              log=None if a.json else print)
+    if a.json:
+        print(json.dumps({"study": r.manifest["study"], "scenarios": r.done, "failed": r.failed, "ran": r.ran,
+                          "table": str(r.path), "model_hash": r.manifest["model_hash"]}))
+    return 0
