@@ -149,8 +149,11 @@ def test_a_lost_worker_is_retried_and_the_model_reaches_each_worker_once(sequent
     assert all(c <= 1 for c in counts.values()), counts
 
 
-def test_fit_recovers_a_known_modulus_within_its_confidence_interval(tmp_path):
-    spec = {"study": {"name": "fit"}, "model": {"mesh": "ellipsoid_192"},
+@pytest.mark.parametrize("mesh", ["ellipsoid_192", "190"])
+def test_fit_recovers_a_known_modulus_within_its_confidence_interval(tmp_path, mesh, request):
+    if mesh != "ellipsoid_192":
+        request.getfixturevalue("shared")   # skips without the shared bench meshes
+    spec = {"study": {"name": "fit"}, "model": {"mesh": mesh},
             "loading": {"kind": "probe", "steps": 110, "young": 3.0e4}}
     sp = ps.spec_from_dict(spec)
     truth = dict(sp.loading, young=3.7e4, scenario=0)
@@ -170,6 +173,17 @@ def test_fit_recovers_a_known_modulus_within_its_confidence_interval(tmp_path):
         fit(sp, measured, ["density"], workers=0)
     with pytest.raises(FitError, match="m >= 3"):
         fit(sp, measured[:2], ["young"], workers=0)
+
+
+def test_fields_go_to_the_companion_store(tmp_path):
+    doc = dict(STUDY, parameters={"young": [3e4, 4e4]}, outputs={"field": True, "curve": False})
+    r = ps.sweep(doc, tmp_path / "out", workers=0)
+    assert "curve_force_n" not in r.table.column_names
+    u = [np.load(tmp_path / "out" / "fields" / f"{k:07d}.npy") for k in range(2)]
+    assert u[0].shape == (54, 3) and np.isfinite(u[0]).all()
+    # The stiffer wall moves less; the field is the displacement [m] the row's max_disp_m measures.
+    assert np.linalg.norm(u[1], axis=1).max() < np.linalg.norm(u[0], axis=1).max()
+    assert np.linalg.norm(u[0], axis=1).max() == pytest.approx(r.rows()[0]["max_disp_m"], rel=0.5)
 
 
 def test_the_press_loading_runs_on_a_hybrid_model(tmp_path):
@@ -208,3 +222,11 @@ def test_the_cli_runs_a_study_and_a_fit_and_refuses_a_bad_spec_in_one_line(tmp_p
     (tmp_path / "bad.toml").write_text('[model]\nmesh = "ellipsoid_192"\n[loading]\nkind = "probe"\nstep = 3\n')
     p = run_cli("sweep", "bad.toml", "--workers", "0", cwd=tmp_path)
     assert p.returncode == 2 and p.stderr.count("\n") == 1 and "loading.step" in p.stderr, p.stderr
+
+
+def test_bench_sweep_reports_its_keys(tmp_path):
+    from palpate.sweep import bench as sb
+    p = run_cli("bench", "sweep", "ellipsoid_192", "--scenarios", "4", "--steps", "20", "--json", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    r = json.loads(p.stdout)
+    assert set(sb.KEYS) <= set(r) and r["scenarios"] == 4 and r["worker2_s"] > 0 and r["startup_s"] > 0

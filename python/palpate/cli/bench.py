@@ -80,6 +80,34 @@ def add_parser(sub) -> None:
     add_quiet(h)
     h.set_defaults(func=cmd_bench_hybrid)
     _add_haptic(bsub)
+    w = bsub.add_parser("sweep", help="the batch-study runner's overhead and 2-worker speed-up (palpate sweep)",
+                        description="A study of N probe scenarios on a protocol mesh run as a plain Python loop, then "
+                                    "by the Dask runner with 1 and 2 local workers: scenarios per second, the runner's "
+                                    "overhead per scenario and the 2-worker speed-up (palpate/sweep/bench.py).")
+    w.add_argument("mesh", nargs="?", default="1350", metavar="MESH",
+                   help="190, 1350, 10k, 50k (the shared lv_* meshes) or ellipsoid_192 (default 1350)")
+    w.add_argument("--scenarios", type=int, default=64, metavar="N", help="scenarios (default 64)")
+    w.add_argument("--steps", type=int, default=1000, help="steps of 1 ms a scenario (default 1000)")
+    w.add_argument("--json", action="store_true", help="one JSON object")
+    w.set_defaults(func=cmd_bench_sweep)
+
+
+def cmd_bench_sweep(a) -> int:
+    import json as _json
+
+    from ..sweep import bench as sb
+
+    if a.scenarios < 2:
+        raise Fail("palpate bench sweep: --scenarios must be at least 2")
+    r = sb.run(a.mesh, a.scenarios, a.steps, log=None if a.json else print)
+    if a.json:
+        print(_json.dumps(r))
+    else:
+        print(f"palpate bench sweep: {r['scenarios']} scenarios of {r['steps']} steps on {r['mesh']}: "
+              f"loop {r['loop_per_s']:.2f}/s, 1 worker {r['worker1_per_s']:.2f}/s, 2 workers {r['worker2_per_s']:.2f}/s; "
+              f"runner overhead {100 * r['overhead_per_scenario']:.1f}% a scenario ({100 * r['overhead_per_scenario_steady']:.1f}% past "
+              f"the cluster's {r['startup_s']:.2f} s start-up); speed-up 2 over 1: {r['speedup_2_over_1']:.2f}x")
+    return 0
 
 
 def _add_haptic(bsub) -> None:

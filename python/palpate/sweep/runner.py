@@ -36,7 +36,7 @@ import numpy as np
 
 from .. import _palpate as _p
 from .. import __version__
-from .scenario import Payload, finite_or_none, run_scenario
+from .scenario import FIELD, Payload, finite_or_none, run_scenario, save_field
 from .spec import TEXT, WHOLE, Spec, SweepSpecError, load_spec, spec_from_dict
 
 #: A part is written when this many rows are waiting or PART_SECONDS have passed.
@@ -257,6 +257,9 @@ def sweep(spec: Union[Spec, Dict[str, Any], str, os.PathLike], out: Union[str, o
 
         def got(s: Dict[str, Any], row: Dict[str, Any]) -> None:
             nonlocal failed
+            u = row.pop(FIELD, None)
+            if u is not None and field_dir is not None:
+                save_field(field_dir, s["scenario"], u)
             full = dict(s)
             full.update(row)
             table.add(full)
@@ -264,7 +267,7 @@ def sweep(spec: Union[Spec, Dict[str, Any], str, os.PathLike], out: Union[str, o
             advance(1, f"sweep {sp.name} ({failed} failed)" if failed else None)
 
         with Runner(payload, client=client, scheduler=scheduler, workers=workers, log=say) as runner:
-            runner.run(todo, got, curve=sp.curve, field_dir=field_dir)
+            runner.run(todo, got, curve=sp.curve, field=sp.field)
     t, path, n_failed = table.finish()
     table.write_manifest(state="complete", finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), done=t.num_rows, failed=n_failed)
     say(f"palpate sweep: {sp.name}: {t.num_rows} scenarios ({n_failed} failed) in {path}")
@@ -323,11 +326,11 @@ class Runner:
         self._own.clear()
 
     def run(self, scenarios: Sequence[Dict[str, Any]], on_row: Callable[[Dict[str, Any], Dict[str, Any]], None], *,
-            curve: bool = True, field_dir: Optional[str] = None) -> None:
+            curve: bool = True, field: bool = False) -> None:
         """Run ``scenarios``, calling ``on_row(scenario, row)`` as each finishes (any order)."""
         if self.local:
             for s in scenarios:
-                on_row(s, run_scenario(self.payload, s, curve, field_dir))
+                on_row(s, run_scenario(self.payload, s, curve, field))
             return
         from distributed import as_completed
         client = self.client
@@ -343,7 +346,7 @@ class Runner:
         by_key: Dict[str, Dict[str, Any]] = {}
 
         def submit(s: Dict[str, Any]):
-            f = client.submit(run_scenario, self._model, s, curve, field_dir, pure=False,
+            f = client.submit(run_scenario, self._model, s, curve, field, pure=False,
                               key=f"palpate-scenario-{s['scenario']}-{time.monotonic_ns()}")
             by_key[f.key] = s
             return f

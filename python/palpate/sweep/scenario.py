@@ -58,8 +58,10 @@ def material(s: Dict[str, Any]) -> "_p.Material":
                        phi=float(s["phi"]), psi=float(s["psi"]))
 
 
-def run_scenario(payload: Payload, s: Dict[str, Any], curve: bool = True, field_dir: Optional[str] = None) -> Dict[str, Any]:
-    """The row of scenario ``s`` (a dict of parameters with its index ``scenario``); never raises."""
+def run_scenario(payload: Payload, s: Dict[str, Any], curve: bool = True, field: bool = False) -> Dict[str, Any]:
+    """The row of scenario ``s`` (a dict of parameters with its index ``scenario``); never raises.
+    ``field``: the final displacement field (n, 3) [m] rides along as ``row[FIELD]`` (the driver
+    stores it: workers on other machines need no shared file system)."""
     crash = os.environ.get(CRASH_ONCE_ENV)
     if crash and s.get("scenario") == 0 and not os.path.exists(crash):
         open(crash, "w").close()
@@ -71,9 +73,9 @@ def run_scenario(payload: Payload, s: Dict[str, Any], curve: bool = True, field_
         row.update(curve_time_s=[], curve_force_n=[], curve_depth_m=[])
     try:
         if payload.kind == "probe":
-            _probe(payload, s, row, curve, field_dir)
+            _probe(payload, s, row, curve, field)
         else:
-            _press(payload, s, row, curve, field_dir)
+            _press(payload, s, row, curve, field)
     except _p.PalpateError as e:
         row["status"], row["error"] = "failed", f"{type(e).__name__}: {e}"
     except Exception as e:  # noqa: BLE001 - a row with the error, never a crashed study
@@ -83,7 +85,7 @@ def run_scenario(payload: Payload, s: Dict[str, Any], curve: bool = True, field_
     return row
 
 
-def _probe(payload: Payload, s: Dict[str, Any], row: Dict[str, Any], curve: bool, field_dir: Optional[str]) -> None:
+def _probe(payload: Payload, s: Dict[str, Any], row: Dict[str, Any], curve: bool, field: bool) -> None:
     from .. import bench
     case = bench.setup(payload.name, payload.points_mu, payload.tets, float(s["force"]),
                        probe_z=float(s["probe_z"]) / bench.SCALE, mesh=payload.mesh)
@@ -105,11 +107,11 @@ def _probe(payload: Payload, s: Dict[str, Any], row: Dict[str, Any], curve: bool
         row["status"], row["error"] = "failed", str(r["error"])
     elif not r["stable"]:
         row["status"], row["error"] = "unstable", f"max |u| {r['max_disp_m']:.3g} m over {bench.STABLE_LIMIT_ANY_FORCE} m"
-    if field_dir is not None and row["status"] != "failed":
-        _save_field(field_dir, s["scenario"], body.displacements)
+    if field and row["status"] != "failed":
+        row[FIELD] = np.asarray(body.displacements, dtype=np.float64)
 
 
-def _press(payload: Payload, s: Dict[str, Any], row: Dict[str, Any], curve: bool, field_dir: Optional[str]) -> None:
+def _press(payload: Payload, s: Dict[str, Any], row: Dict[str, Any], curve: bool, field: bool) -> None:
     from .. import touch
     radius, dt = float(s["tool_radius"]), float(s["dt"])
     sim = _p.HybridSim(payload.hybrid, material(s), tool_radius=radius)
@@ -143,11 +145,16 @@ def _press(payload: Payload, s: Dict[str, Any], row: Dict[str, Any], curve: bool
     if curve:
         row.update(curve_time_s=[float(x) for x in times[:done]], curve_force_n=fn[:done].tolist(),
                    curve_depth_m=depths[:done].tolist())
-    if field_dir is not None and row["status"] != "failed":
-        _save_field(field_dir, s["scenario"], np.asarray(sim.surface) - rest)
+    if field and row["status"] != "failed":
+        row[FIELD] = np.asarray(sim.surface, dtype=np.float64) - rest
 
 
-def _save_field(field_dir: str, scenario: int, u: np.ndarray) -> None:
+#: The row key of a scenario's final field (not a table column: :func:`save_field` stores it).
+FIELD = "_field"
+
+
+def save_field(field_dir: str, scenario: int, u: np.ndarray) -> None:
+    """Store a scenario's field as ``field_dir/NNNNNNN.npy`` (whole or not at all)."""
     os.makedirs(field_dir, exist_ok=True)
     path = os.path.join(field_dir, f"{int(scenario):07d}.npy")
     tmp = path + f".tmp{os.getpid()}"
