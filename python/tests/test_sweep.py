@@ -69,6 +69,8 @@ def test_the_spec_expands_in_order_and_its_draws_are_seeded():
     ({"outputs": {"curve": "yes"}}, "outputs.curve"),
     ({"study": {"seed": -1}}, "study.seed"),
     ({"loading": {"kind": "probe", "dt": 0.0}}, "loading.dt"),
+    ({"parameters": {"young": {"grid": [1e4, 2e4], "num": 10**9}}}, "parameters.young.num"),
+    ({"parameters": {"young": [1e4] * 1001, "poisson": [0.3] * 1001}}, "more than"),
 ])
 def test_a_bad_spec_names_the_key(change, key):
     doc = dict(STUDY, **change)
@@ -230,3 +232,17 @@ def test_bench_sweep_reports_its_keys(tmp_path):
     assert p.returncode == 0, p.stderr
     r = json.loads(p.stdout)
     assert set(sb.KEYS) <= set(r) and r["scenarios"] == 4 and r["worker2_s"] > 0 and r["startup_s"] > 0
+
+
+@pytest.mark.parametrize("make, expect", [
+    (lambda d: "missing.toml", "SweepSpecError: missing.toml: no such file"),
+    (lambda d: str(d), "is a directory"),
+    (lambda d: (d / "bin.toml").write_bytes(bytes(range(256)) * 4) and "bin.toml", "not a text file"),
+    (lambda d: (d / "x.toml").write_text("[model\nmesh=1") and "x.toml", "not valid TOML"),
+    (lambda d: (d / "y.toml").write_text('[model]\nmesh = "ellipsoid_192"\n[loading]\nkind = "probe"\n'
+                                         '[parameters]\nyoung = { grid = [1e4, 2e4], num = 1e9 }\n') and "y.toml",
+     "parameters.young.num: must be a whole number"),
+])
+def test_a_bad_study_file_is_one_line_and_exit_2(tmp_path, make, expect):
+    p = run_cli("sweep", make(tmp_path), "--workers", "0", cwd=tmp_path)
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and expect in p.stderr, p.stderr

@@ -84,11 +84,8 @@ def read_curve(path: Union[str, os.PathLike]) -> np.ndarray:
     ``depth``, metres) and a force column (``force_n`` or ``force``, newtons); other columns are
     ignored. Returns (m, 2): depth, force. Raises :class:`FitError` naming the file and the line."""
     name = str(path)
-    try:
-        from .._readers import read_text
-        text = read_text(Path(path))
-    except UnicodeDecodeError as e:
-        raise FitError(f"{name}: not a text (UTF-8) file: {e}") from None
+    from .._readers import read_text
+    text = read_text(str(path), FitError)
     rows = list(csv.reader(line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")))
     if not rows:
         raise FitError(f"{name}: empty (expected a header with depth_m and force_n, then rows)")
@@ -157,15 +154,15 @@ def fit(spec: Union[Spec, Dict[str, Any], str, os.PathLike], measured: Union[np.
 
     sp = spec if isinstance(spec, Spec) else spec_from_dict(spec) if isinstance(spec, dict) else load_spec(spec)
     say = log or (lambda s: None)
-    data = read_curve(measured) if not isinstance(measured, np.ndarray) else np.asarray(measured, dtype=np.float64)
-    if data.ndim != 2 or data.shape[1] != 2 or len(data) < 3 or not np.all(np.isfinite(data)):
-        raise FitError(f"measured: expected (m >= 3, 2) finite depth [m], force [N] points, got shape {data.shape}")
     params = list(dict.fromkeys(params))
     for p in params:
         if p not in FITTABLE:
             raise FitError(f"cannot fit {p!r}: fittable are {', '.join(FITTABLE)}")
     if not params:
         raise FitError("nothing to fit: name at least one of " + ", ".join(FITTABLE))
+    data = read_curve(measured) if not isinstance(measured, np.ndarray) else np.asarray(measured, dtype=np.float64)
+    if data.ndim != 2 or data.shape[1] != 2 or len(data) < 3 or not np.all(np.isfinite(data)):
+        raise FitError(f"measured: expected (m >= 3, 2) finite depth [m], force [N] points, got shape {data.shape}")
     if len(data) <= len(params):
         raise FitError(f"{len(data)} measured points for {len(params)} parameters: a fit needs more points than parameters")
     kind = sp.kind

@@ -298,7 +298,7 @@ class Runner:
         if self.client is None:
             if scheduler is not None:
                 try:
-                    self.client = Client(scheduler, timeout="30s")
+                    self.client = Client(scheduler, timeout="10s")
                 except (OSError, TimeoutError) as e:
                     raise SweepError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
             else:

@@ -163,11 +163,8 @@ def load_spec(path: Union[str, os.PathLike]) -> Spec:
     file's folder. Raises :class:`SweepSpecError`."""
     p = Path(path)
     name = str(p)
-    try:
-        from .._readers import read_text
-        text = read_text(p)
-    except UnicodeDecodeError as e:
-        raise SweepSpecError(f"{name}: not a text (UTF-8) file: {e}") from None
+    from .._readers import read_text
+    text = read_text(str(p), SweepSpecError)
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -225,6 +222,8 @@ def spec_from_dict(doc: Dict[str, Any], name: str = "<spec>", base: Union[str, o
     has_random = any(a.random for a in axes)
     if has_random:
         samples = ck.number(study, "study", "samples", required=True, integer=True, positive=True)
+        if samples > MAX_SCENARIOS:
+            raise ck.err("study.samples", f"{samples} draws: more than a study may have ({MAX_SCENARIOS})")
     else:
         samples = ck.number(study, "study", "samples", default=1, integer=True, positive=True)
         if samples != 1:
@@ -311,6 +310,8 @@ def _axis(ck: FieldChecker, k: str, v: Any) -> Axis:
                 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in g)):
             raise ck.err(f"{label}.grid", f"must be [low, high], two finite numbers, got {g!r}")
         num = ck.number(v, label, "num", required=True, integer=True, positive=True)
+        if num > MAX_SCENARIOS:
+            raise ck.err(f"{label}.num", f"{num} points: more than a study may have ({MAX_SCENARIOS})")
         scale = v.get("scale", "linear")
         if scale not in ("linear", "log"):
             raise ck.err(f"{label}.scale", f"must be 'linear' or 'log', got {scale!r}")
