@@ -246,3 +246,23 @@ def test_bench_sweep_reports_its_keys(tmp_path):
 def test_a_bad_study_file_is_one_line_and_exit_2(tmp_path, make, expect):
     p = run_cli("sweep", make(tmp_path), "--workers", "0", cwd=tmp_path)
     assert p.returncode == 2 and p.stderr.count("\n") == 1 and expect in p.stderr, p.stderr
+
+
+def test_the_press_can_follow_a_touch_script(tmp_path):
+    import shutil
+    from pathlib import Path
+    src = Path(__file__).resolve().parents[2] / "examples" / "scripts" / "press_release.csv"
+    shutil.copy(src, tmp_path / "path.csv")
+    doc = {"model": {"hybrid": "ventricle"}, "loading": {"kind": "press", "script": "path.csv"},
+           "parameters": {"young": [3e4]}}
+    sp = ps.spec_from_dict(doc, base=tmp_path)
+    assert "depth" not in sp.loading and sp.script == str((tmp_path / "path.csv").resolve())
+    r = ps.sweep(sp, tmp_path / "out", workers=0)
+    row, = r.rows()
+    assert row["status"] == "ok", row["error"]
+    assert row["max_force_n"] > 0 and max(row["curve_depth_m"]) > 0
+    with pytest.raises(ps.SweepSpecError, match="loading.depth"):
+        ps.spec_from_dict(dict(doc, loading={"kind": "press", "script": "path.csv", "depth": 0.003}), base=tmp_path)
+    (tmp_path / "bad.toml").write_text("[[segment]]\nkind = \"poke\"\n")
+    with pytest.raises(ps.SweepSpecError, match="loading.script"):
+        ps.spec_from_dict(dict(doc, loading={"kind": "press", "script": "bad.toml"}), base=tmp_path)

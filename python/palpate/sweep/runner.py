@@ -104,7 +104,11 @@ def model_payload(spec: Spec) -> Payload:
         return Payload("probe", Path(v).stem, mesh=case.mesh, points_mu=points, tets=np.asarray(tets))
     from .. import bench_hybrid
     name, model = bench_hybrid.load_model(spec.model["hybrid"])
-    return Payload("press", name, hybrid=model)
+    script = None
+    if spec.script is not None:
+        from ..touch import parse_script
+        script = parse_script(spec.script)
+    return Payload("press", name, hybrid=model, script=script)
 
 
 def model_hash(payload: Payload) -> str:
@@ -234,7 +238,7 @@ def sweep(spec: Union[Spec, Dict[str, Any], str, os.PathLike], out: Union[str, o
     mhash = model_hash(payload)
     scenarios = sp.scenarios()
     manifest = {"palpate_version": __version__, "study": sp.name, "spec_digest": sp.digest(), "spec": sp.source,
-                "model": sp.model, "model_hash": mhash, "seed": sp.seed, "scenarios": len(scenarios),
+                "model": sp.model, "model_hash": mhash, "script": sp.script, "seed": sp.seed, "scenarios": len(scenarios),
                 "varied": sp.varied(), "state": "running", "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
     if mpath.exists():
         old = json.loads(mpath.read_text())

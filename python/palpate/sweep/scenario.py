@@ -41,6 +41,7 @@ class Payload:
     points_mu: Optional[np.ndarray] = None
     tets: Optional[np.ndarray] = None
     hybrid: Optional[Any] = None        # palpate.HybridModel
+    script: Optional[Any] = None        # palpate.touch.Script (press loading with loading.script)
 
     def __setstate__(self, state: Dict[str, Any]) -> None:
         # Counted: a worker should unpickle a study's model once, not once a task (tests).
@@ -115,7 +116,7 @@ def _press(payload: Payload, s: Dict[str, Any], row: Dict[str, Any], curve: bool
     from .. import touch
     radius, dt = float(s["tool_radius"]), float(s["dt"])
     sim = _p.HybridSim(payload.hybrid, material(s), tool_radius=radius)
-    script = touch.parse_script_text(
+    script = payload.script if payload.script is not None else touch.parse_script_text(
         f"[probe]\nvertex = \"probe\"\ngap = 0.001\n\n[[segment]]\nkind = \"press\"\ndepth = {float(s['depth'])!r}\n"
         f"duration = {float(s['duration'])!r}\n" + (f"\n[[segment]]\nkind = \"hold\"\nduration = {float(s['hold'])!r}\n"
                                                       if s["hold"] > 0 else ""), "press.toml", "toml")

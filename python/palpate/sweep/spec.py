@@ -21,7 +21,9 @@ says what was expected.
     force = 0.2               # probe [N]; ramp = 0.1 [s]; steps = 1000; dt = 1e-3 [s];
                               # integrator = "backward-euler"; probe_z = 0.02 [m]
                               # press: depth = 0.003 [m], duration = 0.3 [s] (the press),
-                              # hold = 0.1 [s], tool_radius = 0.005 [m], dt = 1e-3 [s]
+                              # hold = 0.1 [s], tool_radius = 0.005 [m], dt = 1e-3 [s];
+                              # or script = "path.toml": a palpate touch script (press,
+                              # hold, slide, release: palpate/touch.py) instead of the press
 
     [parameters]              # what varies; each parameter one of:
     young = [2e4, 3e4, 4e4]                               # a list of values
@@ -87,6 +89,9 @@ VARIABLE: Dict[str, Tuple[str, ...]] = {
     "press": tuple(MATERIAL_DEFAULTS) + ("depth", "tool_radius", "dt"),
 }
 
+#: The press's own path, which a script (``loading.script``) replaces.
+SCRIPTED = ("depth", "duration", "hold")
+
 #: Parameters whose values are names, not numbers.
 TEXT = {"integrator"}
 #: Parameters whose values are whole numbers.
@@ -118,6 +123,7 @@ class Spec:
     axes: Tuple[Axis, ...]
     curve: bool = True
     field: bool = False
+    script: Optional[str] = None  # press loading: a palpate touch script's path (the tool's path)
     source: Dict[str, Any] = dataclasses.field(default_factory=dict, compare=False)   # the document as given
 
     def scenarios(self) -> List[Dict[str, Any]]:
@@ -140,7 +146,8 @@ class Spec:
     def digest(self) -> str:
         """A hash of what defines the table (model, loading, axes, seed, outputs): a resumed study
         must have the same."""
-        key = {"model": self.model, "kind": self.kind, "loading": self.loading, "seed": self.seed,
+        script = hashlib.sha256(Path(self.script).read_bytes()).hexdigest() if self.script else None
+        key = {"model": self.model, "kind": self.kind, "loading": self.loading, "seed": self.seed, "script": script,
                "samples": self.samples, "curve": self.curve, "field": self.field,
                "axes": [[a.name, list(a.values) if a.values is not None else None, a.random, a.a, a.b] for a in self.axes]}
         return hashlib.sha256(json.dumps(key, sort_keys=True, default=str).encode()).hexdigest()[:16]
@@ -204,7 +211,24 @@ def spec_from_dict(doc: Dict[str, Any], name: str = "<spec>", base: Union[str, o
         raise ck.err(f"model.{mkey}", f"loading.kind = {kind!r} needs model.{want} (a probe loads an FEM mesh, "
                                       "a press a hybrid model)")
     defaults = dict(MATERIAL_DEFAULTS, **LOADING_DEFAULTS[kind])
-    ck.known(loading, "loading", set(defaults) | {"kind"})
+    ck.known(loading, "loading", set(defaults) | {"kind"} | ({"script"} if kind == "press" else set()))
+    script = None
+    if "script" in loading:
+        script = loading["script"]
+        if not isinstance(script, str) or not script:
+            raise ck.err("loading.script", f"must be the path of a palpate touch script (.toml or .csv), got {script!r}")
+        sp = Path(script)
+        if not sp.is_absolute() and base is not None:
+            sp = Path(base) / sp
+        if not sp.is_file():
+            raise ck.err("loading.script", f"{script!r}: no such file ({sp})")
+        script = str(sp.resolve())
+        for k in SCRIPTED:
+            if k in loading:
+                raise ck.err(f"loading.{k}", "the script gives the tool's path: no press depth or timing beside it")
+        for k in ("depth",):
+            if k in doc.get("parameters", {}) if isinstance(doc.get("parameters"), dict) else False:
+                raise ck.err(f"parameters.{k}", "the script gives the tool's path: the depth cannot vary")
     fixed: Dict[str, Any] = {}
     for k, d in defaults.items():
         if k in TEXT:
@@ -237,8 +261,17 @@ def spec_from_dict(doc: Dict[str, Any], name: str = "<spec>", base: Union[str, o
         if not isinstance(v, bool):
             raise ck.err(f"outputs.{k}", f"must be true or false, got {v!r}")
         flags[k] = v
+    if script is not None:
+        for k in SCRIPTED:
+            fixed.pop(k, None)
     spec = Spec(name=sname, seed=int(seed), samples=int(samples), model=model_out, kind=kind, loading=fixed,
-                axes=axes, curve=flags["curve"], field=flags["field"], source=doc)
+                axes=axes, curve=flags["curve"], field=flags["field"], script=script, source=doc)
+    if script is not None:
+        from ..touch import ScriptError, parse_script
+        try:
+            parse_script(script)
+        except ScriptError as e:
+            raise ck.err("loading.script", str(e)) from None
     n = 1
     for a in axes:
         n *= len(a.values) if a.values is not None else 1
