@@ -17,7 +17,7 @@ use palpate_core::Vec3;
 use palpate_haptics::bridge::protocol::Reject;
 use palpate_haptics::bridge::{Bridge, BridgeStats};
 use palpate_haptics::devices::{Hand, HandParams, Replay, Scripted};
-use palpate_haptics::{CouplingParams, Device, DeviceKind, HapticCore, HybridPhysics, Idle, Physics, Recording, SafetyParams, Servo, ServoConfig, ServoHandle, ServoReport, Snapshot, Stats, Vec3Cell};
+use palpate_haptics::{CouplingParams, Device, DeviceKind, HapticCore, HybridPhysics, Idle, Physics, Realtime, Recording, SafetyParams, Servo, ServoConfig, ServoHandle, ServoReport, Snapshot, Stats, Vec3Cell};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -49,7 +49,7 @@ fn busy(what: &str) -> PyErr {
 /// recording=None, port=None, host="127.0.0.1", kind=None, hand_start=None, idle=False,
 /// tool_radius=None, tool_stiffness=None, hold=True, coupling_stiffness=None,
 /// coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None,
-/// stall_timeout=None, record_ticks=0, max_ticks=None, spin=None)``
+/// stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False)``
 ///
 /// Parameters
 /// ----------
@@ -80,6 +80,12 @@ fn busy(what: &str) -> PyErr {
 ///     not recorded but counted (the report's ``recording_dropped_ticks``).
 /// max_ticks : int, optional
 ///     Stop after this many ticks (a scripted or replayed device also stops at its end).
+/// realtime : bool
+///     Run the servo thread under ``SCHED_FIFO`` (priority 80; the watchdog 81) so that the
+///     machine's other work cannot preempt a tick. Needs root, ``CAP_SYS_NICE`` or an
+///     ``rtprio`` limit; refused otherwise (the loop runs as an ordinary thread) and the
+///     report's ``realtime`` says which (``"off"``, ``"SCHED_FIFO priority 80"`` or
+///     ``"refused: ..."``).
 ///
 /// Positions in metres, forces in newtons (on the user's hand), the model's world frame.
 #[pyclass(module = "palpate", name = "HapticLoop")]
@@ -180,13 +186,18 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
     stats_dict(&d, &r.stats)?;
     core_dict(py, &r.core, &d)?;
     d.set_item("watchdog_trips", r.watchdog_trips)?;
+    d.set_item("realtime", match &r.realtime {
+        Realtime::Off => "off".to_string(),
+        Realtime::Granted(p) => format!("SCHED_FIFO priority {p}"),
+        Realtime::Refused(why) => format!("refused: {why}"),
+    })?;
     Ok(d)
 }
 
 #[pymethods]
 impl PyHapticLoop {
     #[new]
-    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = "127.0.0.1", kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = 0, max_ticks = None, spin = None))]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = "127.0.0.1", kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = 0, max_ticks = None, spin = None, realtime = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -215,6 +226,7 @@ impl PyHapticLoop {
         record_ticks: i64,
         max_ticks: Option<i64>,
         spin: Option<f64>,
+        realtime: bool,
     ) -> PyResult<Self> {
         // Counts as i64: a negative one is a ParameterError (pyo3's usize / u16 conversions raised
         // OverflowError). The rest runs under the panic guard: a panic while opening a recording,
@@ -255,7 +267,7 @@ impl PyHapticLoop {
                 None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout) },
             };
             let defaults = ServoConfig::default();
-            let mut config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(defaults.spin), ..defaults };
+            let mut config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(defaults.spin), realtime, ..defaults };
             config.check().map_err(errors::param_error_from)?;
 
             let mut hand = None;
@@ -410,7 +422,8 @@ impl PyHapticLoop {
     /// since the start of each logged overrun), ``max_force_n``, ``energy_into_user_j``,
     /// ``bad_inputs``, ``n_faults``, ``faults`` (list of dicts ``tick``, ``time``, ``reason``),
     /// ``watchdog_trips``, ``recording_dropped_ticks`` (ticks past the recording buffer, not
-    /// recorded: nonzero means the recording holds only the run's beginning).
+    /// recorded: nonzero means the recording holds only the run's beginning), ``realtime`` (the
+    /// servo's scheduling: ``"off"``, ``"SCHED_FIFO priority 80"`` or ``"refused: ..."``).
     fn stop<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         // Out of the mutex before the GIL is released (see the module).
         let taken = std::mem::replace(&mut *self.stage.lock().unwrap(), Stage::Busy("stopping"));

@@ -567,3 +567,9 @@ def test_soak_and_bench_haptic_commands(capsys):
         assert key in r, key
     assert r["ticks"] == 1000 and r["rate_hz"] == 2000.0
     assert r["idle"]["ticks"] == 1000
+    assert r["realtime"] == "off" and r["idle"]["realtime"] == "off"
+    # --realtime: SCHED_FIFO where privileged, else refused with the reason (crates/palpate-haptics/
+    # tests/realtime.rs checks that a grant is real).
+    assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--json", "--realtime"]) in (0, 1)
+    r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert r["realtime"] == "SCHED_FIFO priority 80" or r["realtime"].startswith("refused: SCHED_FIFO"), r["realtime"]

@@ -43,6 +43,7 @@ use palpate_core::{StepError, Vec3};
 use crate::coupling::{CouplingParams, VirtualCoupling};
 use crate::device::{Device, DeviceInput, ForceSink};
 use crate::physics::Physics;
+use crate::realtime::Realtime;
 use crate::record::{Recording, TickRecord};
 use crate::safety::{Safety, SafetyParams};
 use crate::snapshot::{Mailbox, Snapshot, SnapshotCell};
@@ -110,11 +111,15 @@ pub struct ServoConfig {
     /// Ticks between surface snapshots for a viewer ([`ServoHandle::surface`]; default 32:
     /// 31 Hz at 1 kHz; 0: none).
     pub surface_every: u64,
+    /// Run the servo under `SCHED_FIFO` (and the watchdog one level above it), so that the
+    /// machine's other work cannot preempt a tick ([`crate::realtime`]); refused without
+    /// privilege, which [`ServoReport::realtime`] says. Default false.
+    pub realtime: bool,
 }
 
 impl Default for ServoConfig {
     fn default() -> Self {
-        ServoConfig { rate_hz: 1000.0, coupling: None, safety: None, checkpoint_every: 250, record_ticks: 0, stats_ticks: 600_000, max_ticks: None, spin: 200e-6, surface_every: 32 }
+        ServoConfig { rate_hz: 1000.0, coupling: None, safety: None, checkpoint_every: 250, record_ticks: 0, stats_ticks: 600_000, max_ticks: None, spin: 200e-6, surface_every: 32, realtime: false }
     }
 }
 
@@ -425,6 +430,8 @@ pub struct ServoReport {
     pub stats: Stats,
     /// Watchdog trips (each also a [`Fault::Stall`] in the core's log).
     pub watchdog_trips: u64,
+    /// The servo thread's scheduling: [`Realtime::Off`] unless [`ServoConfig::realtime`].
+    pub realtime: Realtime,
 }
 
 /// The running servo: snapshots, stop.
@@ -461,7 +468,13 @@ impl Servo {
         let s = shared.clone();
         let watchdog = std::thread::Builder::new()
             .name("palpate-watchdog".into())
-            .spawn(move || watch(s, sink, stall))
+            .spawn(move || {
+                if cfg.realtime {
+                    // Above the servo, so that a stuck servo cannot starve its own watchdog.
+                    let _ = crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY + 1);
+                }
+                watch(s, sink, stall)
+            })
             .map_err(|e| format!("cannot start the watchdog thread: {e}"))?;
         Ok(ServoHandle { shared, servo: Some(servo), watchdog: Some(watchdog) })
     }
@@ -546,6 +559,7 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
     let mut last_start: Option<Instant> = None;
     shared.heartbeat.store(shared.now_ns().max(1), Ordering::Release);
     let mut n: u64 = 0;
+    let realtime = if cfg.realtime { crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY) } else { Realtime::Off };
     loop {
         if shared.stop.load(Ordering::Acquire) || cfg.max_ticks.is_some_and(|m| n >= m) || device.finished(core.tick, core.dt) {
             break;
@@ -605,7 +619,7 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
     let stats = times.finish((Instant::now() - start).as_secs_f64());
     shared.done.store(true, Ordering::Release);
     let trips = shared.trips.load(Ordering::Relaxed);
-    ServoReport { core, device, stats, watchdog_trips: trips }
+    ServoReport { core, device, stats, watchdog_trips: trips, realtime }
 }
 
 /// Sleeps until `spin` before `deadline`, then spins to it.

@@ -121,6 +121,9 @@ def _add_haptic(bsub) -> None:
     k.add_argument("--seconds", type=float, default=10.0, metavar="S", help="length of each run [s] (default 10)")
     k.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000)")
     k.add_argument("--no-idle", action="store_true", help="skip the idle-loop run")
+    k.add_argument("--realtime", action="store_true",
+                   help="run the servo under SCHED_FIFO (needs root, CAP_SYS_NICE or an rtprio limit; the report says "
+                        "whether it was granted)")
     k.add_argument("--json", action="store_true", help="one JSON object (keys: " + ", ".join(haptics.BENCH_KEYS) + ", ...)")
     k.set_defaults(func=cmd_bench_haptic)
 
@@ -134,14 +137,14 @@ def cmd_bench_haptic(a) -> int:
         raise Fail(f"palpate bench haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")
     name, model = load_hybrid_model(a.model, "bench haptic")
     try:
-        r = haptics.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name)
+        r = haptics.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name, realtime=a.realtime)
     except palpate_errors() as e:
         raise Fail(f"palpate bench haptic: {type(e).__name__}: {e}", 1) from None
     if a.json:
         print(json.dumps(r), flush=True)
     else:
         print(f"palpate {__version__} bench haptic: {name}, {a.rate:g} Hz for {a.seconds:g} s, scripted palpation "
-              f"({r['cpu_count']} CPUs, load {r['load_avg']}, {r['date']})")
+              f"({r['cpu_count']} CPUs, load {r['load_avg']}, {r['date']}; servo scheduling: {r['realtime']})")
         def row(label, x):
             print(f"  {label:<7} ticks {x['ticks']:>7}  {x['achieved_hz']:8.1f} Hz  period p50 {x['period_us_p50']:7.1f} "
                   f"p99 {x['period_us_p99']:8.1f} max {x['period_us_max']:8.1f} us  compute p99 {x['compute_us_p99']:8.1f} us  "

@@ -41,6 +41,9 @@ def add_parser(sub) -> None:
     h.add_argument("--kind", choices=KINDS, default=None, help="the device's make, for the coupling and safety defaults")
     h.add_argument("--max-force", type=float, default=None, metavar="N", help="force limit [N] (default 3)")
     h.add_argument("--tool-radius", type=float, default=0.005, metavar="M", help="tool sphere radius [m] (default 0.005)")
+    h.add_argument("--realtime", action="store_true",
+                   help="run the servo under SCHED_FIFO so that other work cannot preempt a tick (needs root, "
+                        "CAP_SYS_NICE or an rtprio limit; refused otherwise, with a warning)")
     h.add_argument("--quiet", action="store_true", help="no status line")
     h.set_defaults(func=cmd_haptic)
 
@@ -71,7 +74,8 @@ def make_loop(a, model, record_ticks: int):
     from ..touch import ScriptError
 
     kind, _, arg = a.device.partition(":")
-    common = dict(rate_hz=a.rate, record_ticks=record_ticks, max_force=a.max_force, tool_radius=a.tool_radius)
+    common = dict(rate_hz=a.rate, record_ticks=record_ticks, max_force=a.max_force, tool_radius=a.tool_radius,
+                  realtime=a.realtime)
     if a.kind is not None:
         common["kind"] = a.kind
     if a.seconds is not None and kind != "replay":
@@ -138,6 +142,11 @@ def cmd_haptic(a) -> int:
           f"overruns {r['overruns']}; max force {r['max_force_n']:.3f} N; faults {r['n_faults']}")
     for f in r["faults"][:10]:
         print(f"  fault at tick {f['tick']} (t = {f['time']:.3f} s): {f['reason']}")
+    if a.realtime:
+        if r["realtime"].startswith("refused"):
+            print(f"palpate haptic: warning: real-time scheduling {r['realtime']}", file=sys.stderr)
+        else:
+            print(f"  servo scheduling: {r['realtime']}")
     bs = loop.bridge_stats()
     if bs is not None:
         print("  bridge: " + ", ".join(f"{k} {v}" for k, v in bs.items()))

@@ -19,6 +19,7 @@ def add_parser(sub) -> None:
     s.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000)")
     s.add_argument("--seed", type=int, default=0, help="random seed of the palpation (default 0)")
     s.add_argument("--json", action="store_true", help="the report as one JSON object")
+    s.add_argument("--realtime", action="store_true", help="run the servo under SCHED_FIFO (see palpate haptic --help)")
     s.set_defaults(func=cmd_soak)
 
 
@@ -35,7 +36,7 @@ def cmd_soak(a) -> int:
     t, k = haptics.random_palpation(model, seconds + 1.0, seed=a.seed)
     try:
         loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, rate_hz=a.rate,
-                             max_ticks=int(round(seconds * a.rate)))
+                             max_ticks=int(round(seconds * a.rate)), realtime=a.realtime)
     except palpate_errors() as e:
         raise Fail(f"palpate soak: {type(e).__name__}: {e}", 1) from None
     show = None if a.json else (lambda line: print(line, flush=True))

@@ -1,0 +1,69 @@
+//! Real-time scheduling for the servo thread (opt-in: [`crate::ServoConfig::realtime`]).
+//!
+//! Under Linux's default scheduler a busy machine preempts the servo for milliseconds: the tick
+//! then ends late (an overrun) although its own compute fit in the period. A haptic application
+//! runs its servo under `SCHED_FIFO`, a fixed priority above every ordinary thread, so that only
+//! the kernel and other real-time threads can preempt it. That needs privilege (root, or
+//! `CAP_SYS_NICE`, or an `rtprio` limit in `/etc/security/limits.conf`); without it the request is
+//! refused and the loop runs as before, saying why. The kernel's real-time throttling (by default
+//! 95% of each second, `/proc/sys/kernel/sched_rt_runtime_us`) keeps a runaway servo from
+//! freezing the machine, and the servo sleeps most of each tick anyway.
+//!
+//! The watchdog, which must run when the servo is stuck, gets one priority level above the servo.
+
+/// The servo's `SCHED_FIFO` priority (1-99): above ordinary threads and the default of most
+/// audio and IRQ threads (50), below the kernel's own watchdogs (99).
+pub const SERVO_PRIORITY: i32 = 80;
+
+/// What became of a request for real-time scheduling.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Realtime {
+    /// Not asked for ([`crate::ServoConfig::realtime`] false).
+    Off,
+    /// The thread runs under `SCHED_FIFO` at this priority.
+    Granted(i32),
+    /// Asked for and refused: the reason (e.g. no privilege), the thread runs as before.
+    Refused(String),
+}
+
+impl Realtime {
+    pub fn granted(&self) -> bool {
+        matches!(self, Realtime::Granted(_))
+    }
+}
+
+/// Puts the calling thread under `SCHED_FIFO` at `priority`.
+#[cfg(target_os = "linux")]
+pub fn make_current_thread_realtime(priority: i32) -> Realtime {
+    let param = libc::sched_param { sched_priority: priority };
+    // SAFETY: `pthread_self` is the calling thread, alive; `param` is a valid sched_param that
+    // outlives the call.
+    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+    if rc == 0 {
+        Realtime::Granted(priority)
+    } else {
+        let why = std::io::Error::from_raw_os_error(rc);
+        Realtime::Refused(format!("SCHED_FIFO priority {priority} refused: {why} (needs root, CAP_SYS_NICE or an rtprio limit)"))
+    }
+}
+
+/// Not on this platform: refused.
+#[cfg(not(target_os = "linux"))]
+pub fn make_current_thread_realtime(priority: i32) -> Realtime {
+    Realtime::Refused(format!("SCHED_FIFO priority {priority}: real-time scheduling is implemented for Linux only"))
+}
+
+/// The calling thread's scheduling policy is `SCHED_FIFO` (tests and reports).
+#[cfg(target_os = "linux")]
+pub fn current_thread_is_fifo() -> bool {
+    let mut policy = 0;
+    let mut param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: valid out-pointers for the calling thread.
+    let rc = unsafe { libc::pthread_getschedparam(libc::pthread_self(), &mut policy, &mut param) };
+    rc == 0 && policy == libc::SCHED_FIFO
+}
+
+#[cfg(not(target_os = "linux"))]
+pub fn current_thread_is_fifo() -> bool {
+    false
+}
