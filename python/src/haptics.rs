@@ -85,7 +85,9 @@ fn busy(what: &str) -> PyErr {
 ///     machine's other work cannot preempt a tick. Needs root, ``CAP_SYS_NICE`` or an
 ///     ``rtprio`` limit; refused otherwise (the loop runs as an ordinary thread) and the
 ///     report's ``realtime`` says which (``"off"``, ``"SCHED_FIFO priority 80"`` or
-///     ``"refused: ..."``).
+///     ``"refused: ..."``). The wait then sleeps to the deadline (``spin`` defaults to 0: a
+///     real-time thread wakes on time, and one that spins the rest of each tick uses the whole
+///     core and meets the kernel's real-time throttling, 50 ms without the CPU every second).
 ///
 /// Positions in metres, forces in newtons (on the user's hand), the model's world frame.
 #[pyclass(module = "palpate", name = "HapticLoop")]
@@ -267,7 +269,7 @@ impl PyHapticLoop {
                 None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout) },
             };
             let defaults = ServoConfig::default();
-            let mut config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(defaults.spin), realtime, ..defaults };
+            let mut config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(if realtime { 0.0 } else { defaults.spin }), realtime, ..defaults };
             config.check().map_err(errors::param_error_from)?;
 
             let mut hand = None;

@@ -113,7 +113,8 @@ pub struct ServoConfig {
     pub surface_every: u64,
     /// Run the servo under `SCHED_FIFO` (and the watchdog one level above it), so that the
     /// machine's other work cannot preempt a tick ([`crate::realtime`]); refused without
-    /// privilege, which [`ServoReport::realtime`] says. Default false.
+    /// privilege, which [`ServoReport::realtime`] says. Default false. Set `spin` to 0 with it
+    /// (the module says why).
     pub realtime: bool,
 }
 
