@@ -95,7 +95,7 @@ pub struct ServoConfig {
     /// The safety layer; `None`: the device's defaults.
     pub safety: Option<SafetyParams>,
     /// Ticks between last-good checkpoints (default 250: a quarter second at 1 kHz; a checkpoint
-    /// of the hybrid state allocates, see [`crate::HybridPhysics`]).
+    /// of the hybrid state costs ~0.15 ms on the Rodero ventricle, see [`crate::HybridPhysics`]).
     pub checkpoint_every: u64,
     /// Ticks recorded for replay (0: none; the buffer is allocated at start, so that the servo
     /// never allocates; ticks past it are not recorded but counted,

@@ -8,8 +8,9 @@ use crate::linalg::Ldl;
 use crate::math::{Mat3, Vec3};
 
 /// Everything that changes while simulating: positions, velocities, time and applied forces.
-/// All arrays are `(n_nodes)`, world frame, SI.
-#[derive(Debug, Clone, PartialEq)]
+/// All arrays are `(n_nodes)`, world frame, SI. `clone_from` reuses the destination's arrays (a
+/// checkpoint of a running simulation allocates nothing).
+#[derive(Debug, PartialEq)]
 pub struct State {
     /// Node positions \[m\].
     pub x: Vec<Vec3>,
@@ -19,6 +20,19 @@ pub struct State {
     pub t: f64,
     /// External force on each node \[N\], held constant over a step.
     pub f_ext: Vec<Vec3>,
+}
+
+impl Clone for State {
+    fn clone(&self) -> Self {
+        State { x: self.x.clone(), v: self.v.clone(), t: self.t, f_ext: self.f_ext.clone() }
+    }
+    fn clone_from(&mut self, s: &Self) {
+        let State { x, v, t, f_ext } = self;
+        x.clone_from(&s.x);
+        v.clone_from(&s.v);
+        *t = s.t;
+        f_ext.clone_from(&s.f_ext);
+    }
 }
 
 impl State {

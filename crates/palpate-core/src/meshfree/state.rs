@@ -35,7 +35,8 @@ pub struct ParticleStepReport {
 }
 
 /// The mutable state of a particle body. Arrays are `(n_particles)`, SI, world frame.
-#[derive(Debug, Clone, PartialEq)]
+/// `clone_from` reuses the destination's arrays.
+#[derive(Debug, PartialEq)]
 pub struct ParticleState {
     /// Positions \[m\].
     pub x: Vec<Vec3>,
@@ -47,6 +48,20 @@ pub struct ParticleState {
     pub f_ext: Vec<Vec3>,
     /// Indices of the active (simulated) particles; the others are frozen.
     pub active: Vec<usize>,
+}
+
+impl Clone for ParticleState {
+    fn clone(&self) -> Self {
+        ParticleState { x: self.x.clone(), v: self.v.clone(), t: self.t, f_ext: self.f_ext.clone(), active: self.active.clone() }
+    }
+    fn clone_from(&mut self, s: &Self) {
+        let ParticleState { x, v, t, f_ext, active } = self;
+        x.clone_from(&s.x);
+        v.clone_from(&s.v);
+        *t = s.t;
+        f_ext.clone_from(&s.f_ext);
+        active.clone_from(&s.active);
+    }
 }
 
 impl ParticleState {

@@ -22,6 +22,7 @@
 //! `touch(s)` for each outer vertex under the tool ([`Activation::touch_sphere`] finds them),
 //! then `update(tick)`, which returns the active, entered and left particles.
 
+use std::sync::Arc;
 use crate::hybrid::HybridModel;
 use crate::math::Vec3;
 use crate::mesh::adjacency::Marks;
@@ -42,13 +43,17 @@ pub struct ActiveSets<'a> {
 }
 
 /// The active set: the union of the touched regions' particles, with hysteresis. Built once from
-/// a [`HybridModel`]; `touch`, `touch_sphere` and `update` allocate nothing.
-#[derive(Debug, Clone)]
+/// a [`HybridModel`]; `touch`, `touch_sphere` and `update` allocate nothing, and neither does
+/// `clone_from` onto an activation of the same model (the haptic loop's checkpoints): the
+/// region tables, fixed at build, are shared between clones.
+#[derive(Debug)]
 pub struct Activation {
-    /// Triangles of each region (sorted): `region_tris.get(s)`.
-    region_tris: Buckets,
-    /// Particles of outer triangle `t`: `tri_particle_ptr[t]..tri_particle_ptr[t+1]`.
-    tri_particle_ptr: Vec<u32>,
+    /// Triangles of each region (sorted): `region_tris.get(s)`. Immutable, shared by clones (on
+    /// the Rodero model ~8 MB: copying it made a checkpoint of the state cost 2.5 ms).
+    region_tris: Arc<Buckets>,
+    /// Particles of outer triangle `t`: `tri_particle_ptr[t]..tri_particle_ptr[t+1]`. Immutable,
+    /// shared by clones.
+    tri_particle_ptr: Arc<[u32]>,
     /// Active regions covering each outer triangle.
     tri_count: Vec<u32>,
     /// Per region: the tick of its last contact ([`NEVER`] if none).
@@ -71,6 +76,66 @@ pub struct Activation {
     left: Vec<usize>,
     /// Mean outer edge length \[m\] (a margin for [`Activation::touch_sphere`]).
     mean_edge: f64,
+}
+
+impl Clone for Activation {
+    fn clone(&self) -> Self {
+        let mut a = Activation {
+            region_tris: self.region_tris.clone(),
+            tri_particle_ptr: self.tri_particle_ptr.clone(),
+            tri_count: Vec::new(),
+            last_touched: Vec::new(),
+            is_active: Vec::new(),
+            is_pending: Vec::new(),
+            pending: Vec::new(),
+            regions: Vec::new(),
+            linger: self.linger,
+            tri_on: Vec::new(),
+            tri_off: Vec::new(),
+            active: Vec::new(),
+            scratch: Vec::new(),
+            entered: Vec::new(),
+            left: Vec::new(),
+            mean_edge: self.mean_edge,
+        };
+        a.clone_from(self);
+        a
+    }
+
+    /// Field by field, into the allocations `self` has (none once they are large enough), and
+    /// with the capacities the updates rely on to allocate nothing.
+    fn clone_from(&mut self, s: &Self) {
+        // Exhaustive: a new field is a compile error here until it is copied.
+        let Activation { region_tris, tri_particle_ptr, tri_count, last_touched, is_active, is_pending, pending, regions, linger, tri_on, tri_off, active, scratch, entered, left, mean_edge } = self;
+        if !Arc::ptr_eq(region_tris, &s.region_tris) {
+            *region_tris = s.region_tris.clone();
+        }
+        if !Arc::ptr_eq(tri_particle_ptr, &s.tri_particle_ptr) {
+            *tri_particle_ptr = s.tri_particle_ptr.clone();
+        }
+        let (n_regions, n_tris, n_particles) = (s.last_touched.len(), s.tri_count.len(), s.active.capacity().max(s.scratch.capacity()));
+        copy_into(tri_count, &s.tri_count, n_tris);
+        copy_into(last_touched, &s.last_touched, n_regions);
+        copy_into(is_active, &s.is_active, n_regions);
+        copy_into(is_pending, &s.is_pending, n_regions);
+        copy_into(pending, &s.pending, n_regions);
+        copy_into(regions, &s.regions, n_regions);
+        *linger = s.linger;
+        copy_into(tri_on, &s.tri_on, n_tris);
+        copy_into(tri_off, &s.tri_off, n_tris);
+        copy_into(active, &s.active, n_particles);
+        copy_into(scratch, &s.scratch, n_particles);
+        copy_into(entered, &s.entered, n_particles);
+        copy_into(left, &s.left, n_particles);
+        *mean_edge = s.mean_edge;
+    }
+}
+
+/// `dst = src`, keeping at least `capacity` (allocating only if `dst` has less).
+fn copy_into<T: Copy>(dst: &mut Vec<T>, src: &[T], capacity: usize) {
+    dst.clear();
+    dst.reserve(capacity.max(src.len()));
+    dst.extend_from_slice(src);
 }
 
 impl Activation {
@@ -116,8 +181,8 @@ impl Activation {
             }
         }
         Activation {
-            region_tris,
-            tri_particle_ptr,
+            region_tris: Arc::new(region_tris),
+            tri_particle_ptr: tri_particle_ptr.into(),
             tri_count: vec![0; n_tris],
             last_touched: vec![NEVER; n_regions],
             is_active: vec![false; n_regions],
