@@ -217,6 +217,10 @@ class HybridSimState(TypedDict):
     skin_carried: _IntArray
     skin_reference: _FloatArray
     skin_reference_tool: _FloatArray
+    skin_slack: float
+    skin_sweep_next: Optional[int]
+    skin_sweep_reference: Optional[_FloatArray]
+    skin_sweep_slack: float
 
 @final
 class Body:

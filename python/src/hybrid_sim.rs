@@ -2,7 +2,7 @@
 //! in, force out. Ticks release the GIL.
 
 use numpy::{PyArray1, PyArray2};
-use palpate_core::runtime::{tick, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, TickReport, Tool};
+use palpate_core::runtime::{tick, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, SkinSweep, TickReport, Tool};
 use palpate_core::{StepMemory, Vec3};
 use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
@@ -291,9 +291,10 @@ impl PyHybridSim {
     /// elsewhere); and the bookkeeping of the work a tick skips, which changes no force (kept so
     /// that a restored simulation also does the same work): ``skin_live`` (the vertices a tick
     /// looks at, None before the first whole update), ``skin_carried`` (those placed by
-    /// particles), ``skin_reference`` [m] (core positions at the last whole update) and
-    /// ``skin_reference_tool`` [m]. Positions world frame. Plain Python and numpy values: it
-    /// pickles.
+    /// particles), ``skin_reference`` [m] (core positions at the last whole update),
+    /// ``skin_reference_tool`` [m], ``skin_slack`` [m], and the sweep of the whole skin in
+    /// progress: ``skin_sweep_next`` (its next vertex, None without a sweep),
+    /// ``skin_sweep_reference`` [m] (n_core, 3) or None, ``skin_sweep_slack`` [m]. Positions world frame. Plain Python and numpy values: it pickles.
     fn get_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let s = self.state.snapshot(&self.ws);
         let d = PyDict::new(py);
@@ -315,6 +316,10 @@ impl PyHybridSim {
         d.set_item("skin_carried", conv::flagged_to_py(py, &s.carried))?;
         d.set_item("skin_reference", conv::vec3s_to_py(py, &s.live_ref_x))?;
         d.set_item("skin_reference_tool", conv::vec3_to_py(py, s.live_ref_tool))?;
+        d.set_item("skin_slack", s.live_slack)?;
+        d.set_item("skin_sweep_next", s.sweep.as_ref().map(|w| w.next))?;
+        d.set_item("skin_sweep_reference", s.sweep.as_ref().map(|w| conv::vec3s_to_py(py, &w.ref_x)))?;
+        d.set_item("skin_sweep_slack", s.sweep.as_ref().map_or(0.0, |w| w.slack))?;
         Ok(d)
     }
 
@@ -360,6 +365,19 @@ impl PyHybridSim {
             carried,
             live_ref_x: conv::vec3s(&item("skin_reference")?, "skin_reference", n_core, true)?,
             live_ref_tool: conv::vec3(&item("skin_reference_tool")?, "skin_reference_tool")?,
+            live_slack: item("skin_slack")?.extract()?,
+            sweep: match opt("skin_sweep_next")? {
+                None => None,
+                Some(next) => {
+                    let next: i64 = next.extract()?;
+                    let reference = opt("skin_sweep_reference")?.ok_or_else(|| errors::param_error_from("skin_sweep_reference: None beside a skin_sweep_next"))?;
+                    Some(SkinSweep {
+                        next: usize::try_from(next).map_err(|_| errors::param_error_from(format!("skin_sweep_next = {next}: must not be negative")))?,
+                        ref_x: conv::vec3s(&reference, "skin_sweep_reference", n_core, true)?,
+                        slack: item("skin_sweep_slack")?.extract()?,
+                    })
+                }
+            },
         };
         let sim = &self.sim;
         let (state, ws) = py.detach(|| SimState::restore(sim, &snap)).map_err(|e| errors::step_error(e, "in set_state"))?;

@@ -209,3 +209,34 @@ fn the_skin_within_the_tools_reach_is_fresh_every_tick_under_a_fast_slide() {
     println!("{checked} skin vertices within reach checked, worst {worst:.2e} m from fresh");
     assert!(checked > 300);
 }
+
+/// A press to 8 mm and a release: the skin away from the tool is refreshed by sweeps, a slice a
+/// tick, never all at once after the first tick (a whole update of a fine skin is a tick's budget
+/// several times over), and every stored vertex stays within the margin of its place.
+#[test]
+fn the_far_skin_is_refreshed_a_slice_a_tick_and_stays_within_its_margin() {
+    use palpate_core::runtime::tick::{SKIN_LIVE_MARGIN, SKIN_SWEEP_TICKS};
+    let sim = Sim::new(ventricle().clone(), tissue(), SimOptions::default()).unwrap();
+    let (p, n) = probe(&sim, 0.02);
+    let r = sim.options.tool.radius;
+    let mut st = SimState::rest(&sim);
+    let mut ws = SimWorkspace::new(&sim);
+    let n_skin = st.skin.len();
+    let slice = n_skin.div_ceil(SKIN_SWEEP_TICKS);
+    let mut fresh = vec![Vec3::zeros(); n_skin];
+    let (mut total, mut most, mut worst) = (0usize, 0usize, 0.0f64);
+    for k in 0..700 {
+        let depth = if k < 400 { 8e-3 * k as f64 / 400.0 } else { 8e-3 * (700 - k) as f64 / 300.0 } - 2e-3;
+        let rep = tick(&sim, &mut st, &mut ws, p + n * (r - depth), 1e-3).unwrap_or_else(|e| panic!("tick {k}: {e}"));
+        if k > 0 {
+            total += rep.skin_refreshed;
+            most = most.max(rep.skin_refreshed);
+        }
+        sim.skin_positions(&st, &mut fresh);
+        worst = worst.max((0..n_skin).map(|v| (st.skin[v] - fresh[v]).norm()).fold(0.0, f64::max));
+    }
+    println!("{total} far skin vertices refreshed over 699 ticks, at most {most} in one (a slice is {slice} of {n_skin}); stored skin at most {worst:.2e} m from its place");
+    assert!(total > 2 * n_skin, "the press must make the skin be refreshed: {total}");
+    assert!(most <= slice, "a tick refreshed {most} far vertices at once (a slice is {slice})");
+    assert!(worst <= SKIN_LIVE_MARGIN, "a stored skin vertex is {worst:e} m from its place");
+}

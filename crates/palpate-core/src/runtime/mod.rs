@@ -50,6 +50,6 @@ pub use coupling::Coupling;
 pub use embed::Embedding;
 pub use sim::{Sim, SimOptions};
 pub use stability::Shell;
-pub use state::{SimSnapshot, SimState, SimWorkspace};
+pub use state::{SimSnapshot, SimState, SimWorkspace, SkinSweep};
 pub use tick::{tick, TickReport};
 pub use tool::{ContactSum, PointContact, Tool};

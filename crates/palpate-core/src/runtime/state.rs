@@ -71,8 +71,13 @@ impl Clone for SimState {
 ///
 /// Every stored skin vertex is within [`super::tick::SKIN_LIVE_MARGIN`] of where the core (or the
 /// particles under it) puts it: the tick bounds how far the core's faces have moved since the
-/// last update of the whole skin (`ref_x`, `ref_frames`, [`super::Sim::skin_face_reach`]) and
-/// updates the whole skin when that bound reaches half the margin; a vertex that stops being
+/// last update of the whole skin (`ref_x`, `ref_frames`, [`super::Sim::skin_face_reach`]),
+/// plus `slack`, and sweeps the whole skin, a sixteenth a tick, from a quarter of the margin
+/// (a vertex the sweep placed at tick `u` is within the travel from the sweep's start to now plus
+/// the travel from the start to `u`: hence the slack); only when the bound reaches half the
+/// margin anyway (the skin moving over ~0.08 m/s) is the whole skin updated in one tick (1.2 ms
+/// on the Rodero ventricle's 31,788 vertices, which the sweep spreads into ~80 us slices). A
+/// vertex that stops being
 /// carried by particles is put back at its tie at once (`carried`). The list holds the vertices
 /// within `r_live + margin + step` of the tool when it was last rebuilt (`ref_tool`; rebuilt
 /// once the tool has travelled a margin), plus every vertex moved since. A vertex outside it
@@ -101,6 +106,19 @@ pub(crate) struct LiveSkin {
     pub(crate) ref_tool: Vec3,
     /// The bound on the skin's travel since the last whole update, as of the last tick \[m\].
     pub(crate) travel: f64,
+    /// What the references leave out \[m\]: 0 after a whole update; after a sweep (below), the
+    /// most the skin travelled from the sweep's reference while the sweep went on (a vertex the
+    /// sweep placed late is that much nearer the reference's successor than the reference says).
+    /// Every stored vertex is within `travel + slack` of its place.
+    pub(crate) slack: f64,
+    /// The sweep of the whole skin in progress, spread over [`super::tick::SKIN_SWEEP_TICKS`]
+    /// ticks instead of one (a whole update of the Rodero ventricle's 31,788 vertices takes
+    /// 1.2 ms, more than a haptic tick): the next vertex it places (`None`: no sweep), the core's
+    /// positions and face frames when it began, and its own slack so far.
+    pub(crate) sweep_next: Option<usize>,
+    pub(crate) sweep_ref_x: Vec<Vec3>,
+    pub(crate) sweep_ref_frames: Vec<Option<crate::math::Mat3>>,
+    pub(crate) sweep_slack: f64,
 }
 
 /// [`LiveSkin::iter`]: the list, or every vertex before the first whole update.
@@ -131,10 +149,15 @@ impl Clone for LiveSkin {
             ref_frames: self.ref_frames.clone(),
             ref_tool: self.ref_tool,
             travel: self.travel,
+            slack: self.slack,
+            sweep_next: self.sweep_next,
+            sweep_ref_x: self.sweep_ref_x.clone(),
+            sweep_ref_frames: self.sweep_ref_frames.clone(),
+            sweep_slack: self.sweep_slack,
         }
     }
     fn clone_from(&mut self, s: &Self) {
-        let LiveSkin { list, member, carried, valid, unsorted, ref_x, ref_frames, ref_tool, travel } = self;
+        let LiveSkin { list, member, carried, valid, unsorted, ref_x, ref_frames, ref_tool, travel, slack, sweep_next, sweep_ref_x, sweep_ref_frames, sweep_slack } = self;
         list.clone_from(&s.list);
         member.clone_from(&s.member);
         carried.clone_from(&s.carried);
@@ -144,6 +167,11 @@ impl Clone for LiveSkin {
         ref_frames.clone_from(&s.ref_frames);
         *ref_tool = s.ref_tool;
         *travel = s.travel;
+        *slack = s.slack;
+        *sweep_next = s.sweep_next;
+        sweep_ref_x.clone_from(&s.sweep_ref_x);
+        sweep_ref_frames.clone_from(&s.sweep_ref_frames);
+        *sweep_slack = s.sweep_slack;
     }
 }
 
@@ -159,6 +187,11 @@ impl LiveSkin {
             ref_frames: vec![None; n_faces],
             ref_tool: Vec3::zeros(),
             travel: f64::INFINITY,
+            slack: 0.0,
+            sweep_next: None,
+            sweep_ref_x: vec![Vec3::zeros(); n_core],
+            sweep_ref_frames: vec![None; n_faces],
+            sweep_slack: 0.0,
         }
     }
 
@@ -245,6 +278,8 @@ impl SimState {
             carried: self.live.carried.clone(),
             live_ref_x: self.live.ref_x.clone(),
             live_ref_tool: self.live.ref_tool,
+            live_slack: self.live.slack,
+            sweep: self.live.sweep_next.map(|next| SkinSweep { next, ref_x: self.live.sweep_ref_x.clone(), slack: self.live.sweep_slack }),
         }
     }
 
@@ -272,6 +307,17 @@ impl SimState {
         }
         if !snap.time.is_finite() || !snap.tool.is_none_or(|c| c.iter().all(|x| x.is_finite())) || !snap.live_ref_tool.iter().all(|x| x.is_finite()) {
             return Err(bad("time or tool position not finite".into()));
+        }
+        if !(snap.live_slack >= 0.0 && snap.live_slack.is_finite()) {
+            return Err(bad(format!("skin slack {} m: must be finite and not negative", snap.live_slack)));
+        }
+        if let Some(sw) = &snap.sweep {
+            if sw.next >= n_skin || sw.ref_x.len() != n_core || !(sw.slack >= 0.0 && sw.slack.is_finite()) {
+                return Err(bad(format!("skin sweep: next vertex {} of {n_skin}, reference of {} rows of {n_core}, slack {}", sw.next, sw.ref_x.len(), sw.slack)));
+            }
+            if let Some(i) = sw.ref_x.iter().position(|x| !x.iter().all(|c| c.is_finite())) {
+                return Err(bad(format!("skin sweep reference: row {i} is not finite")));
+            }
         }
         if let Some(list) = &snap.live {
             if let Some(&v) = list.iter().find(|&&v| v as usize >= n_skin) {
@@ -310,6 +356,13 @@ impl SimState {
             live.valid = true;
             super::embed::face_frames(&live.ref_x, &sim.hybrid.core_faces, &mut live.ref_frames);
         }
+        live.slack = snap.live_slack;
+        if let Some(sw) = &snap.sweep {
+            live.sweep_next = Some(sw.next);
+            live.sweep_ref_x.clone_from(&sw.ref_x);
+            live.sweep_slack = sw.slack;
+            super::embed::face_frames(&live.sweep_ref_x, &sim.hybrid.core_faces, &mut live.sweep_ref_frames);
+        }
         Ok((state, ws))
     }
 }
@@ -345,6 +398,18 @@ pub struct SimSnapshot {
     pub carried: Vec<bool>,
     pub live_ref_x: Vec<Vec3>,
     pub live_ref_tool: Vec3,
+    /// The skin's slack \[m\] and the sweep in progress, if any (see `LiveSkin`).
+    pub live_slack: f64,
+    pub sweep: Option<SkinSweep>,
+}
+
+/// A sweep of the whole skin in progress ([`SimSnapshot::sweep`]): the next vertex it places,
+/// the core's positions \[m\] when it began, and the skin's travel from them so far \[m\].
+#[derive(Debug, Clone, PartialEq)]
+pub struct SkinSweep {
+    pub next: usize,
+    pub ref_x: Vec<Vec3>,
+    pub slack: f64,
 }
 
 /// Scratch space of [`super::tick()`].

@@ -42,6 +42,9 @@ pub struct TickReport {
     /// Force on the tool \[N\], world frame: the reaction it must render (the tissue received the
     /// opposite), averaged over the tick.
     pub force: Vec3,
+    /// Skin vertices refreshed away from the tool this tick (a slice of a sweep of the whole
+    /// skin, or all of it at once: see `LiveSkin`); the ones near the tool are not counted.
+    pub skin_refreshed: usize,
     /// Skin vertices in contact over active particles (most over the sub-steps; the particles
     /// under them carry the force), and over the core alone.
     pub particle_contacts: usize,
@@ -303,7 +306,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
 
     // 6. The skin.
     // Near the tool every tick; everywhere every SKIN_REFRESH_TICKS ticks.
-    update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, stamp, tool, live, skin);
+    report.skin_refreshed = update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, stamp, tool, live, skin);
     report.force = tool_force;
     *last_tool = Some(tool);
     *ticks += 1;
@@ -403,6 +406,10 @@ pub(crate) fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, 
 /// last whole update, and the vertices within this of the tool's reach every tick.
 pub const SKIN_LIVE_MARGIN: f64 = 0.005;
 
+/// Ticks a sweep of the whole skin is spread over (see `LiveSkin`): 1/16 of the Rodero
+/// ventricle's skin is ~80 us a tick, where the whole took 1.2 ms in one.
+pub const SKIN_SWEEP_TICKS: usize = 16;
+
 /// The radius \[m\] within which the skin is updated every tick: the tool's reach, two of its
 /// steps (it moves before the next tick's contact) and [`SKIN_LIVE_MARGIN`] (a stale vertex is
 /// no farther than that from its place).
@@ -438,7 +445,7 @@ fn skin_travel(sim: &Sim, core_x: &[Vec3], frames: &[Option<Mat3>], ref_x: &[Vec
 /// the whole skin's update a third of its tick); the list is rebuilt when the tool has moved
 /// [`SKIN_LIVE_MARGIN`] since it last was. Every vertex moved here joins `live`.
 #[allow(clippy::too_many_arguments)]
-fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, tool: Vec3, live: &mut LiveSkin, skin: &mut [Vec3]) {
+fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, tool: Vec3, live: &mut LiveSkin, skin: &mut [Vec3]) -> usize {
     embed::face_frames(core_x, &sim.hybrid.core_faces, frames);
     let frames = &*frames;
     let place = |v: usize, over: bool| {
@@ -461,8 +468,20 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
     let r_live = live_radius(&sim.options);
     let r_list = r_live + SKIN_LIVE_MARGIN + sim.options.max_tool_step;
     live.travel = if live.valid { skin_travel(sim, core_x, frames, &live.ref_x, &live.ref_frames) } else { f64::INFINITY };
-    if !(2.0 * live.travel <= SKIN_LIVE_MARGIN) {
-        // The whole skin: every stored vertex back at its place.
+    // A sweep's vertices were placed from the core at or after its start: within its reference's
+    // travel plus what the skin travelled from it while the sweep went on.
+    let sweep_travel = match live.sweep_next {
+        Some(_) => {
+            let t = skin_travel(sim, core_x, frames, &live.sweep_ref_x, &live.sweep_ref_frames);
+            live.sweep_slack = live.sweep_slack.max(t);
+            t
+        }
+        None => 0.0,
+    };
+    let bound = (live.travel + live.slack).max(if live.sweep_next.is_some() { sweep_travel + live.sweep_slack } else { 0.0 });
+    if !(2.0 * bound <= SKIN_LIVE_MARGIN) {
+        // The whole skin at once (a sweep could not keep up, or the first tick): every stored
+        // vertex back at its place.
         for v in 0..skin.len() {
             if over[v] != stamp {
                 skin[v] = place(v, false);
@@ -471,9 +490,39 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
         }
         live.ref_x.copy_from_slice(core_x);
         live.ref_frames.copy_from_slice(frames);
-        live.travel = 0.0;
+        (live.travel, live.slack, live.sweep_next) = (0.0, 0.0, None);
         live.rebuild(skin, &tool, r_list);
-        return;
+        return skin.len();
+    }
+    // Past a quarter of the margin, a sweep of the whole skin begins, a slice a tick: it ends
+    // before the bound reaches half the margin unless the skin moves faster than ~0.08 m/s, when
+    // the whole update above takes over. (At an eighth, sweeps ran twice as often in a slow press
+    // for no gain: tests/runtime_hand.rs counts them.)
+    if live.sweep_next.is_none() && 4.0 * (live.travel + live.slack) > SKIN_LIVE_MARGIN {
+        live.sweep_ref_x.copy_from_slice(core_x);
+        live.sweep_ref_frames.copy_from_slice(frames);
+        (live.sweep_next, live.sweep_slack) = (Some(0), 0.0);
+    }
+    let mut refreshed = 0;
+    if let Some(start) = live.sweep_next {
+        let n = skin.len();
+        let end = (start + n.div_ceil(SKIN_SWEEP_TICKS)).min(n);
+        refreshed = end - start;
+        for v in start..end {
+            if over[v] != stamp {
+                skin[v] = place(v, false);
+                live.carried[v] = false;
+            }
+        }
+        if end < n {
+            live.sweep_next = Some(end);
+        } else {
+            // Done: the sweep's reference is the skin's.
+            std::mem::swap(&mut live.ref_x, &mut live.sweep_ref_x);
+            std::mem::swap(&mut live.ref_frames, &mut live.sweep_ref_frames);
+            (live.travel, live.slack, live.sweep_next) = (sweep_travel, live.sweep_slack, None);
+            live.rebuild(skin, &tool, r_list);
+        }
     }
     for k in 0..live.list.len() {
         let v = live.list[k] as usize;
@@ -485,4 +534,5 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
     if !((tool - live.ref_tool).norm() <= SKIN_LIVE_MARGIN) {
         live.rebuild(skin, &tool, r_list);
     }
+    refreshed
 }
