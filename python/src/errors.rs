@@ -3,9 +3,8 @@
 //! `ValueError`s) that keep the builtin class a caller expects: `ParameterTypeError` (also a
 //! `TypeError`: wrong dtype, not an array, from `conv.rs`) and `ParameterIndexError` (also an
 //! `IndexError`: an index past the end) and `ParameterKeyError` (also a `KeyError`: a state dict
-//! without a key); everything the core refuses is a `PalpateError`. What
-//! pyo3 itself refuses before palpate's code runs (a str where a float goes) stays pyo3's
-//! TypeError.
+//! without a key); everything the core refuses is a `PalpateError`. What pyo3 itself refuses
+//! before palpate's code runs (a str where a float goes) stays pyo3's TypeError.
 //!
 //! Structured details ride along as attributes: `MeshError.tet` / `.node` (the offending tet or
 //! node, 0-based, or `None`), `SurfaceError.triangle` / `.vertex`, `StepError.node` / `.time`.
@@ -121,7 +120,7 @@ impl std::fmt::Display for Int {
 pub fn count(v: Int, name: &str) -> PyResult<usize> {
     match v {
         Int::Fits(v) => usize::try_from(v).map_err(|_| param_error(format!("{name} = {v}: must be a count, 0 or more"))),
-        Int::Huge { negative: true } => Err(param_error(format!("{name} = {}: must be a count, 0 or more", Int::Huge { negative: true }))),
+        neg @ Int::Huge { negative: true } => Err(param_error(format!("{name} = {neg}: must be a count, 0 or more"))),
         // Larger than any count palpate could run or allocate (the budget refuses far less).
         big @ Int::Huge { negative: false } => Err(param_error(format!("{name} = {big}: too large for a count (at most 2**63 - 1)"))),
     }

@@ -197,14 +197,14 @@ pub(super) fn all_forces_impl<C: LoopCopy>(c: C, m: &ParticleModel, u: &[P4], v:
 /// [`crate::meshfree::step_with_substeps`], which validated the state and filled `ws.u`, `ws.v`,
 /// `ws.touched`, `ws.ring` and `ws.rim`), then the ring's averaged forces into `ws.ring_force`.
 /// `ext`: the caller's per-sub-step external forces ([`crate::meshfree::step_with`]).
-#[inline(always)]
 ///
 /// Stops after the sub-step in which a free particle's speed relative to the free particles'
 /// mass-weighted mean velocity at the step's start passed the material's speed bound (a
-/// divergence starting: [`crate::divergence::speed_bound`]), and returns that particle and its speed; the state then
-/// holds that sub-step's positions and velocities (finite), for the caller to restore. Checked
-/// every sub-step, fused into the force sweep, because an under-stepped shell goes from a few
-/// wave speeds to overflow within one tick's sub-steps.
+/// divergence starting: [`crate::divergence::speed_bound`]), and returns that particle and its
+/// speed; the state then holds that sub-step's positions and velocities (finite), for the caller
+/// to restore. Checked every sub-step, fused into the force sweep, because an under-stepped shell
+/// goes from a few wave speeds to overflow within one tick's sub-steps.
+#[inline(always)]
 pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, mut ext: Option<ExtForce<'_>>) -> Option<(usize, f64)> {
     for &i in &ws.touched {
         ws.b[i] = [[0.0; 4]; 3];
