@@ -8,7 +8,6 @@ use numpy::{PyArray1, PyArray2};
 use palpate_core::integrate::{static_solve, StaticOptions};
 use palpate_core::probe::{self, ProbeLoad, ProbeOptions, Ramp, StepClock, StepTotals};
 use palpate_core::{step, Model, ModelBuilder, State, StepMemory, Vec3, Workspace};
-use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -118,7 +117,7 @@ impl PyBody {
 
 /// `state[key]`, or KeyError naming the key.
 fn item<'py>(state: &Bound<'py, PyDict>, key: &str) -> PyResult<Bound<'py, PyAny>> {
-    state.get_item(key)?.ok_or_else(|| PyKeyError::new_err(format!("state has no {key:?} (a dict from get_state())")))
+    state.get_item(key)?.ok_or_else(|| crate::errors::key_error(format!("state has no {key:?} (a dict from get_state())")))
 }
 
 /// `x` to 4 significant digits, printed shortest (0.4, not 0.39999999999999997), for reprs.
@@ -186,8 +185,8 @@ impl PyBody {
     ///
     /// Other Python threads run meanwhile; they cannot use this body until the call returns
     /// (doing so raises ``RuntimeError: Already borrowed``).
-    #[pyo3(signature = (n = 1, dt = 1e-3))]
-    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: i64, dt: f64) -> PyResult<Bound<'py, PyDict>> {
+    #[pyo3(signature = (n = errors::Int::Fits(1), dt = 1e-3), text_signature = "($self, n=1, dt=1e-3)")]
+    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: errors::Int, dt: f64) -> PyResult<Bound<'py, PyDict>> {
         let n = errors::count(n, "n")?;
         let this = &mut *slf;
         let tot = errors::guard("Body.step", || {
@@ -335,9 +334,9 @@ impl PyBody {
         &self,
         py: Python<'py>,
         forces: Option<&Bound<'py, PyAny>>,
-        max_iterations: Option<i64>,
+        max_iterations: Option<errors::Int>,
         tolerance: Option<f64>,
-        load_steps: Option<i64>,
+        load_steps: Option<errors::Int>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let (max_iterations, load_steps) = (errors::count_opt(max_iterations, "max_iterations")?, errors::count_opt(load_steps, "load_steps")?);
         let d = StaticOptions::default();
@@ -384,7 +383,7 @@ impl PyBody {
         nodes: &Bound<'py, PyAny>,
         total_force: &Bound<'py, PyAny>,
         ramp_time: f64,
-        steps: i64,
+        steps: errors::Int,
         dt: f64,
         stable_limit: f64,
         max_wall_s: Option<f64>,
@@ -410,7 +409,7 @@ impl PyBody {
         mut slf: PyRefMut<'py, Self>,
         py: Python<'py>,
         loads: Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)>,
-        steps: i64,
+        steps: errors::Int,
         dt: f64,
         ramp_start: Option<f64>,
         stable_limit: f64,

@@ -2,8 +2,9 @@
 //! conversion layer of the binding (every other file converts through it).
 //!
 //! * Inputs are numpy arrays or anything `numpy.asarray` accepts (nested lists ...).
-//! * Shape errors raise `ValueError`, dtype errors `TypeError`; both name the argument, the
-//!   expected and the actual shape / dtype.
+//! * Shape errors raise `palpate.ParameterError` (a `ValueError`), dtype errors
+//!   `palpate.ParameterTypeError` (a ParameterError and a `TypeError`); both name the argument,
+//!   the expected and the actual shape / dtype.
 //! * Float arguments accept any real dtype (float64, float32, integers) and are converted to
 //!   float64; index arguments accept any integer dtype (never floats or bools, which would hide a
 //!   mistake; an index *set* also takes a boolean mask). Non-contiguous arrays (slices,
@@ -17,7 +18,6 @@ use std::collections::HashSet;
 use numpy::ndarray::{Array1, Array2, ArrayD, IxDyn};
 use numpy::{Element, IntoPyArray, PyArray1, PyArray2, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use palpate_core::Vec3;
-use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 
 /// `obj` as a numpy array (converted with `numpy.asarray` if it is not one already).
@@ -27,10 +27,10 @@ pub fn as_array<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Bound<'py,
     }
     let np = obj.py().import("numpy")?;
     let conv = np.call_method1("asarray", (obj,)).map_err(|e| {
-        PyTypeError::new_err(format!("{what} must be an array-like of numbers, got {} ({e})", type_name(obj)))
+        crate::errors::type_error(format!("{what} must be an array-like of numbers, got {} ({e})", type_name(obj)))
     })?;
     conv.cast_into::<PyUntypedArray>()
-        .map_err(|_| PyTypeError::new_err(format!("{what} must be an array-like of numbers, got {}", type_name(obj))))
+        .map_err(|_| crate::errors::type_error(format!("{what} must be an array-like of numbers, got {}", type_name(obj))))
 }
 
 fn type_name(obj: &Bound<'_, PyAny>) -> String {
@@ -75,7 +75,7 @@ fn to_f64(a: &Bound<'_, PyUntypedArray>, what: &str, says: &str) -> PyResult<Vec
             .or_else(|| flat::<u8, _>(a, |x| x as f64)),
         _ => None,
     };
-    out.ok_or_else(|| PyTypeError::new_err(format!("{what} {says}, got dtype {}", dtype_str(a))))
+    out.ok_or_else(|| crate::errors::type_error(format!("{what} {says}, got dtype {}", dtype_str(a))))
 }
 
 /// The elements of an integer array as i64 (u64 above i64::MAX saturates, so it is reported as
@@ -95,7 +95,7 @@ fn to_i64(a: &Bound<'_, PyUntypedArray>, what: &str) -> PyResult<Vec<i64>> {
     };
     out.ok_or_else(|| {
         let hint = if kind == b'f' { " (convert with .astype(np.int64) if the values are whole)" } else { "" };
-        PyTypeError::new_err(format!("{what} must be an integer array, got dtype {}{hint}", dtype_str(a)))
+        crate::errors::type_error(format!("{what} must be an integer array, got dtype {}{hint}", dtype_str(a)))
     })
 }
 
@@ -205,7 +205,7 @@ pub fn indices(obj: &Bound<'_, PyAny>, what: &str, n: usize, of: Items, unique: 
         if shape[0] != n {
             return Err(crate::errors::param_error_from(format!("{what}: a boolean mask must have length {n} (one per {item}), got {}", shape[0])));
         }
-        let mask = flat::<bool, _>(&a, |x| x).ok_or_else(|| PyTypeError::new_err(format!("{what}: unreadable boolean mask")))?;
+        let mask = flat::<bool, _>(&a, |x| x).ok_or_else(|| crate::errors::type_error(format!("{what}: unreadable boolean mask")))?;
         return Ok(mask.iter().enumerate().filter(|(_, &m)| m).map(|(i, _)| i).collect());
     }
     let idx = to_i64(&a, what)?

@@ -1,7 +1,10 @@
 //! Python exceptions: one base, `palpate.PalpateError`, and one subclass per core error enum
-//! (`crates/palpate-core/src/error.rs`). Malformed *arguments* (wrong dtype, wrong shape, wrong
-//! type) are reported as the usual `TypeError` / `ValueError` by `conv.rs`; everything the core
-//! refuses is a `PalpateError`.
+//! (`crates/palpate-core/src/error.rs`). Malformed *arguments* are `ParameterError`s (also
+//! `ValueError`s) that keep the builtin class a caller expects: `ParameterTypeError` (also a
+//! `TypeError`: wrong dtype, not an array, from `conv.rs`) and `ParameterIndexError` (also an
+//! `IndexError`: an index past the end) and `ParameterKeyError` (also a `KeyError`: a state dict
+//! without a key); everything the core refuses is a `PalpateError`. What pyo3 itself refuses
+//! before palpate's code runs (a str where a float goes) stays pyo3's TypeError.
 //!
 //! Structured details ride along as attributes: `MeshError.tet` / `.node` (the offending tet or
 //! node, 0-based, or `None`), `SurfaceError.triangle` / `.vertex`, `StepError.node` / `.time`.
@@ -12,7 +15,7 @@ use std::fmt::Display;
 
 use palpate_core::error as core;
 use palpate_core::mesh::SurfaceError as CoreSurfaceError;
-use pyo3::exceptions::{PyException, PyOSError, PyUserWarning, PyValueError};
+use pyo3::exceptions::{PyException, PyIndexError, PyKeyError, PyOSError, PyOverflowError, PyTypeError, PyUserWarning, PyValueError};
 use pyo3::prelude::*;
 use pyo3::{create_exception, PyErr};
 
@@ -37,7 +40,7 @@ create_exception!(
     StepError,
     PalpateError,
     "A time step that could not be completed; the body is left as it was before that step. \
-     Attributes `node` and `time` [s] locate a non-finite value when known, else None."
+     Attributes `node` and `time` [s] locate a non-finite value, or the node past the speed bound of a divergence that has started, when known, else None."
 );
 create_exception!(palpate, MeshWarning, PyUserWarning, "Something in a mesh was repaired (e.g. inverted tets reoriented).");
 create_exception!(
@@ -78,34 +81,104 @@ create_exception!(
      touched should be trusted. The message says where; please report it with the input."
 );
 
-/// A count argument (steps, ticks) that must not be negative, as `usize`: a negative count is a
-/// `palpate.ParameterError` naming the argument (pyo3's own conversion raised OverflowError).
-pub fn count(v: i64, name: &str) -> PyResult<usize> {
-    usize::try_from(v).map_err(|_| param_error(format!("{name} = {v}: must be a count, 0 or more")))
+/// An integer argument as Python gave it, also one beyond 64 bits: typed `i64`, pyo3 refused
+/// `2**70` or `-(2**70)` with its own OverflowError before palpate could name the argument.
+/// [`count`], [`count_opt`] and [`index`] take it and turn it into a `usize` or a
+/// `palpate.ParameterError` that names the argument. Not an int: pyo3's TypeError, as for any
+/// argument of the wrong type.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Int {
+    Fits(i64),
+    /// Beyond 64 bits, with its sign.
+    Huge { negative: bool },
+}
+
+impl<'a, 'py> FromPyObject<'a, 'py> for Int {
+    type Error = PyErr;
+    fn extract(obj: pyo3::Borrowed<'a, 'py, PyAny>) -> PyResult<Self> {
+        match obj.extract::<i64>() {
+            Ok(v) => Ok(Int::Fits(v)),
+            Err(e) if e.is_instance_of::<PyOverflowError>(obj.py()) => Ok(Int::Huge { negative: obj.lt(0)? }),
+            Err(e) => Err(e),
+        }
+    }
+}
+
+impl std::fmt::Display for Int {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Int::Fits(v) => write!(f, "{v}"),
+            Int::Huge { negative: true } => write!(f, "an integer below -2**63"),
+            Int::Huge { negative: false } => write!(f, "an integer above 2**63 - 1"),
+        }
+    }
+}
+
+/// A count argument (steps, ticks) that must not be negative, as `usize`: a negative count, or
+/// one beyond 64 bits, is a `palpate.ParameterError` naming the argument (pyo3's own conversion
+/// raised OverflowError).
+pub fn count(v: Int, name: &str) -> PyResult<usize> {
+    match v {
+        Int::Fits(v) => usize::try_from(v).map_err(|_| param_error(format!("{name} = {v}: must be a count, 0 or more"))),
+        neg @ Int::Huge { negative: true } => Err(param_error(format!("{name} = {neg}: must be a count, 0 or more"))),
+        // Larger than any count palpate could run or allocate (the budget refuses far less).
+        big @ Int::Huge { negative: false } => Err(param_error(format!("{name} = {big}: too large for a count (at most 2**63 - 1)"))),
+    }
 }
 
 /// [`count`] of an optional argument (None: the default).
-pub fn count_opt(v: Option<i64>, name: &str) -> PyResult<Option<usize>> {
+pub fn count_opt(v: Option<Int>, name: &str) -> PyResult<Option<usize>> {
     v.map(|v| count(v, name)).transpose()
 }
 
-/// An index argument `i` into `n` items: a negative one is a `palpate.ParameterError` (pyo3's
-/// conversion to `usize` raised OverflowError); `Ok(None)` when it is past the end, for the
-/// caller's own out-of-range error.
-pub fn index(i: i64, n: usize, name: &str) -> PyResult<Option<usize>> {
-    let i = usize::try_from(i).map_err(|_| param_error(format!("{name} = {i}: must be an index, 0 or more")))?;
-    Ok((i < n).then_some(i))
+/// An index argument `i` into `n` items: a negative one (or one beyond 64 bits) is a
+/// `palpate.ParameterError` (pyo3's conversion to `usize` raised OverflowError); one past the
+/// end is a `palpate.ParameterIndexError` (a ParameterError and an IndexError, as for a sequence)
+/// saying `what` it indexes and how many there are.
+pub fn index(i: Int, n: usize, name: &str, what: &str) -> PyResult<usize> {
+    let i = match i {
+        Int::Fits(v) => usize::try_from(v).map_err(|_| param_error(format!("{name} = {v}: must be an index, 0 or more")))?,
+        Int::Huge { negative: true } => return Err(param_error(format!("{name} = {i}: must be an index, 0 or more"))),
+        Int::Huge { negative: false } => return Err(out_of_range(format!("{name} = {i}: out of range ({n} {what})"))),
+    };
+    if i < n {
+        Ok(i)
+    } else {
+        Err(out_of_range(format!("{name} = {i}: out of range ({n} {what})")))
+    }
+}
+
+/// An index past the end as `palpate.ParameterIndexError`: a ParameterError and an IndexError.
+pub fn out_of_range(msg: String) -> PyErr {
+    raise_dynamic(&PARAMETER_INDEX, msg, PyIndexError::new_err)
+}
+
+/// An argument of the wrong type or form (a dtype, a shape that is not an array) as
+/// `palpate.ParameterTypeError`: a ParameterError and a TypeError.
+pub fn type_error(msg: String) -> PyErr {
+    raise_dynamic(&PARAMETER_TYPE, msg, PyTypeError::new_err)
+}
+
+/// A state dict without `key` as `palpate.ParameterKeyError`: a ParameterError and a KeyError.
+pub fn key_error(msg: String) -> PyErr {
+    raise_dynamic(&PARAMETER_KEY, msg, PyKeyError::new_err)
+}
+
+/// An instance of one of the classes made at registration (`type(name, bases, {})`), or
+/// `fallback` before the module is registered.
+fn raise_dynamic(class: &pyo3::sync::PyOnceLock<Py<PyAny>>, msg: String, fallback: fn(String) -> PyErr) -> PyErr {
+    Python::attach(|py| match class.get(py) {
+        Some(t) => match t.bind(py).call1((msg.clone(),)) {
+            Ok(inst) => PyErr::from_value(inst),
+            Err(_) => fallback(msg),
+        },
+        None => fallback(msg),
+    })
 }
 
 /// A bad argument value as `palpate.ParameterError`: a PalpateError that is also a ValueError.
 pub fn param_error(msg: String) -> PyErr {
-    Python::attach(|py| match PARAMETER.get(py) {
-        Some(t) => match t.bind(py).call1((msg.clone(),)) {
-            Ok(inst) => PyErr::from_value(inst),
-            Err(_) => PyValueError::new_err(msg),
-        },
-        None => PyValueError::new_err(msg),
-    })
+    raise_dynamic(&PARAMETER, msg, PyValueError::new_err)
 }
 
 /// [`param_error`] of anything printable (the binding's argument checks).
@@ -141,6 +214,9 @@ pub fn warn_fixed_load(py: Python<'_>, fixed: &[bool], loaded: impl IntoIterator
 }
 
 static PARAMETER: pyo3::sync::PyOnceLock<Py<PyAny>> = pyo3::sync::PyOnceLock::new();
+static PARAMETER_INDEX: pyo3::sync::PyOnceLock<Py<PyAny>> = pyo3::sync::PyOnceLock::new();
+static PARAMETER_TYPE: pyo3::sync::PyOnceLock<Py<PyAny>> = pyo3::sync::PyOnceLock::new();
+static PARAMETER_KEY: pyo3::sync::PyOnceLock<Py<PyAny>> = pyo3::sync::PyOnceLock::new();
 
 create_exception!(
     palpate,
@@ -187,6 +263,20 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     param_type.setattr("__module__", "palpate")?;
     param_type.setattr("__doc__", "An argument value palpate refuses (negative count, parameter out of range): a PalpateError and a ValueError.")?;
     m.add("ParameterError", &param_type)?;
+    // Kinds of ParameterError that also keep the builtin class a Python caller expects: an index
+    // past the end (IndexError, as for a sequence), an argument of the wrong type or form
+    // (TypeError), a state dict without a key (KeyError).
+    for (name, builtin, doc, slot) in [
+        ("ParameterIndexError", py.get_type::<PyIndexError>(), "An index argument past the end (a region, a particle): a ParameterError and an IndexError.", &PARAMETER_INDEX),
+        ("ParameterTypeError", py.get_type::<PyTypeError>(), "An argument of the wrong type or form (not an array of numbers, an integer array of floats): a ParameterError and a TypeError.", &PARAMETER_TYPE),
+        ("ParameterKeyError", py.get_type::<PyKeyError>(), "A state dict without a key the body needs (not one from get_state()): a ParameterError and a KeyError.", &PARAMETER_KEY),
+    ] {
+        let t = py.import("builtins")?.getattr("type")?.call1((name, (&param_type, builtin), pyo3::types::PyDict::new(py)))?;
+        t.setattr("__module__", "palpate")?;
+        t.setattr("__doc__", doc)?;
+        m.add(name, &t)?;
+        let _ = slot.set(py, t.unbind());
+    }
     let _ = PARAMETER.set(py, param_type.unbind());
     install_panic_hook();
     m.add("HapticsError", py.get_type::<HapticsError>())?;
@@ -327,7 +417,7 @@ pub fn solve_error(e: core::SolveError) -> PyErr {
 /// A step error; `context` (e.g. "after 12 of 100 steps") is appended to the message.
 pub fn step_error(e: core::StepError, context: &str) -> PyErr {
     let (node, time) = match &e {
-        core::StepError::NonFinite { node, time, .. } => (Some(*node), Some(*time)),
+        core::StepError::NonFinite { node, time, .. } | core::StepError::Diverging { node, time, .. } => (Some(*node), Some(*time)),
         core::StepError::NonFiniteForce { node } => (Some(*node), None),
         _ => (None, None),
     };

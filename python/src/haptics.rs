@@ -199,7 +199,7 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
 #[pymethods]
 impl PyHapticLoop {
     #[new]
-    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = "127.0.0.1", kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = 0, max_ticks = None, spin = None, realtime = false))]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = "127.0.0.1", kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -210,7 +210,7 @@ impl PyHapticLoop {
         times: Option<&Bound<'_, PyAny>>,
         knots: Option<&Bound<'_, PyAny>>,
         recording: Option<std::path::PathBuf>,
-        port: Option<i64>,
+        port: Option<errors::Int>,
         host: &str,
         kind: Option<&str>,
         hand_start: Option<&Bound<'_, PyAny>>,
@@ -225,18 +225,22 @@ impl PyHapticLoop {
         max_rate: Option<f64>,
         ramp: Option<f64>,
         stall_timeout: Option<f64>,
-        record_ticks: i64,
-        max_ticks: Option<i64>,
+        record_ticks: errors::Int,
+        max_ticks: Option<errors::Int>,
         spin: Option<f64>,
         realtime: bool,
     ) -> PyResult<Self> {
-        // Counts as i64: a negative one is a ParameterError (pyo3's usize / u16 conversions raised
-        // OverflowError). The rest runs under the panic guard: a panic while opening a recording,
+        // Counts as errors::Int: a negative one, or one beyond 64 bits, is a ParameterError
+        // (pyo3's usize / u16 conversions raised OverflowError). The rest runs under the panic guard: a panic while opening a recording,
         // a device or the physics is an InternalError, not pyo3's PanicException.
         let record_ticks = errors::count(record_ticks, "record_ticks")?;
         let max_ticks = errors::count_opt(max_ticks, "max_ticks")?.map(|n| n as u64);
         let port = match port {
-            Some(p) => Some(u16::try_from(p).map_err(|_| errors::param_error_from(format!("port = {p}: must be 0 to 65535")))?),
+            Some(p) => Some(match p {
+                errors::Int::Fits(v) => u16::try_from(v).ok(),
+                errors::Int::Huge { .. } => None,
+            }
+            .ok_or_else(|| errors::param_error_from(format!("port = {p}: must be 0 to 65535")))?),
             None => None,
         };
         errors::guard("HapticLoop", || {
@@ -452,7 +456,7 @@ impl PyHapticLoop {
     /// ``recording_dropped_ticks``.
     /// Deterministic: a replay gives the recorded forces bit for bit.
     #[pyo3(signature = (max_ticks = None))]
-    fn run<'py>(&self, py: Python<'py>, max_ticks: Option<i64>) -> PyResult<Bound<'py, PyDict>> {
+    fn run<'py>(&self, py: Python<'py>, max_ticks: Option<errors::Int>) -> PyResult<Bound<'py, PyDict>> {
         let max_ticks = errors::count_opt(max_ticks, "max_ticks")?.map(|n| n as u64);
         // Out of the mutex before the GIL is released (see the module).
         let taken = std::mem::replace(&mut *self.stage.lock().unwrap(), Stage::Busy("running offline"));

@@ -9,7 +9,6 @@ use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use palpate_core::hybrid::{self, HybridModel, HybridOptions, Projection, Spacing, VoxelLabel, Wall, WallPart};
 use palpate_core::mesh::TriSurface;
 use palpate_core::HybridError;
-use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -26,8 +25,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// ``circumferential`` x ``longitudinal`` points per surface. Returns ``(points (n, 3) [m],
 /// triangles (m, 3) int64, part (m,) int8: 0 inner, 1 outer, 2 base)``.
 #[pyfunction]
-#[pyo3(signature = (circumferential = 96, longitudinal = 24))]
-fn ventricle_surface<'py>(py: Python<'py>, circumferential: i64, longitudinal: i64) -> PyResult<TaggedSurface<'py>> {
+#[pyo3(signature = (circumferential = errors::Int::Fits(96), longitudinal = errors::Int::Fits(24)), text_signature = "(circumferential=96, longitudinal=24)")]
+fn ventricle_surface<'py>(py: Python<'py>, circumferential: errors::Int, longitudinal: errors::Int) -> PyResult<TaggedSurface<'py>> {
     let (circumferential, longitudinal) = (errors::count(circumferential, "circumferential")?, errors::count(longitudinal, "longitudinal")?);
     if !(3..=4096).contains(&circumferential) || !(1..=4096).contains(&longitudinal) {
         return Err(crate::errors::param_error_from(format!("circumferential must be 3 to 4096 and longitudinal 1 to 4096, got {circumferential} and {longitudinal}")));
@@ -97,11 +96,12 @@ fn options(kw: Option<&Bound<'_, PyDict>>) -> PyResult<HybridOptions> {
     let (mut spacing, mut particles) = (None, None);
     for (k, v) in kw.into_iter().flatten() {
         let key: String = k.extract()?;
-        let arg = |e: PyErr| PyTypeError::new_err(format!("argument '{key}': {e}"));
+        let arg = |e: PyErr| errors::type_error(format!("argument '{key}': {e}"));
         match key.as_str() {
             "projection" => o.projection = v.extract::<PyProjection>().map_err(|e| arg(e.into()))?.into(),
             "core_fraction" => o.core_fraction = v.extract().map_err(arg)?,
-            // Counts as i64 first: a negative one is a ParameterError, not pyo3's OverflowError.
+            // Counts as errors::Int first: a negative one, or one beyond 64 bits, is a
+            // ParameterError naming the option, not pyo3's OverflowError.
             "core_triangles" => o.core_triangles = errors::count(v.extract().map_err(arg)?, "core_triangles")?,
             "core_layers" => o.core_layers = errors::count(v.extract().map_err(arg)?, "core_layers")?,
             "spacing" => spacing = v.extract::<Option<f64>>().map_err(arg)?,
@@ -109,7 +109,7 @@ fn options(kw: Option<&Bound<'_, PyDict>>) -> PyResult<HybridOptions> {
             "density" => o.density = v.extract().map_err(arg)?,
             "min_region_particles" => o.min_region_particles = errors::count(v.extract().map_err(arg)?, "min_region_particles")?,
             "field_voxels" => o.field_voxels = errors::count(v.extract().map_err(arg)?, "field_voxels")?,
-            _ => return Err(PyTypeError::new_err(format!("unexpected keyword argument '{key}' (the build options are {})", OPTION_NAMES.join(", ")))),
+            _ => return Err(errors::type_error(format!("unexpected keyword argument '{key}' (the build options are {})", OPTION_NAMES.join(", ")))),
         }
     }
     match (spacing, particles) {
@@ -293,30 +293,30 @@ impl PyHybridModel {
     fn shell_volume(&self) -> f64 { self.model.shell_volume() }
 
     /// RV(p_s): indices of the particles of region ``s``, int64.
-    fn region_particles<'py>(&self, py: Python<'py>, s: i64) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    fn region_particles<'py>(&self, py: Python<'py>, s: errors::Int) -> PyResult<Bound<'py, PyArray1<i64>>> {
         let s = self.check_region(s)?;
         let v: Vec<i64> = self.model.region_particle_ranges(s).into_iter().flat_map(|r| r.map(|i| i as i64)).collect();
         Ok(PyArray1::from_vec(py, v))
     }
     /// nv(p_s): the outer triangles of region ``s``, int64.
-    fn region_triangles<'py>(&self, py: Python<'py>, s: i64) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    fn region_triangles<'py>(&self, py: Python<'py>, s: errors::Int) -> PyResult<Bound<'py, PyArray1<i64>>> {
         let s = self.check_region(s)?;
         Ok(conv::u32s_to_py(py, &self.model.region_triangles(s)))
     }
     /// The core faces under RV(p_s), int64.
-    fn region_core_faces<'py>(&self, py: Python<'py>, s: i64) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    fn region_core_faces<'py>(&self, py: Python<'py>, s: errors::Int) -> PyResult<Bound<'py, PyArray1<i64>>> {
         let s = self.check_region(s)?;
         Ok(conv::u32s_to_py(py, &self.model.region_core_faces(s)))
     }
     /// C(p_s): the projections on the core of nv(p_s)'s boundary vertices [m], (k, 3).
-    fn region_curve<'py>(&self, py: Python<'py>, s: i64) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    fn region_curve<'py>(&self, py: Python<'py>, s: errors::Int) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let s = self.check_region(s)?;
         Ok(conv::vec3s_to_py(py, &self.model.region_curve(s)))
     }
     /// B(p_s): ``{"origin": (3,) [m], "h": voxel edge [m], "label": (nz, ny, nx) uint8 (0
     /// outside, 1 inside, 2 boundary), "gradient": (nz, ny, nx, 3) float32 unit vectors to the
     /// nearest interior voxel (zero inside)}``.
-    fn region_field<'py>(&self, py: Python<'py>, s: i64) -> PyResult<Bound<'py, PyDict>> {
+    fn region_field<'py>(&self, py: Python<'py>, s: errors::Int) -> PyResult<Bound<'py, PyDict>> {
         let s = self.check_region(s)?;
         let f = self.model.region_field(s);
         let [nx, ny, nz] = f.dims;
@@ -379,12 +379,9 @@ impl PyHybridModel {
 }
 
 impl PyHybridModel {
-    /// The region index `s`: a negative one is a ParameterError, one past the end an IndexError
-    /// (as for a sequence).
-    fn check_region(&self, s: i64) -> PyResult<usize> {
-        match errors::index(s, self.model.n_regions(), "region")? {
-            Some(s) => Ok(s),
-            None => Err(pyo3::exceptions::PyIndexError::new_err(format!("region {s} out of range ({} regions)", self.model.n_regions()))),
-        }
+    /// The region index `s`: a negative one is a ParameterError, one past the end an
+    /// ParameterIndexError (a ParameterError and an IndexError, as for a sequence).
+    fn check_region(&self, s: errors::Int) -> PyResult<usize> {
+        errors::index(s, self.model.n_regions(), "region", "regions")
     }
 }

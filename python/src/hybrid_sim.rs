@@ -4,7 +4,6 @@
 use numpy::{PyArray1, PyArray2};
 use palpate_core::runtime::{tick, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, SkinSweep, TickReport, Tool};
 use palpate_core::{StepMemory, Vec3};
-use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -79,8 +78,8 @@ impl PyHybridSim {
         hold: bool,
         activation_margin: Option<f64>,
         max_tool_step: Option<f64>,
-        linger_ticks: Option<i64>,
-        max_substeps: Option<i64>,
+        linger_ticks: Option<errors::Int>,
+        max_substeps: Option<errors::Int>,
         mass_scaling: Option<f64>,
     ) -> PyResult<Self> {
         let (linger_ticks, max_substeps) = (errors::count_opt(linger_ticks, "linger_ticks")?, errors::count_opt(max_substeps, "max_substeps")?);
@@ -330,7 +329,7 @@ impl PyHybridSim {
     /// a wrong shape, index or non-finite value, ``StepError`` for a state that does not fit
     /// this simulation or a failed factorisation; the simulation is unchanged then.
     fn set_state(&mut self, py: Python<'_>, state: &Bound<'_, PyDict>) -> PyResult<()> {
-        let item = |key: &str| state.get_item(key)?.ok_or_else(|| PyKeyError::new_err(format!("state has no {key:?} (a dict from get_state())")));
+        let item = |key: &str| state.get_item(key)?.ok_or_else(|| crate::errors::key_error(format!("state has no {key:?} (a dict from get_state())")));
         let (n_core, n_p, n_skin) = (self.sim.core.n_nodes(), self.sim.n_particles(), self.sim.hybrid.outer_points.len());
         let skin_items = conv::Items { item: "point", owner: "the skin" };
         let opt = |key: &str| -> PyResult<Option<Bound<'_, PyAny>>> { item(key).map(|v| (!v.is_none()).then_some(v)) };

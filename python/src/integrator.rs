@@ -4,7 +4,6 @@
 
 use palpate_core::integrate::Filter;
 use palpate_core::Integrator;
-use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 
 /// The filter of the paper's semi-implicit scheme (eq. 34).
@@ -140,7 +139,7 @@ impl PyBackwardEuler {
 impl PyBackwardEuler {
     #[new]
     #[pyo3(signature = (solver = PySolver::QuasiNewton, *, max_iterations = None, tolerance = None, history = None))]
-    fn new(solver: PySolver, max_iterations: Option<i64>, tolerance: Option<f64>, history: Option<i64>) -> PyResult<Self> {
+    fn new(solver: PySolver, max_iterations: Option<crate::errors::Int>, tolerance: Option<f64>, history: Option<crate::errors::Int>) -> PyResult<Self> {
         let (max_iterations, history) = (crate::errors::count_opt(max_iterations, "max_iterations")?, crate::errors::count_opt(history, "history")?);
         if solver == PySolver::Linearised && (max_iterations.is_some() || tolerance.is_some() || history.is_some()) {
             return Err(crate::errors::param_error_from("the LINEARISED solver takes no max_iterations, tolerance or history"));
@@ -191,7 +190,7 @@ pub fn integrator_from_py(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Integrator
         return Ok(be.get().integrator());
     }
     let hint = if obj.cast::<pyo3::types::PyString>().is_ok() { " (integrators are objects, not strings)" } else { "" };
-    Err(PyTypeError::new_err(format!(
+    Err(crate::errors::type_error(format!(
         "integrator must be palpate.SemiImplicit(...) or palpate.BackwardEuler(...), got {}{hint}",
         obj.repr().map(|r| r.to_string()).unwrap_or_else(|_| "?".into())
     )))

@@ -161,8 +161,8 @@ pub fn ellipsoid_wall(
     py: Python<'_>,
     inner: Option<[f64; 3]>,
     outer: Option<[f64; 3]>,
-    subdivisions: Option<i64>,
-    layers: Option<i64>,
+    subdivisions: Option<errors::Int>,
+    layers: Option<errors::Int>,
 ) -> PyResult<PyTetMesh> {
     let (subdivisions, layers) = (errors::count_opt(subdivisions, "subdivisions")?, errors::count_opt(layers, "layers")?);
     let d = EllipsoidWall::default();
@@ -201,9 +201,9 @@ pub fn truncated_ellipsoid_wall(
     inner: Option<[f64; 3]>,
     outer: Option<[f64; 3]>,
     z_cut: Option<f64>,
-    circumferential: Option<i64>,
-    longitudinal: Option<i64>,
-    layers: Option<i64>,
+    circumferential: Option<errors::Int>,
+    longitudinal: Option<errors::Int>,
+    layers: Option<errors::Int>,
 ) -> PyResult<PyTetMesh> {
     let (circumferential, longitudinal, layers) =
         (errors::count_opt(circumferential, "circumferential")?, errors::count_opt(longitudinal, "longitudinal")?, errors::count_opt(layers, "layers")?);
@@ -251,8 +251,8 @@ pub fn truncated_ellipsoid_wall(
 /// ``6 nx ny nz`` tets, ``(nx+1)(ny+1)(nz+1)`` nodes; node (i, j, k) has index
 /// ``i + (nx+1) * (j + (ny+1) * k)``.
 #[pyfunction]
-#[pyo3(signature = (size = [0.1, 0.02, 0.02], cells = [10, 2, 2]))]
-pub fn box_mesh(py: Python<'_>, size: [f64; 3], cells: [i64; 3]) -> PyResult<PyTetMesh> {
+#[pyo3(signature = (size = [0.1, 0.02, 0.02], cells = [errors::Int::Fits(10), errors::Int::Fits(2), errors::Int::Fits(2)]))]
+pub fn box_mesh(py: Python<'_>, size: [f64; 3], cells: [errors::Int; 3]) -> PyResult<PyTetMesh> {
     let cells = [errors::count(cells[0], "cells[0]")?, errors::count(cells[1], "cells[1]")?, errors::count(cells[2], "cells[2]")?];
     if !size.iter().all(|s| s.is_finite() && *s > 0.0) {
         return Err(crate::errors::param_error_from(format!("box size must be finite and positive [m], got {size:?}")));

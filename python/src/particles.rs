@@ -6,7 +6,6 @@ use std::time::Instant;
 use numpy::{PyArray1, PyArray2};
 use palpate_core::meshfree::{Kernel, ParticleModel, ParticleModelBuilder, ParticleState, ParticleWorkspace, DEFAULT_HOURGLASS, DEFAULT_MIN_WEIGHT};
 use palpate_core::Vec3;
-use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -66,7 +65,7 @@ pub struct PyParticleBody {
 
 /// `state[key]`, or KeyError naming the key.
 fn item<'py>(state: &Bound<'py, PyDict>, key: &str) -> PyResult<Bound<'py, PyAny>> {
-    state.get_item(key)?.ok_or_else(|| PyKeyError::new_err(format!("state has no {key:?} (a dict from get_state())")))
+    state.get_item(key)?.ok_or_else(|| crate::errors::key_error(format!("state has no {key:?} (a dict from get_state())")))
 }
 
 /// A time step [s] for `run_timed` / `substeps`: positive and finite, else ValueError.
@@ -132,8 +131,8 @@ impl PyParticleBody {
     /// Returns a dict: ``steps``, ``substeps`` (per step), ``substep_dt`` [s].
     /// Raises ``StepError`` if a step fails; the steps before it are kept and the body is left as
     /// it was before the failing step.
-    #[pyo3(signature = (n = 1, dt = 1e-3))]
-    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: i64, dt: f64) -> PyResult<Bound<'py, PyDict>> {
+    #[pyo3(signature = (n = errors::Int::Fits(1), dt = 1e-3), text_signature = "($self, n=1, dt=1e-3)")]
+    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: errors::Int, dt: f64) -> PyResult<Bound<'py, PyDict>> {
         let n = errors::count(n, "n")?;
         if !(dt > 0.0 && dt.is_finite()) {
             return Err(errors::step_error(palpate_core::StepError::BadTimeStep(dt), ""));
@@ -160,7 +159,7 @@ impl PyParticleBody {
     /// early, else None). Stops early when a step fails or the summed wall time exceeds
     /// ``max_wall_s`` [s].
     #[pyo3(signature = (ticks, dt = 1e-3, max_wall_s = None))]
-    fn run_timed<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, ticks: i64, dt: f64, max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+    fn run_timed<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, ticks: errors::Int, dt: f64, max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
         let ticks = errors::count(ticks, "ticks")?;
         check_dt(dt)?;
         let this = &mut *slf;
@@ -366,10 +365,8 @@ impl PyParticleBody {
     }
 
     /// Neighbours of particle ``i`` at rest, int64, ascending.
-    fn neighbours<'py>(&self, py: Python<'py>, i: i64) -> PyResult<Bound<'py, PyArray1<i64>>> {
-        let Some(i) = errors::index(i, self.model.n_particles(), "i")? else {
-            return Err(crate::errors::param_error_from(format!("particle index {i} out of range (the body has {} particles)", self.model.n_particles())));
-        };
+    fn neighbours<'py>(&self, py: Python<'py>, i: errors::Int) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let i = errors::index(i, self.model.n_particles(), "i", "particles")?;
         Ok(conv::usizes_to_py(py, self.model.neighbours(i)))
     }
 

@@ -152,8 +152,8 @@ impl PyTriSurface {
 /// surface: the octahedron cut ``subdivisions`` times into 4, projected onto the ellipsoid.
 /// ``8 * 4**subdivisions`` triangles (default 4: 2048); the volume converges to 4/3 pi a b c.
 #[pyfunction]
-#[pyo3(signature = (semi_axes = [0.026, 0.026, 0.042], subdivisions = 4))]
-pub fn ellipsoid_surface(py: Python<'_>, semi_axes: [f64; 3], subdivisions: i64) -> PyResult<PyTriSurface> {
+#[pyo3(signature = (semi_axes = [0.026, 0.026, 0.042], subdivisions = errors::Int::Fits(4)), text_signature = "(semi_axes=..., subdivisions=4)")]
+pub fn ellipsoid_surface(py: Python<'_>, semi_axes: [f64; 3], subdivisions: errors::Int) -> PyResult<PyTriSurface> {
     let subdivisions = crate::errors::count(subdivisions, "subdivisions")?;
     if !semi_axes.iter().all(|a| a.is_finite() && *a > 0.0) {
         return Err(crate::errors::param_error_from(format!("semi_axes must be finite and positive [m], got {semi_axes:?}")));

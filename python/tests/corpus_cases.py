@@ -472,6 +472,26 @@ def _body_cases(c: Corpus):
         name, klass, code, expect = entry[:4]
         types = entry[4] if len(entry) > 4 else None
         c.api(name, klass, code, expect, types)
+    # Divergence reported when it starts (issue 15, item 4), not at overflow: the step that passes
+    # the speed bound fails with the state restored and every value still finite.
+    diverging = ("    x0, v0, t0 = b.positions.copy(), b.velocities.copy(), b.time\n"
+                 "    try:\n        b.step(1)\n    except palpate.StepError:\n"
+                 "        assert (b.positions == x0).all() and (b.velocities == v0).all() and b.time == t0, 'state changed'\n"
+                 "        assert np.isfinite(b.positions).all() and np.isfinite(b.velocities).all()\n        raise\n")
+    c.api("body_semi_implicit_diverging", "silent",
+          "mesh = palpate.truncated_ellipsoid_wall(); p = mesh.points; free = np.abs(p[:, 2]) > 1e-9\n"
+          "b = palpate.Body(mesh, palpate.Material(young=3e4, poisson=0.4, density=1000.0), fixed=np.flatnonzero(~free), integrator=palpate.SemiImplicit(palpate.Filter.PAPER))\n"
+          "b.set_positions(p + np.random.default_rng(1).uniform(-1e-9, 1e-9, p.shape) * free[:, None])\n"
+          "for k in range(300):\n" + diverging, ["error"], ["StepError"], contains="diverging")
+    c.api("hybrid_sim_under_stepped_diverging", "silent",
+          "m = palpate.build_shape('ellipsoids', particles=400, field_voxels=20000)\n"
+          "s = palpate.HybridSim(m, palpate.Material.myocardium(), max_substeps=1)\n"
+          "o = s.surface; p = o[np.argmax(o[:, 0])]; r = s.tool_radius\n"
+          "for k in range(500):\n"
+          "    x0 = s.core_positions.copy()\n"
+          "    try:\n        s.step(p + np.array([r - min(3e-3, 3e-5 * (k + 1)), 0, 0]))\n"
+          "    except palpate.StepError:\n        assert (s.core_positions == x0).all() and np.isfinite(s.particle_positions()).all()\n        raise\n",
+          ["error"], ["StepError"], contains="diverging")
 
 
 _MODEL = "m = palpate.HybridModel.load(os.path.join(D, 'seed.palpate'))\n"
@@ -523,6 +543,52 @@ def _binding_cases(c: Corpus):
     ]
     for name, code in negative:
         c.api(name, "untyped", code, ["error"], par)
+    # Integers beyond 64 bits (pyo3's i64 conversion raised OverflowError), indices past the end
+    # (a bare IndexError), wrong dtypes and state dicts without a key (bare TypeError, KeyError):
+    # ParameterErrors that keep the builtin class (ParameterIndexError is an IndexError, ...).
+    huge = [
+        ("big_neg_body_steps", _BODY + "body().step(-(2**70))", par),
+        ("big_body_steps", _BODY + "body().step(2**70)", par),
+        ("big_box_cells", "palpate.box_mesh(cells=(2**70, 2, 2))", par),
+        ("big_neg_box_cells", "palpate.box_mesh(cells=(10, -(2**70), 2))", par),
+        ("big_ellipsoid_surface", "palpate.ellipsoid_surface((0.01, 0.01, 0.01), 2**70)", par),
+        ("big_neg_ellipsoid_wall_layers", "palpate.ellipsoid_wall(layers=-(2**70))", par),
+        ("big_truncated_wall_circumferential", "palpate.truncated_ellipsoid_wall(circumferential=2**70)", par),
+        ("big_ventricle_surface", "palpate.ventricle_surface(2**70, 24)", par),
+        ("big_run_probe_steps", _BODY + "body().run_probe([20], (0, 0, -1e-3), 0.1, 2**70)", par),
+        ("big_neg_run_loads_steps", _BODY + "body().run_loads([([20], (0, 0, -1e-3), 0.1)], -(2**70))", par),
+        ("big_static_solve_iterations", _BODY + "body().static_solve(max_iterations=2**70)", par),
+        ("big_backward_euler_history", "palpate.BackwardEuler(history=-(2**70))", par),
+        ("big_pb_steps", _PB + "pb().step(2**70)", par),
+        ("big_neg_pb_run_timed", _PB + "pb().run_timed(-(2**70))", par),
+        ("big_particle_neighbours", _PB + "pb().neighbours(2**70)", ["ParameterIndexError"]),
+        ("big_neg_particle_neighbours", _PB + "pb().neighbours(-(2**70))", par),
+        ("big_build_particles", "palpate.build_shape('ellipsoids', particles=2**70)", par),
+        ("big_hybrid_sim_substeps", _MODEL + "palpate.HybridSim(m, palpate.Material.myocardium(), max_substeps=2**70)", par),
+        ("big_region_particles", _MODEL + "m.region_particles(2**70)", ["ParameterIndexError"]),
+        ("big_neg_region_curve", _MODEL + "m.region_curve(-(2**70))", par),
+        ("big_record_ticks", _MODEL + "palpate.HapticLoop(m, palpate.Material.myocardium(), 'scripted', times=[0, 1], knots=[[0, 0, 0.05], [0, 0, 0.06]], record_ticks=2**70)", par),
+        ("big_bridge_port", _MODEL + "palpate.HapticLoop(m, palpate.Material.myocardium(), 'bridge', port=-(2**70))", par),
+        ("region_particles_past_end", _MODEL + "m.region_particles(m.n_regions)", ["ParameterIndexError"]),
+        ("region_field_past_end", _MODEL + "m.region_field(10**9)", ["ParameterIndexError"]),
+        ("region_triangles_past_end", _MODEL + "m.region_triangles(m.n_regions)", ["ParameterIndexError"]),
+        ("region_core_faces_past_end", _MODEL + "m.region_core_faces(m.n_regions + 5)", ["ParameterIndexError"]),
+        ("region_curve_past_end", _MODEL + "m.region_curve(m.n_regions)", ["ParameterIndexError"]),
+        ("tets_float_dtype", "palpate.TetMesh(np.eye(4, 3), np.zeros((1, 4)))", ["ParameterTypeError"]),
+        ("points_strings", "palpate.TetMesh([['a', 'b', 'c']] * 4, [[0, 1, 2, 3]])", ["ParameterTypeError"]),
+        ("integrator_string", _BODY + "body(integrator='semi_implicit')", ["ParameterTypeError"]),
+        ("build_option_unknown", "palpate.build_shape('ellipsoids', core_fractoin=0.5)", ["ParameterTypeError"]),
+        ("body_set_state_empty", _BODY + "body().set_state({})", ["ParameterKeyError"]),
+        ("pb_set_state_empty", _PB + "pb().set_state({})", ["ParameterKeyError"]),
+    ]
+    builtin = {"ParameterIndexError": "IndexError", "ParameterTypeError": "TypeError", "ParameterKeyError": "KeyError"}
+    for name, code, types in huge:
+        if types[0] in builtin:
+            # Still the builtin class an `except IndexError` (TypeError, KeyError) caller expects.
+            *setup, call = code.rstrip("\n").split("\n")
+            code = "\n".join(setup + ["try:", f"    {call}", "except palpate.PalpateError as e:",
+                                       f"    assert isinstance(e, {builtin[types[0]]}), type(e).__mro__", "    raise"])
+        c.api(name, "untyped", code, ["error"], types)
     n = c.write("touch_garbage.toml", "[[segment]]\nkind = 'press'\ndepth = -1\n")
     c.api("touch_script_bad", "untyped", f"import palpate.touch as t; t.parse_script(os.path.join(D, {n!r}))", ["error"], ["ScriptError"])
 

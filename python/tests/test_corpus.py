@@ -75,7 +75,7 @@ def verdict(case, r):
         return f"error {r['type']} ({r['message'][:300]}), expected one of {case['types']}"
     if o == "error" and want and not any(w in r["message"] for w in want):
         return f"error {r['type']} ({r['message'][:300]}) does not say any of {want}"
-    if o == "error" and r["type"] != "ParameterError":  # a bad argument is not about a file
+    if o == "error" and "ParameterError" not in [r["type"], *r.get("mro", [])]:  # a bad argument is not about a file
         msg = r["message"]
         files = case.get("names") or [a for a in case.get("code", "").split("'") if "." in a and "/" not in a and " " not in a]
         if "os.path.join(D" in case.get("code", "") and files and not any(f in msg for f in files):

@@ -1,21 +1,16 @@
 //! Study: the runtime_hand test's press toward 2 N (50 mm/s, capped at 20 mm) with the shell's
 //! mass scaling set by `MS` (a quantile; `MS=off`), printing the sub-steps and the fastest
 //! particle near the end: `cargo run --release --example press2n -- [ventricle|ellipsoids]`.
-use palpate_core::hybrid::{build, shapes, HybridOptions};
-use palpate_core::material::{Damping, Elasticity};
-use palpate_core::mesh::generate::TruncatedEllipsoidWall;
+#[path = "support/mod.rs"]
+mod support;
+
 use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace};
-use palpate_core::{Material, Vec3};
+use support::{probe, tissue, wall_model};
 
 fn main() {
     let which = std::env::args().nth(1).unwrap_or_else(|| "ventricle".into());
-    let wall = if which == "ellipsoids" {
-        shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap()
-    } else {
-        shapes::truncated_ventricle(&TruncatedEllipsoidWall { circumferential: 96, longitudinal: 24, ..Default::default() }).unwrap()
-    };
-    let m = build(&wall, &HybridOptions::default()).unwrap();
-    let mat = Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, if std::env::var("DAMPED").is_ok() { Damping::from_paper(0.5, 0.5) } else { Damping::NONE }).unwrap();
+    let m = wall_model(&which);
+    let mat = tissue(std::env::var("DAMPED").is_ok());
     let mut o = SimOptions::default();
     o.mass_scaling = match std::env::var("MS").ok().as_deref() {
         Some("off") => None,
@@ -24,11 +19,10 @@ fn main() {
     };
     let sim = Sim::new(m, mat, o).unwrap();
     println!("mass scaling {:?}: rest omega^2 {:.3e}", sim.particles.mass_scaling(), sim.particles.omega_max().powi(2));
-    // The probe as tests/support: the outer vertex nearest (x_max, 0, z), radial normal.
-    let z = 0.02;
-    let outer = &sim.hybrid.outer_points;
-    let p = *outer.iter().filter(|q| q.x > 0.0).min_by(|a, b| (a.y.powi(2) + (a.z - z).powi(2)).total_cmp(&(b.y.powi(2) + (b.z - z).powi(2)))).unwrap();
-    let n = -Vec3::new(p.x, p.y, 0.0).normalize();
+    // The probe as tests/runtime_hand.rs: the outer vertex nearest (x_max, 0, 20 mm), the inward
+    // radial normal.
+    let (p, outward) = probe(&sim, 0.02);
+    let n = -outward;
     let r = sim.options.tool.radius;
     let mut st = SimState::rest(&sim);
     let mut ws = SimWorkspace::new(&sim);

@@ -3,11 +3,14 @@
 //! vertex farthest along +x, the tool along the direction from the outer surface's centroid;
 //! damped as the bench). Prints the tick's mean and percentiles and the mean sub-step count; run
 //! it under `perf record` for where the time goes.
+#[path = "support/mod.rs"]
+mod support;
+
 use palpate_core::hybrid::HybridModel;
-use palpate_core::material::{Damping, Elasticity};
 use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace};
-use palpate_core::{Material, Vec3};
+use palpate_core::Vec3;
 use std::time::Instant;
+use support::{percentile, press_path, tissue};
 
 fn main() {
     let arg = |k: usize| std::env::args().nth(k);
@@ -15,7 +18,7 @@ fn main() {
     let radius = arg(2).and_then(|s| s.parse::<f64>().ok()).unwrap_or(2.0) * 1e-3;
     let ticks = arg(3).and_then(|s| s.parse::<usize>().ok()).unwrap_or(2000);
     let m = HybridModel::load(std::path::Path::new(&path)).unwrap();
-    let mat = Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, Damping::from_paper(0.5, 0.5)).unwrap();
+    let mat = tissue(true);
     let mut o = SimOptions::default();
     o.tool.radius = radius;
     if std::env::var("MS").ok().as_deref() == Some("off") {
@@ -33,15 +36,7 @@ fn main() {
     let mut times = Vec::with_capacity(ticks);
     let mut subs = 0usize;
     for k in 0..ticks {
-        let (d, s) = if k < press {
-            (-2e-3 + 5e-3 * k as f64 / press as f64, 0.0)
-        } else if k < press + hold {
-            (3e-3, 0.0)
-        } else if k < press + hold + slide {
-            (3e-3, 10e-3 * (k - press - hold) as f64 / slide as f64)
-        } else {
-            (3e-3 - 5e-3 * (k - press - hold - slide) as f64 / (ticks - press - hold - slide) as f64, 10e-3)
-        };
+        let (d, s) = press_path(k, [press, hold, slide, ticks - press - hold - slide], 3e-3, 10e-3);
         let c = p + n_in * (d - radius) + tangent * s;
         let t0 = Instant::now();
         let rep = tick(&sim, &mut st, &mut ws, c, 1e-3).unwrap();
@@ -69,6 +64,6 @@ fn main() {
     }
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
-    let pct = |q: f64| sorted[((q * (sorted.len() - 1) as f64).round() as usize).min(sorted.len() - 1)];
+    let pct = |q: f64| percentile(&sorted, q);
     println!("{path}: tick ms mean {:.3} p50 {:.3} p99 {:.3}; sub-steps per tick {:.1} (mass scaling {:?})", times.iter().sum::<f64>() / times.len() as f64, pct(0.5), pct(0.99), subs as f64 / ticks as f64, sim.particles.mass_scaling().applied);
 }

@@ -7,12 +7,13 @@
 //! force reaches 2 N), `TOOL_K`, `TOOL_C` (contact stiffness [N/m], damping [N s/m]), `MARGIN`
 //! (activation margin [mm]), `COUPLING_K`, `COUPLING_C`, `DEBUG=1` (every 5 ticks: the fastest
 //! active particle, the smallest det F, the core's displacement).
-use palpate_core::hybrid::{build, shapes, HybridOptions};
-use palpate_core::material::{Damping, Elasticity};
-use palpate_core::mesh::generate::TruncatedEllipsoidWall;
+#[path = "support/mod.rs"]
+mod support;
+
 use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace};
-use palpate_core::{Material, Vec3};
+use palpate_core::Vec3;
 use std::time::Instant;
+use support::{percentile, press_path, probe, tissue, wall_model};
 
 fn main() {
     let arg = |k: usize| std::env::args().nth(k);
@@ -20,13 +21,8 @@ fn main() {
     let which = arg(1).unwrap_or_else(|| "ventricle".into());
     let depth_max = arg(2).and_then(|s| s.parse::<f64>().ok()).unwrap_or(5.0) * 1e-3;
     let slide = arg(3).and_then(|s| s.parse::<f64>().ok()).unwrap_or(10.0) * 1e-3;
-    let wall = if which == "ellipsoids" {
-        shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap()
-    } else {
-        shapes::truncated_ventricle(&TruncatedEllipsoidWall { circumferential: 96, longitudinal: 24, ..Default::default() }).unwrap()
-    };
-    let m = build(&wall, &HybridOptions::default()).unwrap();
-    let mat = Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, if env("UNDAMPED").is_some() { Damping::NONE } else { Damping::from_paper(0.5, 0.5) }).unwrap();
+    let m = wall_model(&which);
+    let mat = tissue(env("UNDAMPED").is_none());
     let mut opts = SimOptions::default();
     if let Some(k) = env("COUPLING_K") {
         opts.coupling = Some(palpate_core::runtime::Coupling { stiffness: k, damping: env("COUPLING_C").unwrap_or(0.0) });
@@ -44,10 +40,7 @@ fn main() {
     let mut st = SimState::rest(&sim);
     let mut ws = SimWorkspace::new(&sim);
     // The probe point: the outer vertex nearest to (x_max, 0, 20 mm); normal: radial from the axis.
-    let outer = &sim.hybrid.outer_points;
-    let target = Vec3::new(1.0, 0.0, 0.02);
-    let p = *outer.iter().filter(|q| q.x > 0.0).min_by(|a, b| ((*a - target).component_mul(&Vec3::new(0.0, 1.0, 1.0))).norm().total_cmp(&((*b - target).component_mul(&Vec3::new(0.0, 1.0, 1.0))).norm())).unwrap();
-    let n = Vec3::new(p.x, p.y, 0.0).normalize();
+    let (p, n) = probe(&sim, 0.02);
     let tangent = Vec3::new(0.0, 0.0, 1.0);
     let r = sim.options.tool.radius;
     let dt = 1e-3;
@@ -60,15 +53,7 @@ fn main() {
     let force_target = env("FORCE");
     let mut frozen: Option<f64> = None;
     for k in 0..total {
-        let (depth, s) = if k < t_press {
-            (-2e-3 + (depth_max + 2e-3) * k as f64 / t_press as f64, 0.0)
-        } else if k < t_press + t_hold {
-            (depth_max, 0.0)
-        } else if k < t_press + t_hold + t_slide {
-            (depth_max, slide * (k - t_press - t_hold) as f64 / t_slide as f64)
-        } else {
-            (depth_max - (depth_max + 2e-3) * (k - t_press - t_hold - t_slide) as f64 / t_release as f64, slide)
-        };
+        let (depth, s) = press_path(k, [t_press, t_hold, t_slide, t_release], depth_max, slide);
         let depth = match (force_target, frozen) {
             (Some(_), Some(d)) => d.min(depth),
             _ => depth,
@@ -114,7 +99,7 @@ fn main() {
     }
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
-    let pct = |q: f64| sorted[((q * (sorted.len() - 1) as f64).round() as usize).min(sorted.len() - 1)];
+    let pct = |q: f64| percentile(&sorted, q);
     let (amean, amax) = if actives.is_empty() { (0.0, 0) } else { (actives.iter().sum::<usize>() as f64 / actives.len() as f64, *actives.iter().max().unwrap()) };
     println!("{which}: {} core tets, {} particles | tick ms mean {:.3} p50 {:.3} p99 {:.3} max {:.3} | active mean {amean:.0} max {amax} | max force {fmax:.3} N",
         sim.core.n_tets(), sim.n_particles(), times.iter().sum::<f64>() / times.len() as f64, pct(0.5), pct(0.99), sorted[sorted.len() - 1]);

@@ -121,6 +121,10 @@ pub enum StepError {
     BadTimeStep(f64),
     #[error("non-finite {what} at node {node} (t = {time} s): the state was restored to the start of the step")]
     NonFinite { what: &'static str, node: usize, time: f64 },
+    /// A step whose state is still finite but past the physical speed bound
+    /// ([`crate::divergence`]): the start of a divergence, contained as a non-finite step is.
+    #[error("{what} at node {node} moves at {speed:.3e} m/s relative to the body, over the divergence bound of {bound:.3e} m/s (t = {time} s): the step is diverging (take a smaller dt, a stabler integrator, or check the material); the state was restored to the start of the step")]
+    Diverging { what: &'static str, node: usize, speed: f64, bound: f64, time: f64 },
     #[error("state does not fit the model ({nodes} nodes): x has {x} rows, v {v}, f_ext {f_ext}")]
     StateShape { nodes: usize, x: usize, v: usize, f_ext: usize },
     #[error("workspace was made for {workspace} nodes, the model has {nodes}: make it with the model it steps")]

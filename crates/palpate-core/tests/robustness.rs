@@ -175,7 +175,7 @@ fn huge_forces_give_typed_errors_and_restore_the_state() {
                 }
                 Err(e) => {
                     match &e {
-                        StepError::NonFinite { node, .. } => assert!(*node < model.n_nodes()),
+                        StepError::NonFinite { node, .. } | StepError::Diverging { node, .. } => assert!(*node < model.n_nodes()),
                         StepError::Solve(SolveError::NonFinite { .. } | SolveError::NotPositiveDefinite { .. }) => {}
                         other => panic!("{name}: unexpected error {other:?}"),
                     }

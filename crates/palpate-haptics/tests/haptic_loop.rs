@@ -202,42 +202,6 @@ fn nan_from_the_physics_never_reaches_the_device() {
     assert!(rec.ticks[299].force.norm() > 1.0, "pressing again after the ramp");
 }
 
-/// The hybrid physics with a NaN written into the core's positions before tick `at` (as a
-/// corrupted state would be).
-struct NanState {
-    inner: palpate_haptics::HybridPhysics,
-    at: u64,
-    ticks: u64,
-}
-
-impl Physics for NanState {
-    fn tick(&mut self, tool: &Vec3, dt: f64) -> Result<Vec3, palpate_core::StepError> {
-        if self.ticks == self.at {
-            self.inner.state_mut().core.x[0].x = f64::NAN;
-        }
-        self.ticks += 1;
-        self.inner.tick(tool, dt)
-    }
-    fn tool(&self) -> Option<Vec3> {
-        self.inner.tool()
-    }
-    fn max_tool_step(&self) -> f64 {
-        self.inner.max_tool_step()
-    }
-    fn checkpoint(&mut self) {
-        self.inner.checkpoint()
-    }
-    fn restore(&mut self) {
-        self.inner.restore()
-    }
-    fn is_finite(&self) -> bool {
-        self.inner.is_finite()
-    }
-    fn identity(&self) -> palpate_haptics::Identity {
-        self.inner.identity()
-    }
-}
-
 #[test]
 fn nan_in_the_hybrid_state_is_contained_and_restored() {
     let physics = hybrid();
@@ -245,7 +209,9 @@ fn nan_in_the_hybrid_state_is_contained_and_restored() {
     let r = physics.sim().options.tool.radius;
     let (times, knots) = press_slide_release(p, n, r, 0.004, 0.0);
     let mut dev = Scripted::new(times, knots).unwrap();
-    let nan = NanState { inner: physics, at: 450, ticks: 0 };
+    // A NaN written into the core's positions before tick 450, as a corrupted state would be.
+    let mut nan = Faulty::new(physics, 450);
+    nan.corrupt = Some(|p: &mut palpate_haptics::HybridPhysics| p.state_mut().core.x[0].x = f64::NAN);
     let mut core = HapticCore::new(Box::new(nan), 1000.0, CouplingParams::default(), SafetyParams::default(), 100, 2000);
     core.run_offline(&mut dev, 450);
     assert_eq!(core.faults(), 0);
@@ -265,45 +231,12 @@ fn nan_in_the_hybrid_state_is_contained_and_restored() {
 
 /// A NaN where the tick does not look (its force stays finite): the servo meets it at the next
 /// checkpoint and takes the fault path (before, it skipped the checkpoint and ran on).
-struct HiddenNan {
-    inner: Wall,
-    bad_from: u64,
-    ticks: u64,
-    restores: u64,
-}
-
-impl Physics for HiddenNan {
-    fn tick(&mut self, tool: &Vec3, dt: f64) -> Result<Vec3, palpate_core::StepError> {
-        self.ticks += 1;
-        self.inner.tick(tool, dt)
-    }
-    fn tool(&self) -> Option<Vec3> {
-        self.inner.tool()
-    }
-    fn max_tool_step(&self) -> f64 {
-        self.inner.max_tool_step()
-    }
-    fn checkpoint(&mut self) {
-        self.inner.checkpoint()
-    }
-    fn restore(&mut self) {
-        self.restores += 1;
-        self.ticks = 0;
-        self.inner.restore()
-    }
-    fn is_finite(&self) -> bool {
-        self.ticks < self.bad_from
-    }
-    fn identity(&self) -> palpate_haptics::Identity {
-        self.inner.identity()
-    }
-}
-
 #[test]
 fn a_non_finite_state_behind_a_finite_force_is_a_fault_at_the_next_checkpoint() {
     let sink: Arc<LogSink> = Arc::default();
     let mut dev = Pressing { z: |_t: f64| -0.004, sink, ticks: 400 };
-    let physics = HiddenNan { inner: wall(), bad_from: 120, ticks: 0, restores: 0 };
+    let mut physics = Faulty::new(wall(), u64::MAX);
+    physics.bad_state_from = Some(120);
     let mut core = HapticCore::new(Box::new(physics), 1000.0, CouplingParams::default(), fast_ramp(), 50, 400);
     core.run_offline(&mut dev, 160);
     assert_eq!(core.faults(), 1, "{:?}", core.fault_log());

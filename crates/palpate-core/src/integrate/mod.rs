@@ -10,6 +10,8 @@
 //! All take the state at `t` to `t + dt` with `f_ext` held constant, keep fixed nodes at their
 //! position with zero velocity, allocate nothing after the first step, and never leave a
 //! non-finite state behind: the state is restored and [`StepError::NonFinite`] names the node.
+//! A finite state past the physical speed bound ([`crate::divergence`]: a divergence that has
+//! started) is restored the same way and reported as [`StepError::Diverging`].
 
 mod backward_euler;
 pub(crate) mod factor;
@@ -207,7 +209,13 @@ pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Re
             .or_else(|| state.v.iter().position(|v| !is_finite3(v)).map(|n| ("velocity", n))),
         Err(_) => None,
     };
-    if result.is_err() || bad.is_some() {
+    // Finite but past the physical speed bound: a divergence starting (crate::divergence),
+    // restored and reported as a non-finite step is.
+    let diverging = match (&result, bad) {
+        (Ok(_), None) => crate::divergence::over_bound(&state.v, model.masses(), 0..n, crate::divergence::speed_bound(&model.material)),
+        _ => None,
+    };
+    if result.is_err() || bad.is_some() || diverging.is_some() {
         state.x.copy_from_slice(&ws.x_save);
         state.v.copy_from_slice(&ws.v_save);
         ws.potential.invalidate();
@@ -216,6 +224,9 @@ pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Re
     report.factorizations = (ws.factor_count - factor_count) as usize;
     if let Some((what, node)) = bad {
         return Err(StepError::NonFinite { what, node, time: state.t });
+    }
+    if let Some((node, speed)) = diverging {
+        return Err(StepError::Diverging { what: "velocity", node, speed, bound: crate::divergence::speed_bound(&model.material), time: state.t });
     }
     state.t += dt;
     Ok(report)

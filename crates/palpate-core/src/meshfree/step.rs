@@ -101,7 +101,8 @@ fn advance(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWo
     ws.save.extend(state.active.iter().map(|&i| (state.x[i], state.v[i])));
     touch(model, state, ws);
     let h = dt / substeps as f64;
-    pair_loop::run_substeps(model, state, ws, h, substeps, external);
+    // The physical speed bound (crate::divergence), checked every sub-step inside the loop.
+    let diverging = pair_loop::run_substeps(model, state, ws, h, substeps, external);
     let bad = state.active.iter().copied().find(|&i| !is_finite3(&state.x[i]) || !is_finite3(&state.v[i]));
     if let Some(node) = bad {
         for (k, &i) in state.active.iter().enumerate() {
@@ -110,6 +111,17 @@ fn advance(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWo
         ws.ring.clear();
         ws.ring_force.clear();
         return Err(StepError::NonFinite { what: "particle position or velocity", node, time: state.t });
+    }
+    // Finite but past the physical speed bound: a divergence starting (crate::divergence),
+    // restored and reported as a non-finite step is.
+    if let Some((node, speed)) = diverging {
+        for (k, &i) in state.active.iter().enumerate() {
+            (state.x[i], state.v[i]) = ws.save[k];
+        }
+        ws.ring.clear();
+        ws.ring_force.clear();
+        let bound = crate::divergence::speed_bound(&model.material);
+        return Err(StepError::Diverging { what: "particle velocity", node, speed, bound, time: state.t });
     }
     state.t += dt;
     Ok(ParticleStepReport { substeps, substep_dt: h })

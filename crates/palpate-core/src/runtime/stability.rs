@@ -28,7 +28,11 @@
 //!   under `F`), plus the springs' dampers.
 //!
 //! The count is capped ([`super::SimOptions::max_substeps`]): past it a tick costs more than a
-//! haptic tick has, and a tick that still diverges is contained (restored and reported).
+//! haptic tick has, and a tick that still diverges is contained (restored and reported): as
+//! `StepError::Diverging` at the sub-step where a particle passes the physical speed bound
+//! (50 P-wave speeds, [`crate::divergence`]), before anything overflows; measured with the cap
+//! forced to 9 on the synthetic ventricle, the tick after the first past one wave speed
+//! (tests/runtime_hand.rs).
 //!
 //! **Adopted since: selective mass scaling** (`crate::meshfree` `mass_scaling.rs`, on by default
 //! through [`super::SimOptions::mass_scaling`]): the few poorly supported particles below get the

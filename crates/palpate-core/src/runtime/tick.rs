@@ -67,8 +67,8 @@ pub struct TickReport {
 
 /// Advance the hybrid model by one tick of `dt` \[s\] with the device's tool centre at `tool`
 /// \[m\] (world frame; the simulated tool moves toward it by at most
-/// [`super::SimOptions::max_tool_step`], and [`SimState::tool`] says where it is). Allocates nothing. A bad `dt` or tool position changes nothing; a failed or
-/// non-finite particle or core step leaves the core and the particles' motion as they were at
+/// [`super::SimOptions::max_tool_step`], and [`SimState::tool`] says where it is). Allocates nothing. A bad `dt` or tool position changes nothing; a failed,
+/// non-finite or diverging (past the speed bound of [`crate::divergence`]) particle or core step leaves the core and the particles' motion as they were at
 /// the start of the tick, but the activation keeps this tick's update (the regions the tool
 /// touched stay active, their particles at their ties).
 pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, dt: f64) -> Result<TickReport, StepError> {

@@ -52,20 +52,28 @@ impl ForceSink for LogSink {
     }
 }
 
-/// Wraps a physics and, at tick `at`, stalls for `stall` or returns a NaN force; counts restores.
+/// Wraps a physics and, at tick `at` (counted from the first tick, restores included), stalls
+/// for `stall`, returns a NaN force (`nan`) or corrupts the inner physics first (`corrupt`: as
+/// a bad state would be); with `bad_state_from = Some(k)`, its state reads as non-finite from
+/// its `k`-th tick after the start or the last restore while its force stays finite (a NaN where
+/// the tick does not look, met only by `is_finite`). Counts restores.
 pub struct Faulty<P: Physics> {
     pub inner: P,
     pub at: u64,
     pub stall: Option<Duration>,
     pub nan: bool,
+    pub corrupt: Option<fn(&mut P)>,
+    pub bad_state_from: Option<u64>,
     pub ticks: u64,
+    /// Ticks since the start or the last restore (for `bad_state_from`).
+    pub since_restore: u64,
     pub stalled_at: Arc<Mutex<Option<Instant>>>,
     pub restores: Arc<AtomicU64>,
 }
 
 impl<P: Physics> Faulty<P> {
     pub fn new(inner: P, at: u64) -> Faulty<P> {
-        Faulty { inner, at, stall: None, nan: false, ticks: 0, stalled_at: Arc::default(), restores: Arc::default() }
+        Faulty { inner, at, stall: None, nan: false, corrupt: None, bad_state_from: None, ticks: 0, since_restore: 0, stalled_at: Arc::default(), restores: Arc::default() }
     }
 }
 
@@ -73,10 +81,14 @@ impl<P: Physics> Physics for Faulty<P> {
     fn tick(&mut self, tool: &Vec3, dt: f64) -> Result<Vec3, StepError> {
         let k = self.ticks;
         self.ticks += 1;
+        self.since_restore += 1;
         if k == self.at {
             if let Some(d) = self.stall {
                 *self.stalled_at.lock().unwrap() = Some(Instant::now());
                 std::thread::sleep(d);
+            }
+            if let Some(corrupt) = self.corrupt {
+                corrupt(&mut self.inner);
             }
         }
         let f = self.inner.tick(tool, dt)?;
@@ -93,10 +105,11 @@ impl<P: Physics> Physics for Faulty<P> {
     }
     fn restore(&mut self) {
         self.restores.fetch_add(1, Ordering::Relaxed);
+        self.since_restore = 0;
         self.inner.restore()
     }
     fn is_finite(&self) -> bool {
-        self.inner.is_finite()
+        self.inner.is_finite() && self.bad_state_from.is_none_or(|k| self.since_restore < k)
     }
     fn identity(&self) -> Identity {
         self.inner.identity()

@@ -29,7 +29,7 @@ impl Avx2 {
     }
 
     /// `substeps` Verlet sub-steps (see [`passes::substeps_impl`]) in this copy.
-    pub(super) fn run_substeps(self, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>) {
+    pub(super) fn run_substeps(self, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>) -> Option<(usize, f64)> {
         // SAFETY: a `target_feature` function needs only that the CPU has the features, which
         // an `Avx2` proves.
         unsafe { substeps_avx2(self, m, state, ws, h, substeps, ext) }
@@ -44,7 +44,7 @@ impl Avx2 {
 }
 
 #[target_feature(enable = "avx2,fma")]
-fn substeps_avx2(c: Avx2, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>) {
+fn substeps_avx2(c: Avx2, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>) -> Option<(usize, f64)> {
     passes::substeps_impl(c, m, state, ws, h, substeps, ext)
 }
 

@@ -197,8 +197,15 @@ pub(super) fn all_forces_impl<C: LoopCopy>(c: C, m: &ParticleModel, u: &[P4], v:
 /// [`crate::meshfree::step_with_substeps`], which validated the state and filled `ws.u`, `ws.v`,
 /// `ws.touched`, `ws.ring` and `ws.rim`), then the ring's averaged forces into `ws.ring_force`.
 /// `ext`: the caller's per-sub-step external forces ([`crate::meshfree::step_with`]).
+///
+/// Stops after the sub-step in which a free particle's speed relative to the free particles'
+/// mass-weighted mean velocity at the step's start passed the material's speed bound (a
+/// divergence starting: [`crate::divergence::speed_bound`]), and returns that particle and its
+/// speed; the state then holds that sub-step's positions and velocities (finite), for the caller
+/// to restore. Checked every sub-step, fused into the force sweep, because an under-stepped shell
+/// goes from a few wave speeds to overflow within one tick's sub-steps.
 #[inline(always)]
-pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, mut ext: Option<ExtForce<'_>>) {
+pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, mut ext: Option<ExtForce<'_>>) -> Option<(usize, f64)> {
     for &i in &ws.touched {
         ws.b[i] = [[0.0; 4]; 3];
         ws.gamma[i] = 0.0;
@@ -223,6 +230,15 @@ pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut Pa
     ws.rim_sum.clear();
     ws.rim_sum.resize(ws.rim.len(), [[0.0; 4]; 4]);
     let damped = !m.material.is_undamped();
+    let (mut momentum, mut mass) = (Vec3::zeros(), 0.0);
+    for &i in &ws.free {
+        momentum += m.mass[i] * state.v[i];
+        mass += m.mass[i];
+    }
+    let mean = if mass > 0.0 { super::p4(&(momentum / mass)) } else { [0.0; 4] };
+    let bound = crate::divergence::speed_bound(&m.material);
+    let bound2 = bound * bound;
+    let mut over: Option<(usize, f64)> = None;
     for s in 0..substeps {
         if let Some(ext) = ext.as_mut() {
             external_forces(m, state, ws, *ext, s, h);
@@ -235,23 +251,33 @@ pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut Pa
         // other displacement buffer: this sweep still reads the current displacements of the
         // neighbours. (Velocities are read again only by the next sub-step's pass 1.)
         let (vel, u_next, acc_ext, u_now) = (&mut ws.v, &mut ws.u_next, &ws.acc_ext, &ws.u);
+        let (mut fastest, mut top) = (usize::MAX, 0.0f64);
         c.force_pass(m, &ws.free, &ws.u, &ws.b, &ws.gamma, |i, f| {
             let (ae, im) = (&acc_ext[i], m.inv_mass[i]);
             let (v, u, un) = (&mut vel[i], &u_now[i], &mut u_next[i]);
+            let mut s2 = 0.0;
             for l in 0..3 {
                 v[l] = madd::<C>(h, madd::<C>(f[l], im, ae[l]), v[l]);
                 un[l] = madd::<C>(h, v[l], u[l]);
+                s2 += (v[l] - mean[l]) * (v[l] - mean[l]);
+            }
+            if s2 > top {
+                (fastest, top) = (i, s2);
             }
         });
         std::mem::swap(&mut ws.u, &mut ws.u_next);
         // Frozen and fixed particles keep their displacement in both buffers.
+        if top > bound2 {
+            over = Some((fastest, top.sqrt()));
+            break;
+        }
     }
     for &i in &ws.free {
         state.v[i] = super::v3(&ws.v[i]);
         state.x[i] = m.rest[i] + super::v3(&ws.u[i]);
     }
-    if ws.ring.is_empty() {
-        return;
+    if over.is_some() || ws.ring.is_empty() {
+        return over;
     }
     // The ring's gather on the sub-step averages (module docs), in the scratch buffers `b` and
     // `u_next`, which the sub-steps no longer need: the rim gets its averages; the ring and its
@@ -267,6 +293,7 @@ pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut Pa
     let out = &mut ws.ring_force;
     out.clear();
     c.force_pass(m, &ws.ring, &ws.u_next, &ws.b, &ws.gamma, |_, f| out.push(super::v3(&f)));
+    None
 }
 
 /// Add the rim's `B` and displacement of this sub-step to their sums (kept out of line: inlined,
