@@ -1,5 +1,5 @@
 """The ``palpate`` command line (also ``python -m palpate``): one module per command (``run``,
-``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``), shared helpers in ``_common``.
+``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``, ``view``), shared helpers in ``_common``.
 
     palpate run SCENE.toml [--out DIR] [--steps N] [--quiet]
     palpate bench protocol MESH [--force F] [--steps N] [--json] [--integrator NAME] [--newton auto|on|off]
@@ -27,6 +27,9 @@
     palpate bench haptic MODEL [--seconds S] [--rate HZ] [--no-idle] [--json]
     palpate device touch|forcedimension|haply|hapticmaster [--port P] [--host IP] [--scale S] [--offset X Y Z]
         (a vendor device as a bridge client; each vendor SDK an optional extra)
+    palpate view [MODEL] [--host IP] [--port N] [--device hand|bridge] [--bridge-port P] [--preset NAME]
+                 [--tool-radius M] [--press-depth M] [--fps HZ] [--seconds S] [--screenshot OUT.png [--press M]]
+        (the haptic loop in a browser, viser on 127.0.0.1; palpate/viewer/)
 
 Long work (a model build, a scene run, a touch, a benchmark sweep) shows a progress display on
 stderr when it is a terminal, nothing otherwise; ``--quiet`` (run, build, touch, bench protocol,
@@ -43,11 +46,11 @@ import sys
 from typing import List, Optional
 
 from .. import __version__
-from . import bench, build, device, haptic, info, run, soak, touch
+from . import bench, build, device, haptic, info, run, soak, touch, view
 from ._common import Fail, Parser, run_guarded
 
 #: The commands, in the order of ``palpate --help``: each module adds its parser and handler.
-COMMANDS = (run, bench, build, info, touch, haptic, soak, device)
+COMMANDS = (run, bench, build, info, touch, haptic, soak, device, view)
 
 
 def build_parser() -> argparse.ArgumentParser:
