@@ -178,7 +178,7 @@ def test_message_over_the_size_bound_closes_the_connection(model):
 def test_viewer_press_moves_the_surface_and_the_force(model):
     from palpate.viewer import Viewer
 
-    v = Viewer(model, "ventricle", port=0, fps=30)
+    v = Viewer(model, "ventricle", port=0, fps=30, show_core=True, show_particles=True)
     try:
         assert v.url.startswith("http://127.0.0.1:") and v.bounds_warning is None
         assert v.wait_ready(60)
@@ -190,7 +190,13 @@ def test_viewer_press_moves_the_surface_and_the_force(model):
         s = v.status()
         assert s["frames"] > 5 and s["fps"] > 5, s
         # The bands drawn are those of the displacement: some triangle is above the first edge.
-        assert len(v._bands) >= 1
+        assert wait_for(lambda: len(v._bands) >= 1), v.status()
+        assert "error" not in v.note.content, v.note.content
+        # The interior drawn is the loop's: active particles under the press, the core moved.
+        assert wait_for(lambda: v.status()["active_particles"] > 0), v.status()
+        core_now = np.asarray(v.core.points, dtype=np.float64)
+        core_rest = np.asarray(model.core_points)[v.core_edges] * 1e3
+        assert core_now.shape == core_rest.shape and np.abs(core_now - core_rest).max() > 1e-3
     finally:
         report = v.close()
     assert report["max_force_n"] > 0.02 and report["n_faults"] == 0

@@ -50,6 +50,8 @@ def add_parser(sub) -> None:
                    help="render one frame of a press at the probe point in headless Chromium to OUT.png and exit")
     v.add_argument("--press", type=float, default=0.004, metavar="M",
                    help="with --screenshot: the press depth at the probe point [m] (default 0.004)")
+    v.add_argument("--show-core", action="store_true", help="draw the FEM core's tets (as simulated) from the start")
+    v.add_argument("--show-particles", action="store_true", help="draw the active shell particles from the start")
     v.add_argument("--quiet", action="store_true", help="no status lines")
     v.set_defaults(func=cmd_view)
 
@@ -83,7 +85,7 @@ def _check(a) -> None:
 
 def status_line(s: dict, t: float) -> str:
     return (f"t {t:6.1f} s | force {s['force_n']:.3f} N (max {s['max_force_n']:.3f}) | surface {s['surface_mm']:.2f} mm "
-            f"(max {s['max_surface_mm']:.2f}) | {s['fps']:.1f} frames/s | drags {s['drags']} | loop ticks "
+            f"(max {s['max_surface_mm']:.2f}) | {s['fps']:.1f} frames/s | active particles {s['active_particles']} | drags {s['drags']} | loop ticks "
             f"{s['loop_ticks']} overruns {s['loop_overruns']} | inputs rejected "
             f"{s['inputs']['non_finite'] + s['inputs']['rate_limited']} | messages dropped {s['messages']['dropped']}")
 
@@ -115,7 +117,7 @@ def cmd_view(a) -> int:
         viewer = Viewer(model, name, host=a.host, port=a.port, device=a.device, bridge_port=a.bridge_port,
                         bridge_host=a.host if a.device == "bridge" else "127.0.0.1", preset=a.preset,
                         tool_radius=a.tool_radius, press_depth=a.press_depth, rate_hz=a.rate, fps=a.fps,
-                        max_force=a.max_force)
+                        max_force=a.max_force, show_core=a.show_core, show_particles=a.show_particles)
     except _p.ParameterError as e:
         raise Fail(f"palpate view: {e}") from None
     except OSError as e:
@@ -147,8 +149,16 @@ def cmd_view(a) -> int:
 def _screenshot(a, viewer) -> int:
     from ..viewer.browser import screenshot
 
+    # The gizmo would hide the dimple: off for the picture.
+    viewer.g_gizmo.value = False
+    viewer.gizmo.visible = False
+    t0 = viewer.loop.snapshot()["time"]
     viewer.set_target(viewer.press_target(a.press))
-    time.sleep(2.0)                      # the hand reaches the press (the hand's own dynamics)
+    # The hand reaches the press and the organ's swing settles: 3 s of the loop's time (more wall
+    # time where the loop runs slower than real time), at most 60 s.
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline and viewer.loop.snapshot()["time"] - t0 < 3.0:
+        time.sleep(0.1)
     try:
         n = screenshot(viewer.url, a.screenshot)
     except RuntimeError as e:

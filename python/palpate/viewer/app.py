@@ -37,7 +37,7 @@ PRESS_RANGE = (0.0, 0.010)
 #: Seconds of history in the live plot.
 PLOT_SECONDS = 10.0
 #: Force arrow: it starts on the tool sphere and is this long per newton [m/N].
-ARROW_M_PER_N = 0.030
+ARROW_M_PER_N = 0.050
 #: How far the hand lifts off when a drag ends [m] (beyond the press depth).
 LIFT = 0.008
 
@@ -65,13 +65,15 @@ class Viewer:
     ``"bridge"``: a real device through the UDP bridge on ``bridge_host``:``bridge_port``
     (:attr:`bridge_address`). ``preset`` is a key of :data:`PRESETS`, ``tool_radius`` [m],
     ``press_depth`` [m] how deep a drag on the surface presses, ``fps`` the viewer's update rate
-    [Hz] (the loop's is ``rate_hz``). Raises :class:`palpate.ParameterError` for a bad value.
+    [Hz] (the loop's is ``rate_hz``); ``show_core``, ``show_particles``: draw the core's tets and
+    the active particles from the start (the GUI's "Show" boxes). Raises :class:`palpate.ParameterError` for a bad value.
     :meth:`close` stops the loop and the server."""
 
     def __init__(self, model: "_p.HybridModel", name: str = "model", *, host: str = "127.0.0.1", port: int = 8080,
                  device: str = "hand", bridge_host: str = "127.0.0.1", bridge_port: int = 0,
                  preset: Optional[str] = None, tool_radius: float = 0.005, press_depth: float = 0.003,
-                 rate_hz: float = 1000.0, fps: float = 30.0, max_force: Optional[float] = None):
+                 rate_hz: float = 1000.0, fps: float = 30.0, max_force: Optional[float] = None,
+                 show_core: bool = False, show_particles: bool = False):
         presets = _presets()
         preset = preset if preset is not None else next(iter(presets))
         if preset not in presets:
@@ -105,6 +107,7 @@ class Viewer:
                                          "bridge_port": int(bridge_port), "rate_hz": float(rate_hz),
                                          "max_force": max_force}
         self.fps = float(fps)
+        self._show_initial = (bool(show_core), bool(show_particles))
         self.paused = False
         self.lock = threading.RLock()
         self.loop: Optional[_p.HapticLoop] = None
@@ -113,7 +116,7 @@ class Viewer:
         self.history: Deque[Tuple[float, float, float]] = deque(maxlen=int(PLOT_SECONDS * fps) + 1)
         self.stats: Dict[str, Any] = {"frames": 0, "surface_updates": 0, "fps": 0.0, "max_force_n": 0.0,
                                       "force_n": 0.0, "max_surface_mm": 0.0, "surface_mm": 0.0, "drags": 0,
-                                      "gizmo_moves": 0, "restarts": 0, "loop_ticks": 0, "loop_overruns": 0,
+                                      "gizmo_moves": 0, "restarts": 0, "loop_ticks": 0, "loop_overruns": 0, "active_particles": 0,
                                       "frame_ms_max": 0.0}
         self._last_surface_tick = -1
         self._sent = self.rest.copy()
@@ -280,13 +283,18 @@ class Viewer:
         self.gizmo = sc.add_transform_controls("/hand", scale=max(10.0, 0.15 * self.size * MM), disable_rotations=True,
                                                position=tuple(self.home() * MM))
         self.gizmo.on_update(self._on_gizmo)
-        core_p = np.asarray(self.model.core_points) * MM
-        core_f = np.asarray(self.model.core_faces)
-        self.core = sc.add_mesh_simple("/organ/core", core_p.astype(np.float32), core_f.astype(np.uint32),
-                                       color=(240, 140, 60), wireframe=True, visible=False)
-        part = np.asarray(self.model.particles) * MM
-        self.particles = sc.add_point_cloud("/organ/particles", part.astype(np.float32), (120, 200, 255),
-                                            point_size=0.6, visible=False)
+        # The core's tets as their edges, and the active particles: live from the loop's interior
+        # snapshot (HapticLoop.interior: the core's nodes, then the active particles), drawn only
+        # when shown.
+        core_p = np.asarray(self.model.core_points, dtype=np.float64)
+        self.n_core = len(core_p)
+        tets = np.asarray(self.model.core_tets, dtype=np.int64)
+        pairs = np.concatenate([tets[:, [a, b]] for a, b in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))])
+        self.core_edges = np.unique(np.sort(pairs, axis=1), axis=0)
+        self.core = sc.add_line_segments("/organ/core", (core_p[self.core_edges] * MM).astype(np.float32),
+                                         (240, 140, 60), thickness=2.0, thickness_units="screen", visible=False)
+        self.active: Optional[Any] = None
+        self._last_interior_tick = -1
 
     def _build_gui(self) -> None:
         gui = self.server.gui
@@ -328,11 +336,13 @@ class Viewer:
                 self.g_radius.value, *(r * MM for r in TOOL_RADIUS_RANGE), 5.0) / MM))
             self.g_device = gui.add_dropdown("device", DEVICES, initial_value=self.settings["device"])
             self.g_device.on_update(lambda _: self._set("device", self.g_device.value))
-        with gui.add_folder("Show", expand_by_default=False):
-            self.g_core = gui.add_checkbox("core (at rest)", False)
-            self.g_core.on_update(lambda _: setattr(self.core, "visible", bool(self.g_core.value)))
-            self.g_particles = gui.add_checkbox("shell particles (at rest)", False)
-            self.g_particles.on_update(lambda _: setattr(self.particles, "visible", bool(self.g_particles.value)))
+        with gui.add_folder("Show", expand_by_default=any(self._show_initial)):
+            self.g_core = gui.add_checkbox("core tets", self._show_initial[0], hint="the FEM core's tet edges, as simulated")
+            self.g_core.on_update(lambda _: self._show_interior())
+            self.g_active = gui.add_checkbox("active particles", self._show_initial[1], hint="the shell particles simulated now")
+            self.g_active.on_update(lambda _: self._show_interior())
+            self.core.visible = bool(self.g_core.value)
+            self.surface.opacity = self._opacity()
             self.g_gizmo = gui.add_checkbox("tool gizmo", True)
             self.g_gizmo.on_update(lambda _: setattr(self.gizmo, "visible", bool(self.g_gizmo.value)))
 
@@ -351,6 +361,44 @@ class Viewer:
             return
         self.settings[key] = value
         self._restart(wait=False)
+
+    def _opacity(self) -> Optional[float]:
+        """The surface's opacity: see-through while the interior is shown."""
+        return 0.45 if (self.g_core.value or self.g_active.value) else None
+
+    def _show_interior(self) -> None:
+        self.core.visible = bool(self.g_core.value)
+        self.surface.opacity = self._opacity()
+        for h in self._bands.values():
+            h.opacity = self._opacity()
+        if not self.g_active.value and self.active is not None:
+            self.active.remove()
+            self.active = None
+        self._last_interior_tick = -1
+
+    def _push_interior(self, loop: "_p.HapticLoop") -> None:
+        """The core's edges and the active particles from the loop's interior snapshot."""
+        got = loop.interior()
+        if got is None or got[0] == self._last_interior_tick:
+            return
+        self._last_interior_tick = got[0]
+        pts = np.asarray(got[1], dtype=np.float64)
+        if len(pts) < self.n_core or not np.all(np.isfinite(pts)):
+            return
+        if self.g_core.value:
+            self.core.points = (pts[self.core_edges] * MM).astype(np.float32)
+        if self.g_active.value:
+            act = pts[self.n_core:]
+            with self.lock:
+                self.stats["active_particles"] = len(act)
+            if len(act) == 0:
+                if self.active is not None:
+                    self.active.remove()
+                    self.active = None
+                return
+            self.active = self.server.scene.add_point_cloud(
+                "/organ/active", (act * MM).astype(np.float32), (120, 220, 255), point_size=0.8,
+                point_shape="circle", precision="float32")
 
     def _set_depth(self) -> None:
         self.settings["press_depth"] = finite_number(self.g_depth.value, 0.0, PRESS_RANGE[1] * MM, 3.0) / MM
@@ -450,6 +498,8 @@ class Viewer:
             if got is not None and got[0] != self._last_surface_tick:
                 self._push_surface(np.asarray(got[1], dtype=np.float64))
                 self._last_surface_tick = got[0]
+            if self.g_core.value or self.g_active.value:
+                self._push_interior(loop)
             if np.all(np.isfinite(tool)):
                 self.tool.position = tuple(tool * MM)
                 if fmag > 1e-4:
@@ -494,7 +544,7 @@ class Viewer:
             verts = ((surf[used] + lift[used]) * MM).astype(np.float32)
             self._bands[k] = self.server.scene.add_mesh_simple(
                 name, verts, inv.reshape(-1, 3).astype(np.uint32), color=colors.BANDS[k], side="double",
-                cast_shadow=False, receive_shadow=False)
+                opacity=self._opacity(), cast_shadow=False, receive_shadow=False)
 
     def _status_text(self) -> None:
         s = self.status()
