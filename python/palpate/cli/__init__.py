@@ -25,6 +25,7 @@
         (the haptic loop, headless, with a live status line; palpate/haptics.py)
     palpate soak MODEL --minutes N [--rate HZ] [--seed S] [--json]
     palpate bench haptic MODEL [--seconds S] [--rate HZ] [--no-idle] [--json]
+    palpate bench view [MODEL] [--seconds S] [--rate HZ] [--fps HZ] [--json]
     palpate device touch|forcedimension|haply|hapticmaster [--port P] [--host IP] [--scale S] [--offset X Y Z]
         (a vendor device as a bridge client; each vendor SDK an optional extra)
     palpate view [MODEL] [--host IP] [--port N] [--device hand|bridge] [--bridge-port P] [--preset NAME]

@@ -94,6 +94,11 @@ class Viewer:
         self.model, self.name = model, name
         self.rest = np.asarray(model.outer_points, dtype=np.float64)
         self.tris = np.asarray(model.outer_triangles, dtype=np.int64)
+        # Drawn front faces only (double-sided drawing cost the software renderer 4x): the
+        # triangles turned outward if the surface's signed volume says they face in.
+        a, b, c = (self.rest[self.tris[:, k]] for k in range(3))
+        if float(np.einsum("ij,ij->i", a - a.mean(axis=0), np.cross(b - a, c - a)).sum()) < 0:
+            self.tris = self.tris[:, ::-1].copy()
         self.normals = vertex_normals(self.rest, self.tris)
         used = np.unique(self.tris)
         self.center = 0.5 * (self.rest[used].min(axis=0) + self.rest[used].max(axis=0))
@@ -274,7 +279,8 @@ class Viewer:
         ic.near = 1.0
         ic.far = 50.0 * self.size * MM
         self.surface = sc.add_mesh_simple("/organ/surface", (self.rest * MM).astype(np.float32),
-                                          self.tris.astype(np.uint32), color=colors.BANDS[0], side="double")
+                                          self.tris.astype(np.uint32), color=colors.BANDS[0], cast_shadow=False,
+                                          receive_shadow=False)
         self.surface.on_drag(self._on_drag)
         self.tool = sc.add_icosphere("/tool", radius=self.settings["tool_radius"] * MM, color=(235, 235, 235),
                                      opacity=0.85, position=tuple(self.home() * MM), cast_shadow=False)
@@ -543,7 +549,7 @@ class Viewer:
             used, inv = np.unique(faces, return_inverse=True)
             verts = ((surf[used] + lift[used]) * MM).astype(np.float32)
             self._bands[k] = self.server.scene.add_mesh_simple(
-                name, verts, inv.reshape(-1, 3).astype(np.uint32), color=colors.BANDS[k], side="double",
+                name, verts, inv.reshape(-1, 3).astype(np.uint32), color=colors.BANDS[k],
                 opacity=self._opacity(), cast_shadow=False, receive_shadow=False)
 
     def _status_text(self) -> None:
