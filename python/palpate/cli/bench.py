@@ -87,8 +87,8 @@ def add_parser(sub) -> None:
 def _add_view(bsub) -> None:
     w = bsub.add_parser("view", help="what the web viewer (palpate view) costs the haptic loop",
                         description="Run the haptic loop on MODEL with a simulated hand dragged across the probe point "
-                                    "(20 Hz targets, as a mouse drag): alone, under palpate view with the page open in "
-                                    "the system's headless Chromium, and alone again; report the loop's period "
+                                    "(20 Hz targets, as a mouse drag): alone, under palpate view with no page, with the page "
+                                    "open in the system's headless Chromium (niced), and alone again; report the loop's period "
                                     "percentiles and overruns, and the viewer's frame rates (palpate/viewer/bench.py).")
     w.add_argument("model", metavar="MODEL", nargs="?", default="rodero")
     w.add_argument("--seconds", type=float, default=20.0, metavar="S", help="length of each run [s] (default 20)")
@@ -128,14 +128,15 @@ def cmd_bench_view(a) -> int:
         return 0
     print(f"palpate {__version__} bench view: {name}, {a.rate:g} Hz, {a.seconds:g} s per run, hand dragged at 20 Hz "
           f"({r['cpu_count']} CPUs, load {r['load_avg_before']} -> {r['load_avg_after']}, {r['date']})")
-    for label in ("alone", "viewer", "alone_again"):
+    for label in ("alone", "viewer_no_page", "viewer", "alone_again"):
         x = r[label]
-        print(f"  {label:<12} ticks {x['ticks']:>6}  {x['achieved_hz']:7.1f} Hz  period p50 {x['period_us_p50']:7.1f} "
+        print(f"  {label:<14} ticks {x['ticks']:>6}  {x['achieved_hz']:7.1f} Hz  period p50 {x['period_us_p50']:7.1f} "
               f"p99 {x['period_us_p99']:8.1f} max {x['period_us_max']:8.1f} us  overruns {x['overruns']}  "
               f"max force {x['max_force_n']:.3f} N")
     v = r["viewer"]
     print(f"  viewer: {v['viewer_frames_per_s']:.1f} frames/s pushed, page {v['page_animation_frames_per_s']:.1f} "
-          f"animation frames/s, slowest frame {v['viewer_frame_ms_max']:.0f} ms")
+          f"animation frames/s, slowest frame {v['viewer_frame_ms_max']:.0f} ms; {v['browser_processes_niced']} browser "
+          "processes niced")
     return 0
 
 

@@ -85,7 +85,8 @@ def _check(a) -> None:
 
 def status_line(s: dict, t: float) -> str:
     return (f"t {t:6.1f} s | force {s['force_n']:.3f} N (max {s['max_force_n']:.3f}) | surface {s['surface_mm']:.2f} mm "
-            f"(max {s['max_surface_mm']:.2f}) | {s['fps']:.1f} frames/s | active particles {s['active_particles']} | drags {s['drags']} | loop ticks "
+            f"(max {s['max_surface_mm']:.2f}) | {s['fps']:.1f} frames/s"
+            + (f" | active particles {s['active_particles']}" if s["active_particles"] is not None else "") + f" | drags {s['drags']} | loop ticks "
             f"{s['loop_ticks']} overruns {s['loop_overruns']} | inputs rejected "
             f"{s['inputs']['non_finite'] + s['inputs']['rate_limited']} | messages dropped {s['messages']['dropped']}")
 

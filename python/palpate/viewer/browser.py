@@ -52,6 +52,36 @@ def launch(pw: Any, width: int = 1000, height: int = 650) -> Tuple[Any, Any]:
     return browser, page
 
 
+def lower_browser_priority(nice: int = 10) -> int:
+    """Lowers the CPU priority of this process's Chromium descendants (Linux ``/proc``) to
+    niceness ``nice``, so that a browser rendering in software on the same CPUs yields to the
+    haptic loop; returns how many processes it lowered (0 where it cannot)."""
+    from .app import lower_priority
+
+    try:
+        children: dict = {}
+        for d in os.listdir("/proc"):
+            if not d.isdigit():
+                continue
+            try:
+                with open(f"/proc/{d}/stat") as f:
+                    stat = f.read()
+            except OSError:
+                continue
+            comm = stat[stat.index("(") + 1:stat.rindex(")")]
+            ppid = int(stat[stat.rindex(")") + 2:].split()[1])
+            children.setdefault(ppid, []).append((int(d), comm))
+    except (OSError, ValueError):
+        return 0
+    n, todo = 0, [os.getpid()]
+    while todo:
+        for pid, comm in children.get(todo.pop(), []):
+            todo.append(pid)
+            if "chrom" in comm.lower() and lower_priority(pid, nice):
+                n += 1
+    return n
+
+
 def hide_toasts(page: Any) -> None:
     """Hides viser's notifications (the "software WebGL rendering" toast) for a clean picture."""
     page.add_style_tag(content=".mantine-Notifications-root { display: none !important; }")
