@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ipaddress
 import math
+import os
 import sys
 import time
 
@@ -110,7 +111,13 @@ def cmd_view(a) -> int:
             raise Fail(f"palpate view: --screenshot needs a browser: {why or why2}", 1)
         if a.press > PRESS_RANGE[1] + a.tool_radius:
             raise Fail(f"palpate view: --press {a.press} m is deeper than the viewer allows")
-    name, model = load_hybrid_model(a.model, "view")
+    try:
+        name, model = load_hybrid_model(a.model, "view")
+    except Fail as e:
+        if os.path.isfile(a.model) and e.code == 2:
+            raise Fail(f"{e}; a tet mesh or a scene file (full FEM) is not viewable yet: build a hybrid model "
+                       "from its surfaces with palpate build") from None
+        raise
     if not is_loopback(a.host):
         print(f"palpate: warning: serving on {a.host}: anyone who can reach port {a.port} can watch and drive the "
               "simulation (no authentication, no encryption); use 127.0.0.1 and an SSH tunnel instead", file=sys.stderr)
