@@ -236,6 +236,15 @@ def test_viewer_refuses_bad_targets_and_settings(model):
         assert np.all(v.target <= v.guard.hi) and np.all(v.target < 1.0)
         c = v.guard.counts()
         assert c["non_finite"] == 1 and c["clamped"] == 1
+        # A new tool radius (the GUI's slider, a value the page sent) restarts the loop with it;
+        # a non-finite one falls back to the default, an unknown preset or device is ignored.
+        v.g_radius.value = 8.0
+        v._set("tool_radius", 0.008)
+        assert wait_for(lambda: v.status()["restarts"] == 2 and v.loop is not None and v.tool.radius == 8.0, 60)
+        assert v.settings["tool_radius"] == 0.008
+        v._set("preset", "steel")
+        v._set("device", "mouse")
+        assert v.settings["preset"] != "steel" and v.settings["device"] == "hand"
     finally:
         v.close()
 

@@ -360,7 +360,7 @@ class Viewer:
             self.g_radius = gui.add_slider("tool radius [mm]", TOOL_RADIUS_RANGE[0] * MM, TOOL_RADIUS_RANGE[1] * MM,
                                            0.5, self.settings["tool_radius"] * MM)
             self.g_radius.on_update(lambda _: self._set("tool_radius", finite_number(
-                self.g_radius.value, *(r * MM for r in TOOL_RADIUS_RANGE), 5.0) / MM))
+                self.g_radius.value, TOOL_RADIUS_RANGE[0] * MM, TOOL_RADIUS_RANGE[1] * MM, 5.0) / MM))
             self.g_device = gui.add_dropdown("device", DEVICES, initial_value=self.settings["device"])
             self.g_device.on_update(lambda _: self._set("device", self.g_device.value))
         with gui.add_folder("Show", expand_by_default=any(self._show_initial)):
