@@ -259,13 +259,21 @@ class Viewer:
                 if old is not None:
                     old.stop()
                 self._show_note("building the simulation...")
-                try:
-                    loop = self._make_loop()
-                    loop.start()
-                except (_p.PalpateError, ValueError, OSError) as e:
-                    self.loop_error = f"{type(e).__name__}: {e}"
-                    self._show_note(f"**could not start the loop**: {self.loop_error}")
-                    return
+                while True:
+                    wanted = dict(self.settings)
+                    try:
+                        loop = self._make_loop()
+                        loop.start()
+                    except (_p.PalpateError, ValueError, OSError) as e:
+                        self.loop_error = f"{type(e).__name__}: {e}"
+                        self._show_note(f"**could not start the loop**: {self.loop_error}")
+                        return
+                    if self._stop.is_set():          # closed meanwhile
+                        loop.stop()
+                        return
+                    if self.settings == wanted:
+                        break
+                    loop.stop()                      # a setting changed while it was built: again
                 with self.lock:
                     self.loop, self.loop_error = loop, None
                     self.target = self.home()
