@@ -3,6 +3,7 @@
 #   make test   set up, then cargo test --release, the release wheel, pytest and make lint
 #   make wheel  the release wheel in dist/: abi3 (CPython >= 3.9), manylinux_2_28, stripped
 #   make lint   clippy -D warnings, cargo doc -D warnings, stubtest, the fuzz targets compiled (all in make test)
+#   make browser  Debian's chromium for the viewer's browser test (as root with apt-get; in make test)
 # The set-up is stamp-file driven: a warm re-run is a no-op, an edit to any .rs / Cargo.toml /
 # pyproject.toml rebuilds the extension. Python sources are installed editable (maturin develop),
 # so edits to python/palpate/*.py need no rebuild.
@@ -13,7 +14,12 @@ VENV := .venv
 BIN := $(VENV)/bin
 # Versions that build together on this machine (see shared/design/stack-notes.md).
 PY_DEPS := maturin==1.16.0 numpy==2.4.6 meshio==5.3.5 matplotlib==3.11.2 pytest==9.2.0 \
-           scipy==1.17.1 scikit-fem==12.0.2  # the last two: independent reference in python/tests
+           scipy==1.17.1 scikit-fem==12.0.2 \
+           viser==1.1.1 playwright==1.65.2
+# scipy, scikit-fem: the independent reference in python/tests; viser, playwright: `palpate view`
+# and its browser test (the view extra). viser from its PyPI wheel (a source install builds its
+# client with node from the network). Playwright drives the system's Chromium (`make browser`):
+# never `playwright install`.
 # Batch studies (palpate sweep / fit; the `study` extra), pinned to versions that install together.
 STUDY_DEPS := dask==2026.8.0 distributed==2026.8.0 pyarrow==26.0.1
 # `make wheel` only: zig as the linker, against glibc 2.28's symbols, so that the wheel installs on
@@ -29,7 +35,7 @@ RUST_INPUTS := $(shell find crates python/src -name '*.rs' 2>/dev/null) \
 
 export MPLBACKEND ?= Agg
 
-.PHONY: all setup demo test cargo-test pytest wheel lint clippy rustdoc stubtest fuzz-check clean distclean
+.PHONY: all setup demo test cargo-test pytest wheel lint clippy rustdoc stubtest fuzz-check clean distclean browser
 
 all: setup
 
@@ -74,8 +80,18 @@ test: cargo-test pytest lint
 cargo-test:
 	cargo test --release -q
 
-pytest: setup wheel
+pytest: setup wheel browser
 	$(BIN)/python -m pytest -q python/tests
+
+# The browser test's Chromium (python/tests/test_view.py): Debian's package, installed where the
+# set-up runs as root with apt-get (~90 s, once); elsewhere the browser tests skip, saying why.
+browser:
+	@if command -v chromium >/dev/null 2>&1 || [ -n "$$PALPATE_CHROMIUM" ]; then :; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+	  echo "palpate: installing Debian's chromium for the browser tests (apt-get, ~90 s)" >&2; \
+	  (apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium) >/dev/null \
+	    || echo "palpate: apt-get install chromium failed: the browser tests will skip" >&2; \
+	else echo "palpate: no chromium and no root apt-get: the browser tests will skip (apt-get install -y chromium)" >&2; fi
 
 $(VENV)/.lint-deps: $(VENV)/.deps
 	$(BIN)/python -m pip install -q --disable-pip-version-check $(LINT_DEPS)

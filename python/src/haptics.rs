@@ -395,6 +395,18 @@ impl PyHapticLoop {
         got.and_then(|(tick, pts)| (tick > 0).then(|| (tick, conv::vec3s_to_py(py, &pts))))
     }
 
+    /// The organ's interior as of the latest surface snapshot: ``(tick, points)``, points
+    /// ``(n_core + k, 3)`` [m] (world frame): the core's nodes (all ``n_core``, the model's
+    /// ``core_points`` order), then the ``k`` active particles as simulated; or None before one.
+    /// Never blocks the loop.
+    fn interior<'py>(&self, py: Python<'py>) -> Option<(u64, Bound<'py, numpy::PyArray2<f64>>)> {
+        let got = match &*self.stage.lock().unwrap() {
+            Stage::Running(h) => Some(h.interior()),
+            _ => None,
+        };
+        got.and_then(|(tick, pts)| (tick > 0).then(|| (tick, conv::vec3s_to_py(py, &pts))))
+    }
+
     /// Has the running loop stopped by itself (device finished or ``max_ticks``)?
     fn finished(&self) -> bool {
         let st = self.stage.lock().unwrap();

@@ -43,9 +43,10 @@ def test_core_dependencies_are_numpy_and_meshio():
 
 
 def test_import_needs_no_extra():
-    # A core install has no matplotlib or scikit-fem: importing palpate and its CLI must not need them.
-    code = ("import sys; import palpate, palpate.cli, palpate.touch, palpate.demo, palpate.io; "
-            "bad = [m for m in ('matplotlib', 'skfem', 'scipy') if m in sys.modules]; "
+    # A core install has no matplotlib, scikit-fem or the viewer's viser and Playwright: importing
+    # palpate and its CLI (palpate view's parser included) must not need them.
+    code = ("import sys; import palpate, palpate.cli, palpate.touch, palpate.demo, palpate.io, palpate.viewer; "
+            "bad = [m for m in ('matplotlib', 'skfem', 'scipy', 'viser', 'playwright') if m in sys.modules]; "
             "assert not bad, bad")
     subprocess.run([sys.executable, "-c", code], check=True)
 

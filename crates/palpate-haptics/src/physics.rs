@@ -43,6 +43,16 @@ pub trait Physics: Send {
     fn surface_len(&self) -> usize {
         0
     }
+    /// Points inside the organ a viewer draws (\[m\], world frame): the core's nodes, then the
+    /// active particles, copied into the start of `out` without allocating; returns how many
+    /// (at most `out.len()`, which is [`Physics::interior_capacity`]). Default none.
+    fn interior(&self, _out: &mut [Vec3]) -> usize {
+        0
+    }
+    /// The most points [`Physics::interior`] gives (0: none).
+    fn interior_capacity(&self) -> usize {
+        0
+    }
     /// Is every number of the state finite? (Checked by the servo only after a fault or at a
     /// checkpoint: it reads the whole state.)
     fn is_finite(&self) -> bool;
@@ -126,6 +136,22 @@ impl Physics for HybridPhysics {
     }
     fn surface_len(&self) -> usize {
         self.state.skin.len()
+    }
+    /// The core's nodes (all of them, in the model's order), then the active particles as
+    /// simulated (in the order of the active set).
+    fn interior(&self, out: &mut [Vec3]) -> usize {
+        let core = &self.state.core.x;
+        let nc = core.len().min(out.len());
+        out[..nc].copy_from_slice(&core[..nc]);
+        let mut n = nc;
+        for (o, &p) in out[nc..].iter_mut().zip(self.state.particles.active.iter()) {
+            *o = self.state.particles.x[p];
+            n += 1;
+        }
+        n
+    }
+    fn interior_capacity(&self) -> usize {
+        self.state.core.x.len() + self.state.particles.x.len()
     }
     fn restore(&mut self) {
         self.state.clone_from(&self.good);

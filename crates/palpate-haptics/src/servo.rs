@@ -412,6 +412,7 @@ struct Shared {
     trips: AtomicU64,
     snapshot: SnapshotCell,
     surface: Mailbox,
+    interior: Mailbox,
     epoch: Instant,
 }
 
@@ -457,6 +458,7 @@ impl Servo {
             trips: AtomicU64::new(0),
             snapshot: SnapshotCell::default(),
             surface: Mailbox::new(if config.surface_every > 0 { core.physics.surface_len() } else { 0 }),
+            interior: Mailbox::up_to(if config.surface_every > 0 { core.physics.interior_capacity() } else { 0 }),
             epoch: Instant::now(),
         });
         let sink = device.sink();
@@ -490,6 +492,12 @@ impl ServoHandle {
     /// [`Physics::surface`]) and its tick (0: none yet). Never blocks the servo.
     pub fn surface(&self) -> (u64, Vec<Vec3>) {
         self.shared.surface.latest()
+    }
+    /// The organ's core nodes then its active particles (\[m\], world frame; see
+    /// [`Physics::interior`]) as of the latest surface snapshot, and its tick (0: none yet).
+    /// Never blocks the servo.
+    pub fn interior(&self) -> (u64, Vec<Vec3>) {
+        self.shared.interior.latest()
     }
     /// Has the servo stopped (device finished, `max_ticks` reached, or stopped)?
     pub fn is_finished(&self) -> bool {
@@ -555,6 +563,7 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
     let spin = Duration::from_secs_f64(cfg.spin);
     let mut times = TickTimes::new(cfg.stats_ticks, cfg.rate_hz);
     let mut surface = vec![Vec3::zeros(); if cfg.surface_every > 0 { core.physics.surface_len() } else { 0 }];
+    let mut interior = vec![Vec3::zeros(); if cfg.surface_every > 0 { core.physics.interior_capacity() } else { 0 }];
     let start = Instant::now();
     let mut deadline = start;
     let mut last_start: Option<Instant> = None;
@@ -609,6 +618,10 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
         if !surface.is_empty() && core.tick.is_multiple_of(cfg.surface_every) {
             core.physics.surface(&mut surface);
             shared.surface.publish(core.tick, &surface);
+        }
+        if !interior.is_empty() && core.tick.is_multiple_of(cfg.surface_every) {
+            let k = core.physics.interior(&mut interior);
+            shared.interior.publish(core.tick, &interior[..k]);
         }
         if late > period {
             // More than a whole tick late: start again from now (no burst of catch-up ticks).

@@ -179,27 +179,44 @@ impl SnapshotCell {
     }
 }
 
-/// A latest-only mailbox for a large snapshot (the organ's surface for a viewer): the writer
-/// copies into the shared slot only if no reader holds it (`try_lock`), so it never waits; a
-/// reader clones the slot out. A publish a reader is copying from is skipped (the next one
-/// lands): the loop's rule is that it never blocks, not that every frame is seen.
+/// A latest-only mailbox for a large snapshot (the organ's surface, or its core and active
+/// particles, for a viewer): the writer copies into the shared slot only if no reader holds it
+/// (`try_lock`), so it never waits; a reader clones the slot out. A publish a reader is copying
+/// from is skipped (the next one lands): the loop's rule is that it never blocks, not that every
+/// frame is seen.
 #[derive(Debug, Default)]
 pub struct Mailbox {
-    slot: Mutex<(u64, Vec<Vec3>)>,
+    slot: Mutex<Slot>,
+    /// Any length up to the capacity ([`Mailbox::up_to`]), or exactly it ([`Mailbox::new`]).
+    variable: bool,
+}
+
+#[derive(Debug, Default)]
+struct Slot {
+    tick: u64,
+    len: usize,
+    points: Vec<Vec3>,
 }
 
 impl Mailbox {
-    /// A mailbox for `n` points (allocated now: a publish only copies).
+    /// A mailbox for exactly `n` points (allocated now: a publish only copies); before the first
+    /// publish it holds `n` zeros.
     pub fn new(n: usize) -> Mailbox {
-        Mailbox { slot: Mutex::new((0, vec![Vec3::zeros(); n])) }
+        Mailbox { slot: Mutex::new(Slot { tick: 0, len: n, points: vec![Vec3::zeros(); n] }), variable: false }
     }
-    /// Publishes `points` as of tick `tick` unless a reader holds the slot; returns whether it
-    /// did. Never blocks, never allocates (`points` must have the mailbox's length).
+    /// A mailbox for up to `capacity` points (allocated now); empty before the first publish.
+    pub fn up_to(capacity: usize) -> Mailbox {
+        Mailbox { slot: Mutex::new(Slot { tick: 0, len: 0, points: vec![Vec3::zeros(); capacity] }), variable: true }
+    }
+    /// Publishes `points` as of tick `tick` unless a reader holds the slot or the length does not
+    /// fit (not the mailbox's length, or over its capacity); returns whether it did. Never blocks,
+    /// never allocates.
     pub fn publish(&self, tick: u64, points: &[Vec3]) -> bool {
         match self.slot.try_lock() {
-            Ok(mut g) if g.1.len() == points.len() => {
-                g.0 = tick;
-                g.1.copy_from_slice(points);
+            Ok(mut g) if points.len() == g.points.len() || (self.variable && points.len() <= g.points.len()) => {
+                g.tick = tick;
+                g.len = points.len();
+                g.points[..points.len()].copy_from_slice(points);
                 true
             }
             _ => false,
@@ -208,7 +225,7 @@ impl Mailbox {
     /// The last published points and their tick (tick 0: nothing published yet).
     pub fn latest(&self) -> (u64, Vec<Vec3>) {
         let g = self.slot.lock().unwrap_or_else(|e| e.into_inner());
-        (g.0, g.1.clone())
+        (g.tick, g.points[..g.len].to_vec())
     }
 }
 
@@ -275,6 +292,18 @@ mod tests {
         drop(held);
         assert_eq!(m.latest(), (3, vec![Vec3::x(); 4]));
         assert!(!m.publish(5, &[Vec3::y(); 3]), "wrong length: refused");
+    }
+
+    #[test]
+    fn a_variable_mailbox_holds_any_length_up_to_its_capacity() {
+        let m = Mailbox::up_to(4);
+        assert_eq!(m.latest(), (0, vec![]));
+        assert!(m.publish(1, &[Vec3::x(); 3]));
+        assert_eq!(m.latest(), (1, vec![Vec3::x(); 3]));
+        assert!(m.publish(2, &[Vec3::y(); 1]), "shorter than the last: only its points are read");
+        assert_eq!(m.latest(), (2, vec![Vec3::y()]));
+        assert!(!m.publish(3, &[Vec3::z(); 5]), "over the capacity: refused");
+        assert_eq!(m.latest().0, 2);
     }
 
     #[test]

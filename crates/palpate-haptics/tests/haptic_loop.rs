@@ -408,6 +408,8 @@ fn identity_is_the_same_for_the_same_model_built_twice() {
 fn servo_publishes_the_surface_for_a_viewer() {
     let physics = hybrid();
     let rest = physics.sim().hybrid.outer_points.clone();
+    let core_rest = physics.state().core.x.clone();
+    let n_particles = physics.sim().n_particles();
     let (p, n) = probe(&physics.sim().hybrid);
     let r = physics.sim().options.tool.radius;
     let (times, knots) = (vec![0.0, 0.4, 5.0], vec![p + n * (r + 0.002), p + n * (r - 0.004), p + n * (r - 0.004)]);
@@ -420,9 +422,18 @@ fn servo_publishes_the_surface_for_a_viewer() {
         std::thread::sleep(Duration::from_millis(20));
     }
     let (tick, skin) = h.surface();
+    let (itick, interior) = h.interior();
     h.stop();
     assert!(tick >= 600 && tick % 16 == 0, "tick {tick}");
     assert_eq!(skin.len(), rest.len());
     let moved = skin.iter().zip(&rest).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
     assert!(moved > 0.001, "the press moves the skin in the snapshot: {moved} m");
+    // The interior: every core node (moved by the press), then the active particles (some, under
+    // a 4 mm press; a snapshot of the rest core, or of every particle, would fail).
+    assert!(itick >= 600 && itick % 16 == 0, "tick {itick}");
+    assert!(interior.len() > core_rest.len(), "active particles follow the core nodes: {} points", interior.len());
+    assert!(interior.len() < core_rest.len() + n_particles, "only the active particles");
+    let core_moved = interior.iter().zip(&core_rest).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+    assert!(core_moved > 1e-5, "the press moves the core in the snapshot: {core_moved} m");
 }
+

@@ -1,5 +1,5 @@
 """The ``palpate`` command line (also ``python -m palpate``): one module per command (``run``,
-``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``, ``sweep``, ``fit``), shared helpers in ``_common``.
+``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``, ``view``, ``sweep``, ``fit``), shared helpers in ``_common``.
 
     palpate run SCENE.toml [--out DIR] [--steps N] [--quiet]
     palpate bench protocol MESH [--force F] [--steps N] [--json] [--integrator NAME] [--newton auto|on|off]
@@ -25,8 +25,12 @@
         (the haptic loop, headless, with a live status line; palpate/haptics.py)
     palpate soak MODEL --minutes N [--rate HZ] [--seed S] [--json]
     palpate bench haptic MODEL [--seconds S] [--rate HZ] [--no-idle] [--json]
+    palpate bench view [MODEL] [--seconds S] [--rate HZ] [--fps HZ] [--json]
     palpate device touch|forcedimension|haply|hapticmaster [--port P] [--host IP] [--scale S] [--offset X Y Z]
         (a vendor device as a bridge client; each vendor SDK an optional extra)
+    palpate view [MODEL] [--host IP] [--port N] [--device hand|bridge] [--bridge-port P] [--preset NAME]
+                 [--tool-radius M] [--press-depth M] [--fps HZ] [--seconds S] [--screenshot OUT.png [--press M]]
+        (the haptic loop in a browser, viser on 127.0.0.1; palpate/viewer/)
     palpate sweep SPEC.toml [--out DIR] [--workers N | --scheduler ADDRESS] [--resume] [--json] [--quiet]
         (a batch study on Dask: results.parquet, a row per scenario; palpate/sweep/)
     palpate fit SPEC.toml --measured CURVE.csv [--params young,poisson,phi,psi] [--plot PNG] [--workers N]
@@ -47,11 +51,11 @@ import sys
 from typing import List, Optional
 
 from .. import __version__
-from . import bench, build, device, fit, haptic, info, run, soak, sweep, touch
+from . import bench, build, device, fit, haptic, info, run, soak, sweep, touch, view
 from ._common import Fail, Parser, run_guarded
 
 #: The commands, in the order of ``palpate --help``: each module adds its parser and handler.
-COMMANDS = (run, bench, build, info, touch, haptic, soak, device, sweep, fit)
+COMMANDS = (run, bench, build, info, touch, haptic, soak, device, view, sweep, fit)
 
 
 def build_parser() -> argparse.ArgumentParser:

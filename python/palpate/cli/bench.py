@@ -1,7 +1,8 @@
-"""``palpate bench protocol|particles|hybrid|haptic``: the shared FEM probe case (:mod:`palpate.bench`),
+"""``palpate bench protocol|particles|hybrid|haptic|view``: the shared FEM probe case (:mod:`palpate.bench`),
 the per-tick cost of a particle body (:mod:`palpate.bench_particles`) and of the hybrid
 simulation at a chosen active count (:mod:`palpate.bench_hybrid`), and the haptic loop's timing
-(:func:`palpate.haptics.bench`). The defaults are those
+(:func:`palpate.haptics.bench`), and what the web viewer costs that loop
+(:func:`palpate.viewer.bench.bench`). The defaults are those
 modules' (the benchmarks' definitions)."""
 from __future__ import annotations
 
@@ -80,6 +81,11 @@ def add_parser(sub) -> None:
     add_quiet(h)
     h.set_defaults(func=cmd_bench_hybrid)
     _add_haptic(bsub)
+    _add_view(bsub)
+    _add_sweep(bsub)
+
+
+def _add_sweep(bsub) -> None:
     w = bsub.add_parser("sweep", help="the batch-study runner's overhead and 2-worker speed-up (palpate sweep)",
                         description="A study of N probe scenarios on a protocol mesh run as a plain Python loop, then "
                                     "by the Dask runner with 1 and 2 local workers: scenarios per second, the runner's "
@@ -107,6 +113,61 @@ def cmd_bench_sweep(a) -> int:
               f"loop {r['loop_per_s']:.2f}/s, 1 worker {r['worker1_per_s']:.2f}/s, 2 workers {r['worker2_per_s']:.2f}/s; "
               f"runner overhead {100 * r['overhead_per_scenario']:.1f}% a scenario ({100 * r['overhead_per_scenario_steady']:.1f}% past "
               f"the cluster's {r['startup_s']:.2f} s start-up); speed-up 2 over 1: {r['speedup_2_over_1']:.2f}x")
+
+
+def _add_view(bsub) -> None:
+    w = bsub.add_parser("view", help="what the web viewer (palpate view) costs the haptic loop",
+                        description="Run the haptic loop on MODEL with a simulated hand dragged across the probe point "
+                                    "(20 Hz targets, as a mouse drag): alone, under palpate view with no page, with the page "
+                                    "open in the system's headless Chromium (niced), and alone again; report the loop's period "
+                                    "percentiles and overruns, and the viewer's frame rates (palpate/viewer/bench.py).")
+    w.add_argument("model", metavar="MODEL", nargs="?", default="rodero")
+    w.add_argument("--seconds", type=float, default=20.0, metavar="S", help="length of each run [s] (default 20)")
+    w.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000)")
+    w.add_argument("--fps", type=float, default=30.0, metavar="HZ", help="viewer update rate [Hz] (default 30)")
+    w.add_argument("--json", action="store_true", help="one JSON object")
+    w.set_defaults(func=cmd_bench_view)
+
+
+def cmd_bench_view(a) -> int:
+    if not (a.seconds >= 5 and math.isfinite(a.seconds)):
+        raise Fail(f"palpate bench view: --seconds must be at least 5, got {a.seconds}")
+    if not 250 <= a.rate <= 4000:
+        raise Fail(f"palpate bench view: --rate must be within 250 to 4000 Hz, got {a.rate}")
+    if not (1 <= a.fps <= 120):
+        raise Fail(f"palpate bench view: --fps must be within 1 to 120, got {a.fps}")
+    try:
+        import viser  # noqa: F401
+    except ImportError:
+        raise Fail("palpate bench view: needs viser (pip install 'palpate[view]')", 1) from None
+    from ..viewer.browser import find_chromium, have_playwright
+
+    ok, why = have_playwright()
+    exe, why2 = find_chromium()
+    if not ok or exe is None:
+        raise Fail(f"palpate bench view: needs a browser: {why or why2}", 1)
+    from ..viewer import bench as vb
+
+    name, model = load_hybrid_model(a.model, "bench view")
+    say = (lambda s: None) if a.json else (lambda s: print(f"  ... {s}", file=sys.stderr, flush=True))
+    try:
+        r = vb.bench(model, name, a.seconds, a.rate, a.fps, on_status=say)
+    except palpate_errors() as e:
+        raise Fail(f"palpate bench view: {type(e).__name__}: {e}", 1) from None
+    if a.json:
+        print(json.dumps(r), flush=True)
+        return 0
+    print(f"palpate {__version__} bench view: {name}, {a.rate:g} Hz, {a.seconds:g} s per run, hand dragged at 20 Hz "
+          f"({r['cpu_count']} CPUs, load {r['load_avg_before']} -> {r['load_avg_after']}, {r['date']})")
+    for label in ("alone", "viewer_no_page", "viewer", "alone_again"):
+        x = r[label]
+        print(f"  {label:<14} ticks {x['ticks']:>6}  {x['achieved_hz']:7.1f} Hz  period p50 {x['period_us_p50']:7.1f} "
+              f"p99 {x['period_us_p99']:8.1f} max {x['period_us_max']:8.1f} us  overruns {x['overruns']}  "
+              f"max force {x['max_force_n']:.3f} N")
+    v = r["viewer"]
+    print(f"  viewer: {v['viewer_frames_per_s']:.1f} frames/s pushed, page {v['page_animation_frames_per_s']:.1f} "
+          f"animation frames/s, slowest frame {v['viewer_frame_ms_max']:.0f} ms; {v['browser_processes_niced']} browser "
+          "processes niced")
     return 0
 
 

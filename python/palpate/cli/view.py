@@ -1,0 +1,179 @@
+"""``palpate view [MODEL]``: the haptic loop in a browser (:mod:`palpate.viewer`): a web page on
+127.0.0.1 (``--host`` to serve elsewhere, with a warning) showing the deformed surface, the tool,
+the force and a live plot; dragging on the surface moves the simulated hand. ``--screenshot
+OUT.png`` renders one frame of a press with the system's headless Chromium and exits.
+
+MODEL is a hybrid model file (``palpate build``) or a shape name (default ``rodero``; ``ventricle``
+and ``ellipsoids`` build in a second without data). A tet mesh or a scene file (full FEM) is not
+viewable yet: the viewer draws the hybrid loop's snapshots only."""
+from __future__ import annotations
+
+import ipaddress
+import math
+import os
+import sys
+import time
+
+from ._common import Fail, load_hybrid_model, num
+
+#: Status lines on stdout every this many seconds (unless --quiet).
+STATUS_EVERY_S = 1.0
+
+
+def add_parser(sub) -> None:
+    from ..viewer.app import DEVICES, PRESS_RANGE, TOOL_RADIUS_RANGE
+
+    v = sub.add_parser("view", help="see the haptic loop and touch it in a browser (viser)",
+                       description="Serve a web viewer of the haptic loop on MODEL (a palpate model file or a shape "
+                                   "name: rodero (default), ventricle, ellipsoids) and print its URL. Drag on the "
+                                   "surface (or move the gizmo) to press with the simulated hand; --device bridge "
+                                   "lets a real device drive the view. Stops on Ctrl-C or after --seconds. Needs "
+                                   "the view extra (pip install 'palpate[view]').")
+    v.add_argument("model", nargs="?", default="rodero", metavar="MODEL")
+    v.add_argument("--host", default="127.0.0.1", metavar="IP",
+                   help="address to serve on (default 127.0.0.1; anything else is reachable from the network "
+                        "without authentication: a warning says so)")
+    v.add_argument("--port", type=int, default=8080, help="port (default 8080; 0: a free one; a busy one: the next free)")
+    v.add_argument("--device", choices=DEVICES, default="hand",
+                   help="hand: the page moves a simulated hand (default); bridge: a real device over UDP")
+    v.add_argument("--bridge-port", type=int, default=0, metavar="P", help="UDP port of the bridge (default 0: a free one)")
+    v.add_argument("--preset", default=None, metavar="NAME",
+                   help="material preset (default 'haptic (30 kPa, damped)'; also 'myocardium', 'paper ellipsoids')")
+    v.add_argument("--tool-radius", type=float, default=0.005, metavar="M",
+                   help=f"tool sphere radius [m] (default 0.005; {num(TOOL_RADIUS_RANGE[0])} to {num(TOOL_RADIUS_RANGE[1])})")
+    v.add_argument("--press-depth", type=float, default=0.003, metavar="M",
+                   help=f"how deep a drag on the surface presses [m] (default 0.003; up to {num(PRESS_RANGE[1])})")
+    v.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000; 250 to 4000)")
+    v.add_argument("--fps", type=float, default=30.0, metavar="HZ", help="viewer update rate [Hz] (default 30; 1 to 120)")
+    v.add_argument("--max-force", type=float, default=None, metavar="N", help="force limit [N] (default 3)")
+    v.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: Ctrl-C)")
+    v.add_argument("--screenshot", default=None, metavar="OUT.png",
+                   help="render one frame of a press at the probe point in headless Chromium to OUT.png and exit")
+    v.add_argument("--press", type=float, default=0.004, metavar="M",
+                   help="with --screenshot: the press depth at the probe point [m] (default 0.004)")
+    v.add_argument("--show-core", action="store_true", help="draw the FEM core's tets (as simulated) from the start")
+    v.add_argument("--show-particles", action="store_true", help="draw the active shell particles from the start")
+    v.add_argument("--quiet", action="store_true", help="no status lines")
+    v.set_defaults(func=cmd_view)
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _check(a) -> None:
+    for flag, v in (("--tool-radius", a.tool_radius), ("--fps", a.fps), ("--seconds", a.seconds),
+                    ("--max-force", a.max_force)):
+        if v is not None and not (v > 0 and math.isfinite(v)):
+            raise Fail(f"palpate view: {flag} must be positive and finite, got {v}")
+    if not (a.press >= 0 and math.isfinite(a.press)):
+        raise Fail(f"palpate view: --press must be non-negative and finite, got {a.press}")
+    if not 250 <= a.rate <= 4000:
+        raise Fail(f"palpate view: --rate must be within 250 to 4000 Hz, got {a.rate}")
+    if not 0 <= a.port <= 65535 or not 0 <= a.bridge_port <= 65535:
+        raise Fail("palpate view: ports must be within 0 to 65535")
+    try:
+        ipaddress.ip_address(a.host)
+    except ValueError:
+        if a.host != "localhost":
+            raise Fail(f"palpate view: --host {a.host!r} is not an IP address") from None
+
+
+def status_line(s: dict, t: float) -> str:
+    return (f"t {t:6.1f} s | force {s['force_n']:.3f} N (max {s['max_force_n']:.3f}) | surface {s['surface_mm']:.2f} mm "
+            f"(max {s['max_surface_mm']:.2f}) | {s['fps']:.1f} frames/s"
+            + (f" | active particles {s['active_particles']}" if s["active_particles"] is not None else "") + f" | drags {s['drags']} | loop ticks "
+            f"{s['loop_ticks']} overruns {s['loop_overruns']} | inputs rejected "
+            f"{s['inputs']['non_finite'] + s['inputs']['rate_limited']} | messages dropped {s['messages']['dropped']}")
+
+
+def cmd_view(a) -> int:
+    _check(a)
+    try:
+        import viser  # noqa: F401
+    except ImportError:
+        raise Fail("palpate view: needs viser (pip install 'palpate[view]')", 1) from None
+    from .. import _palpate as _p
+    from ..viewer import Viewer
+    from ..viewer.app import PRESS_RANGE
+
+    if a.screenshot:
+        from ..viewer.browser import find_chromium, have_playwright
+
+        ok, why = have_playwright()
+        exe, why2 = find_chromium()
+        if not ok or exe is None:
+            raise Fail(f"palpate view: --screenshot needs a browser: {why or why2}", 1)
+        if a.press > PRESS_RANGE[1] + a.tool_radius:
+            raise Fail(f"palpate view: --press {a.press} m is deeper than the viewer allows")
+    try:
+        name, model = load_hybrid_model(a.model, "view")
+    except Fail as e:
+        if os.path.isfile(a.model) and e.code == 2:
+            raise Fail(f"{e}; a tet mesh or a scene file (full FEM) is not viewable yet: build a hybrid model "
+                       "from its surfaces with palpate build") from None
+        raise
+    if not is_loopback(a.host):
+        print(f"palpate: warning: serving on {a.host}: anyone who can reach port {a.port} can watch and drive the "
+              "simulation (no authentication, no encryption); use 127.0.0.1 and an SSH tunnel instead", file=sys.stderr)
+    try:
+        viewer = Viewer(model, name, host=a.host, port=a.port, device=a.device, bridge_port=a.bridge_port,
+                        bridge_host=a.host if a.device == "bridge" else "127.0.0.1", preset=a.preset,
+                        tool_radius=a.tool_radius, press_depth=a.press_depth, rate_hz=a.rate, fps=a.fps,
+                        max_force=a.max_force, show_core=a.show_core, show_particles=a.show_particles)
+    except _p.ParameterError as e:
+        raise Fail(f"palpate view: {e}") from None
+    except OSError as e:
+        raise Fail(f"palpate view: cannot serve on {a.host}:{a.port}: {e}", 1) from None
+    if viewer.bounds_warning:
+        print(f"palpate: warning: {viewer.bounds_warning}", file=sys.stderr)
+    try:
+        if not viewer.wait_ready(60.0):
+            raise Fail(f"palpate view: the loop did not start: {viewer.loop_error or 'timeout'}", 1)
+        where = f", bridge on udp://{viewer.bridge_address}" if viewer.bridge_address else ""
+        print(f"palpate view: {name} on {viewer.url} (device {a.device}{where}; Ctrl-C stops)", flush=True)
+        if a.screenshot:
+            return _screenshot(a, viewer)
+        t0 = time.monotonic()
+        next_line = t0 + STATUS_EVERY_S
+        while a.seconds is None or time.monotonic() - t0 < a.seconds:
+            time.sleep(0.05)
+            if not a.quiet and time.monotonic() >= next_line:
+                next_line += STATUS_EVERY_S
+                print(status_line(viewer.status(), time.monotonic() - t0), flush=True)
+    finally:
+        report = viewer.close()
+    if report is not None and not a.quiet:
+        print(f"  loop: {report['ticks']} ticks, period p99 {report['period_us_p99']:.0f} us, overruns "
+              f"{report['overruns']}, max force {report['max_force_n']:.3f} N, faults {report['n_faults']}", flush=True)
+    return 0
+
+
+def _screenshot(a, viewer) -> int:
+    from ..viewer.browser import screenshot
+
+    # The gizmo would hide the dimple: off for the picture.
+    viewer.g_gizmo.value = False
+    viewer.gizmo.visible = False
+    t0 = viewer.loop.snapshot()["time"]
+    viewer.set_target(viewer.press_target(a.press))
+    # The hand reaches the press and the organ's swing settles: 3 s of the loop's time (more wall
+    # time where the loop runs slower than real time), at most 60 s.
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline and viewer.loop.snapshot()["time"] - t0 < 3.0:
+        time.sleep(0.1)
+    try:
+        n = screenshot(viewer.url, a.screenshot)
+    except RuntimeError as e:
+        raise Fail(f"palpate view: {e}", 1) from None
+    except OSError as e:
+        raise Fail(f"palpate view: cannot write {a.screenshot}: {e}", 1) from None
+    s = viewer.status()
+    print(f"palpate view: wrote {a.screenshot} ({n / 1e3:.0f} kB): force {s['force_n']:.3f} N, surface "
+          f"{s['surface_mm']:.2f} mm", flush=True)
+    return 0
