@@ -11,7 +11,11 @@
 //! rest of its tick ([`crate::ServoConfig::spin`] 0): measured on the Rodero ventricle at 1 kHz
 //! (compute ~0.8 ms a tick on a loaded 2-core machine), spinning the last 200 us made the thread
 //! use the whole core, and the throttle then took it off the CPU for ~50 ms a second (period
-//! max 54 ms, 4 watchdog trips in 8 s); sleeping, the period's max was 4.5 ms and no trip.
+//! max 54 ms, 4 watchdog trips in 8 s); sleeping, the period's max was 4.5 ms and no trip. And
+//! when the physics itself takes longer than the period, a real-time servo never sleeps: it rests
+//! 6% of the period every tick regardless (measured before that rest: 60 s on Rodero at 1 kHz,
+//! whose deep presses take 1.0-1.4 ms a tick, gave a 53 ms stall and a watchdog trip; at 2 and
+//! 4 kHz 4 and 10 trips in 10 s).
 //!
 //! The watchdog, which must run when the servo is stuck, gets one priority level above the servo.
 

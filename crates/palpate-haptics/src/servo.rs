@@ -569,6 +569,8 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
     let mut last_start: Option<Instant> = None;
     shared.heartbeat.store(shared.now_ns().max(1), Ordering::Release);
     let mut n: u64 = 0;
+    // The least a real-time servo rests each tick: 6% of the period (see below).
+    let min_rest = period.mul_f64(0.06);
     let realtime = if cfg.realtime { crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY) } else { Realtime::Off };
     loop {
         if shared.stop.load(Ordering::Acquire) || cfg.max_ticks.is_some_and(|m| n >= m) || device.finished(core.tick, core.dt) {
@@ -628,6 +630,16 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
             deadline = t1;
         }
         wait_until(deadline, spin);
+        if realtime.granted() {
+            // A real-time servo that computes through its whole period (the physics slower than
+            // real time) would use the whole core, and the kernel's RT throttle would then take
+            // it off the CPU for ~50 ms (a watchdog trip, a zeroed force): it rests a little
+            // every tick instead, so that it stays under the throttle's 95% (crate::realtime).
+            let rested = Instant::now().saturating_duration_since(t1);
+            if rested < min_rest {
+                std::thread::sleep(min_rest - rested);
+            }
+        }
     }
     sink.send(&Vec3::zeros());
     let stats = times.finish((Instant::now() - start).as_secs_f64());

@@ -125,6 +125,7 @@ def _add_view(bsub) -> None:
     w.add_argument("--seconds", type=float, default=20.0, metavar="S", help="length of each run [s] (default 20)")
     w.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000)")
     w.add_argument("--fps", type=float, default=30.0, metavar="HZ", help="viewer update rate [Hz] (default 30)")
+    w.add_argument("--realtime", action="store_true", help="every run's servo under SCHED_FIFO (palpate haptic --help)")
     w.add_argument("--json", action="store_true", help="one JSON object")
     w.set_defaults(func=cmd_bench_view)
 
@@ -151,7 +152,7 @@ def cmd_bench_view(a) -> int:
     name, model = load_hybrid_model(a.model, "bench view")
     say = (lambda s: None) if a.json else (lambda s: print(f"  ... {s}", file=sys.stderr, flush=True))
     try:
-        r = vb.bench(model, name, a.seconds, a.rate, a.fps, on_status=say)
+        r = vb.bench(model, name, a.seconds, a.rate, a.fps, on_status=say, realtime=a.realtime)
     except palpate_errors() as e:
         raise Fail(f"palpate bench view: {type(e).__name__}: {e}", 1) from None
     if a.json:

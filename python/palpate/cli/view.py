@@ -53,6 +53,9 @@ def add_parser(sub) -> None:
                    help="with --screenshot: the press depth at the probe point [m] (default 0.004)")
     v.add_argument("--show-core", action="store_true", help="draw the FEM core's tets (as simulated) from the start")
     v.add_argument("--show-particles", action="store_true", help="draw the active shell particles from the start")
+    v.add_argument("--realtime", action="store_true",
+                   help="run the haptic servo under SCHED_FIFO so that the browser cannot preempt a tick (needs root, "
+                        "CAP_SYS_NICE or an rtprio limit)")
     v.add_argument("--quiet", action="store_true", help="no status lines")
     v.set_defaults(func=cmd_view)
 
@@ -125,7 +128,8 @@ def cmd_view(a) -> int:
         viewer = Viewer(model, name, host=a.host, port=a.port, device=a.device, bridge_port=a.bridge_port,
                         bridge_host=a.host if a.device == "bridge" else "127.0.0.1", preset=a.preset,
                         tool_radius=a.tool_radius, press_depth=a.press_depth, rate_hz=a.rate, fps=a.fps,
-                        max_force=a.max_force, show_core=a.show_core, show_particles=a.show_particles)
+                        max_force=a.max_force, show_core=a.show_core, show_particles=a.show_particles,
+                        realtime=a.realtime)
     except _p.ParameterError as e:
         raise Fail(f"palpate view: {e}") from None
     except OSError as e:

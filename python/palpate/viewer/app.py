@@ -83,14 +83,16 @@ class Viewer:
     (:attr:`bridge_address`). ``preset`` is a key of :data:`PRESETS`, ``tool_radius`` [m],
     ``press_depth`` [m] how deep a drag on the surface presses, ``fps`` the viewer's update rate
     [Hz] (the loop's is ``rate_hz``); ``show_core``, ``show_particles``: draw the core's tets and
-    the active particles from the start (the GUI's "Show" boxes). Raises :class:`palpate.ParameterError` for a bad value.
+    the active particles from the start (the GUI's "Show" boxes); ``realtime``: the servo under
+    ``SCHED_FIFO`` (:class:`palpate.HapticLoop`), so that the browser and the viewer's own threads
+    cannot preempt a tick. Raises :class:`palpate.ParameterError` for a bad value.
     :meth:`close` stops the loop and the server."""
 
     def __init__(self, model: "_p.HybridModel", name: str = "model", *, host: str = "127.0.0.1", port: int = 8080,
                  device: str = "hand", bridge_host: str = "127.0.0.1", bridge_port: int = 0,
                  preset: Optional[str] = None, tool_radius: float = 0.005, press_depth: float = 0.003,
                  rate_hz: float = 1000.0, fps: float = 30.0, max_force: Optional[float] = None,
-                 show_core: bool = False, show_particles: bool = False):
+                 show_core: bool = False, show_particles: bool = False, realtime: bool = False):
         presets = _presets()
         preset = preset if preset is not None else next(iter(presets))
         if preset not in presets:
@@ -127,7 +129,7 @@ class Viewer:
         self.settings: Dict[str, Any] = {"device": device, "preset": preset, "tool_radius": float(tool_radius),
                                          "press_depth": float(press_depth), "bridge_host": bridge_host,
                                          "bridge_port": int(bridge_port), "rate_hz": float(rate_hz),
-                                         "max_force": max_force}
+                                         "max_force": max_force, "realtime": bool(realtime)}
         self.fps = float(fps)
         self._show_initial = (bool(show_core), bool(show_particles))
         self.paused = False
@@ -240,7 +242,7 @@ class Viewer:
     def _make_loop(self) -> "_p.HapticLoop":
         s = self.settings
         mat = _presets()[s["preset"]]()
-        common: Dict[str, Any] = dict(rate_hz=s["rate_hz"], tool_radius=s["tool_radius"])
+        common: Dict[str, Any] = dict(rate_hz=s["rate_hz"], tool_radius=s["tool_radius"], realtime=s["realtime"])
         if s["max_force"] is not None:
             common["max_force"] = s["max_force"]
         if s["device"] == "bridge":

@@ -59,8 +59,9 @@ def _pick(r: Dict[str, Any]) -> Dict[str, Any]:
 
 
 def run_alone(model: "_p.HybridModel", material: "_p.Material", home: np.ndarray, path, seconds: float,
-              rate_hz: float, tool_radius: float) -> Dict[str, Any]:
-    loop = _p.HapticLoop(model, material, "hand", hand_start=home, rate_hz=rate_hz, tool_radius=tool_radius)
+              rate_hz: float, tool_radius: float, realtime: bool = False) -> Dict[str, Any]:
+    loop = _p.HapticLoop(model, material, "hand", hand_start=home, rate_hz=rate_hz, tool_radius=tool_radius,
+                         realtime=realtime)
     stop = threading.Event()
     th = threading.Thread(target=_drive, args=(loop.set_hand_target, path, stop), daemon=True)
     loop.start()
@@ -76,13 +77,13 @@ def run_alone(model: "_p.HybridModel", material: "_p.Material", home: np.ndarray
 
 def run_with_viewer(model: "_p.HybridModel", name: str, path, seconds: float, rate_hz: float, tool_radius: float,
                     fps: float, on_status: Optional[Callable[[str], None]] = None,
-                    nice_browser: bool = True) -> Dict[str, Any]:
+                    nice_browser: bool = True, realtime: bool = False) -> Dict[str, Any]:
     from playwright.sync_api import sync_playwright
 
     from . import Viewer
     from .browser import hide_toasts, launch, lower_browser_priority, wait_for_scene
 
-    v = Viewer(model, name, port=0, rate_hz=rate_hz, tool_radius=tool_radius, fps=fps)
+    v = Viewer(model, name, port=0, rate_hz=rate_hz, tool_radius=tool_radius, fps=fps, realtime=realtime)
     try:
         with sync_playwright() as pw:
             browser, page = launch(pw)
@@ -127,12 +128,12 @@ def run_with_viewer(model: "_p.HybridModel", name: str, path, seconds: float, ra
 
 
 def run_viewer_no_page(model: "_p.HybridModel", name: str, path, seconds: float, rate_hz: float,
-                       tool_radius: float, fps: float) -> Dict[str, Any]:
+                       tool_radius: float, fps: float, realtime: bool = False) -> Dict[str, Any]:
     """The loop under the viewer with no page connected: the viewer's own cost (its frame thread
     still reads the snapshots and builds every frame)."""
     from . import Viewer
 
-    v = Viewer(model, name, port=0, rate_hz=rate_hz, tool_radius=tool_radius, fps=fps)
+    v = Viewer(model, name, port=0, rate_hz=rate_hz, tool_radius=tool_radius, fps=fps, realtime=realtime)
     stop = threading.Event()
     th = threading.Thread(target=_drive, args=(v.set_target, path, stop), daemon=True)
     th.start()
@@ -151,10 +152,11 @@ def run_viewer_no_page(model: "_p.HybridModel", name: str, path, seconds: float,
 
 
 def bench(model: "_p.HybridModel", name: str, seconds: float = 20.0, rate_hz: float = 1000.0, fps: float = 30.0,
-          tool_radius: float = 0.005, on_status: Optional[Callable[[str], None]] = None) -> Dict[str, Any]:
+          tool_radius: float = 0.005, on_status: Optional[Callable[[str], None]] = None,
+          realtime: bool = False) -> Dict[str, Any]:
     """The four runs (see the module); a dict with ``alone``, ``viewer_no_page``, ``viewer``,
-    ``alone_again`` and the
-    machine (CPU count, processor, load averages before and after, date)."""
+    ``alone_again`` and the machine (CPU count, processor, load averages before and after, date);
+    ``realtime``: every run's servo under ``SCHED_FIFO`` (:class:`palpate.HapticLoop`)."""
     from .. import haptics
     from ..bench_hybrid import probe
 
@@ -164,15 +166,15 @@ def bench(model: "_p.HybridModel", name: str, seconds: float = 20.0, rate_hz: fl
     mat = haptics.material()
     say = on_status or (lambda s: None)
     res: Dict[str, Any] = {"model": name, "seconds": seconds, "rate_hz": rate_hz, "fps": fps,
-                           "load_avg_before": list(os.getloadavg())}
+                           "load_avg_before": list(os.getloadavg()), "realtime": realtime}
     say("alone")
-    res["alone"] = run_alone(model, mat, home, path, seconds, rate_hz, tool_radius)
+    res["alone"] = run_alone(model, mat, home, path, seconds, rate_hz, tool_radius, realtime)
     say("under the viewer, no page open")
-    res["viewer_no_page"] = run_viewer_no_page(model, name, path, seconds, rate_hz, tool_radius, fps)
+    res["viewer_no_page"] = run_viewer_no_page(model, name, path, seconds, rate_hz, tool_radius, fps, realtime)
     say("with the viewer and the page open")
-    res["viewer"] = run_with_viewer(model, name, path, seconds, rate_hz, tool_radius, fps, say)
+    res["viewer"] = run_with_viewer(model, name, path, seconds, rate_hz, tool_radius, fps, say, realtime=realtime)
     say("alone again")
-    res["alone_again"] = run_alone(model, mat, home, path, seconds, rate_hz, tool_radius)
+    res["alone_again"] = run_alone(model, mat, home, path, seconds, rate_hz, tool_radius, realtime)
     res["load_avg_after"] = list(os.getloadavg())
     res["cpu_count"] = os.cpu_count()
     res["machine"] = platform.processor() or platform.machine()
