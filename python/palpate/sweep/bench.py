@@ -17,9 +17,7 @@ from __future__ import annotations
 import os
 import tempfile
 import time
-from typing import Any, Dict, Optional
-
-import numpy as np
+from typing import Any, Dict
 
 from .runner import model_payload, sweep
 from .scenario import run_scenario

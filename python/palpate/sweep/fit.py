@@ -28,14 +28,13 @@ import csv
 import math
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from .. import _palpate as _p
 from .runner import Runner, model_payload
-from .spec import Spec, SweepSpecError, load_spec, spec_from_dict
+from .spec import Spec, load_spec, spec_from_dict
 
 #: What may be fitted, with the bounds of the search and whether it is searched in log space.
 FITTABLE: Dict[str, Tuple[float, float, bool]] = {

@@ -218,6 +218,7 @@ def sweep(spec: Union[Spec, Dict[str, Any], str, os.PathLike], out: Union[str, o
     say = log or (lambda s: None)
     _check_workers(workers)
     mpath = out_dir / "manifest.json"
+    old: Optional[Dict[str, Any]] = None
     if out_dir.exists() and not out_dir.is_dir():
         raise SweepError(f"{out_dir}: exists and is not a folder")
     if mpath.exists():
@@ -240,8 +241,7 @@ def sweep(spec: Union[Spec, Dict[str, Any], str, os.PathLike], out: Union[str, o
     manifest = {"palpate_version": __version__, "study": sp.name, "spec_digest": sp.digest(), "spec": sp.source,
                 "model": sp.model, "model_hash": mhash, "script": sp.script, "seed": sp.seed, "scenarios": len(scenarios),
                 "varied": sp.varied(), "state": "running", "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
-    if mpath.exists():
-        old = json.loads(mpath.read_text())
+    if old is not None:
         if old.get("model_hash") != mhash:
             raise SweepError(f"{out_dir}: its study ran on another model (hash {old.get('model_hash')}, now {mhash})")
         manifest["started"] = old.get("started", manifest["started"])
