@@ -94,6 +94,7 @@ def _add_sweep(bsub) -> None:
                    help="190, 1350, 10k, 50k (the shared lv_* meshes) or ellipsoid_192 (default 1350)")
     w.add_argument("--scenarios", type=int, default=64, metavar="N", help="scenarios (default 64)")
     w.add_argument("--steps", type=int, default=1000, help="steps of 1 ms a scenario (default 1000)")
+    w.add_argument("--repeat", type=int, default=3, help="rounds of the three runs; medians reported (default 3)")
     w.add_argument("--json", action="store_true", help="one JSON object")
     w.set_defaults(func=cmd_bench_sweep)
 
@@ -105,14 +106,18 @@ def cmd_bench_sweep(a) -> int:
 
     if a.scenarios < 2:
         raise Fail("palpate bench sweep: --scenarios must be at least 2")
-    r = sb.run(a.mesh, a.scenarios, a.steps, log=None if a.json else print)
+    if not 1 <= a.repeat <= 100:
+        raise Fail("palpate bench sweep: --repeat must be 1 to 100")
+    r = sb.run(a.mesh, a.scenarios, a.steps, a.repeat, log=None if a.json else print)
     if a.json:
         print(_json.dumps(r))
     else:
         print(f"palpate bench sweep: {r['scenarios']} scenarios of {r['steps']} steps on {r['mesh']}: "
               f"loop {r['loop_per_s']:.2f}/s, 1 worker {r['worker1_per_s']:.2f}/s, 2 workers {r['worker2_per_s']:.2f}/s; "
               f"runner overhead {100 * r['overhead_per_scenario']:.1f}% a scenario ({100 * r['overhead_per_scenario_steady']:.1f}% past "
-              f"the cluster's {r['startup_s']:.2f} s start-up); speed-up 2 over 1: {r['speedup_2_over_1']:.2f}x")
+              f"the cluster's {r['cluster_start_stop_s']:.2f} s start and stop; importing Dask took {r['startup_s']:.2f} s once); speed-up 2 over 1: "
+              f"{r['speedup_2_over_1']:.2f}x ({r['speedup_2_over_1_steady']:.2f}x past the start-up; two bare processes "
+              f"without Dask: {r['bare_speedup_2']:.2f}x over the loop); medians of {r['repeat']}")
 
 
 def _add_view(bsub) -> None:
