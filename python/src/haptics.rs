@@ -385,8 +385,10 @@ impl PyHapticLoop {
     }
 
     /// The organ's surface (the skin's vertices, (n, 3) [m], world frame; fresh near the tool,
-    /// elsewhere at most 32 ticks old) as of the latest surface snapshot (every 32 ticks), and
-    /// its tick, or None before one. Never blocks the loop.
+    /// elsewhere at most 32 ticks old) as of the latest surface snapshot, and its tick, or None
+    /// before one. Never blocks the loop. Snapshots are taken every 32 ticks while someone reads
+    /// them (a read within the last 512 ticks), else every 512: a reader's first read after a
+    /// long pause may be up to 512 ticks old, the next ones are fresh (poll, as a viewer does).
     fn surface<'py>(&self, py: Python<'py>) -> Option<(u64, Bound<'py, numpy::PyArray2<f64>>)> {
         let got = match &*self.stage.lock().unwrap() {
             Stage::Running(h) => Some(h.surface()),

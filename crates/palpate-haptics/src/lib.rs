@@ -34,6 +34,6 @@ pub use physics::{HybridPhysics, Identity, Idle, Physics, Wall};
 pub use realtime::Realtime;
 pub use record::{Recording, TickRecord};
 pub use safety::{Safety, SafetyParams};
-pub use servo::{Fault, FaultRecord, HapticCore, Servo, ServoConfig, ServoHandle, ServoReport, TickOut};
+pub use servo::{Fault, FaultRecord, HapticCore, Servo, ServoConfig, ServoHandle, ServoReport, TickOut, IDLE_SNAPSHOT_TICKS};
 pub use snapshot::{Mailbox, Snapshot, SnapshotCell, Vec3Cell};
 pub use stats::Stats;
