@@ -52,6 +52,11 @@ pub struct PyBody {
 }
 
 impl PyBody {
+    /// The compiled model (the haptic loop rebuilds it with its own material).
+    pub(crate) fn model(&self) -> &Model {
+        &self.model
+    }
+
     fn run_steps(&mut self, n: usize, dt: f64) -> Result<StepTotals, (usize, palpate_core::StepError)> {
         let mut tot = StepTotals::default();
         for k in 0..n {

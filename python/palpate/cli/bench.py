@@ -15,7 +15,7 @@ from .. import _progress
 from .. import bench
 from .. import bench_hybrid as bh
 from .. import bench_particles as bp
-from ._common import Fail, add_quiet, fmt_mm, load_hybrid_model, num, palpate_errors
+from ._common import Fail, add_quiet, fmt_mm, load_hybrid_model, load_view_model, num, palpate_errors
 
 
 def add_parser(sub) -> None:
@@ -126,7 +126,9 @@ def _add_view(bsub) -> None:
                                     "(20 Hz targets, as a mouse drag): alone, under palpate view with no page, with the page "
                                     "open in the system's headless Chromium (niced), and alone again; report the loop's period "
                                     "percentiles and overruns, and the viewer's frame rates (palpate/viewer/bench.py).")
-    w.add_argument("model", metavar="MODEL", nargs="?", default="rodero")
+    w.add_argument("model", metavar="MODEL", nargs="?", default="rodero",
+                   help="as palpate view's: a hybrid model or shape, or a full-FEM tet mesh, scene or protocol mesh name")
+    w.add_argument("--unit", choices=("m", "cm", "mm"), default="m", help="a tet mesh file's coordinate unit (default m)")
     w.add_argument("--seconds", type=float, default=20.0, metavar="S", help="length of each run [s] (default 20)")
     w.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000)")
     w.add_argument("--fps", type=float, default=30.0, metavar="HZ", help="viewer update rate [Hz] (default 30)")
@@ -154,7 +156,7 @@ def cmd_bench_view(a) -> int:
         raise Fail(f"palpate bench view: needs a browser: {why or why2}", 1)
     from ..viewer import bench as vb
 
-    name, model = load_hybrid_model(a.model, "bench view")
+    name, model = load_view_model(a.model, "bench view", a.unit)
     say = (lambda s: None) if a.json else (lambda s: print(f"  ... {s}", file=sys.stderr, flush=True))
     try:
         r = vb.bench(model, name, a.seconds, a.rate, a.fps, on_status=say, realtime=a.realtime)
