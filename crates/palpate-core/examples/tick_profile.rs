@@ -2,7 +2,7 @@
 //! MODEL.palpate [radius_mm] [ticks]` (a 3 mm press, a 10 mm slide and a release at the outer
 //! vertex farthest along +x, the tool along the direction from the outer surface's centroid;
 //! damped as the bench; `DEPTH_MM` sets the press's depth, `TRACE=FILE` writes one CSV row a
-//! tick). Prints the tick's mean and percentiles and the mean sub-step count; run
+//! tick, the last column the force on the tool [N]). Prints the tick's mean and percentiles and the mean sub-step count; run
 //! it under `perf record` for where the time goes.
 #[path = "support/mod.rs"]
 mod support;
@@ -19,9 +19,17 @@ fn main() {
     let radius = arg(2).and_then(|s| s.parse::<f64>().ok()).unwrap_or(2.0) * 1e-3;
     let ticks = arg(3).and_then(|s| s.parse::<usize>().ok()).unwrap_or(2000);
     let m = HybridModel::load(std::path::Path::new(&path)).unwrap();
-    let mat = tissue(true);
+    let mat = tissue(std::env::var("UNDAMPED").is_err());
     let mut o = SimOptions::default();
     o.tool.radius = radius;
+    // TOOL_K [N/m], TOOL_C [N s/m]: the contact's stiffness and damping per point.
+    let env = |k: &str| std::env::var(k).ok().and_then(|s| s.parse::<f64>().ok());
+    if let Some(k) = env("TOOL_K") {
+        o.tool.stiffness = k;
+    }
+    if let Some(c) = env("TOOL_C") {
+        o.tool.damping = c;
+    }
     if std::env::var("MS").ok().as_deref() == Some("off") {
         o.mass_scaling = None;
     }
@@ -59,7 +67,7 @@ fn main() {
         }
         if let Some(t) = trace.as_mut() {
             use std::io::Write;
-            writeln!(t, "{k},{ms:.4},{},{},{},{},{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations).unwrap();
+            writeln!(t, "{k},{ms:.4},{},{},{},{},{},{:.6e}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.force.norm()).unwrap();
         }
         subs += rep.substeps;
     }
