@@ -255,13 +255,23 @@ pub fn default_area_stiffness(material: &Material, radius: f64) -> f64 {
 /// [`FEM_CONTACT_DAMPING_RATIO`] (`(omega h)^2 + 2 (2 zeta omega h) <= 3 < 4`: symplectic
 /// Euler's limit with damping): any servo rate (250 Hz to 4 kHz) is stable.
 ///
-/// The price, measured: at 1 kHz on the protocol meshes this bound, not the tissue, sets the
-/// stiffness (lv_1350: see `tests/fem_physics.rs`' print), far below
-/// [`default_area_stiffness`]; the contact softens with finer meshes and faster rates (lighter
-/// nodes, shorter ticks); and a press deeper than the radius lets the sphere sink through the
-/// surface (the surface's samples pass its centre; no blow-up). Lifting that needs the contact
-/// inside the implicit step (its penalty in the step's incremental potential), not a better
-/// explicit bound.
+/// # The price, measured (1 kHz, myocardium, the 5 mm tool)
+/// The stability bound, not the tissue, sets the stiffness, 35-60x below
+/// [`default_area_stiffness`]'s 8.6e7 N/m^3: `k_a` = 1.4e6 N/m^3 on lv_1350, 2.3e6 on
+/// `ellipsoid_192`, 1.5e6 on a slab with 15 mm cells (`tests/fem_physics.rs` prints them).
+/// At that stiffness the surface hardly moves under the tool, and the sphere sinks into it by
+/// about the whole press; a sphere sunk `D` into a flat surface pushes
+/// `pi k_a (R - D) D^2` (the samples' radial forces turn sideways as the centre nears the
+/// surface), most at `D = 2 R / 3`: ~0.085 N on lv_1350 (a 6 mm press peaks there, then the
+/// sphere sinks through the wall; the nodes-only contact peaked at ~0.06 N), ~0.15 N under a
+/// 15 mm press on `ellipsoid_192` (the nodes-only contact reached ~0.7 N on its probe node
+/// before the node slid off, and nothing between nodes). The node-only contact spent the same
+/// per-node budget `m / dt^2` on one point at full depth; spread over a patch whose mean depth
+/// is a fraction of the press it pushes less, but the same everywhere. The contact softens with
+/// finer meshes and faster rates (lighter nodes, shorter ticks), and is 16x stiffer at 250 Hz.
+/// Lifting the bound needs the contact inside the implicit step (its penalty in the step's
+/// incremental potential, `palpate_core::integrate::potential`), where `k_a` could be the
+/// tissue-matched default: not a better explicit bound.
 ///
 /// # State
 /// The last good state is a copy made by `clone_from` (allocation-free once warm); a failed step

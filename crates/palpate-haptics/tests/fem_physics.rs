@@ -422,6 +422,8 @@ fn lv_1350_6mm_press_force_and_tick_cost() {
         times.push(t0.elapsed().as_secs_f64());
         peak = peak.max(f.dot(&n_out));
     }
+    let slow: Vec<usize> = (0..times.len()).filter(|&k| times[k] > 1e-3).collect();
+    println!("lv_1350: {} ticks over 1 ms: {slow:?}", slow.len());
     let mut held = times[300..].to_vec();
     held.sort_by(f64::total_cmp);
     let q = |x: f64| held[((held.len() - 1) as f64 * x) as usize] * 1e6;
