@@ -176,7 +176,8 @@ pub struct FemOptions {
     /// The rigid sphere's radius \[m\].
     pub radius: f64,
     /// The most penalty stiffness per unit of surface area `k_a` \[N/m^3\]; each tick takes the
-    /// least of this and what keeps the explicit contact stable ([`FemPhysics::contact`]).
+    /// least of this and what keeps the explicit contact stable ([`FemPhysics::contact_tool`],
+    /// capped further where the surface in reach is more than a flat disc).
     /// `None`: [`default_area_stiffness`] of the model's material and the radius.
     pub area_stiffness: Option<f64>,
     /// The most approach damping per unit area \[N s/m^3\] (infinite: ratio
