@@ -647,6 +647,7 @@ class HapticLoop:
         idle: bool = False,
         tool_radius: Optional[float] = None,
         tool_stiffness: Optional[float] = None,
+        tool_area_stiffness: Optional[float] = None,
         hold: bool = True,
         coupling_stiffness: Optional[float] = None,
         coupling_damping: Optional[float] = None,

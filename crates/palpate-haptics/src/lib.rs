@@ -5,6 +5,8 @@
 //!   [`Servo`] (the native thread at 250 Hz-4 kHz, absolute-deadline pacing, a watchdog);
 //! - [`physics`]: what the servo steps ([`Physics`]): [`HybridPhysics`] (the hybrid runtime),
 //!   [`FemPhysics`] (a full-FEM body), [`Wall`], [`Idle`];
+//! - [`surface_contact`]: the sphere against a tet mesh's boundary triangles (a penalty per unit
+//!   area, sampled), [`FemPhysics`]' contact;
 //! - [`coupling`]: the virtual coupling (device <-> simulated tool), why a proxy with a mass;
 //! - [`safety`]: force limit, force-rate limit, ramp;
 //! - [`device`], [`devices`]: the [`Device`] interface; scripted, replay, simulated hand;
@@ -27,10 +29,12 @@ pub mod safety;
 pub mod servo;
 pub mod snapshot;
 pub mod stats;
+pub mod surface_contact;
 
 pub use coupling::{CouplingParams, VirtualCoupling};
 pub use device::{Device, DeviceInput, DeviceKind, ForceCell, ForceSink};
-pub use physics::{FemOptions, FemPhysics, HybridPhysics, Identity, Idle, Physics, Wall};
+pub use physics::{default_area_stiffness, FemOptions, FemPhysics, HybridPhysics, Identity, Idle, Physics, Wall};
+pub use surface_contact::{AreaTool, SurfaceContact};
 pub use realtime::Realtime;
 pub use record::{Recording, TickRecord};
 pub use safety::{Safety, SafetyParams};

@@ -8,6 +8,8 @@ use palpate_core::math::is_finite3;
 use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace, Tool};
 use palpate_core::{step, Material, Model, ModelError, State, StepError, Vec3, Workspace};
 
+use crate::surface_contact::{self, AreaTool, SurfaceContact};
+
 /// Who the simulation is, for a recording: replaying against another model (or the same model
 /// with another material or options) would not give the recorded forces.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -167,14 +169,20 @@ impl Physics for HybridPhysics {
     }
 }
 
-/// Options of [`FemPhysics`]: the tool and how far it moves in a tick.
+/// Options of [`FemPhysics`]: the tool, its contact with the surface, and how far it moves in a
+/// tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FemOptions {
-    /// The rigid sphere: radius \[m\], and the most penalty stiffness \[N/m\] and approach damping
-    /// \[N s/m\] per boundary node; each tick takes the least of these and what keeps the
-    /// explicit contact stable on the lightest free boundary node ([`FemPhysics::contact_tool`];
-    /// the default: that bound alone).
-    pub tool: Tool,
+    /// The rigid sphere's radius \[m\].
+    pub radius: f64,
+    /// The most penalty stiffness per unit of surface area `k_a` \[N/m^3\]; each tick takes the
+    /// least of this and what keeps the explicit contact stable ([`FemPhysics::contact_tool`],
+    /// capped further where the surface in reach is more than a flat disc).
+    /// `None`: [`default_area_stiffness`] of the model's material and the radius.
+    pub area_stiffness: Option<f64>,
+    /// The most approach damping per unit area \[N s/m^3\] (infinite: ratio
+    /// [`FEM_CONTACT_DAMPING_RATIO`] of critical at the stability bound, the default).
+    pub area_damping: f64,
     /// The most the simulated tool moves in a tick \[m\] (the hybrid runtime's default).
     pub max_tool_step: f64,
 }
@@ -182,35 +190,89 @@ pub struct FemOptions {
 impl Default for FemOptions {
     fn default() -> Self {
         FemOptions {
-            tool: Tool { radius: palpate_core::runtime::tool::DEFAULT_RADIUS, stiffness: f64::INFINITY, damping: f64::INFINITY },
+            radius: palpate_core::runtime::tool::DEFAULT_RADIUS,
+            area_stiffness: None,
+            area_damping: f64::INFINITY,
             max_tool_step: SimOptions::default().max_tool_step,
         }
     }
 }
 
-/// `omega^2 h^2` of the contact spring on the lightest free boundary node at the tick's `dt`
-/// (see [`FemPhysics::contact_tool`]): half-way to the explicit limit of 4.
+/// `omega^2 h^2` of the contact on the node it loads most at the tick's `dt` (see
+/// [`FemPhysics`]): a quarter of the explicit limit of 4.
 pub const FEM_CONTACT_STABILITY: f64 = 1.0;
-/// Damping ratio of the contact (of critical, on the lightest free boundary node).
+/// Damping ratio of the contact (of critical, at the stability bound).
 pub const FEM_CONTACT_DAMPING_RATIO: f64 = 0.5;
+/// The default area stiffness in units of `E* / R` ([`default_area_stiffness`]).
+pub const AREA_STIFFNESS_PER_E_OVER_R: f64 = 12.0;
+
+/// The default penalty stiffness per unit area \[N/m^3\] for a tissue of `material` under a
+/// sphere of `radius` \[m\]: `12 E* / R`, `E* = E / (1 - nu^2)`, ten times the tissue's own
+/// stiffness per unit area under the sphere. Hertz: a pressure `p` on a disc of radius `a` of
+/// an elastic half-space sinks it by `16 p a / (3 pi E*) ~ 1.7 p a / E*` on average, a stiffness
+/// per unit area of `E* / (1.7 a)`; at a quarter-radius press (`a = sqrt(R d) = R / 2`) that is
+/// `1.18 E* / R`. Ten times it, the contact adds ~10% compliance in series with the tissue and
+/// sinks ~10% of the indentation into the tool (as `Tool`'s default does per point). Myocardium
+/// (30 kPa, `nu = 0.4`) under the 5 mm sphere: 8.6e7 N/m^3. At 1 kHz on the protocol meshes the
+/// stability bound is lower (see [`FemPhysics`]), and sets the stiffness.
+pub fn default_area_stiffness(material: &Material, radius: f64) -> f64 {
+    let nu = material.poisson();
+    AREA_STIFFNESS_PER_E_OVER_R * material.young() / (1.0 - nu * nu) / radius
+}
 
 /// A full-FEM body (`palpate_core::fem`, stepped by [`palpate_core::step`] with the model's
-/// integrator) as the servo's physics, touched by a rigid sphere on its boundary nodes.
+/// integrator) as the servo's physics, touched by a rigid sphere on its boundary surface.
 ///
 /// # The contact
-/// The tool is the hybrid runtime's [`Tool`]: the penalty of [`Tool::apply`] on the mesh's
-/// boundary nodes, at the tool's end-of-tick centre, held as the nodes' external force over the
-/// step (as the hybrid tick does on its core's surface); the tool receives exactly the opposite
-/// of their sum. A force held over an implicit step is explicit, so it is stable while the
-/// spring's `omega h = sqrt(k / m) dt` stays below 2 on every node it acts on: the backward-Euler
-/// system's compliance at a node is at most `dt^2 / m` (its matrix is `M` plus positive
-/// semi-definite terms), so `k <= 4 m_min / dt^2` bounds the loop on every contacted node at
-/// once. Each tick takes `k = min(tool.stiffness, FEM_CONTACT_STABILITY m_min / dt^2)` with
-/// `m_min` the lightest free boundary node, and damping of ratio [`FEM_CONTACT_DAMPING_RATIO`]
-/// (`(omega h)^2 + 2 (2 zeta omega h) = 3 < 4`: symplectic Euler's limit with damping), so
-/// any servo rate (250 Hz to 4 kHz) is stable. The price: the contact softens with finer
-/// meshes and faster rates (lighter nodes, shorter ticks), and a node pushed by more than
-/// `k R` passes through the sphere (the tool then sinks through a coarse mesh; no blow-up).
+/// One contact model: the sphere against the mesh's boundary **triangles**
+/// ([`crate::surface_contact`]), a penalty per unit of surface area `k_a` integrated by sample
+/// points spaced at most a third of the radius on every boundary triangle, each sample's force
+/// spread to its triangle's nodes by its barycentric weights (the transpose of its
+/// interpolation: the nodal forces are minus the penalty energy's gradient). The force depends
+/// on how deep the sphere is in the surface, not on where the nodes are: a press between two
+/// nodes 15 mm apart feels as a press on a node, deeper presses push harder, and a slide is
+/// smooth. (It replaces a penalty on the boundary nodes alone, under which the sphere slipped
+/// between nodes on meshes as coarse as the tool: no force between nodes, a node sliding off the
+/// sphere near 0.7 N on `ellipsoid_192`, ~0.06 N at most under a 6 mm press on lv_1350 before the
+/// sphere sank through.) Rejected: nearest-point contact against the triangles (one point per
+/// triangle): its force jumps where the nearest triangle changes and it has no area, so its
+/// stiffness would not scale with the patch pressed.
+///
+/// The forces are computed at the tool's end-of-tick centre and the start-of-tick positions and
+/// held as the nodes' external force over the step (as the hybrid tick does on its core's
+/// surface); the tool receives exactly minus their sum (summed over the nodes, in node order).
+///
+/// # Stability
+/// A force held over an implicit step is explicit, so it is stable while its `omega h` stays
+/// below 2 on every node it acts on: the backward-Euler system's compliance at a node is at most
+/// `dt^2 / m` (its matrix is `M` plus positive semi-definite terms). The contact's `omega^2` on
+/// node `a` is at most `k_a G_a / m_a` (Gershgorin; `G_a` the area of its samples in contact,
+/// weighted by their barycentric weight at it), so each tick takes
+/// `k_a = min(area_stiffness, FEM_CONTACT_STABILITY min_a (m_a / G_a) / dt^2)` over the free
+/// boundary nodes, `G_a` bounded two ways ([`crate::surface_contact`]): once for the whole
+/// surface by a flat disc a little wider than the tool ([`FemPhysics::contact_tool`], which
+/// sets the stiffness everywhere but where a deep press wraps the surface around the sphere),
+/// and each tick by the samples within reach of the tool. Damping of ratio
+/// [`FEM_CONTACT_DAMPING_RATIO`] (`(omega h)^2 + 2 (2 zeta omega h) <= 3 < 4`: symplectic
+/// Euler's limit with damping): any servo rate (250 Hz to 4 kHz) is stable.
+///
+/// # The price, measured (1 kHz, myocardium, the 5 mm tool)
+/// The stability bound, not the tissue, sets the stiffness, 35-60x below
+/// [`default_area_stiffness`]'s 8.6e7 N/m^3: `k_a` = 1.4e6 N/m^3 on lv_1350, 2.3e6 on
+/// `ellipsoid_192`, 1.5e6 on a slab with 15 mm cells (`tests/fem_physics.rs` prints them).
+/// At that stiffness the surface hardly moves under the tool, and the sphere sinks into it by
+/// about the whole press; a sphere sunk `D` into a flat surface pushes
+/// `pi k_a (R - D) D^2` (the samples' radial forces turn sideways as the centre nears the
+/// surface), most at `D = 2 R / 3`: ~0.085 N on lv_1350 (a 6 mm press peaks there, then the
+/// sphere sinks through the wall; the nodes-only contact peaked at ~0.06 N), ~0.15 N under a
+/// 15 mm press on `ellipsoid_192` (the nodes-only contact reached ~0.7 N on its probe node
+/// before the node slid off, and nothing between nodes). The node-only contact spent the same
+/// per-node budget `m / dt^2` on one point at full depth; spread over a patch whose mean depth
+/// is a fraction of the press it pushes less, but the same everywhere. The contact softens with
+/// finer meshes and faster rates (lighter nodes, shorter ticks), and is 16x stiffer at 250 Hz.
+/// Lifting the bound needs the contact inside the implicit step (its penalty in the step's
+/// incremental potential, `palpate_core::integrate::potential`), where `k_a` could be the
+/// tissue-matched default: not a better explicit bound.
 ///
 /// # State
 /// The last good state is a copy made by `clone_from` (allocation-free once warm); a failed step
@@ -222,10 +284,14 @@ pub struct FemPhysics {
     ws: Workspace,
     good: State,
     options: FemOptions,
-    /// The boundary nodes, ascending: the contact set and the surface's points.
+    /// The requested stiffness per unit area (the options' or the default) \[N/m^3\].
+    area_stiffness: f64,
+    /// The boundary nodes, ascending: the surface's points.
     boundary: Vec<usize>,
-    /// The lightest free boundary node's mass \[kg\] (infinite if none is free).
-    min_mass: f64,
+    /// The boundary triangles and their contact samples.
+    contact: SurfaceContact,
+    /// The lightest free boundary node's mass per contact area \[kg/m^2\].
+    mass_per_area: f64,
     /// The contact forces of the tick being computed, swapped with `state.f_ext` for the step.
     forces: Vec<Vec3>,
     tool: Option<Vec3>,
@@ -236,27 +302,32 @@ pub struct FemPhysics {
 impl FemPhysics {
     /// The body `model` at rest, touched by `options`' tool.
     pub fn new(model: Model, options: FemOptions) -> Result<FemPhysics, ModelError> {
-        let t = &options.tool;
+        let o = &options;
+        let k = o.area_stiffness.unwrap_or_else(|| default_area_stiffness(model.material(), o.radius));
         for (name, value, ok, reason) in [
-            ("tool radius", t.radius, t.radius > 0.0 && t.radius.is_finite(), "must be positive and finite [m]"),
-            ("tool stiffness", t.stiffness, t.stiffness > 0.0, "must be positive [N/m] (infinite: the stability bound)"),
-            ("tool damping", t.damping, t.damping >= 0.0, "must be >= 0 [N s/m] (infinite: the stability bound's)"),
-            ("max tool step", options.max_tool_step, options.max_tool_step > 0.0, "must be positive [m]"),
+            ("tool radius", o.radius, o.radius > 0.0 && o.radius.is_finite(), "must be positive and finite [m]"),
+            ("tool area stiffness", k, k > 0.0 && !k.is_nan(), "must be positive [N/m^3] (infinite: the stability bound)"),
+            ("tool area damping", o.area_damping, o.area_damping >= 0.0, "must be >= 0 [N s/m^3] (infinite: the stability bound's)"),
+            ("max tool step", o.max_tool_step, o.max_tool_step > 0.0, "must be positive [m]"),
         ] {
             if !ok {
                 return Err(ModelError::Parameter { name, value, reason });
             }
         }
-        let mut boundary: Vec<usize> = model.mesh().boundary_faces().iter().flatten().copied().collect();
+        let faces = model.mesh().boundary_faces();
+        let mut boundary: Vec<usize> = faces.iter().flatten().copied().collect();
         boundary.sort_unstable();
         boundary.dedup();
-        let min_mass = boundary.iter().filter(|&&i| !model.fixed()[i]).map(|&i| model.masses()[i]).fold(f64::INFINITY, f64::min);
+        let contact = SurfaceContact::new(model.mesh().points(), faces, o.radius)?;
         let identity = fem_identity(&model, &options);
         let state = State::rest(&model);
         let ws = Workspace::new(&model);
         let good = state.clone();
         let forces = vec![Vec3::zeros(); model.n_nodes()];
-        Ok(FemPhysics { model, state, ws, good, options, boundary, min_mass, forces, tool: None, good_tool: None, identity })
+        let (m, share) = (model.masses(), contact.area_shares());
+        let disc = std::f64::consts::PI * (o.radius * (1.0 + surface_contact::REACH_MARGIN)).powi(2);
+        let mass_per_area = boundary.iter().filter(|&&i| !model.fixed()[i] && share[i] > 0.0).map(|&i| m[i] / share[i].min(disc)).fold(f64::INFINITY, f64::min);
+        Ok(FemPhysics { model, state, ws, good, options, area_stiffness: k, boundary, contact, mass_per_area, forces, tool: None, good_tool: None, identity })
     }
 
     pub fn model(&self) -> &Model {
@@ -269,19 +340,50 @@ impl FemPhysics {
     pub fn state_mut(&mut self) -> &mut State {
         &mut self.state
     }
-    /// The boundary nodes in ascending order: the contact set, and the order of
-    /// [`Physics::surface`]'s points (`numpy.unique` of the mesh's boundary faces).
+    /// The boundary nodes in ascending order: the order of [`Physics::surface`]'s points
+    /// (`numpy.unique` of the mesh's boundary faces).
     pub fn boundary_nodes(&self) -> &[usize] {
         &self.boundary
     }
+    /// The boundary triangles and their contact samples.
+    pub fn surface_contact(&self) -> &SurfaceContact {
+        &self.contact
+    }
+    /// The requested stiffness per unit area \[N/m^3\] (the options' or the default), before the
+    /// stability cap.
+    pub fn area_stiffness(&self) -> f64 {
+        self.area_stiffness
+    }
+    /// The lightest free boundary node's mass per contact area \[kg/m^2\], `min_a m_a / G_a` with
+    /// `G_a` the smaller of the area its samples carry and a flat disc of radius
+    /// `R (1 + REACH_MARGIN)` (infinite if no boundary node is free): the surface's one
+    /// stiffness bound ([`crate::surface_contact`]).
+    pub fn mass_per_area(&self) -> f64 {
+        self.mass_per_area
+    }
 
-    /// The tool as it acts in a tick of `dt` \[s\]: the options' radius, the stiffness and damping
-    /// capped by the explicit contact's stability on the lightest free boundary node (type docs).
-    pub fn contact_tool(&self, dt: f64) -> Tool {
-        let t = &self.options.tool;
-        let k = t.stiffness.min(FEM_CONTACT_STABILITY * self.min_mass / (dt * dt));
-        let c = t.damping.min(Tool::damping_for(k, self.min_mass, FEM_CONTACT_DAMPING_RATIO));
-        Tool { radius: t.radius, stiffness: if k.is_finite() { k } else { 0.0 }, damping: c }
+    /// The contact in a tick of `dt` \[s\] with the tool nowhere in particular: the options'
+    /// radius, the stiffness and damping per unit area capped by the surface's one stability
+    /// bound (the tick may cap it further where the surface within reach is more than a flat
+    /// disc; type docs).
+    pub fn contact_tool(&self, dt: f64) -> AreaTool {
+        self.capped(self.mass_per_area, dt)
+    }
+
+    fn capped(&self, rho: f64, dt: f64) -> AreaTool {
+        let k = self.area_stiffness.min(FEM_CONTACT_STABILITY * rho / (dt * dt));
+        let k = if k.is_finite() { k } else { 0.0 };
+        let c = self.options.area_damping.min(Tool::damping_for(k, rho, FEM_CONTACT_DAMPING_RATIO));
+        AreaTool { radius: self.options.radius, stiffness: k, damping: c }
+    }
+
+    /// The contact for a tick of `dt` with the tool at `centre`: [`FemPhysics::contact_tool`],
+    /// capped further by the samples in reach; leaves the faces in reach in `self.contact`.
+    fn tick_contact(&mut self, centre: &Vec3, dt: f64) -> AreaTool {
+        let r = self.options.radius;
+        self.contact.find_near(centre, &self.state.x, r * (1.0 + surface_contact::REACH_MARGIN));
+        let rho = self.contact.reach_mass_per_area(r, centre, &self.state.x, self.model.masses(), self.model.fixed());
+        self.capped(rho.min(self.mass_per_area), dt)
     }
 }
 
@@ -301,7 +403,7 @@ fn fem_identity(model: &Model, options: &FemOptions) -> Identity {
     bytes.extend_from_slice(format!("{:?} {:?} {material:?} {:?} {options:?}", model.gravity(), model.integrator(), model.fixed().len()).as_bytes());
     let description = format!(
         "full FEM: {} nodes ({} fixed), {} tets; E = {} Pa, nu = {}, rho = {} kg/m^3; tool radius {} m",
-        model.n_nodes(), model.fixed().iter().filter(|&&f| f).count(), model.n_tets(), material.young(), material.poisson(), material.density(), options.tool.radius
+        model.n_nodes(), model.fixed().iter().filter(|&&f| f).count(), model.n_tets(), material.young(), material.poisson(), material.density(), options.radius
     );
     Identity { digest: file::checksum(&bytes), description }
 }
@@ -319,7 +421,10 @@ impl Physics for FemPhysics {
         let at = prev + (tool - prev).cap_magnitude(self.options.max_tool_step);
         let tool_v = (at - prev) / dt;
         self.forces.iter_mut().for_each(|f| *f = Vec3::zeros());
-        let sum = self.contact_tool(dt).apply(&at, &tool_v, &self.state.x, &self.state.v, &self.boundary, &mut self.forces);
+        let contact = self.tick_contact(&at, dt);
+        self.contact.apply(&contact, &at, &tool_v, &self.state.x, &self.state.v, &mut self.forces);
+        // The tool's force: minus the nodes' sum, in node order (exactly the reaction).
+        let force_on_tool = -self.forces.iter().fold(Vec3::zeros(), |a, f| a + f);
         // The contact forces become the step's external force; on failure the previous ones
         // come back (the state as before the tick).
         std::mem::swap(&mut self.state.f_ext, &mut self.forces);
@@ -328,7 +433,7 @@ impl Physics for FemPhysics {
             return Err(e);
         }
         self.tool = Some(at);
-        Ok(sum.force_on_tool)
+        Ok(force_on_tool)
     }
     fn tool(&self) -> Option<Vec3> {
         self.tool

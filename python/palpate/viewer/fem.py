@@ -1,7 +1,7 @@
 """A full-FEM body for the viewer (issue 14): :class:`FemModel`, what :class:`palpate.viewer.Viewer`
 reads of a :class:`palpate.HybridModel` (``outer_points``, ``outer_triangles``, ``core_points``,
 ``core_tets``) made from a tet mesh, and the :class:`palpate.Body` the haptic loop runs
-(``palpate_haptics::FemPhysics``: the tool meets the boundary nodes).
+(``palpate_haptics::FemPhysics``: the tool meets the boundary surface, its triangles).
 
 :func:`load_fem_model` reads a protocol mesh name (``ellipsoid_192``, ``lv_190``, ``lv_1350``,
 ``lv_10k``, ``lv_50k``: the benchmark's set-up, base held), a scene file (``.toml``,
