@@ -64,11 +64,11 @@ def test_run_lv_scene(tmp_path):
      "integrator.type"),
     ('[mesh\n', "invalid TOML"),
 ])
-def test_scene_errors_are_one_line_exit_2(tmp_path, body, key):
+def test_scene_errors_are_one_line_exit_1(tmp_path, body, key):
     f = tmp_path / "bad.toml"
     f.write_text(body)
     r = palpate_cli("run", f, "--out", tmp_path / "o")
-    assert r.returncode == 2
+    assert r.returncode == 1     # bad input: the scene file
     assert "Traceback" not in r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr
@@ -124,11 +124,11 @@ def test_bench_protocol_generated_ellipsoid():
 
 def test_bench_protocol_errors(tmp_path):
     r = palpate_cli("bench", "protocol")
-    assert r.returncode == 2 and "MESH" in r.stderr
+    assert r.returncode == 2 and "MESH" in r.stderr         # usage: neither MESH nor --all
     bad = tmp_path / "x.msh"
     bad.write_text("garbage\n")
     r = palpate_cli("bench", "protocol", bad, "--steps", 5)
-    assert r.returncode == 2 and "x.msh" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 1 and "x.msh" in r.stderr and "Traceback" not in r.stderr   # bad input
 
 
 def test_info(tmp_path):
