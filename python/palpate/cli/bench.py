@@ -68,7 +68,7 @@ def add_parser(sub) -> None:
                                     "or a shape: ellipsoids, ventricle, rodero), then time each tick of a scripted "
                                     f"press, hold, {num(bh.SLIDE * 1e3)} mm slide and release (one thread; see "
                                     "palpate/bench_hybrid.py for the probe point and the calibration rule). "
-                                    "Exit 1 if a tick fails.")
+                                    "Exit 3 if a tick fails.")
     h.add_argument("model", metavar="MODEL", help="model file (palpate build) or ellipsoids|ventricle|rodero")
     h.add_argument("--active", type=int, required=True, metavar="N", help="target number of active particles")
     h.add_argument("--ticks", type=int, default=bh.TICKS,
