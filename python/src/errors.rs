@@ -309,7 +309,7 @@ fn argument_note(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
     const CODE: &std::ffi::CStr = cr#"
 import re
 
-def add_note(self, note):
+def add_note(self, note, /):
     m = re.fullmatch(r"while processing '(\w+)'", str(note))
     if m and self.args and isinstance(self.args[0], str) and not self.args[0].startswith("argument '"):
         self.args = (f"argument '{m.group(1)}': {self.args[0]}",) + self.args[1:]
