@@ -12,6 +12,9 @@
 //! * An empty list `[]` (which numpy reads as float64 of shape `(0,)`) is an empty set of rows or
 //!   indices wherever rows or indices are expected.
 //! * Outputs are fresh C-contiguous float64 / int64 arrays (copies, never views of the state).
+//! * Every other argument (a float, a flag, a str or path, a 3-tuple, a palpate class or enum) is
+//!   declared `#[pyo3(from_py_with = conv::arg)]`: a wrong type is a `ParameterTypeError` naming
+//!   the argument, not pyo3's bare `TypeError` ([`arg`]).
 
 use std::collections::HashSet;
 
