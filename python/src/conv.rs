@@ -46,20 +46,19 @@ pub fn retyped(obj: &Bound<'_, PyAny>, e: PyErr) -> PyErr {
 }
 
 /// `obj` as a numpy array (converted with `numpy.asarray` if it is not one already).
-/// Not numbers (a str, None, a dict, a list of str: numpy makes them str or object arrays) is a
-/// `ParameterTypeError` here, before any shape check would call it a shape error.
+/// Something that is not an array and not numbers (a str, None, a dict, a list of str: numpy
+/// makes them str or object arrays) is a `ParameterTypeError` here, before a shape check would
+/// call it a shape error; an array of another dtype is refused with its dtype by the callers.
 pub fn as_array<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Bound<'py, PyUntypedArray>> {
+    if let Ok(a) = obj.cast::<PyUntypedArray>() {
+        return Ok(a.clone());
+    }
     let not_numbers = || crate::errors::type_error(format!("{what} must be an array-like of numbers, got {}", type_name(obj)));
-    let a = match obj.cast::<PyUntypedArray>() {
-        Ok(a) => a.clone(),
-        Err(_) => {
-            let np = obj.py().import("numpy")?;
-            let conv = np.call_method1("asarray", (obj,)).map_err(|e| {
-                crate::errors::type_error(format!("{what} must be an array-like of numbers, got {} ({e})", type_name(obj)))
-            })?;
-            conv.cast_into::<PyUntypedArray>().map_err(|_| not_numbers())?
-        }
-    };
+    let np = obj.py().import("numpy")?;
+    let conv = np.call_method1("asarray", (obj,)).map_err(|e| {
+        crate::errors::type_error(format!("{what} must be an array-like of numbers, got {} ({e})", type_name(obj)))
+    })?;
+    let a = conv.cast_into::<PyUntypedArray>().map_err(|_| not_numbers())?;
     if !matches!(a.dtype().kind(), b'b' | b'i' | b'u' | b'f') {
         return Err(not_numbers());
     }
