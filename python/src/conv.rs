@@ -60,7 +60,11 @@ pub fn as_array<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Bound<'py,
     })?;
     let a = conv.cast_into::<PyUntypedArray>().map_err(|_| not_numbers())?;
     if !matches!(a.dtype().kind(), b'b' | b'i' | b'u' | b'f') {
-        return Err(not_numbers());
+        return Err(crate::errors::type_error(format!(
+            "{what} must be an array-like of numbers, got {} (numpy reads it as dtype {})",
+            type_name(obj),
+            dtype_str(&a)
+        )));
     }
     Ok(a)
 }
