@@ -629,10 +629,10 @@ def ventricle_surface(circumferential: int = 96, longitudinal: int = 24) -> Tupl
 
 @final
 class HapticLoop:
-    """The haptic loop over a hybrid model (issue 13): a native servo thread, device in, force out."""
+    """The haptic loop over a hybrid model (issue 13) or a full-FEM body (issue 14): a native servo thread, device in, force out."""
     def __new__(
         cls,
-        model: HybridModel,
+        model: Union[HybridModel, Body],
         material: Material,
         device: str,
         *,

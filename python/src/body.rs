@@ -52,6 +52,11 @@ pub struct PyBody {
 }
 
 impl PyBody {
+    /// The compiled model (the haptic loop rebuilds it with its own material).
+    pub(crate) fn model(&self) -> &Model {
+        &self.model
+    }
+
     fn run_steps(&mut self, n: usize, dt: f64) -> Result<StepTotals, (usize, palpate_core::StepError)> {
         let mut tot = StepTotals::default();
         for k in 0..n {
@@ -389,7 +394,8 @@ impl PyBody {
         steps: errors::Int,
         #[pyo3(from_py_with = conv::arg)] dt: f64,
         #[pyo3(from_py_with = conv::arg)] stable_limit: f64,
-        #[pyo3(from_py_with = conv::arg)] max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+        #[pyo3(from_py_with = conv::arg)] max_wall_s: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let steps = errors::count(steps, "steps")?;
         let this = &mut *slf;
         let n = this.model.n_nodes();
@@ -415,7 +421,8 @@ impl PyBody {
         #[pyo3(from_py_with = conv::arg)] dt: f64,
         #[pyo3(from_py_with = conv::arg)] ramp_start: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] stable_limit: f64,
-        #[pyo3(from_py_with = conv::arg)] max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+        #[pyo3(from_py_with = conv::arg)] max_wall_s: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let this = &mut *slf;
         let n = this.model.n_nodes();
         let start = ramp_start.unwrap_or(this.state.t);

@@ -1,5 +1,5 @@
-//! `palpate.HapticLoop`: the haptic loop (`palpate_haptics`) over a hybrid model: a native servo
-//! thread that reads a device, ticks the simulation and sends the force, never waiting on Python.
+//! `palpate.HapticLoop`: the haptic loop (`palpate_haptics`) over a hybrid model or a full-FEM
+//! body: a native servo thread that reads a device, ticks the simulation and sends the force, never waiting on Python.
 //! Python only starts it, reads snapshots (a seqlock: never blocks the loop) and stops it;
 //! waiting and the offline run release the GIL.
 //!
@@ -13,14 +13,15 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use palpate_core::runtime::{SimOptions, Tool};
-use palpate_core::Vec3;
+use palpate_core::{ModelBuilder, Vec3};
 use palpate_haptics::bridge::protocol::Reject;
 use palpate_haptics::bridge::{Bridge, BridgeStats};
 use palpate_haptics::devices::{Hand, HandParams, Replay, Scripted};
-use palpate_haptics::{CouplingParams, Device, DeviceKind, HapticCore, HybridPhysics, Idle, Physics, Realtime, Recording, SafetyParams, Servo, ServoConfig, ServoHandle, ServoReport, Snapshot, Stats, Vec3Cell};
+use palpate_haptics::{CouplingParams, Device, DeviceKind, FemOptions, FemPhysics, HapticCore, HybridPhysics, Idle, Physics, Realtime, Recording, SafetyParams, Servo, ServoConfig, ServoHandle, ServoReport, Snapshot, Stats, Vec3Cell};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
+use crate::body::PyBody;
 use crate::conv;
 use crate::errors::{self, HapticsError};
 use crate::hybrid::PyHybridModel;
@@ -40,7 +41,7 @@ fn busy(what: &str) -> PyErr {
     haptics_error(format!("the loop is {what} in another thread"))
 }
 
-/// The haptic loop over a hybrid model (issue 13): a servo thread at ``rate_hz`` (250 to 4000 Hz)
+/// The haptic loop over a hybrid model (issue 13) or a full-FEM body (issue 14): a servo thread at ``rate_hz`` (250 to 4000 Hz)
 /// that each tick reads ``device``, ticks the simulation (its tool driven through a virtual
 /// coupling) and sends the force through the safety layer (force limit, rate limit, ramp); a
 /// watchdog zeroes the force if the simulation misses ticks for ``stall_timeout``.
@@ -53,8 +54,14 @@ fn busy(what: &str) -> PyErr {
 ///
 /// Parameters
 /// ----------
-/// model : HybridModel
+/// model : HybridModel or Body
+///     A hybrid model (core, shell, skin), or a full-FEM :class:`Body`: its mesh, fixed nodes,
+///     gravity and integrator with ``material``, at rest (the body's state is not used). The
+///     tool meets a body's boundary nodes; its stiffness per node (``tool_stiffness``, default:
+///     no cap of its own) is capped each tick by what keeps the explicit contact stable on the
+///     lightest free boundary node (``palpate_haptics::FemPhysics``).
 /// material : Material
+///     The tissue's (a body's own material is replaced by it: pass ``body.material`` to keep it).
 /// device : str
 ///     ``"scripted"`` (needs ``times`` (k,) [s], strictly increasing, and ``knots`` (k, 3) [m]:
 ///     the tool-centre trajectory, e.g. a resolved ``palpate.touch`` script), ``"replay"``
@@ -69,6 +76,8 @@ fn busy(what: &str) -> PyErr {
 ///     bridge, else ``simulated``).
 /// idle : bool
 ///     No simulation (zero force): the idle loop the benchmark compares with.
+/// hold : bool
+///     Hybrid models only: see :class:`HybridSim`.
 /// coupling_stiffness, coupling_damping, proxy_mass : float, optional
 ///     The virtual coupling [N/m], [N s/m], [kg] (defaults: the device kind's).
 /// max_force, max_rate, ramp, stall_timeout : float, optional
@@ -203,7 +212,7 @@ impl PyHapticLoop {
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
-        #[pyo3(from_py_with = conv::arg)] model: PyRef<'_, PyHybridModel>,
+        model: &Bound<'_, PyAny>,
         #[pyo3(from_py_with = conv::arg)] material: PyRef<'_, PyMaterial>,
         #[pyo3(from_py_with = conv::arg)] device: String,
         #[pyo3(from_py_with = conv::arg)] rate_hz: f64,
@@ -228,7 +237,8 @@ impl PyHapticLoop {
         record_ticks: errors::Int,
         max_ticks: Option<errors::Int>,
         #[pyo3(from_py_with = conv::arg)] spin: Option<f64>,
-        #[pyo3(from_py_with = conv::arg)] realtime: bool) -> PyResult<Self> {
+        #[pyo3(from_py_with = conv::arg)] realtime: bool,
+    ) -> PyResult<Self> {
         // Counts as errors::Int: a negative one, or one beyond 64 bits, is a ParameterError
         // (pyo3's usize / u16 conversions raised OverflowError). The rest runs under the panic guard: a panic while opening a recording,
         // a device or the physics is an InternalError, not pyo3's PanicException.
@@ -316,7 +326,7 @@ impl PyHapticLoop {
 
             let physics: Box<dyn Physics> = if idle {
                 Box::new(Idle::default())
-            } else {
+            } else if let Ok(hm) = model.cast::<PyHybridModel>() {
                 let mut options = SimOptions { hold, ..SimOptions::default() };
                 let mut tool = Tool::default();
                 if let Some(r) = tool_radius {
@@ -326,8 +336,26 @@ impl PyHapticLoop {
                     tool.stiffness = k;
                 }
                 options.tool = tool;
-                let (hm, mat) = (model.model.clone(), material.inner);
+                let (hm, mat) = (hm.borrow().model.clone(), material.inner);
                 Box::new(py.detach(|| HybridPhysics::new(hm, mat, options)).map_err(errors::model_error)?)
+            } else if let Ok(body) = model.cast::<PyBody>() {
+                let mut options = FemOptions::default();
+                if let Some(r) = tool_radius {
+                    options.tool.radius = r;
+                }
+                if let Some(k) = tool_stiffness {
+                    options.tool.stiffness = k;
+                }
+                // The body's model rebuilt with the loop's material (its mesh, fixed nodes,
+                // gravity and integrator): the material is the loop's, as for a hybrid model.
+                let m = body.borrow();
+                let src = m.model();
+                let fixed: Vec<usize> = src.fixed().iter().enumerate().filter(|(_, &f)| f).map(|(i, _)| i).collect();
+                let builder = ModelBuilder::new(src.mesh().clone(), material.inner).fixed_nodes(fixed).gravity(src.gravity()).integrator(src.integrator());
+                drop(m);
+                Box::new(py.detach(|| builder.build().and_then(|model| FemPhysics::new(model, options))).map_err(errors::model_error)?)
+            } else {
+                return Err(errors::type_error(format!("model: expected a HybridModel or a Body, got {}", model.get_type().name()?)));
             };
             let id = physics.identity();
             if let Some(r) = &replay {
@@ -384,8 +412,10 @@ impl PyHapticLoop {
     }
 
     /// The organ's surface (the skin's vertices, (n, 3) [m], world frame; fresh near the tool,
-    /// elsewhere at most 32 ticks old) as of the latest surface snapshot (every 32 ticks), and
-    /// its tick, or None before one. Never blocks the loop.
+    /// elsewhere at most 32 ticks old) as of the latest surface snapshot, and its tick, or None
+    /// before one. Never blocks the loop. Snapshots are taken every 32 ticks while someone reads
+    /// them (a read within the last 512 ticks), else every 512: a reader's first read after a
+    /// long pause may be up to 512 ticks old, the next ones are fresh (poll, as a viewer does).
     fn surface<'py>(&self, py: Python<'py>) -> Option<(u64, Bound<'py, numpy::PyArray2<f64>>)> {
         let got = match &*self.stage.lock().unwrap() {
             Stage::Running(h) => Some(h.surface()),

@@ -80,7 +80,8 @@ impl PyHybridSim {
         #[pyo3(from_py_with = conv::arg)] max_tool_step: Option<f64>,
         linger_ticks: Option<errors::Int>,
         max_substeps: Option<errors::Int>,
-        #[pyo3(from_py_with = conv::arg)] mass_scaling: Option<f64>) -> PyResult<Self> {
+        #[pyo3(from_py_with = conv::arg)] mass_scaling: Option<f64>,
+    ) -> PyResult<Self> {
         let (linger_ticks, max_substeps) = (errors::count_opt(linger_ticks, "linger_ticks")?, errors::count_opt(max_substeps, "max_substeps")?);
         let mut tool = Tool::default();
         if let Some(r) = tool_radius {

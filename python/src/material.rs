@@ -84,7 +84,8 @@ impl PyMaterial {
         #[pyo3(from_py_with = conv::arg)] density: f64,
         #[pyo3(from_py_with = conv::arg)] phi: f64,
         #[pyo3(from_py_with = conv::arg)] psi: f64,
-        #[pyo3(from_py_with = conv::arg)] law: PyLaw) -> PyResult<Self> {
+        #[pyo3(from_py_with = conv::arg)] law: PyLaw,
+    ) -> PyResult<Self> {
         let elasticity = match (young, poisson, lame_lambda, lame_mu) {
             (Some(young), Some(poisson), None, None) => Elasticity::YoungPoisson { young, poisson },
             (None, None, Some(lambda), Some(mu)) => Elasticity::Lame { lambda, mu },

@@ -100,7 +100,8 @@ impl PyParticleBody {
         fixed: Option<&Bound<'_, PyAny>>,
         gravity: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = conv::arg)] hourglass: f64,
-        #[pyo3(from_py_with = conv::arg)] min_relative_weight: f64) -> PyResult<Self> {
+        #[pyo3(from_py_with = conv::arg)] min_relative_weight: f64,
+    ) -> PyResult<Self> {
         let p = conv::points_vec3(positions, "positions")?;
         let n = p.len();
         let m = conv::reals(masses, "masses", n, "(one per particle)")?;

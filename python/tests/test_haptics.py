@@ -573,3 +573,31 @@ def test_soak_and_bench_haptic_commands(capsys):
     assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--json", "--realtime"]) in (0, 3)
     r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert r["realtime"] == "SCHED_FIFO priority 80" or r["realtime"].startswith("refused: SCHED_FIFO"), r["realtime"]
+
+
+def test_full_fem_body_hand_worst_stays_finite():
+    """A hand's worst on a full-FEM body (issue 14) through the loop: a push aimed 25 mm into the
+    tissue (a 5 N-scale push held by the coupling, the servo's limit at 5 N) and a 0.5 m/s slide
+    over 50 mm and back: every force finite, no fault, the body touched. A wrong contact (no
+    stability cap on the penalty, a reaction of the wrong sign) blows up or faults here."""
+    from palpate.viewer.fem import load_fem_model
+
+    _, m = load_fem_model("ellipsoid_192")
+    free = np.flatnonzero(m.outer_free)
+    pts = m.outer_points
+    v = free[np.argmax(pts[free, 0] + 10 * (pts[free, 2] > 0.005))]
+    p = pts[v]
+    n = np.array([p[0], p[1], 0.0]) / np.hypot(p[0], p[1])
+    r = 0.005
+    c = lambda d, s: p + n * (r - d) + np.array([0.0, 0.0, s])      # noqa: E731
+    times = [0.0, 0.6, 0.9, 1.0, 1.1, 1.3]
+    knots = [c(-0.003, 0), c(-0.003, 0), c(0.025, 0), c(0.025, 0.05), c(0.025, 0), c(-0.003, 0)]
+    loop = palpate.HapticLoop(m.body, m.material, "scripted", times=times, knots=knots, max_force=5.0,
+                              record_ticks=2000)
+    r = loop.run()
+    assert r["n_faults"] == 0 and r["ticks"] > 1200, r
+    rec = loop.recorded()
+    assert np.isfinite(rec["force"]).all() and np.isfinite(rec["tool"]).all()
+    assert r["max_force_n"] > 0.3 and r["max_force_n"] <= 5.0 + 1e-9, r
+    with pytest.raises(palpate.ParameterTypeError, match="HybridModel or a Body"):
+        palpate.HapticLoop(m.body.mesh, m.material, "hand", hand_start=p)

@@ -228,10 +228,11 @@ def test_the_cli_runs_a_study_and_a_fit_and_refuses_a_bad_spec_in_one_line(tmp_p
 
 def test_bench_sweep_reports_its_keys(tmp_path):
     from palpate.sweep import bench as sb
-    p = run_cli("bench", "sweep", "ellipsoid_192", "--scenarios", "4", "--steps", "20", "--json", cwd=tmp_path)
+    p = run_cli("bench", "sweep", "ellipsoid_192", "--scenarios", "4", "--steps", "20", "--repeat", "2", "--json", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     r = json.loads(p.stdout)
-    assert set(sb.KEYS) <= set(r) and r["scenarios"] == 4 and r["worker2_s"] > 0 and r["startup_s"] > 0
+    assert set(sb.KEYS) <= set(r) and r["scenarios"] == 4 and r["repeat"] == 2 and r["worker2_s"] > 0 and r["startup_s"] > 0
+    assert r["bare2_s"] > 0 and r["cluster_start_stop_s"] > 0
 
 
 @pytest.mark.parametrize("make, expect", [

@@ -1,7 +1,8 @@
 //! Profile the hybrid tick on a model file: `cargo run --release --example tick_profile --
 //! MODEL.palpate [radius_mm] [ticks]` (a 3 mm press, a 10 mm slide and a release at the outer
 //! vertex farthest along +x, the tool along the direction from the outer surface's centroid;
-//! damped as the bench). Prints the tick's mean and percentiles and the mean sub-step count; run
+//! damped as the bench; `DEPTH_MM` sets the press's depth, `TRACE=FILE` writes one CSV row a
+//! tick). Prints the tick's mean and percentiles and the mean sub-step count; run
 //! it under `perf record` for where the time goes.
 #[path = "support/mod.rs"]
 mod support;
@@ -35,8 +36,12 @@ fn main() {
     let (press, hold, slide) = (ticks / 4, ticks / 10, ticks / 2);
     let mut times = Vec::with_capacity(ticks);
     let mut subs = 0usize;
+    // DEPTH_MM: the press's depth (default 3 mm); TRACE=FILE: one CSV row a tick (ms, active,
+    // entered, left, sub-steps, core iterations) to tell what the slow ticks have in common.
+    let depth = std::env::var("DEPTH_MM").ok().and_then(|s| s.parse::<f64>().ok()).unwrap_or(3.0) * 1e-3;
+    let mut trace = std::env::var("TRACE").ok().map(|f| std::io::BufWriter::new(std::fs::File::create(f).unwrap()));
     for k in 0..ticks {
-        let (d, s) = press_path(k, [press, hold, slide, ticks - press - hold - slide], 3e-3, 10e-3);
+        let (d, s) = press_path(k, [press, hold, slide, ticks - press - hold - slide], depth, 10e-3);
         let c = p + n_in * (d - radius) + tangent * s;
         let t0 = Instant::now();
         let rep = tick(&sim, &mut st, &mut ws, c, 1e-3).unwrap();
@@ -51,6 +56,10 @@ fn main() {
         }
         if std::env::var("SPIKES").is_ok() && ms > 1.5 {
             println!("tick {k}: {ms:.2} ms active {} (+{} -{}) substeps {} core iterations {} contacts {}+{}+{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.particle_contacts, rep.skin_contacts, rep.core_contacts);
+        }
+        if let Some(t) = trace.as_mut() {
+            use std::io::Write;
+            writeln!(t, "{k},{ms:.4},{},{},{},{},{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations).unwrap();
         }
         subs += rep.substeps;
     }

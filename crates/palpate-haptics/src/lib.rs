@@ -4,7 +4,7 @@
 //! - [`servo`]: [`HapticCore`] (one deterministic tick: device sample in, force out) and
 //!   [`Servo`] (the native thread at 250 Hz-4 kHz, absolute-deadline pacing, a watchdog);
 //! - [`physics`]: what the servo steps ([`Physics`]): [`HybridPhysics`] (the hybrid runtime),
-//!   [`Wall`], [`Idle`];
+//!   [`FemPhysics`] (a full-FEM body), [`Wall`], [`Idle`];
 //! - [`coupling`]: the virtual coupling (device <-> simulated tool), why a proxy with a mass;
 //! - [`safety`]: force limit, force-rate limit, ramp;
 //! - [`device`], [`devices`]: the [`Device`] interface; scripted, replay, simulated hand;
@@ -30,10 +30,10 @@ pub mod stats;
 
 pub use coupling::{CouplingParams, VirtualCoupling};
 pub use device::{Device, DeviceInput, DeviceKind, ForceCell, ForceSink};
-pub use physics::{HybridPhysics, Identity, Idle, Physics, Wall};
+pub use physics::{FemOptions, FemPhysics, HybridPhysics, Identity, Idle, Physics, Wall};
 pub use realtime::Realtime;
 pub use record::{Recording, TickRecord};
 pub use safety::{Safety, SafetyParams};
-pub use servo::{Fault, FaultRecord, HapticCore, Servo, ServoConfig, ServoHandle, ServoReport, TickOut};
+pub use servo::{Fault, FaultRecord, HapticCore, Servo, ServoConfig, ServoHandle, ServoReport, TickOut, IDLE_SNAPSHOT_TICKS};
 pub use snapshot::{Mailbox, Snapshot, SnapshotCell, Vec3Cell};
 pub use stats::Stats;

@@ -1,10 +1,12 @@
 //! What the servo steps: [`Physics`], one tick of a simulation with a position-driven tool, and
-//! its implementations: [`HybridPhysics`] (the hybrid runtime, `palpate_core::runtime`), and
-//! [`Wall`] and [`Idle`] (a rigid half-space and nothing: the tests' and the idle loop's).
+//! its implementations: [`HybridPhysics`] (the hybrid runtime, `palpate_core::runtime`),
+//! [`FemPhysics`] (a full-FEM body, `palpate_core::fem`), and [`Wall`] and [`Idle`] (a rigid
+//! half-space and nothing: the tests' and the idle loop's).
 
 use palpate_core::hybrid::{file, HybridModel};
-use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace};
-use palpate_core::{Material, ModelError, StepError, Vec3};
+use palpate_core::math::is_finite3;
+use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace, Tool};
+use palpate_core::{step, Material, Model, ModelError, State, StepError, Vec3, Workspace};
 
 /// Who the simulation is, for a recording: replaying against another model (or the same model
 /// with another material or options) would not give the recorded forces.
@@ -159,6 +161,210 @@ impl Physics for HybridPhysics {
     fn is_finite(&self) -> bool {
         let f = |v: &[Vec3]| v.iter().all(|p| p.iter().all(|c| c.is_finite()));
         f(&self.state.core.x) && f(&self.state.core.v) && f(&self.state.particles.x) && f(&self.state.particles.v) && f(&self.state.skin)
+    }
+    fn identity(&self) -> Identity {
+        self.identity.clone()
+    }
+}
+
+/// Options of [`FemPhysics`]: the tool and how far it moves in a tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FemOptions {
+    /// The rigid sphere: radius \[m\], and the most penalty stiffness \[N/m\] and approach damping
+    /// \[N s/m\] per boundary node; each tick takes the least of these and what keeps the
+    /// explicit contact stable on the lightest free boundary node ([`FemPhysics::contact_tool`];
+    /// the default: that bound alone).
+    pub tool: Tool,
+    /// The most the simulated tool moves in a tick \[m\] (the hybrid runtime's default).
+    pub max_tool_step: f64,
+}
+
+impl Default for FemOptions {
+    fn default() -> Self {
+        FemOptions {
+            tool: Tool { radius: palpate_core::runtime::tool::DEFAULT_RADIUS, stiffness: f64::INFINITY, damping: f64::INFINITY },
+            max_tool_step: SimOptions::default().max_tool_step,
+        }
+    }
+}
+
+/// `omega^2 h^2` of the contact spring on the lightest free boundary node at the tick's `dt`
+/// (see [`FemPhysics::contact_tool`]): half-way to the explicit limit of 4.
+pub const FEM_CONTACT_STABILITY: f64 = 1.0;
+/// Damping ratio of the contact (of critical, on the lightest free boundary node).
+pub const FEM_CONTACT_DAMPING_RATIO: f64 = 0.5;
+
+/// A full-FEM body (`palpate_core::fem`, stepped by [`palpate_core::step`] with the model's
+/// integrator) as the servo's physics, touched by a rigid sphere on its boundary nodes.
+///
+/// # The contact
+/// The tool is the hybrid runtime's [`Tool`]: the penalty of [`Tool::apply`] on the mesh's
+/// boundary nodes, at the tool's end-of-tick centre, held as the nodes' external force over the
+/// step (as the hybrid tick does on its core's surface); the tool receives exactly the opposite
+/// of their sum. A force held over an implicit step is explicit, so it is stable while the
+/// spring's `omega h = sqrt(k / m) dt` stays below 2 on every node it acts on: the backward-Euler
+/// system's compliance at a node is at most `dt^2 / m` (its matrix is `M` plus positive
+/// semi-definite terms), so `k <= 4 m_min / dt^2` bounds the loop on every contacted node at
+/// once. Each tick takes `k = min(tool.stiffness, FEM_CONTACT_STABILITY m_min / dt^2)` with
+/// `m_min` the lightest free boundary node, and damping of ratio [`FEM_CONTACT_DAMPING_RATIO`]
+/// (`(omega h)^2 + 2 (2 zeta omega h) = 3 < 4`: symplectic Euler's limit with damping), so
+/// any servo rate (250 Hz to 4 kHz) is stable. The price: the contact softens with finer
+/// meshes and faster rates (lighter nodes, shorter ticks), and a node pushed by more than
+/// `k R` passes through the sphere (the tool then sinks through a coarse mesh; no blow-up).
+///
+/// # State
+/// The last good state is a copy made by `clone_from` (allocation-free once warm); a failed step
+/// leaves the state as before the tick (`step` restores positions and velocities, the tick puts
+/// the external forces back).
+pub struct FemPhysics {
+    model: Model,
+    state: State,
+    ws: Workspace,
+    good: State,
+    options: FemOptions,
+    /// The boundary nodes, ascending: the contact set and the surface's points.
+    boundary: Vec<usize>,
+    /// The lightest free boundary node's mass \[kg\] (infinite if none is free).
+    min_mass: f64,
+    /// The contact forces of the tick being computed, swapped with `state.f_ext` for the step.
+    forces: Vec<Vec3>,
+    tool: Option<Vec3>,
+    good_tool: Option<Vec3>,
+    identity: Identity,
+}
+
+impl FemPhysics {
+    /// The body `model` at rest, touched by `options`' tool.
+    pub fn new(model: Model, options: FemOptions) -> Result<FemPhysics, ModelError> {
+        let t = &options.tool;
+        for (name, value, ok, reason) in [
+            ("tool radius", t.radius, t.radius > 0.0 && t.radius.is_finite(), "must be positive and finite [m]"),
+            ("tool stiffness", t.stiffness, t.stiffness > 0.0, "must be positive [N/m] (infinite: the stability bound)"),
+            ("tool damping", t.damping, t.damping >= 0.0, "must be >= 0 [N s/m] (infinite: the stability bound's)"),
+            ("max tool step", options.max_tool_step, options.max_tool_step > 0.0, "must be positive [m]"),
+        ] {
+            if !ok {
+                return Err(ModelError::Parameter { name, value, reason });
+            }
+        }
+        let mut boundary: Vec<usize> = model.mesh().boundary_faces().iter().flatten().copied().collect();
+        boundary.sort_unstable();
+        boundary.dedup();
+        let min_mass = boundary.iter().filter(|&&i| !model.fixed()[i]).map(|&i| model.masses()[i]).fold(f64::INFINITY, f64::min);
+        let identity = fem_identity(&model, &options);
+        let state = State::rest(&model);
+        let ws = Workspace::new(&model);
+        let good = state.clone();
+        let forces = vec![Vec3::zeros(); model.n_nodes()];
+        Ok(FemPhysics { model, state, ws, good, options, boundary, min_mass, forces, tool: None, good_tool: None, identity })
+    }
+
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+    pub fn state(&self) -> &State {
+        &self.state
+    }
+    /// The state, to change between ticks (fault injection in tests).
+    pub fn state_mut(&mut self) -> &mut State {
+        &mut self.state
+    }
+    /// The boundary nodes in ascending order: the contact set, and the order of
+    /// [`Physics::surface`]'s points (`numpy.unique` of the mesh's boundary faces).
+    pub fn boundary_nodes(&self) -> &[usize] {
+        &self.boundary
+    }
+
+    /// The tool as it acts in a tick of `dt` \[s\]: the options' radius, the stiffness and damping
+    /// capped by the explicit contact's stability on the lightest free boundary node (type docs).
+    pub fn contact_tool(&self, dt: f64) -> Tool {
+        let t = &self.options.tool;
+        let k = t.stiffness.min(FEM_CONTACT_STABILITY * self.min_mass / (dt * dt));
+        let c = t.damping.min(Tool::damping_for(k, self.min_mass, FEM_CONTACT_DAMPING_RATIO));
+        Tool { radius: t.radius, stiffness: if k.is_finite() { k } else { 0.0 }, damping: c }
+    }
+}
+
+/// The model's digest (FNV-1a, as the hybrid file's checksum) over its rest mesh, fixed nodes,
+/// masses, gravity, material, integrator and the options.
+fn fem_identity(model: &Model, options: &FemOptions) -> Identity {
+    let mut bytes: Vec<u8> = Vec::with_capacity(8 * (3 * model.n_nodes() + 4 * model.n_tets() + 2 * model.n_nodes()));
+    for p in model.mesh().points() {
+        p.iter().for_each(|c| bytes.extend_from_slice(&c.to_le_bytes()));
+    }
+    for t in model.mesh().tets() {
+        t.iter().for_each(|&i| bytes.extend_from_slice(&(i as u64).to_le_bytes()));
+    }
+    bytes.extend(model.fixed().iter().map(|&f| f as u8));
+    model.masses().iter().for_each(|m| bytes.extend_from_slice(&m.to_le_bytes()));
+    let material = model.material();
+    bytes.extend_from_slice(format!("{:?} {:?} {material:?} {:?} {options:?}", model.gravity(), model.integrator(), model.fixed().len()).as_bytes());
+    let description = format!(
+        "full FEM: {} nodes ({} fixed), {} tets; E = {} Pa, nu = {}, rho = {} kg/m^3; tool radius {} m",
+        model.n_nodes(), model.fixed().iter().filter(|&&f| f).count(), model.n_tets(), material.young(), material.poisson(), material.density(), options.tool.radius
+    );
+    Identity { digest: file::checksum(&bytes), description }
+}
+
+impl Physics for FemPhysics {
+    fn tick(&mut self, tool: &Vec3, dt: f64) -> Result<Vec3, StepError> {
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(StepError::BadTimeStep(dt));
+        }
+        if !is_finite3(tool) {
+            return Err(StepError::NonFiniteTool);
+        }
+        let prev = self.tool.unwrap_or(*tool);
+        // The simulated tool follows the device at most `max_tool_step` a tick (as the hybrid's).
+        let at = prev + (tool - prev).cap_magnitude(self.options.max_tool_step);
+        let tool_v = (at - prev) / dt;
+        self.forces.iter_mut().for_each(|f| *f = Vec3::zeros());
+        let sum = self.contact_tool(dt).apply(&at, &tool_v, &self.state.x, &self.state.v, &self.boundary, &mut self.forces);
+        // The contact forces become the step's external force; on failure the previous ones
+        // come back (the state as before the tick).
+        std::mem::swap(&mut self.state.f_ext, &mut self.forces);
+        if let Err(e) = step(&self.model, &mut self.state, &mut self.ws, dt) {
+            std::mem::swap(&mut self.state.f_ext, &mut self.forces);
+            return Err(e);
+        }
+        self.tool = Some(at);
+        Ok(sum.force_on_tool)
+    }
+    fn tool(&self) -> Option<Vec3> {
+        self.tool
+    }
+    fn max_tool_step(&self) -> f64 {
+        self.options.max_tool_step
+    }
+    fn checkpoint(&mut self) {
+        self.good.clone_from(&self.state);
+        self.good_tool = self.tool;
+    }
+    fn restore(&mut self) {
+        self.state.clone_from(&self.good);
+        self.tool = self.good_tool;
+    }
+    /// The boundary nodes as simulated, in ascending node order ([`FemPhysics::boundary_nodes`]).
+    fn surface(&self, out: &mut [Vec3]) {
+        for (o, &i) in out.iter_mut().zip(&self.boundary) {
+            *o = self.state.x[i];
+        }
+    }
+    fn surface_len(&self) -> usize {
+        self.boundary.len()
+    }
+    /// Every node, in the mesh's order.
+    fn interior(&self, out: &mut [Vec3]) -> usize {
+        let n = self.state.x.len().min(out.len());
+        out[..n].copy_from_slice(&self.state.x[..n]);
+        n
+    }
+    fn interior_capacity(&self) -> usize {
+        self.state.x.len()
+    }
+    fn is_finite(&self) -> bool {
+        let f = |v: &[Vec3]| v.iter().all(is_finite3);
+        f(&self.state.x) && f(&self.state.v) && self.tool.is_none_or(|t| is_finite3(&t))
     }
     fn identity(&self) -> Identity {
         self.identity.clone()

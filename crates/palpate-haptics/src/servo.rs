@@ -109,7 +109,10 @@ pub struct ServoConfig {
     /// The last part of each wait that is spun rather than slept \[s\] (default 200 us).
     pub spin: f64,
     /// Ticks between surface snapshots for a viewer ([`ServoHandle::surface`]; default 32:
-    /// 31 Hz at 1 kHz; 0: none).
+    /// 31 Hz at 1 kHz; 0: none) while someone reads them (a read within the last
+    /// [`IDLE_SNAPSHOT_TICKS`] ticks); with no reader, one every [`IDLE_SNAPSHOT_TICKS`] ticks.
+    /// (A snapshot copies the whole skin, 0.76 MB on Rodero, in the servo thread: a headless
+    /// loop should not pay it 31 times a second.)
     pub surface_every: u64,
     /// Run the servo under `SCHED_FIFO` (and the watchdog one level above it), so that the
     /// machine's other work cannot preempt a tick ([`crate::realtime`]); refused without
@@ -117,6 +120,11 @@ pub struct ServoConfig {
     /// (the module says why).
     pub realtime: bool,
 }
+
+/// Without a reader, the surface and interior snapshots are refreshed about once every this many
+/// ticks (0.5 s at 1 kHz: a reader's first read is at most about that old); a read makes them
+/// follow [`ServoConfig::surface_every`] again for as many ticks.
+pub const IDLE_SNAPSHOT_TICKS: u64 = 512;
 
 impl Default for ServoConfig {
     fn default() -> Self {
@@ -562,8 +570,8 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
     let period = Duration::from_secs_f64(cfg.dt());
     let spin = Duration::from_secs_f64(cfg.spin);
     let mut times = TickTimes::new(cfg.stats_ticks, cfg.rate_hz);
-    let mut surface = vec![Vec3::zeros(); if cfg.surface_every > 0 { core.physics.surface_len() } else { 0 }];
-    let mut interior = vec![Vec3::zeros(); if cfg.surface_every > 0 { core.physics.interior_capacity() } else { 0 }];
+    // Snapshots for readers: the tick of the last read seen and the reads counted then.
+    let (mut read_tick, mut reads, mut published) = (0u64, 0u64, None::<u64>);
     let start = Instant::now();
     let mut deadline = start;
     let mut last_start: Option<Instant> = None;
@@ -617,13 +625,21 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
             buttons: out.buttons,
         };
         shared.snapshot.publish(&snap);
-        if !surface.is_empty() && core.tick.is_multiple_of(cfg.surface_every) {
-            core.physics.surface(&mut surface);
-            shared.surface.publish(core.tick, &surface);
-        }
-        if !interior.is_empty() && core.tick.is_multiple_of(cfg.surface_every) {
-            let k = core.physics.interior(&mut interior);
-            shared.interior.publish(core.tick, &interior[..k]);
+        if cfg.surface_every > 0 && core.tick.is_multiple_of(cfg.surface_every) {
+            let r = shared.surface.reads() + shared.interior.reads();
+            if r != reads {
+                (reads, read_tick) = (r, core.tick);
+            }
+            let watched = core.tick.saturating_sub(read_tick) <= IDLE_SNAPSHOT_TICKS;
+            if watched || published.is_none_or(|t| core.tick - t >= IDLE_SNAPSHOT_TICKS) {
+                published = Some(core.tick);
+                let physics = &core.physics;
+                shared.surface.publish_with(core.tick, |out| {
+                    physics.surface(out);
+                    out.len()
+                });
+                shared.interior.publish_with(core.tick, |out| physics.interior(out));
+            }
         }
         if late > period {
             // More than a whole tick late: start again from now (no burst of catch-up ticks).

@@ -183,12 +183,14 @@ impl SnapshotCell {
 /// particles, for a viewer): the writer copies into the shared slot only if no reader holds it
 /// (`try_lock`), so it never waits; a reader clones the slot out. A publish a reader is copying
 /// from is skipped (the next one lands): the loop's rule is that it never blocks, not that every
-/// frame is seen.
+/// frame is seen. Reads are counted ([`Mailbox::reads`]), so that the writer can tell whether
+/// anyone is looking (the servo publishes rarely when nobody is: see `ServoConfig::surface_every`).
 #[derive(Debug, Default)]
 pub struct Mailbox {
     slot: Mutex<Slot>,
     /// Any length up to the capacity ([`Mailbox::up_to`]), or exactly it ([`Mailbox::new`]).
     variable: bool,
+    reads: AtomicU64,
 }
 
 #[derive(Debug, Default)]
@@ -202,11 +204,11 @@ impl Mailbox {
     /// A mailbox for exactly `n` points (allocated now: a publish only copies); before the first
     /// publish it holds `n` zeros.
     pub fn new(n: usize) -> Mailbox {
-        Mailbox { slot: Mutex::new(Slot { tick: 0, len: n, points: vec![Vec3::zeros(); n] }), variable: false }
+        Mailbox { slot: Mutex::new(Slot { tick: 0, len: n, points: vec![Vec3::zeros(); n] }), variable: false, reads: AtomicU64::new(0) }
     }
     /// A mailbox for up to `capacity` points (allocated now); empty before the first publish.
     pub fn up_to(capacity: usize) -> Mailbox {
-        Mailbox { slot: Mutex::new(Slot { tick: 0, len: 0, points: vec![Vec3::zeros(); capacity] }), variable: true }
+        Mailbox { slot: Mutex::new(Slot { tick: 0, len: 0, points: vec![Vec3::zeros(); capacity] }), variable: true, reads: AtomicU64::new(0) }
     }
     /// Publishes `points` as of tick `tick` unless a reader holds the slot or the length does not
     /// fit (not the mailbox's length, or over its capacity); returns whether it did. Never blocks,
@@ -222,10 +224,30 @@ impl Mailbox {
             _ => false,
         }
     }
+    /// Publishes what `fill` writes straight into the slot (no copy of the writer's own):
+    /// `fill` gets the whole slot (the mailbox's length, or its capacity) and returns how many
+    /// points it wrote (a fixed-length mailbox publishes the whole slot whatever it returns).
+    /// Skipped, `fill` not called, when a reader holds the slot. Never blocks, never allocates.
+    pub fn publish_with(&self, tick: u64, fill: impl FnOnce(&mut [Vec3]) -> usize) -> bool {
+        match self.slot.try_lock() {
+            Ok(mut g) => {
+                let n = fill(&mut g.points);
+                g.len = if self.variable { n.min(g.points.len()) } else { g.points.len() };
+                g.tick = tick;
+                true
+            }
+            Err(_) => false,
+        }
+    }
     /// The last published points and their tick (tick 0: nothing published yet).
     pub fn latest(&self) -> (u64, Vec<Vec3>) {
+        self.reads.fetch_add(1, Ordering::Relaxed);
         let g = self.slot.lock().unwrap_or_else(|e| e.into_inner());
         (g.tick, g.points[..g.len].to_vec())
+    }
+    /// How many times [`Mailbox::latest`] has been called.
+    pub fn reads(&self) -> u64 {
+        self.reads.load(Ordering::Relaxed)
     }
 }
 

@@ -419,6 +419,8 @@ fn servo_publishes_the_surface_for_a_viewer() {
     let h = Servo::start(core, Box::new(dev), &cfg).unwrap();
     let t0 = std::time::Instant::now();
     while h.snapshot().map_or(0, |s| s.tick) < 700 && t0.elapsed() < Duration::from_secs(60) {
+        // Polled as a viewer does (a servo nobody reads refreshes its snapshots rarely).
+        let _ = (h.surface(), h.interior());
         std::thread::sleep(Duration::from_millis(20));
     }
     let (tick, skin) = h.surface();
@@ -437,3 +439,46 @@ fn servo_publishes_the_surface_for_a_viewer() {
     assert!(core_moved > 1e-5, "the press moves the core in the snapshot: {core_moved} m");
 }
 
+
+/// A servo nobody reads copies its surface rarely (every `IDLE_SNAPSHOT_TICKS`: the skin is 0.76
+/// MB on Rodero, a cost in the servo thread 31 times a second otherwise), and a reader brings the
+/// snapshots back to `surface_every` at once. Fails if the servo publishes unwatched at the full
+/// rate, or never again after a reader comes.
+#[test]
+fn a_servo_nobody_reads_refreshes_its_surface_rarely() {
+    use palpate_haptics::IDLE_SNAPSHOT_TICKS;
+    let physics = hybrid();
+    let (p, n) = probe(&physics.sim().hybrid);
+    let r = physics.sim().options.tool.radius;
+    let dev = Scripted::new(vec![0.0, 10.0], vec![p + n * (r + 0.002), p + n * (r + 0.002)]).unwrap();
+    let cfg = ServoConfig { surface_every: 16, ..Default::default() };
+    let core = HapticCore::with_config(Box::new(physics), &cfg, &dev).unwrap();
+    let h = Servo::start(core, Box::new(dev), &cfg).unwrap();
+    let now = || h.snapshot().map_or(0, |s| s.tick);
+    let t0 = std::time::Instant::now();
+    while now() < 3 * IDLE_SNAPSHOT_TICKS + 100 && t0.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // Unwatched since the start: published at the full rate for the first IDLE ticks (no read can
+    // have come yet), then every IDLE ticks or so.
+    let (first, _) = h.surface();
+    let behind = now() - first;
+    assert!(first > IDLE_SNAPSHOT_TICKS, "refreshed while idle too: tick {first}");
+    assert!(behind > 16 + 20, "unwatched, yet the snapshot is {behind} ticks old only: published at the full rate");
+    assert!(behind <= IDLE_SNAPSHOT_TICKS + 64, "the idle refresh stopped: {behind} ticks old");
+    // Now watched: fresh within a few periods.
+    let t1 = std::time::Instant::now();
+    let mut fresh = false;
+    while t1.elapsed() < Duration::from_secs(5) {
+        let (t, skin) = h.surface();
+        let _ = h.interior();
+        if t > first && now() - t <= 64 {
+            assert!(!skin.is_empty());
+            fresh = true;
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    h.stop();
+    assert!(fresh, "a reader did not bring the snapshots back to surface_every");
+}

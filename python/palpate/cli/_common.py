@@ -214,6 +214,24 @@ def load_hybrid_model(model_spec: str, cmd: str):
         raise Fail(f"palpate {cmd}: {model_spec}: {type(e).__name__}: {e}", cause=e) from None
 
 
+def load_view_model(model_spec: str, cmd: str, unit: str = "m"):
+    """``(name, model)`` for ``palpate view`` / ``palpate bench view``: a full-FEM
+    :class:`palpate.viewer.fem.FemModel` for a protocol mesh name, a scene (.toml) or a tet mesh
+    file (coordinates in ``unit``), else a hybrid model (:func:`load_hybrid_model`); a bad one is a
+    :class:`Fail` naming the file and the reason (bad input, or by :data:`EXIT_CODES`)."""
+    from ..viewer.fem import is_fem_spec, load_fem_model
+
+    if not is_fem_spec(model_spec):
+        return load_hybrid_model(model_spec, cmd)
+    try:
+        return load_fem_model(model_spec, unit)
+    except palpate_errors() as e:
+        # The readers' and the scene's messages name the file already.
+        raise Fail(f"palpate {cmd}: {type(e).__name__}: {e}", cause=e) from None
+    except (ValueError, OSError) as e:
+        raise Fail(f"palpate {cmd}: {model_spec}: {e}") from None
+
+
 def model_lines(info: dict) -> List[str]:
     """The description of a hybrid model's info() dict, shared by build and info."""
     i = info

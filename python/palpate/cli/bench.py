@@ -15,7 +15,7 @@ from .. import _progress
 from .. import bench
 from .. import bench_hybrid as bh
 from .. import bench_particles as bp
-from ._common import FAILED, Fail, RunFailed, Usage, add_quiet, fmt_mm, load_hybrid_model, num, palpate_errors
+from ._common import FAILED, Fail, RunFailed, Usage, add_quiet, fmt_mm, load_hybrid_model, load_view_model, num, palpate_errors
 
 
 def add_parser(sub) -> None:
@@ -94,6 +94,7 @@ def _add_sweep(bsub) -> None:
                    help="190, 1350, 10k, 50k (the shared lv_* meshes) or ellipsoid_192 (default 1350)")
     w.add_argument("--scenarios", type=int, default=64, metavar="N", help="scenarios (default 64)")
     w.add_argument("--steps", type=int, default=1000, help="steps of 1 ms a scenario (default 1000)")
+    w.add_argument("--repeat", type=int, default=3, help="rounds of the three runs; medians reported (default 3)")
     w.add_argument("--json", action="store_true", help="one JSON object")
     w.set_defaults(func=cmd_bench_sweep)
 
@@ -105,14 +106,18 @@ def cmd_bench_sweep(a) -> int:
 
     if a.scenarios < 2:
         raise Usage("palpate bench sweep: --scenarios must be at least 2")
-    r = sb.run(a.mesh, a.scenarios, a.steps, log=None if a.json else print)
+    if not 1 <= a.repeat <= 100:
+        raise Usage("palpate bench sweep: --repeat must be 1 to 100")
+    r = sb.run(a.mesh, a.scenarios, a.steps, a.repeat, log=None if a.json else print)
     if a.json:
         print(_json.dumps(r))
     else:
         print(f"palpate bench sweep: {r['scenarios']} scenarios of {r['steps']} steps on {r['mesh']}: "
               f"loop {r['loop_per_s']:.2f}/s, 1 worker {r['worker1_per_s']:.2f}/s, 2 workers {r['worker2_per_s']:.2f}/s; "
               f"runner overhead {100 * r['overhead_per_scenario']:.1f}% a scenario ({100 * r['overhead_per_scenario_steady']:.1f}% past "
-              f"the cluster's {r['startup_s']:.2f} s start-up); speed-up 2 over 1: {r['speedup_2_over_1']:.2f}x")
+              f"the cluster's {r['cluster_start_stop_s']:.2f} s start and stop; importing Dask took {r['startup_s']:.2f} s once); speed-up 2 over 1: "
+              f"{r['speedup_2_over_1']:.2f}x ({r['speedup_2_over_1_steady']:.2f}x past the start-up; two bare processes "
+              f"without Dask: {r['bare_speedup_2']:.2f}x over the loop); medians of {r['repeat']}")
 
 
 def _add_view(bsub) -> None:
@@ -121,7 +126,9 @@ def _add_view(bsub) -> None:
                                     "(20 Hz targets, as a mouse drag): alone, under palpate view with no page, with the page "
                                     "open in the system's headless Chromium (niced), and alone again; report the loop's period "
                                     "percentiles and overruns, and the viewer's frame rates (palpate/viewer/bench.py).")
-    w.add_argument("model", metavar="MODEL", nargs="?", default="rodero")
+    w.add_argument("model", metavar="MODEL", nargs="?", default="rodero",
+                   help="as palpate view's: a hybrid model or shape, or a full-FEM tet mesh, scene or protocol mesh name")
+    w.add_argument("--unit", choices=("m", "cm", "mm"), default="m", help="a tet mesh file's coordinate unit (default m)")
     w.add_argument("--seconds", type=float, default=20.0, metavar="S", help="length of each run [s] (default 20)")
     w.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000)")
     w.add_argument("--fps", type=float, default=30.0, metavar="HZ", help="viewer update rate [Hz] (default 30)")
@@ -149,7 +156,7 @@ def cmd_bench_view(a) -> int:
         raise RunFailed(f"palpate bench view: needs a browser: {why or why2}")
     from ..viewer import bench as vb
 
-    name, model = load_hybrid_model(a.model, "bench view")
+    name, model = load_view_model(a.model, "bench view", a.unit)
     say = (lambda s: None) if a.json else (lambda s: print(f"  ... {s}", file=sys.stderr, flush=True))
     try:
         r = vb.bench(model, name, a.seconds, a.rate, a.fps, on_status=say, realtime=a.realtime)

@@ -4,17 +4,19 @@ the force and a live plot; dragging on the surface moves the simulated hand. ``-
 OUT.png`` renders one frame of a press with the system's headless Chromium and exits.
 
 MODEL is a hybrid model file (``palpate build``) or a shape name (default ``rodero``; ``ventricle``
-and ``ellipsoids`` build in a second without data). A tet mesh or a scene file (full FEM) is not
-viewable yet: the viewer draws the hybrid loop's snapshots only."""
+and ``ellipsoids`` build in a second without data), or a full-FEM body: a tet mesh file (``.msh``,
+``.vtu``, ``.vtk``, ``.npz``, ...; ``--unit`` for its coordinates; the nodes at its lowest z are
+held), a scene file (``.toml``, as ``palpate run`` reads: its material is the first preset, its
+fixed nodes and gravity are kept) or a protocol mesh name (``ellipsoid_192``, ``lv_1350``, ...). A
+full-FEM body is drawn by its boundary faces (the tool meets its boundary nodes) and its tets."""
 from __future__ import annotations
 
 import ipaddress
 import math
-import os
 import sys
 import time
 
-from ._common import INPUT, Fail, RunFailed, Usage, load_hybrid_model, num
+from ._common import Fail, RunFailed, Usage, load_view_model, num
 
 #: Status lines on stdout every this many seconds (unless --quiet).
 STATUS_EVERY_S = 1.0
@@ -25,11 +27,15 @@ def add_parser(sub) -> None:
 
     v = sub.add_parser("view", help="see the haptic loop and touch it in a browser (viser)",
                        description="Serve a web viewer of the haptic loop on MODEL (a palpate model file or a shape "
-                                   "name: rodero (default), ventricle, ellipsoids) and print its URL. Drag on the "
+                                   "name: rodero (default), ventricle, ellipsoids; or a full-FEM body: a tet mesh "
+                                   "file, a scene file (.toml) or a protocol mesh name such as ellipsoid_192) and "
+                                   "print its URL. Drag on the "
                                    "surface (or move the gizmo) to press with the simulated hand; --device bridge "
                                    "lets a real device drive the view. Stops on Ctrl-C or after --seconds. Needs "
                                    "the view extra (pip install 'palpate[view]').")
     v.add_argument("model", nargs="?", default="rodero", metavar="MODEL")
+    v.add_argument("--unit", choices=("m", "cm", "mm"), default="m",
+                   help="a tet mesh file's coordinate unit (default m; the shared lv_*.msh are in cm)")
     v.add_argument("--host", default="127.0.0.1", metavar="IP",
                    help="address to serve on (default 127.0.0.1; anything else is reachable from the network "
                         "without authentication: a warning says so)")
@@ -51,7 +57,8 @@ def add_parser(sub) -> None:
                    help="render one frame of a press at the probe point in headless Chromium to OUT.png and exit")
     v.add_argument("--press", type=float, default=0.004, metavar="M",
                    help="with --screenshot: the press depth at the probe point [m] (default 0.004)")
-    v.add_argument("--show-core", action="store_true", help="draw the FEM core's tets (as simulated) from the start")
+    v.add_argument("--show-core", action="store_true",
+                   help="draw the FEM core's tets (a full-FEM body's tets) as simulated from the start")
     v.add_argument("--show-particles", action="store_true", help="draw the active shell particles from the start")
     v.add_argument("--realtime", action="store_true",
                    help="run the haptic servo under SCHED_FIFO so that the browser cannot preempt a tick (needs root, "
@@ -114,13 +121,7 @@ def cmd_view(a) -> int:
             raise RunFailed(f"palpate view: --screenshot needs a browser: {why or why2}")
         if a.press > PRESS_RANGE[1] + a.tool_radius:
             raise Usage(f"palpate view: --press {a.press} m is deeper than the viewer allows")
-    try:
-        name, model = load_hybrid_model(a.model, "view")
-    except Fail as e:
-        if os.path.isfile(a.model) and e.code == INPUT:
-            raise Fail(f"{e}; a tet mesh or a scene file (full FEM) is not viewable yet: build a hybrid model "
-                       "from its surfaces with palpate build") from None
-        raise
+    name, model = load_view_model(a.model, "view", a.unit)
     if not is_loopback(a.host):
         print(f"palpate: warning: serving on {a.host}: anyone who can reach port {a.port} can watch and drive the "
               "simulation (no authentication, no encryption); use 127.0.0.1 and an SSH tunnel instead", file=sys.stderr)

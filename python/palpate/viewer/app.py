@@ -25,6 +25,7 @@ import numpy as np
 
 from .. import _palpate as _p
 from . import colors
+from .fem import FemModel, loop_model
 from .guard import STATS, TargetGuard, finite_number, install_message_bounds
 
 #: Scene units per metre (the scene is in millimetres).
@@ -75,8 +76,9 @@ def _unit(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
 
 
 class Viewer:
-    """A web viewer of the haptic loop on ``model`` (a :class:`palpate.HybridModel`), served by
-    viser on ``host``:``port`` (``port=0``: a free one; :attr:`url`).
+    """A web viewer of the haptic loop on ``model`` (a :class:`palpate.HybridModel`, or a
+    full-FEM :class:`palpate.viewer.fem.FemModel`: a tet mesh or a scene's body), served by viser
+    on ``host``:``port`` (``port=0``: a free one; :attr:`url`).
 
     ``device`` ``"hand"``: a simulated hand the page moves (drag on the surface, or the gizmo);
     ``"bridge"``: a real device through the UDP bridge on ``bridge_host``:``bridge_port``
@@ -85,15 +87,23 @@ class Viewer:
     [Hz] (the loop's is ``rate_hz``); ``show_core``, ``show_particles``: draw the core's tets and
     the active particles from the start (the GUI's "Show" boxes); ``realtime``: the servo under
     ``SCHED_FIFO`` (:class:`palpate.HapticLoop`), so that the browser and the viewer's own threads
-    cannot preempt a tick. Raises :class:`palpate.ParameterError` for a bad value.
+    cannot preempt a tick. A full-FEM model draws its boundary faces as the surface and its tets
+    as the "core"; a scene's material is the first preset ("scene: ..."). Raises
+    :class:`palpate.ParameterError` for a bad value.
     :meth:`close` stops the loop and the server."""
 
-    def __init__(self, model: "_p.HybridModel", name: str = "model", *, host: str = "127.0.0.1", port: int = 8080,
+    def __init__(self, model: "_p.HybridModel | FemModel", name: str = "model", *, host: str = "127.0.0.1", port: int = 8080,
                  device: str = "hand", bridge_host: str = "127.0.0.1", bridge_port: int = 0,
                  preset: Optional[str] = None, tool_radius: float = 0.005, press_depth: float = 0.003,
                  rate_hz: float = 1000.0, fps: float = 30.0, max_force: Optional[float] = None,
                  show_core: bool = False, show_particles: bool = False, realtime: bool = False):
-        presets = _presets()
+        self.fem = isinstance(model, FemModel)
+        presets = dict(_presets())
+        if self.fem and model.material is not None:
+            m = model.material
+            # The scene's own material first (the default), beside the viewer's presets.
+            presets = {f"scene: {m.young / 1e3:g} kPa, nu {m.poisson:g}": (lambda: m), **presets}
+        self.presets = presets
         preset = preset if preset is not None else next(iter(presets))
         if preset not in presets:
             raise _p.ParameterError(f"preset {preset!r}: expected one of {', '.join(presets)}")
@@ -123,6 +133,10 @@ class Viewer:
         self.center = 0.5 * (self.rest[used].min(axis=0) + self.rest[used].max(axis=0))
         self.size = float(np.linalg.norm(np.ptp(self.rest[used], axis=0)))
         v = probe_point(self.rest, self.tris)
+        if self.fem and not model.outer_free[v] and model.outer_free.any():
+            # A held node does not move: the free boundary node nearest the probe instead.
+            free = np.flatnonzero(model.outer_free)
+            v = int(free[np.argmin(np.linalg.norm(self.rest[free] - self.rest[v], axis=1))])
         self.probe = self.rest[v].copy()
         self.probe_normal = _unit(self.normals[v], _unit(self.rest[v] - self.center, np.array([1.0, 0.0, 0.0])))
         self.guard = TargetGuard.around(self.rest[used], margin=max(0.02, 0.25 * self.size))
@@ -241,13 +255,14 @@ class Viewer:
     # -- the loop -------------------------------------------------------------------------------
     def _make_loop(self) -> "_p.HapticLoop":
         s = self.settings
-        mat = _presets()[s["preset"]]()
+        mat = self.presets[s["preset"]]()
         common: Dict[str, Any] = dict(rate_hz=s["rate_hz"], tool_radius=s["tool_radius"], realtime=s["realtime"])
         if s["max_force"] is not None:
             common["max_force"] = s["max_force"]
         if s["device"] == "bridge":
-            return _p.HapticLoop(self.model, mat, "bridge", port=s["bridge_port"], host=s["bridge_host"], **common)
-        return _p.HapticLoop(self.model, mat, "hand", hand_start=self.home(), **common)
+            return _p.HapticLoop(loop_model(self.model), mat, "bridge", port=s["bridge_port"], host=s["bridge_host"],
+                                 **common)
+        return _p.HapticLoop(loop_model(self.model), mat, "hand", hand_start=self.home(), **common)
 
     def _restart(self, wait: bool = True) -> None:
         """Stops the running loop and starts one with the current settings (``wait``: here, else
@@ -335,7 +350,9 @@ class Viewer:
 
     def _build_gui(self) -> None:
         gui = self.server.gui
-        gui.add_markdown(f"**{self.name}**: {len(self.rest):,} surface vertices. Drag on the surface to press "
+        kind = (f"full FEM, {len(self.model.core_tets):,} tets; the tool meets the boundary nodes" if self.fem
+                else "hybrid")
+        gui.add_markdown(f"**{self.name}** ({kind}): {len(self.rest):,} surface vertices. Drag on the surface to press "
                          "with the tool (the press depth below), or move the gizmo: both set the target of the "
                          "simulated hand, which the 1 kHz loop follows.")
         self.note = gui.add_markdown("")
@@ -365,7 +382,7 @@ class Viewer:
             self.g_reset = gui.add_button("reset", hint="a new loop: the tissue at rest, the hand at home")
             self.g_reset.on_click(lambda _: self._restart(wait=False))
         with gui.add_folder("Tool and device"):
-            self.g_preset = gui.add_dropdown("material", tuple(_presets()), initial_value=self.settings["preset"])
+            self.g_preset = gui.add_dropdown("material", tuple(self.presets), initial_value=self.settings["preset"])
             self.g_preset.on_update(lambda _: self._set("preset", self.g_preset.value))
             self.g_radius = gui.add_slider("tool radius [mm]", TOOL_RADIUS_RANGE[0] * MM, TOOL_RADIUS_RANGE[1] * MM,
                                            0.5, self.settings["tool_radius"] * MM)
@@ -374,9 +391,12 @@ class Viewer:
             self.g_device = gui.add_dropdown("device", DEVICES, initial_value=self.settings["device"])
             self.g_device.on_update(lambda _: self._set("device", self.g_device.value))
         with gui.add_folder("Show", expand_by_default=any(self._show_initial)):
-            self.g_core = gui.add_checkbox("core tets", self._show_initial[0], hint="the FEM core's tet edges, as simulated")
+            self.g_core = gui.add_checkbox("tets" if self.fem else "core tets", self._show_initial[0],
+                                           hint="the FEM core's tet edges, as simulated")
             self.g_core.on_update(lambda _: self._show_interior())
-            self.g_active = gui.add_checkbox("active particles", self._show_initial[1], hint="the shell particles simulated now")
+            # A full-FEM body has no particles: the box stays off and hidden.
+            self.g_active = gui.add_checkbox("active particles", self._show_initial[1] and not self.fem,
+                                             hint="the shell particles simulated now", visible=not self.fem)
             self.g_active.on_update(lambda _: self._show_interior())
             self.core.visible = bool(self.g_core.value)
             self.surface.opacity = self._opacity()
@@ -390,7 +410,7 @@ class Viewer:
             pass
 
     def _set(self, key: str, value: Any) -> None:
-        if key == "preset" and value not in _presets():
+        if key == "preset" and value not in self.presets:
             return
         if key == "device" and value not in DEVICES:
             return

@@ -60,7 +60,9 @@ def _pick(r: Dict[str, Any]) -> Dict[str, Any]:
 
 def run_alone(model: "_p.HybridModel", material: "_p.Material", home: np.ndarray, path, seconds: float,
               rate_hz: float, tool_radius: float, realtime: bool = False) -> Dict[str, Any]:
-    loop = _p.HapticLoop(model, material, "hand", hand_start=home, rate_hz=rate_hz, tool_radius=tool_radius,
+    from .fem import loop_model
+
+    loop = _p.HapticLoop(loop_model(model), material, "hand", hand_start=home, rate_hz=rate_hz, tool_radius=tool_radius,
                          realtime=realtime)
     stop = threading.Event()
     th = threading.Thread(target=_drive, args=(loop.set_hand_target, path, stop), daemon=True)

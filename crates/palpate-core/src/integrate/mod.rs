@@ -174,7 +174,8 @@ pub struct StepReport {
 /// Advance `state` by `dt` \[s\] with the model's integrator.
 ///
 /// Errors leave `state` as it was: a non-positive or non-finite `dt`, a non-finite external
-/// force, a failed factorisation, or a non-finite result (reported with the first bad node).
+/// force, position or velocity given, a failed factorisation, or a non-finite result (reported
+/// with the first bad node).
 pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Result<StepReport, StepError> {
     if !(dt > 0.0 && dt.is_finite()) {
         return Err(StepError::BadTimeStep(dt));
@@ -185,6 +186,13 @@ pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Re
     }
     if let Some(node) = state.f_ext.iter().position(|f| !is_finite3(f)) {
         return Err(StepError::NonFiniteForce { node });
+    }
+    // A non-finite state on entry (set by a caller between steps) is refused, not stepped: the
+    // minimising schemes would drop a NaN velocity without a word (its line search rejects the
+    // NaN trial points and the step's velocity is recomputed from positions), a silent reset.
+    let bad_in = state.x.iter().position(|x| !is_finite3(x)).map(|n| ("position given to the step", n));
+    if let Some((what, node)) = bad_in.or_else(|| state.v.iter().position(|v| !is_finite3(v)).map(|n| ("velocity given to the step", n))) {
+        return Err(StepError::NonFinite { what, node, time: state.t });
     }
     ws.x_save.copy_from_slice(&state.x);
     ws.v_save.copy_from_slice(&state.v);
