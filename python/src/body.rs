@@ -147,12 +147,11 @@ impl PyBody {
     #[pyo3(signature = (mesh, material, fixed = None, gravity = None, integrator = None))]
     fn new(
         py: Python<'_>,
-        mesh: Bound<'_, PyTetMesh>,
-        material: Bound<'_, PyMaterial>,
+        #[pyo3(from_py_with = conv::arg)] mesh: Bound<'_, PyTetMesh>,
+        #[pyo3(from_py_with = conv::arg)] material: Bound<'_, PyMaterial>,
         fixed: Option<&Bound<'_, PyAny>>,
         gravity: Option<&Bound<'_, PyAny>>,
-        integrator: Option<&Bound<'_, PyAny>>,
-    ) -> PyResult<Self> {
+        integrator: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
         let n = mesh.get().inner.n_nodes();
         let fixed = match fixed {
             Some(f) if !f.is_none() => conv::indices(f, "fixed", n, conv::NODES, false)?,
@@ -191,7 +190,12 @@ impl PyBody {
     /// Other Python threads run meanwhile; they cannot use this body until the call returns
     /// (doing so raises ``RuntimeError: Already borrowed``).
     #[pyo3(signature = (n = errors::Int::Fits(1), dt = 1e-3), text_signature = "($self, n=1, dt=1e-3)")]
-    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: errors::Int, dt: f64) -> PyResult<Bound<'py, PyDict>> {
+    fn step<'py>(
+        mut slf: PyRefMut<'py, Self>,
+        py: Python<'py>,
+        n: errors::Int,
+        #[pyo3(from_py_with = conv::arg)] dt: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let n = errors::count(n, "n")?;
         let this = &mut *slf;
         let tot = errors::guard("Body.step", || {
@@ -340,9 +344,8 @@ impl PyBody {
         py: Python<'py>,
         forces: Option<&Bound<'py, PyAny>>,
         max_iterations: Option<errors::Int>,
-        tolerance: Option<f64>,
-        load_steps: Option<errors::Int>,
-    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        #[pyo3(from_py_with = conv::arg)] tolerance: Option<f64>,
+        load_steps: Option<errors::Int>) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let (max_iterations, load_steps) = (errors::count_opt(max_iterations, "max_iterations")?, errors::count_opt(load_steps, "load_steps")?);
         let d = StaticOptions::default();
         let (max_iterations, tolerance, load_steps) =
@@ -387,11 +390,11 @@ impl PyBody {
         py: Python<'py>,
         nodes: &Bound<'py, PyAny>,
         total_force: &Bound<'py, PyAny>,
-        ramp_time: f64,
+        #[pyo3(from_py_with = conv::arg)] ramp_time: f64,
         steps: errors::Int,
-        dt: f64,
-        stable_limit: f64,
-        max_wall_s: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] dt: f64,
+        #[pyo3(from_py_with = conv::arg)] stable_limit: f64,
+        #[pyo3(from_py_with = conv::arg)] max_wall_s: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let steps = errors::count(steps, "steps")?;
         let this = &mut *slf;
@@ -413,12 +416,12 @@ impl PyBody {
     fn run_loads<'py>(
         mut slf: PyRefMut<'py, Self>,
         py: Python<'py>,
-        loads: Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)>,
+        #[pyo3(from_py_with = conv::arg)] loads: Vec<(Bound<'py, PyAny>, Bound<'py, PyAny>, f64)>,
         steps: errors::Int,
-        dt: f64,
-        ramp_start: Option<f64>,
-        stable_limit: f64,
-        max_wall_s: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] dt: f64,
+        #[pyo3(from_py_with = conv::arg)] ramp_start: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] stable_limit: f64,
+        #[pyo3(from_py_with = conv::arg)] max_wall_s: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let this = &mut *slf;
         let n = this.model.n_nodes();
@@ -460,20 +463,20 @@ impl PyBody {
     /// factorisation unless held or cached). Raises ``KeyError`` for a missing entry,
     /// ``ValueError`` for a wrong shape or a non-finite value, ``StepError`` if the factorisation
     /// fails; the body is unchanged then.
-    fn set_state(&mut self, py: Python<'_>, state: &Bound<'_, PyDict>) -> PyResult<()> {
+    fn set_state(&mut self, py: Python<'_>, #[pyo3(from_py_with = conv::arg)] state: Bound<'_, PyDict>) -> PyResult<()> {
         let n = self.model.n_nodes();
-        let x = conv::vec3s(&item(state, "positions")?, "positions", n, true)?;
-        let v = conv::vec3s(&item(state, "velocities")?, "velocities", n, true)?;
-        let f_ext = conv::vec3s(&item(state, "forces")?, "forces", n, true)?;
-        let t: f64 = item(state, "time")?.extract()?;
+        let x = conv::vec3s(&item(&state, "positions")?, "positions", n, true)?;
+        let v = conv::vec3s(&item(&state, "velocities")?, "velocities", n, true)?;
+        let f_ext = conv::vec3s(&item(&state, "forces")?, "forces", n, true)?;
+        let t: f64 = conv::arg(&item(&state, "time")?)?;
         if !t.is_finite() {
             return Err(crate::errors::param_error_from(format!("time = {t} s must be finite")));
         }
-        let refreshed = item(state, "refreshed_at")?;
+        let refreshed = item(&state, "refreshed_at")?;
         let mem = StepMemory {
-            factored_dt: item(state, "factored_dt")?.extract()?,
+            factored_dt: conv::arg(&item(&state, "factored_dt")?)?,
             refreshed_at: if refreshed.is_none() { None } else { Some(conv::vec3s(&refreshed, "refreshed_at", n, true)?) },
-            excess_iterations: item(state, "excess_iterations")?.extract()?,
+            excess_iterations: conv::arg(&item(&state, "excess_iterations")?)?,
         };
         let (model, ws) = (&self.model, &mut self.ws);
         errors::guard("Body.set_state", || py.detach(|| ws.restore_memory(model, &mem)).map_err(|e| errors::step_error(e, "in set_state")))?;
@@ -501,7 +504,7 @@ impl PyBody {
     /// memory of one factor), and returning to one costs no factorisation. Changes the cost of later steps, never their
     /// result. Returns whether it factorised (False: already held, or the semi-implicit scheme,
     /// which has no factor). Raises ``StepError`` for a bad ``dt`` or a failed factorisation.
-    fn prepare(&mut self, py: Python<'_>, dt: f64) -> PyResult<bool> {
+    fn prepare(&mut self, py: Python<'_>, #[pyo3(from_py_with = conv::arg)] dt: f64) -> PyResult<bool> {
         let (model, ws) = (&self.model, &mut self.ws);
         errors::guard("Body.prepare", || py.detach(|| ws.prepare(model, dt)).map_err(|e| errors::step_error(e, "in prepare")))
     }

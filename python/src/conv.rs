@@ -12,6 +12,9 @@
 //! * An empty list `[]` (which numpy reads as float64 of shape `(0,)`) is an empty set of rows or
 //!   indices wherever rows or indices are expected.
 //! * Outputs are fresh C-contiguous float64 / int64 arrays (copies, never views of the state).
+//! * Every other argument (a float, a flag, a str or path, a 3-tuple, a palpate class or enum) is
+//!   declared `#[pyo3(from_py_with = conv::arg)]`: a wrong type is a `ParameterTypeError` naming
+//!   the argument, not pyo3's bare `TypeError` ([`arg`]).
 
 use std::collections::HashSet;
 
@@ -20,17 +23,50 @@ use numpy::{Element, IntoPyArray, PyArray1, PyArray2, PyArrayDescrMethods, PyArr
 use palpate_core::Vec3;
 use pyo3::prelude::*;
 
+/// Any other argument (a number, a flag, a string or path, a 3-vector given as a tuple, a palpate
+/// class or enum), converted by pyo3 as its Rust type says, but a wrong type is a
+/// `palpate.ParameterTypeError` (a PalpateError that is also a TypeError) instead of pyo3's bare
+/// `TypeError`. Used as `#[pyo3(from_py_with = conv::arg)] dt: f64`: the argument keeps its type,
+/// its default and its text signature; pyo3 names the argument (errors.rs puts it in the message).
+/// Errors that are not about the type (an OverflowError, a ValueError) pass through unchanged.
+pub fn arg<'a, 'py, T: FromPyObject<'a, 'py>>(obj: &'a Bound<'py, PyAny>) -> PyResult<T> {
+    obj.extract::<T>().map_err(|e| retyped(obj, e.into()))
+}
+
+/// pyo3's bare `TypeError` for `obj` (its message names the type received) as a
+/// `palpate.ParameterTypeError` that also shows the value; any other error unchanged.
+pub fn retyped(obj: &Bound<'_, PyAny>, e: PyErr) -> PyErr {
+    let py = obj.py();
+    if !e.get_type(py).is(py.get_type::<pyo3::exceptions::PyTypeError>()) {
+        return e;
+    }
+    let r = obj.repr().map(|r| r.to_string()).unwrap_or_else(|_| "?".into());
+    let r = if r.chars().count() > 40 { format!("{}...", r.chars().take(37).collect::<String>()) } else { r };
+    crate::errors::type_error(format!("{} (got {r})", e.value(py)))
+}
+
 /// `obj` as a numpy array (converted with `numpy.asarray` if it is not one already).
+/// Something that is not an array and not numbers (a str, None, a dict, a list of str: numpy
+/// makes them str or object arrays) is a `ParameterTypeError` here, before a shape check would
+/// call it a shape error; an array of another dtype is refused with its dtype by the callers.
 pub fn as_array<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Bound<'py, PyUntypedArray>> {
     if let Ok(a) = obj.cast::<PyUntypedArray>() {
         return Ok(a.clone());
     }
+    let not_numbers = || crate::errors::type_error(format!("{what} must be an array-like of numbers, got {}", type_name(obj)));
     let np = obj.py().import("numpy")?;
     let conv = np.call_method1("asarray", (obj,)).map_err(|e| {
         crate::errors::type_error(format!("{what} must be an array-like of numbers, got {} ({e})", type_name(obj)))
     })?;
-    conv.cast_into::<PyUntypedArray>()
-        .map_err(|_| crate::errors::type_error(format!("{what} must be an array-like of numbers, got {}", type_name(obj))))
+    let a = conv.cast_into::<PyUntypedArray>().map_err(|_| not_numbers())?;
+    if !matches!(a.dtype().kind(), b'b' | b'i' | b'u' | b'f') {
+        return Err(crate::errors::type_error(format!(
+            "{what} must be an array-like of numbers, got {} (numpy reads it as dtype {})",
+            type_name(obj),
+            dtype_str(&a)
+        )));
+    }
+    Ok(a)
 }
 
 fn type_name(obj: &Bound<'_, PyAny>) -> String {
@@ -236,7 +272,7 @@ pub fn node_indices(obj: &Bound<'_, PyAny>, what: &str, n: usize) -> PyResult<Ve
 /// values; `form` says what is expected.
 pub fn codes(obj: &Bound<'_, PyAny>, what: &str, form: &str) -> PyResult<Vec<i64>> {
     let bad = || crate::errors::param_error_from(format!("{what}: expected {form}"));
-    let a = as_array(obj, what).map_err(|_| bad())?;
+    let a = as_array(obj, what)?;
     if a.shape().len() != 1 {
         return Err(bad());
     }

@@ -3,8 +3,12 @@
 //! `ValueError`s) that keep the builtin class a caller expects: `ParameterTypeError` (also a
 //! `TypeError`: wrong dtype, not an array, from `conv.rs`) and `ParameterIndexError` (also an
 //! `IndexError`: an index past the end) and `ParameterKeyError` (also a `KeyError`: a state dict
-//! without a key); everything the core refuses is a `PalpateError`. What pyo3 itself refuses
-//! before palpate's code runs (a str where a float goes) stays pyo3's TypeError.
+//! without a key); everything the core refuses is a `PalpateError`. An argument of the wrong
+//! type (a str where a float goes), which pyo3 converts before palpate's code runs, is a
+//! `ParameterTypeError` too: every such argument is read through `conv::arg` (or `Int`), and the
+//! argument's name, which pyo3 adds as a note (`while processing 'dt'`), is put in the message
+//! (`ParameterTypeError.add_note`, below). Python's own call errors (an unknown keyword, a
+//! missing or extra argument) stay `TypeError`s, as for any Python function.
 //!
 //! Structured details ride along as attributes: `MeshError.tet` / `.node` (the offending tet or
 //! node, 0-based, or `None`), `SurfaceError.triangle` / `.vertex`, `StepError.node` / `.time`.
@@ -84,8 +88,8 @@ create_exception!(
 /// An integer argument as Python gave it, also one beyond 64 bits: typed `i64`, pyo3 refused
 /// `2**70` or `-(2**70)` with its own OverflowError before palpate could name the argument.
 /// [`count`], [`count_opt`] and [`index`] take it and turn it into a `usize` or a
-/// `palpate.ParameterError` that names the argument. Not an int: pyo3's TypeError, as for any
-/// argument of the wrong type.
+/// `palpate.ParameterError` that names the argument. Not an int: a `palpate.ParameterTypeError`,
+/// as for any argument of the wrong type (`conv::arg`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Int {
     Fits(i64),
@@ -99,7 +103,7 @@ impl<'a, 'py> FromPyObject<'a, 'py> for Int {
         match obj.extract::<i64>() {
             Ok(v) => Ok(Int::Fits(v)),
             Err(e) if e.is_instance_of::<PyOverflowError>(obj.py()) => Ok(Int::Huge { negative: obj.lt(0)? }),
-            Err(e) => Err(e),
+            Err(e) => Err(crate::conv::retyped(&obj, e)),
         }
     }
 }
@@ -268,10 +272,14 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     // (TypeError), a state dict without a key (KeyError).
     for (name, builtin, doc, slot) in [
         ("ParameterIndexError", py.get_type::<PyIndexError>(), "An index argument past the end (a region, a particle): a ParameterError and an IndexError.", &PARAMETER_INDEX),
-        ("ParameterTypeError", py.get_type::<PyTypeError>(), "An argument of the wrong type or form (not an array of numbers, an integer array of floats): a ParameterError and a TypeError.", &PARAMETER_TYPE),
+        ("ParameterTypeError", py.get_type::<PyTypeError>(), "An argument of the wrong type or form (a str where a number goes, not an array of numbers, an integer array of floats): a ParameterError and a TypeError.", &PARAMETER_TYPE),
         ("ParameterKeyError", py.get_type::<PyKeyError>(), "A state dict without a key the body needs (not one from get_state()): a ParameterError and a KeyError.", &PARAMETER_KEY),
     ] {
-        let t = py.import("builtins")?.getattr("type")?.call1((name, (&param_type, builtin), pyo3::types::PyDict::new(py)))?;
+        let body = pyo3::types::PyDict::new(py);
+        if name == "ParameterTypeError" {
+            body.set_item("add_note", argument_note(py)?)?;
+        }
+        let t = py.import("builtins")?.getattr("type")?.call1((name, (&param_type, builtin), body))?;
         t.setattr("__module__", "palpate")?;
         t.setattr("__doc__", doc)?;
         m.add(name, &t)?;
@@ -291,6 +299,27 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     step.setattr("node", py.None())?;
     step.setattr("time", py.None())?;
     Ok(())
+}
+
+/// `ParameterTypeError.add_note`: pyo3 names an argument whose conversion failed by adding the
+/// note `while processing 'NAME'` to the error (pyo3 0.30, `argument_extraction_error`); this
+/// puts the name at the head of the message instead (`argument 'dt': must be real number, not
+/// str (got 'abc')`), on every Python version (add_note is 3.11+). Other notes are notes.
+fn argument_note(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
+    const CODE: &std::ffi::CStr = cr#"
+import re
+
+def add_note(self, note, /):
+    m = re.fullmatch(r"while processing '(\w+)'", str(note))
+    if m and self.args and isinstance(self.args[0], str) and not self.args[0].startswith("argument '"):
+        self.args = (f"argument '{m.group(1)}': {self.args[0]}",) + self.args[1:]
+    elif hasattr(BaseException, "add_note"):
+        BaseException.add_note(self, note)
+"#;
+    let globals = pyo3::types::PyDict::new(py);
+    globals.set_item("__name__", "palpate")?;
+    py.run(CODE, Some(&globals), None)?;
+    globals.as_any().get_item("add_note")
 }
 
 /// Set `name = value` on the exception instance when `value` is known (class default: None).

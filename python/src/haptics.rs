@@ -217,37 +217,37 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
 #[pymethods]
 impl PyHapticLoop {
     #[new]
-    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = "127.0.0.1", kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False)")]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         model: &Bound<'_, PyAny>,
-        material: &PyMaterial,
-        device: &str,
-        rate_hz: f64,
+        #[pyo3(from_py_with = conv::arg)] material: PyRef<'_, PyMaterial>,
+        #[pyo3(from_py_with = conv::arg)] device: String,
+        #[pyo3(from_py_with = conv::arg)] rate_hz: f64,
         times: Option<&Bound<'_, PyAny>>,
         knots: Option<&Bound<'_, PyAny>>,
-        recording: Option<std::path::PathBuf>,
+        #[pyo3(from_py_with = conv::arg)] recording: Option<std::path::PathBuf>,
         port: Option<errors::Int>,
-        host: &str,
-        kind: Option<&str>,
+        #[pyo3(from_py_with = conv::arg)] host: String,
+        #[pyo3(from_py_with = conv::arg)] kind: Option<String>,
         hand_start: Option<&Bound<'_, PyAny>>,
-        idle: bool,
-        tool_radius: Option<f64>,
-        tool_stiffness: Option<f64>,
-        tool_area_stiffness: Option<f64>,
-        hold: bool,
-        coupling_stiffness: Option<f64>,
-        coupling_damping: Option<f64>,
-        proxy_mass: Option<f64>,
-        max_force: Option<f64>,
-        max_rate: Option<f64>,
-        ramp: Option<f64>,
-        stall_timeout: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] idle: bool,
+        #[pyo3(from_py_with = conv::arg)] tool_radius: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] tool_stiffness: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] tool_area_stiffness: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] hold: bool,
+        #[pyo3(from_py_with = conv::arg)] coupling_stiffness: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] coupling_damping: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] proxy_mass: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] max_force: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] max_rate: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] ramp: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] stall_timeout: Option<f64>,
         record_ticks: errors::Int,
         max_ticks: Option<errors::Int>,
-        spin: Option<f64>,
-        realtime: bool,
+        #[pyo3(from_py_with = conv::arg)] spin: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] realtime: bool,
     ) -> PyResult<Self> {
         // Counts as errors::Int: a negative one, or one beyond 64 bits, is a ParameterError
         // (pyo3's usize / u16 conversions raised OverflowError). The rest runs under the panic guard: a panic while opening a recording,
@@ -278,7 +278,7 @@ impl PyHapticLoop {
                 replay = Some(r);
             }
             let kind = match kind {
-                Some(k) => kind_of(k)?,
+                Some(k) => kind_of(&k)?,
                 None if device == "bridge" => DeviceKind::Bridge,
                 None => DeviceKind::Simulated,
             };
@@ -299,7 +299,7 @@ impl PyHapticLoop {
             let mut bridge = None;
             // Ticks a finite device gives (a script's, a replay's): no recording needs more.
             let mut device_ticks: Option<usize> = None;
-            let dev: Box<dyn Device> = match device {
+            let dev: Box<dyn Device> = match device.as_str() {
                 "scripted" => {
                     let (Some(t), Some(k)) = (times, knots) else {
                         return Err(errors::param_error_from("device 'scripted' needs times=(k,) [s] and knots=(k, 3) [m]"));
@@ -462,7 +462,7 @@ impl PyHapticLoop {
     /// Waits (GIL released) until the loop finishes by itself or ``timeout`` [s] passes;
     /// returns whether it finished.
     #[pyo3(signature = (timeout = None))]
-    fn wait(&self, py: Python<'_>, timeout: Option<f64>) -> PyResult<bool> {
+    fn wait(&self, py: Python<'_>, #[pyo3(from_py_with = conv::arg)] timeout: Option<f64>) -> PyResult<bool> {
         let t0 = Instant::now();
         loop {
             if self.finished() {
@@ -539,7 +539,7 @@ impl PyHapticLoop {
 
     /// Writes the recording (``record_ticks`` > 0) to ``path``: the device inputs, forces and
     /// tool positions per tick, and the model's identity (format: ``palpate_haptics::record``).
-    fn save_recording(&self, path: std::path::PathBuf) -> PyResult<usize> {
+    fn save_recording(&self, #[pyo3(from_py_with = conv::arg)] path: std::path::PathBuf) -> PyResult<usize> {
         let st = self.stage.lock().unwrap();
         let rec = match &*st {
             Stage::Ready(core, _) => core.recording(),
@@ -578,7 +578,7 @@ impl PyHapticLoop {
     /// Moves the simulated hand's target to ``p`` (3,) [m] (device ``"hand"`` only); never
     /// blocks the loop.
     fn set_hand_target(&self, p: &Bound<'_, PyAny>) -> PyResult<()> {
-        let v = conv::vec3(p, "target")?;
+        let v = conv::vec3(p, "p (the hand's target)")?;
         let h = self.hand.as_ref().ok_or_else(|| haptics_error("set_hand_target needs device 'hand'"))?;
         h.set(&v);
         Ok(())

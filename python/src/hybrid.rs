@@ -10,7 +10,7 @@ use palpate_core::hybrid::{self, HybridModel, HybridOptions, Projection, Spacing
 use palpate_core::mesh::TriSurface;
 use palpate_core::HybridError;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBytes, PyDict};
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyProjection>()?;
@@ -166,7 +166,12 @@ impl PyHybridModel {
     /// ``field_voxels``: wall voxels of the transmural solve. An unknown option is a TypeError.
     #[staticmethod]
     #[pyo3(signature = (inner, outer, **options))]
-    fn build_nested(py: Python<'_>, inner: &PyTriSurface, outer: &PyTriSurface, options: Option<&Bound<'_, PyDict>>) -> PyResult<PyHybridModel> {
+    fn build_nested(
+        py: Python<'_>,
+        #[pyo3(from_py_with = conv::arg)] inner: PyRef<'_, PyTriSurface>,
+        #[pyo3(from_py_with = conv::arg)] outer: PyRef<'_, PyTriSurface>,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<PyHybridModel> {
         let o = self::options(options)?;
         let wall = Wall::nested(&inner.inner, &outer.inner).map_err(hybrid_error)?;
         build_wall(py, wall, o)
@@ -182,8 +187,7 @@ impl PyHybridModel {
         points: &Bound<'_, PyAny>,
         triangles: &Bound<'_, PyAny>,
         parts: &Bound<'_, PyAny>,
-        options: Option<&Bound<'_, PyDict>>,
-    ) -> PyResult<PyHybridModel> {
+        options: Option<&Bound<'_, PyDict>>) -> PyResult<PyHybridModel> {
         let o = self::options(options)?;
         let pts = conv::points(points, "points")?;
         let tris = conv::index_rows::<3>(triangles, "triangles")?;
@@ -210,14 +214,14 @@ impl PyHybridModel {
     }
 
     /// Save to ``path`` (one versioned binary file with a checksum).
-    fn save(&self, py: Python<'_>, path: std::path::PathBuf) -> PyResult<()> {
+    fn save(&self, py: Python<'_>, #[pyo3(from_py_with = conv::arg)] path: std::path::PathBuf) -> PyResult<()> {
         py.detach(|| self.model.save(&path)).map_err(file_error)
     }
 
     /// Load a model saved with :meth:`save`. Raises :class:`ModelFileError` naming the file for
     /// a foreign, truncated, corrupted or other-version file.
     #[staticmethod]
-    fn load(py: Python<'_>, path: std::path::PathBuf) -> PyResult<PyHybridModel> {
+    fn load(py: Python<'_>, #[pyo3(from_py_with = conv::arg)] path: std::path::PathBuf) -> PyResult<PyHybridModel> {
         let model = errors::guard(&format!("HybridModel.load({})", path.display()), || py.detach(|| HybridModel::load(&path)).map_err(file_error))?;
         Ok(PyHybridModel { model })
     }
@@ -225,7 +229,8 @@ impl PyHybridModel {
     /// A model from the bytes of :meth:`to_bytes` (or of a file :meth:`save` wrote); how a
     /// model unpickles. Raises :class:`ModelFileError` as :meth:`load` does.
     #[staticmethod]
-    fn from_bytes(py: Python<'_>, data: &[u8]) -> PyResult<PyHybridModel> {
+    fn from_bytes(py: Python<'_>, #[pyo3(from_py_with = conv::arg)] data: Bound<'_, PyBytes>) -> PyResult<PyHybridModel> {
+        let data = data.as_bytes();
         let model = errors::guard("HybridModel.from_bytes", || py.detach(|| hybrid::file::from_bytes(data, "<bytes>")).map_err(file_error))?;
         Ok(PyHybridModel { model })
     }

@@ -71,16 +71,16 @@ impl PyHybridSim {
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
-        model: &PyHybridModel,
-        material: &PyMaterial,
-        tool_radius: Option<f64>,
-        tool_stiffness: Option<f64>,
-        hold: bool,
-        activation_margin: Option<f64>,
-        max_tool_step: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] model: PyRef<'_, PyHybridModel>,
+        #[pyo3(from_py_with = conv::arg)] material: PyRef<'_, PyMaterial>,
+        #[pyo3(from_py_with = conv::arg)] tool_radius: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] tool_stiffness: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] hold: bool,
+        #[pyo3(from_py_with = conv::arg)] activation_margin: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] max_tool_step: Option<f64>,
         linger_ticks: Option<errors::Int>,
         max_substeps: Option<errors::Int>,
-        mass_scaling: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] mass_scaling: Option<f64>,
     ) -> PyResult<Self> {
         let (linger_ticks, max_substeps) = (errors::count_opt(linger_ticks, "linger_ticks")?, errors::count_opt(max_substeps, "max_substeps")?);
         let mut tool = Tool::default();
@@ -137,7 +137,12 @@ impl PyHybridSim {
     /// core and particles' motion are then left as they were; the activation keeps the tick's
     /// update).
     #[pyo3(signature = (tool_centre, dt = 1e-3))]
-    fn step<'py>(&mut self, py: Python<'py>, tool_centre: &Bound<'py, PyAny>, dt: f64) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        tool_centre: &Bound<'py, PyAny>,
+        #[pyo3(from_py_with = conv::arg)] dt: f64,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let c = conv::vec3(tool_centre, "tool_centre")?;
         let (sim, state, ws) = (&self.sim, &mut self.state, &mut self.ws);
         let r = errors::guard("HybridSim.step", || py.detach(|| tick(sim, state, ws, c, dt)).map_err(|e| errors::step_error(e, "in the hybrid tick")))?;
@@ -328,7 +333,7 @@ impl PyHybridSim {
     /// report (``last``) is cleared. Raises ``KeyError`` for a missing entry, ``ValueError`` for
     /// a wrong shape, index or non-finite value, ``StepError`` for a state that does not fit
     /// this simulation or a failed factorisation; the simulation is unchanged then.
-    fn set_state(&mut self, py: Python<'_>, state: &Bound<'_, PyDict>) -> PyResult<()> {
+    fn set_state(&mut self, py: Python<'_>, #[pyo3(from_py_with = conv::arg)] state: Bound<'_, PyDict>) -> PyResult<()> {
         let item = |key: &str| state.get_item(key)?.ok_or_else(|| crate::errors::key_error(format!("state has no {key:?} (a dict from get_state())")));
         let (n_core, n_p, n_skin) = (self.sim.core.n_nodes(), self.sim.n_particles(), self.sim.hybrid.outer_points.len());
         let skin_items = conv::Items { item: "point", owner: "the skin" };
@@ -345,14 +350,14 @@ impl PyHybridSim {
             carried[v] = true;
         }
         let snap = SimSnapshot {
-            time: item("time")?.extract()?,
-            ticks: item("ticks")?.extract()?,
+            time: conv::arg(&item("time")?)?,
+            ticks: conv::arg(&item("ticks")?)?,
             core_x: conv::vec3s(&item("core_positions")?, "core_positions", n_core, true)?,
             core_v: conv::vec3s(&item("core_velocities")?, "core_velocities", n_core, true)?,
             core_memory: StepMemory {
-                factored_dt: item("factored_dt")?.extract()?,
+                factored_dt: conv::arg(&item("factored_dt")?)?,
                 refreshed_at: opt("refreshed_at")?.map(|x| conv::vec3s(&x, "refreshed_at", n_core, true)).transpose()?,
-                excess_iterations: item("excess_iterations")?.extract()?,
+                excess_iterations: conv::arg(&item("excess_iterations")?)?,
             },
             particle_x: conv::vec3s(&item("particle_positions")?, "particle_positions", n_p, true)?,
             particle_v: conv::vec3s(&item("particle_velocities")?, "particle_velocities", n_p, true)?,
@@ -364,16 +369,16 @@ impl PyHybridSim {
             carried,
             live_ref_x: conv::vec3s(&item("skin_reference")?, "skin_reference", n_core, true)?,
             live_ref_tool: conv::vec3(&item("skin_reference_tool")?, "skin_reference_tool")?,
-            live_slack: item("skin_slack")?.extract()?,
+            live_slack: conv::arg(&item("skin_slack")?)?,
             sweep: match opt("skin_sweep_next")? {
                 None => None,
                 Some(next) => {
-                    let next: i64 = next.extract()?;
+                    let next: i64 = conv::arg(&next)?;
                     let reference = opt("skin_sweep_reference")?.ok_or_else(|| errors::param_error_from("skin_sweep_reference: None beside a skin_sweep_next"))?;
                     Some(SkinSweep {
                         next: usize::try_from(next).map_err(|_| errors::param_error_from(format!("skin_sweep_next = {next}: must not be negative")))?,
                         ref_x: conv::vec3s(&reference, "skin_sweep_reference", n_core, true)?,
-                        slack: item("skin_sweep_slack")?.extract()?,
+                        slack: conv::arg(&item("skin_sweep_slack")?)?,
                     })
                 }
             },

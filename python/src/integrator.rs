@@ -6,6 +6,8 @@ use palpate_core::integrate::Filter;
 use palpate_core::Integrator;
 use pyo3::prelude::*;
 
+use crate::conv;
+
 /// The filter of the paper's semi-implicit scheme (eq. 34).
 ///
 /// ``PAPER``: each node's block ``(I - dt^2/m J_F)^-1``, the paper's; stable only while the node
@@ -56,7 +58,7 @@ pub struct PySemiImplicit {
 impl PySemiImplicit {
     #[new]
     #[pyo3(signature = (filter = PyFilter::Paper))]
-    fn new(filter: PyFilter) -> Self {
+    fn new(#[pyo3(from_py_with = conv::arg)] filter: PyFilter) -> Self {
         PySemiImplicit { filter }
     }
     fn __repr__(&self) -> String {
@@ -139,7 +141,12 @@ impl PyBackwardEuler {
 impl PyBackwardEuler {
     #[new]
     #[pyo3(signature = (solver = PySolver::QuasiNewton, *, max_iterations = None, tolerance = None, history = None))]
-    fn new(solver: PySolver, max_iterations: Option<crate::errors::Int>, tolerance: Option<f64>, history: Option<crate::errors::Int>) -> PyResult<Self> {
+    fn new(
+        #[pyo3(from_py_with = conv::arg)] solver: PySolver,
+        max_iterations: Option<crate::errors::Int>,
+        #[pyo3(from_py_with = conv::arg)] tolerance: Option<f64>,
+        history: Option<crate::errors::Int>,
+    ) -> PyResult<Self> {
         let (max_iterations, history) = (crate::errors::count_opt(max_iterations, "max_iterations")?, crate::errors::count_opt(history, "history")?);
         if solver == PySolver::Linearised && (max_iterations.is_some() || tolerance.is_some() || history.is_some()) {
             return Err(crate::errors::param_error_from("the LINEARISED solver takes no max_iterations, tolerance or history"));

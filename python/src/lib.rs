@@ -3,7 +3,7 @@
 //! | file | binds |
 //! |---|---|
 //! | `errors.rs` | core error enums -> `palpate.PalpateError` and its subclasses (the whole tree: `MeshError`, `SurfaceError`, `MaterialError`, `ModelError`, `ModelFileError`, `SolveError`, `StepError`, `MeshWarning`), and the warnings |
-//! | `conv.rs` | numpy <-> core arrays (dtype / shape checks): the one conversion layer, used by every file |
+//! | `conv.rs` | numpy <-> core arrays (dtype / shape checks) and every other argument pyo3 converts (`conv::arg`: a wrong type is a `ParameterTypeError`): the one conversion layer, used by every file |
 //! | `defaults.rs` | the core's defaults (hybrid builder, backward Euler, static solve, particle body) for `palpate.defaults` |
 //! | `mesh.rs` | `TetMesh`, `ellipsoid_wall`, `truncated_ellipsoid_wall`, `box_mesh` (`palpate_core::mesh`) |
 //! | `surface.rs` | `TriSurface`, `ellipsoid_surface`, `sample_inside`, `sample_between` (`palpate_core::mesh::{surface, sample}`) |

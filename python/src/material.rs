@@ -3,6 +3,7 @@
 use palpate_core::material::{Damping, Elasticity, Law, Material};
 use pyo3::prelude::*;
 
+use crate::conv;
 use crate::errors::{self, MaterialError};
 
 /// The elastic law of a ``Material`` (``palpate_core::material::Law``); both use the material's
@@ -76,14 +77,14 @@ impl PyMaterial {
     #[pyo3(signature = (young = None, poisson = None, lame_lambda = None, lame_mu = None, density = 1000.0, phi = 0.0, psi = 0.0, law = PyLaw::StVenantKirchhoff))]
     #[allow(clippy::too_many_arguments)]
     fn new(
-        young: Option<f64>,
-        poisson: Option<f64>,
-        lame_lambda: Option<f64>,
-        lame_mu: Option<f64>,
-        density: f64,
-        phi: f64,
-        psi: f64,
-        law: PyLaw,
+        #[pyo3(from_py_with = conv::arg)] young: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] poisson: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] lame_lambda: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] lame_mu: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] density: f64,
+        #[pyo3(from_py_with = conv::arg)] phi: f64,
+        #[pyo3(from_py_with = conv::arg)] psi: f64,
+        #[pyo3(from_py_with = conv::arg)] law: PyLaw,
     ) -> PyResult<Self> {
         let elasticity = match (young, poisson, lame_lambda, lame_mu) {
             (Some(young), Some(poisson), None, None) => Elasticity::YoungPoisson { young, poisson },

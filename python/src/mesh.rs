@@ -46,7 +46,12 @@ impl PyTetMesh {
 impl PyTetMesh {
     #[new]
     #[pyo3(signature = (points, tets, *, source = None))]
-    fn new(py: Python<'_>, points: &Bound<'_, PyAny>, tets: &Bound<'_, PyAny>, source: Option<String>) -> PyResult<Self> {
+    fn new(
+        py: Python<'_>,
+        points: &Bound<'_, PyAny>,
+        tets: &Bound<'_, PyAny>,
+        #[pyo3(from_py_with = conv::arg)] source: Option<String>,
+    ) -> PyResult<Self> {
         let p = conv::points(points, "points")?;
         let t = conv::index_rows::<4>(tets, "tets")?;
         let (mesh, warnings) = errors::guard("TetMesh", || Ok(TetMesh::from_arrays(&p, &t)))?.map_err(|e| match &source {
@@ -100,7 +105,12 @@ impl PyTetMesh {
 
     /// Indices of the nodes with z <= z_cut + tol [m] (int64, ascending): e.g. the base to fix.
     #[pyo3(signature = (z_cut = 0.0, tol = 1e-9))]
-    fn nodes_below<'py>(&self, py: Python<'py>, z_cut: f64, tol: f64) -> Bound<'py, PyArray1<i64>> {
+    fn nodes_below<'py>(
+        &self,
+        py: Python<'py>,
+        #[pyo3(from_py_with = conv::arg)] z_cut: f64,
+        #[pyo3(from_py_with = conv::arg)] tol: f64,
+    ) -> Bound<'py, PyArray1<i64>> {
         conv::usizes_to_py(py, &generate::base_nodes(&self.inner, z_cut, tol))
     }
 
@@ -159,11 +169,10 @@ fn check_size(n_tets: Option<usize>) -> PyResult<()> {
 #[pyo3(signature = (inner = None, outer = None, subdivisions = None, layers = None))]
 pub fn ellipsoid_wall(
     py: Python<'_>,
-    inner: Option<[f64; 3]>,
-    outer: Option<[f64; 3]>,
+    #[pyo3(from_py_with = conv::arg)] inner: Option<[f64; 3]>,
+    #[pyo3(from_py_with = conv::arg)] outer: Option<[f64; 3]>,
     subdivisions: Option<errors::Int>,
-    layers: Option<errors::Int>,
-) -> PyResult<PyTetMesh> {
+    layers: Option<errors::Int>) -> PyResult<PyTetMesh> {
     let (subdivisions, layers) = (errors::count_opt(subdivisions, "subdivisions")?, errors::count_opt(layers, "layers")?);
     let d = EllipsoidWall::default();
     let p = EllipsoidWall {
@@ -198,13 +207,12 @@ pub fn ellipsoid_wall(
 #[pyo3(signature = (inner = None, outer = None, z_cut = None, circumferential = None, longitudinal = None, layers = None))]
 pub fn truncated_ellipsoid_wall(
     py: Python<'_>,
-    inner: Option<[f64; 3]>,
-    outer: Option<[f64; 3]>,
-    z_cut: Option<f64>,
+    #[pyo3(from_py_with = conv::arg)] inner: Option<[f64; 3]>,
+    #[pyo3(from_py_with = conv::arg)] outer: Option<[f64; 3]>,
+    #[pyo3(from_py_with = conv::arg)] z_cut: Option<f64>,
     circumferential: Option<errors::Int>,
     longitudinal: Option<errors::Int>,
-    layers: Option<errors::Int>,
-) -> PyResult<PyTetMesh> {
+    layers: Option<errors::Int>) -> PyResult<PyTetMesh> {
     let (circumferential, longitudinal, layers) =
         (errors::count_opt(circumferential, "circumferential")?, errors::count_opt(longitudinal, "longitudinal")?, errors::count_opt(layers, "layers")?);
     let d = TruncatedEllipsoidWall::default();
@@ -252,7 +260,11 @@ pub fn truncated_ellipsoid_wall(
 /// ``i + (nx+1) * (j + (ny+1) * k)``.
 #[pyfunction]
 #[pyo3(signature = (size = [0.1, 0.02, 0.02], cells = [errors::Int::Fits(10), errors::Int::Fits(2), errors::Int::Fits(2)]))]
-pub fn box_mesh(py: Python<'_>, size: [f64; 3], cells: [errors::Int; 3]) -> PyResult<PyTetMesh> {
+pub fn box_mesh(
+    py: Python<'_>,
+    #[pyo3(from_py_with = conv::arg)] size: [f64; 3],
+    #[pyo3(from_py_with = conv::arg)] cells: [errors::Int; 3],
+) -> PyResult<PyTetMesh> {
     let cells = [errors::count(cells[0], "cells[0]")?, errors::count(cells[1], "cells[1]")?, errors::count(cells[2], "cells[2]")?];
     if !size.iter().all(|s| s.is_finite() && *s > 0.0) {
         return Err(crate::errors::param_error_from(format!("box size must be finite and positive [m], got {size:?}")));

@@ -30,7 +30,7 @@ fn simd_path() -> &'static str {
 /// Allow (default) or forbid the AVX2 + FMA copy of the particle hot loop, process-wide (for
 /// comparing the two copies; results agree to round-off).
 #[pyfunction]
-fn set_simd_enabled(enabled: bool) {
+fn set_simd_enabled(#[pyo3(from_py_with = conv::arg)] enabled: bool) {
     palpate_core::meshfree::set_simd_enabled(enabled)
 }
 
@@ -84,7 +84,12 @@ fn check_radius(h: f64, what: &str) -> PyResult<()> {
 /// array of that shape) and the support radius ``h`` [m] (``W = 0`` for ``r >= h``): the core's
 /// own function, the one a ``ParticleBody`` weighs its pairs with.
 #[pyfunction]
-fn kernel_value<'py>(py: Python<'py>, kernel: PyKernel, r: &Bound<'py, PyAny>, h: f64) -> PyResult<Bound<'py, PyAny>> {
+fn kernel_value<'py>(
+    py: Python<'py>,
+    #[pyo3(from_py_with = conv::arg)] kernel: PyKernel,
+    r: &Bound<'py, PyAny>,
+    #[pyo3(from_py_with = conv::arg)] h: f64,
+) -> PyResult<Bound<'py, PyAny>> {
     check_radius(h, "h")?;
     let k = Kernel::from(kernel);
     let (v, shape) = conv::reals_nd(r, "r")?;
@@ -106,7 +111,7 @@ type Csr<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>);
 /// Returns ``(ptr, idx)``, int64 compressed rows: the neighbours of point ``i`` are
 /// ``idx[ptr[i]:ptr[i + 1]]``, ascending; ``ptr`` has shape (n + 1,).
 #[pyfunction]
-fn neighbours<'py>(py: Python<'py>, points: &Bound<'py, PyAny>, radius: f64) -> PyResult<Csr<'py>> {
+fn neighbours<'py>(py: Python<'py>, points: &Bound<'py, PyAny>, #[pyo3(from_py_with = conv::arg)] radius: f64) -> PyResult<Csr<'py>> {
     check_radius(radius, "radius")?;
     let p = conv::points_vec3(points, "points")?;
     // 40 bytes a pair: the index lists here and the two int64 arrays handed to Python.

@@ -94,13 +94,13 @@ impl PyParticleBody {
         py: Python<'_>,
         positions: &Bound<'_, PyAny>,
         masses: &Bound<'_, PyAny>,
-        material: Bound<'_, PyMaterial>,
-        support_radius: f64,
-        kernel: PyKernel,
+        #[pyo3(from_py_with = conv::arg)] material: Bound<'_, PyMaterial>,
+        #[pyo3(from_py_with = conv::arg)] support_radius: f64,
+        #[pyo3(from_py_with = conv::arg)] kernel: PyKernel,
         fixed: Option<&Bound<'_, PyAny>>,
         gravity: Option<&Bound<'_, PyAny>>,
-        hourglass: f64,
-        min_relative_weight: f64,
+        #[pyo3(from_py_with = conv::arg)] hourglass: f64,
+        #[pyo3(from_py_with = conv::arg)] min_relative_weight: f64,
     ) -> PyResult<Self> {
         let p = conv::points_vec3(positions, "positions")?;
         let n = p.len();
@@ -132,7 +132,12 @@ impl PyParticleBody {
     /// Raises ``StepError`` if a step fails; the steps before it are kept and the body is left as
     /// it was before the failing step.
     #[pyo3(signature = (n = errors::Int::Fits(1), dt = 1e-3), text_signature = "($self, n=1, dt=1e-3)")]
-    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: errors::Int, dt: f64) -> PyResult<Bound<'py, PyDict>> {
+    fn step<'py>(
+        mut slf: PyRefMut<'py, Self>,
+        py: Python<'py>,
+        n: errors::Int,
+        #[pyo3(from_py_with = conv::arg)] dt: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let n = errors::count(n, "n")?;
         if !(dt > 0.0 && dt.is_finite()) {
             return Err(errors::step_error(palpate_core::StepError::BadTimeStep(dt), ""));
@@ -159,7 +164,13 @@ impl PyParticleBody {
     /// early, else None). Stops early when a step fails or the summed wall time exceeds
     /// ``max_wall_s`` [s].
     #[pyo3(signature = (ticks, dt = 1e-3, max_wall_s = None))]
-    fn run_timed<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, ticks: errors::Int, dt: f64, max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+    fn run_timed<'py>(
+        mut slf: PyRefMut<'py, Self>,
+        py: Python<'py>,
+        ticks: errors::Int,
+        #[pyo3(from_py_with = conv::arg)] dt: f64,
+        #[pyo3(from_py_with = conv::arg)] max_wall_s: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let ticks = errors::count(ticks, "ticks")?;
         check_dt(dt)?;
         let this = &mut *slf;
@@ -225,16 +236,16 @@ impl PyParticleBody {
     /// steps repeat those that followed it bit for bit. Raises ``KeyError`` for a missing entry,
     /// ``ValueError`` for a wrong shape, a non-finite value or a bad index; the body is unchanged
     /// then.
-    fn set_state(&mut self, state: &Bound<'_, PyDict>) -> PyResult<()> {
+    fn set_state(&mut self, #[pyo3(from_py_with = conv::arg)] state: Bound<'_, PyDict>) -> PyResult<()> {
         let n = self.model.n_particles();
-        let x = conv::vec3s(&item(state, "positions")?, "positions", n, true)?;
-        let v = conv::vec3s(&item(state, "velocities")?, "velocities", n, true)?;
-        let f_ext = conv::vec3s(&item(state, "forces")?, "forces", n, true)?;
-        let t: f64 = item(state, "time")?.extract()?;
+        let x = conv::vec3s(&item(&state, "positions")?, "positions", n, true)?;
+        let v = conv::vec3s(&item(&state, "velocities")?, "velocities", n, true)?;
+        let f_ext = conv::vec3s(&item(&state, "forces")?, "forces", n, true)?;
+        let t: f64 = conv::arg(&item(&state, "time")?)?;
         if !t.is_finite() {
             return Err(crate::errors::param_error_from(format!("time = {t} s must be finite")));
         }
-        let active = conv::indices(&item(state, "active")?, "active", n, PARTICLES, true)?;
+        let active = conv::indices(&item(&state, "active")?, "active", n, PARTICLES, true)?;
         self.state = ParticleState { x, v, t, f_ext, active };
         Ok(())
     }
@@ -347,7 +358,7 @@ impl PyParticleBody {
     }
 
     /// Sub-steps one step of ``dt`` [s] takes.
-    fn substeps(&self, dt: f64) -> PyResult<usize> {
+    fn substeps(&self, #[pyo3(from_py_with = conv::arg)] dt: f64) -> PyResult<usize> {
         check_dt(dt)?;
         Ok(self.model.substeps(dt))
     }

@@ -64,7 +64,12 @@ fn per_point<'py, T: numpy::Element + Copy + IntoPyObject<'py>>(
 impl PyTriSurface {
     #[new]
     #[pyo3(signature = (points, triangles, *, source = None))]
-    fn new(py: Python<'_>, points: &Bound<'_, PyAny>, triangles: &Bound<'_, PyAny>, source: Option<String>) -> PyResult<Self> {
+    fn new(
+        py: Python<'_>,
+        points: &Bound<'_, PyAny>,
+        triangles: &Bound<'_, PyAny>,
+        #[pyo3(from_py_with = conv::arg)] source: Option<String>,
+    ) -> PyResult<Self> {
         let p = conv::points(points, "points")?;
         let t = conv::index_rows::<3>(triangles, "triangles")?;
         let (surface, warnings) = errors::guard("TriSurface", || Ok(py.detach(|| TriSurface::from_arrays(&p, &t))))?.map_err(|e| match &source {
@@ -122,10 +127,15 @@ impl PyTriSurface {
     ///
     /// ``method="winding"`` (default): generalised winding number > 1/2 (O(triangles) per point);
     /// ``method="parity"``: parity of the +z ray's crossings (grid-accelerated, what the samplers use).
-    #[pyo3(signature = (points, method = "winding"))]
-    fn contains<'py>(&self, py: Python<'py>, points: &Bound<'py, PyAny>, method: &str) -> PyResult<Bound<'py, PyAny>> {
+    #[pyo3(signature = (points, method = String::from("winding")), text_signature = "($self, points, method=\"winding\")")]
+    fn contains<'py>(
+        &self,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+        #[pyo3(from_py_with = conv::arg)] method: String,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let s = &self.inner;
-        match method {
+        match method.as_str() {
             "winding" => per_point(py, points, "points", |p| s.contains(p)),
             "parity" => per_point(py, points, "points", |p| s.contains_parity(p)),
             other => Err(crate::errors::param_error_from(format!("method must be 'winding' or 'parity', got {other:?}"))),
@@ -153,7 +163,7 @@ impl PyTriSurface {
 /// ``8 * 4**subdivisions`` triangles (default 4: 2048); the volume converges to 4/3 pi a b c.
 #[pyfunction]
 #[pyo3(signature = (semi_axes = [0.026, 0.026, 0.042], subdivisions = errors::Int::Fits(4)), text_signature = "(semi_axes=..., subdivisions=4)")]
-pub fn ellipsoid_surface(py: Python<'_>, semi_axes: [f64; 3], subdivisions: errors::Int) -> PyResult<PyTriSurface> {
+pub fn ellipsoid_surface(py: Python<'_>, #[pyo3(from_py_with = conv::arg)] semi_axes: [f64; 3], subdivisions: errors::Int) -> PyResult<PyTriSurface> {
     let subdivisions = crate::errors::count(subdivisions, "subdivisions")?;
     if !semi_axes.iter().all(|a| a.is_finite() && *a > 0.0) {
         return Err(crate::errors::param_error_from(format!("semi_axes must be finite and positive [m], got {semi_axes:?}")));
@@ -172,7 +182,12 @@ type Sampled<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>);
 /// is centred on the surface's bounding box (half a spacing inside it when the extent is a whole
 /// number of spacings). ``ValueError`` for a non-positive spacing / density or a lattice too large.
 #[pyfunction]
-pub fn sample_inside<'py>(py: Python<'py>, surface: &Bound<'py, PyTriSurface>, spacing: f64, density: f64) -> PyResult<Sampled<'py>> {
+pub fn sample_inside<'py>(
+    py: Python<'py>,
+    #[pyo3(from_py_with = conv::arg)] surface: Bound<'py, PyTriSurface>,
+    #[pyo3(from_py_with = conv::arg)] spacing: f64,
+    #[pyo3(from_py_with = conv::arg)] density: f64,
+) -> PyResult<Sampled<'py>> {
     let s = &surface.get().inner;
     let set = crate::errors::guard("sample_inside", || py.detach(|| mesh::sample_inside(s, spacing, density)).map_err(surface_error))?;
     Ok((conv::vec3s_to_py(py, &set.positions), conv::f64s_to_py(py, &set.masses)))
@@ -184,11 +199,10 @@ pub fn sample_inside<'py>(py: Python<'py>, surface: &Bound<'py, PyTriSurface>, s
 #[pyfunction]
 pub fn sample_between<'py>(
     py: Python<'py>,
-    inner: &Bound<'py, PyTriSurface>,
-    outer: &Bound<'py, PyTriSurface>,
-    spacing: f64,
-    density: f64,
-) -> PyResult<Sampled<'py>> {
+    #[pyo3(from_py_with = conv::arg)] inner: Bound<'py, PyTriSurface>,
+    #[pyo3(from_py_with = conv::arg)] outer: Bound<'py, PyTriSurface>,
+    #[pyo3(from_py_with = conv::arg)] spacing: f64,
+    #[pyo3(from_py_with = conv::arg)] density: f64) -> PyResult<Sampled<'py>> {
     let (i, o) = (&inner.get().inner, &outer.get().inner);
     let set = crate::errors::guard("sample_between", || py.detach(|| mesh::sample_between(i, o, spacing, density)).map_err(surface_error))?;
     Ok((conv::vec3s_to_py(py, &set.positions), conv::f64s_to_py(py, &set.masses)))

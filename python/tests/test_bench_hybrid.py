@@ -120,11 +120,12 @@ def test_bad_arguments_are_refused(ellipsoids):
         bh.run(ellipsoids, -5, TICKS)
     with pytest.raises(ValueError):
         bh.run("no-such-model", 200, TICKS)
-    for args in [("ellipsoids", "--active", -5), ("ellipsoids", "--active", 0), ("no-such-model", "--active", 200),
-                 (REPO / "README.md", "--active", 200), ("ellipsoids", "--active", 200, "--ticks", 3),
-                 ("ellipsoids",)]:
+    # Usage (2): the command line as written; bad input (1): a model that is not one.
+    for args, code in [(("ellipsoids", "--active", -5), 2), (("ellipsoids", "--active", 0), 2),
+                       (("no-such-model", "--active", 200), 1), ((REPO / "README.md", "--active", 200), 1),
+                       (("ellipsoids", "--active", 200, "--ticks", 3), 2), (("ellipsoids",), 2)]:
         r = _cli(*args)
-        assert r.returncode == 2, (args, r.stdout, r.stderr)
+        assert r.returncode == code, (args, r.stdout, r.stderr)
         assert "Traceback" not in r.stderr and "error" in r.stderr
 
 

@@ -64,11 +64,11 @@ def test_run_lv_scene(tmp_path):
      "integrator.type"),
     ('[mesh\n', "invalid TOML"),
 ])
-def test_scene_errors_are_one_line_exit_2(tmp_path, body, key):
+def test_scene_errors_are_one_line_exit_1(tmp_path, body, key):
     f = tmp_path / "bad.toml"
     f.write_text(body)
     r = palpate_cli("run", f, "--out", tmp_path / "o")
-    assert r.returncode == 2
+    assert r.returncode == 1     # bad input: the scene file
     assert "Traceback" not in r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr
@@ -124,13 +124,89 @@ def test_bench_protocol_generated_ellipsoid():
 
 def test_bench_protocol_errors(tmp_path):
     r = palpate_cli("bench", "protocol")
-    assert r.returncode == 2 and "MESH" in r.stderr
+    assert r.returncode == 2 and "MESH" in r.stderr         # usage: neither MESH nor --all
     bad = tmp_path / "x.msh"
     bad.write_text("garbage\n")
     r = palpate_cli("bench", "protocol", bad, "--steps", 5)
-    assert r.returncode == 2 and "x.msh" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 1 and "x.msh" in r.stderr and "Traceback" not in r.stderr   # bad input
 
 
 def test_info(tmp_path):
     r = palpate_cli("info", REPO / "python" / "tests" / "data" / "malformed" / "gmsh2_inverted_tet.msh")
     assert r.returncode == 0 and "2 tets" in r.stdout
+
+
+def _diverging_scene(tmp_path):
+    """The shipped ellipsoid scene with the paper's semi-implicit scheme at 20x its time step: it
+    blows up within a few steps (a StepError after the scene was accepted)."""
+    text = (REPO / "scenes" / "ellipsoid_probe.toml").read_text()
+    text = text.replace('type = "backward_euler"', 'type = "semi_implicit"').replace("dt = 1e-3", "dt = 0.02")
+    assert 'type = "semi_implicit"' in text and "dt = 0.02" in text
+    f = tmp_path / "diverging.toml"
+    f.write_text(text.replace("steps = 1000", "steps = 500"))
+    return f
+
+
+def test_exit_codes_table_each_code_from_a_real_command(tmp_path):
+    """The exit-code table (cli/_common.EXIT_CODES, README "Exit codes", palpate --help): for every
+    code, real commands that end with it, with one line on stderr (none for 0 and a closed pipe).
+    Would catch: a usage error reported as bad input or the reverse, a failed run reported as bad
+    input (the contract before: 2 for both usage and input, 1 for failed runs), a code added to
+    the table that no command produces, a traceback on Ctrl-C."""
+    import signal
+    import time
+
+    from palpate.cli import _common as c
+
+    garbage = tmp_path / "x.msh"
+    garbage.write_text("garbage\n")
+    scene = _diverging_scene(tmp_path)
+    (tmp_path / "a_dir.palpate").mkdir()
+    import palpate
+    box = palpate.box_mesh()
+    mesh = tmp_path / "box.npz"
+    np.savez(mesh, points=box.points, tets=box.tets)
+    commands = {
+        c.OK: [("info", mesh)],
+        c.INPUT: [("info", tmp_path / "missing.msh"), ("info", garbage),                     # OSError, MeshError
+                  ("run", scene, "--out", ".."),                                             # SceneError (the output)
+                  ("touch", "--shape", "ventricle", "--script", garbage)],                   # ScriptError
+        c.USAGE: [("frobnicate",), ("run",), ("info", mesh, "--unit", "inch"),              # argparse
+                  ("bench", "protocol", "ellipsoid_192", "--force", -1),                     # a flag's range
+                  ("bench", "protocol", "ellipsoid_192", "--all")],                          # conflicting
+        c.FAILED: [("run", scene, "--out", tmp_path / "o"),                                  # StepError
+                   ("build", "--shape", "ellipsoids", "-o", tmp_path / "a_dir.palpate",      # a failed write
+                    "--particles", 400, "--field-voxels", 20000)],
+    }
+    for code, cmds in commands.items():
+        for args in cmds:
+            r = palpate_cli(*args)
+            assert r.returncode == code, (args, code, r.returncode, r.stderr)
+            assert "Traceback" not in r.stderr
+            lines = r.stderr.strip().splitlines()
+            assert (lines == []) if code == c.OK else (len(lines) == 1 and lines[0].startswith("palpate") and "error:" in lines[0]), r.stderr
+
+    # Ctrl-C in the middle of a run: one line and 130 (the scene runs ~20 s unless interrupted).
+    argv = ["run", REPO / "scenes" / "lv_probe.toml", "--steps", 200000, "--out", tmp_path / "long"]
+    p = subprocess.Popen([sys.executable, "-m", "palpate", *map(str, argv)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
+    assert p.stdout.readline().startswith("palpate run:")   # past the imports: the command is running
+    time.sleep(0.5)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=120)
+    assert p.returncode == c.INTERRUPTED and err == "palpate: interrupted\n", (p.returncode, err)
+
+    # stdout closed by its reader: quiet, 141.
+    r, w = os.pipe()
+    os.close(r)
+    try:
+        q = subprocess.run([sys.executable, "-m", "palpate", "info", str(mesh)], stdout=w, stderr=subprocess.PIPE, text=True,
+                           timeout=120)
+    finally:
+        os.close(w)
+    assert q.returncode == c.CLOSED_PIPE and q.stderr == "", (q.returncode, q.stderr)
+
+    walked = set(commands) | {c.INTERRUPTED, c.CLOSED_PIPE}
+    assert {code for _, code in c.EXIT_CODES} <= walked
+    assert walked == {c.OK, c.INPUT, c.USAGE, c.FAILED, c.INTERRUPTED, c.CLOSED_PIPE}
+    help_text = palpate_cli("--help").stdout
+    assert all(f"\n  {code} " in help_text for code in walked), help_text[-1200:]

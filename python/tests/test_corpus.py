@@ -129,12 +129,13 @@ def test_verdict_can_fail():
     header = {"kind": "api", "expect": ["error"], "types": ["MeshError", "LimitError"], "code": "", "contains": corpus_cases.PRECHECK}
     assert verdict(header, {"outcome": "error", "type": "MeshError", "message": "x.vtk: cannot read as VTK (ValueError: cannot reshape)", "mro": ["MeshError"]})
     assert verdict(header, {"outcome": "error", "type": "MeshError", "message": "x.vtk: byte 9: POINTS announces 9; the file has 90", "mro": ["MeshError"]}) is None
-    assert verdict({"kind": "cli", "codes": [2], "contains": "LimitError"}, {"outcome": "exit", "code": 2, "stderr": "palpate: error: MeshError: x\n"})
-    cli = {"kind": "cli", "codes": [2]}
-    assert verdict(cli, {"outcome": "exit", "code": 1, "stderr": "palpate: error: x\n"})
-    assert verdict(cli, {"outcome": "exit", "code": 2, "stderr": "Traceback (most recent call last):\n...\n"})
-    assert verdict(cli, {"outcome": "exit", "code": 2, "stderr": "palpate: error: x\n"}) is None
-    assert verdict({"kind": "cli", "codes": [1, 2]}, {"outcome": "exit", "code": 1, "stderr":
+    assert verdict({"kind": "cli", "codes": [1], "contains": "LimitError"}, {"outcome": "exit", "code": 1, "stderr": "palpate: error: MeshError: x\n"})
+    cli = {"kind": "cli", "codes": [1]}
+    assert verdict(cli, {"outcome": "exit", "code": 2, "stderr": "palpate: error: x\n"})   # usage where input was due
+    assert verdict(cli, {"outcome": "exit", "code": 3, "stderr": "palpate: error: x\n"})   # a failed run where input was due
+    assert verdict(cli, {"outcome": "exit", "code": 1, "stderr": "Traceback (most recent call last):\n...\n"})
+    assert verdict(cli, {"outcome": "exit", "code": 1, "stderr": "palpate: error: x\n"}) is None
+    assert verdict({"kind": "cli", "codes": [1, 3]}, {"outcome": "exit", "code": 3, "stderr":
                    "palpate: error: box_mesh: internal error (a palpate bug; please report it with the input): x\n"})
 
 

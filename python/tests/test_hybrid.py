@@ -269,7 +269,7 @@ def test_cli_info_damaged_model(malformed_dir, name):
     d, expected = malformed_dir
     path = d / f"{name}.palpate"
     r = palpate_cli("info", path)
-    assert r.returncode == 2
+    assert r.returncode == 1     # bad input
     assert "Traceback" not in r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr
@@ -287,7 +287,7 @@ def test_cli_info_model_with_magic_but_other_extension(small, tmp_path):
 def test_cli_build_not_nested(ellipsoid_stls, tmp_path):
     out = tmp_path / "bad.palpate"
     r = palpate_cli("build", ellipsoid_stls["outer"], ellipsoid_stls["inner"], "--unit", "mm", "-o", out)
-    assert r.returncode == 2
+    assert r.returncode == 1     # bad input: the surfaces
     assert "Traceback" not in r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr
@@ -312,21 +312,23 @@ def test_cli_build_files_and_tagged(ellipsoid_stls, tmp_path):
     assert m.spacing == pytest.approx(0.0015) and len(m.core_base_nodes) > 0
 
 
-@pytest.mark.parametrize("args, fragment", [
-    ([], "exactly one"),
-    (["--shape", "ellipsoids", "a.stl"], "exactly one"),
-    (["only_one.stl"], "two surface files"),
-    (["--shape", "ellipsoids", "--inner", "1"], "go with --tagged"),
-    (["--shape", "ellipsoids", "--unit", "mm"], "--unit"),
-    (["--shape", "ellipsoids", "--core-fraction", "1.5"], "core fraction"),
-    (["--shape", "ellipsoids", "--spacing", "-1"], "--spacing must be positive"),
-    (["--tagged", "x.vtp", "--inner", "a,b"], "--inner"),
-    (["--tagged", "missing.vtp"], "missing.vtp"),
-    (["a.stl", "b.stl"], "a.stl"),
+@pytest.mark.parametrize("args, fragment, code", [
+    # usage (2): the command line as written
+    ([], "exactly one", 2),
+    (["--shape", "ellipsoids", "a.stl"], "exactly one", 2),
+    (["only_one.stl"], "two surface files", 2),
+    (["--shape", "ellipsoids", "--inner", "1"], "go with --tagged", 2),
+    (["--shape", "ellipsoids", "--unit", "mm"], "--unit", 2),
+    (["--shape", "ellipsoids", "--spacing", "-1"], "--spacing must be positive", 2),
+    (["--tagged", "x.vtp", "--inner", "a,b"], "--inner", 2),
+    # bad input (1): a value the builder refuses, files that are not there
+    (["--shape", "ellipsoids", "--core-fraction", "1.5"], "core fraction", 1),
+    (["--tagged", "missing.vtp"], "missing.vtp", 1),
+    (["a.stl", "b.stl"], "a.stl", 1),
 ])
-def test_cli_build_errors(tmp_path, args, fragment):
+def test_cli_build_errors(tmp_path, args, fragment, code):
     r = palpate_cli("build", *args, "-o", tmp_path / "m.palpate", cwd=tmp_path)
-    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert r.returncode == code, (r.stdout, r.stderr)
     assert "Traceback" not in r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr
@@ -340,7 +342,7 @@ def test_cli_main_in_process(tmp_path, capsys):
     assert cli.main(["info", str(out)]) == 0
     assert "palpate hybrid model" in capsys.readouterr().out
     out.write_bytes(out.read_bytes()[:100])
-    assert cli.main(["info", str(out)]) == 2
+    assert cli.main(["info", str(out)]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "truncated" in err
 

@@ -45,7 +45,7 @@ def test_kernel_value_matches_the_formulas_and_is_normalised(kernel):
 def test_kernel_value_refuses_a_bad_radius():
     with pytest.raises(ValueError, match="h = 0"):
         palpate.kernel_value(K.WENDLAND_C2, 0.1, 0.0)
-    with pytest.raises(TypeError, match="r must be real numbers"):
+    with pytest.raises(palpate.ParameterTypeError, match=r"r must be an array-like of numbers, got list \(numpy reads it as dtype <U1\)"):
         palpate.kernel_value(K.WENDLAND_C2, ["a"], 1.0)
 
 

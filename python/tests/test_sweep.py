@@ -223,7 +223,7 @@ def test_the_cli_runs_a_study_and_a_fit_and_refuses_a_bad_spec_in_one_line(tmp_p
     assert json.loads(p.stdout)["values"]["young"] == pytest.approx(3.5e4, rel=1e-3)
     (tmp_path / "bad.toml").write_text('[model]\nmesh = "ellipsoid_192"\n[loading]\nkind = "probe"\nstep = 3\n')
     p = run_cli("sweep", "bad.toml", "--workers", "0", cwd=tmp_path)
-    assert p.returncode == 2 and p.stderr.count("\n") == 1 and "loading.step" in p.stderr, p.stderr
+    assert p.returncode == 1 and p.stderr.count("\n") == 1 and "loading.step" in p.stderr, p.stderr
 
 
 def test_bench_sweep_reports_its_keys(tmp_path):
@@ -244,9 +244,9 @@ def test_bench_sweep_reports_its_keys(tmp_path):
                                          '[parameters]\nyoung = { grid = [1e4, 2e4], num = 1e9 }\n') and "y.toml",
      "parameters.young.num: must be a whole number"),
 ])
-def test_a_bad_study_file_is_one_line_and_exit_2(tmp_path, make, expect):
+def test_a_bad_study_file_is_one_line_and_exit_1(tmp_path, make, expect):
     p = run_cli("sweep", make(tmp_path), "--workers", "0", cwd=tmp_path)
-    assert p.returncode == 2 and p.stderr.count("\n") == 1 and expect in p.stderr, p.stderr
+    assert p.returncode == 1 and p.stderr.count("\n") == 1 and expect in p.stderr, p.stderr
 
 
 def test_the_press_can_follow_a_touch_script(tmp_path):

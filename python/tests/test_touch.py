@@ -1,7 +1,7 @@
 """``palpate touch`` and :mod:`palpate.touch`: scripted touches of a hybrid model.
 
 What a wrong implementation would do: accept a script with a typo, a negative duration, a
-non-finite number or nothing in it (or fail with a traceback instead of one line, exit 2); put
+non-finite number or nothing in it (or fail with a traceback instead of one line, exit 1); put
 the tool sphere's centre on the surface instead of tangent to it at depth 0; log a force before
 contact or one that pulls the tool in; write a VTU series ParaView or meshio cannot read, or a
 .pvd that misses frames; lose the ticks done before a failed one.
@@ -104,16 +104,16 @@ GOOD = '[probe]\nvertex = "probe"\n[[segment]]\nkind = "press"\ndepth = 0.003\nd
     ("one.csv", "t,x,y,z\n0,0,0,0\n", "line 2"),
     ("script.txt", GOOD, ".toml"),
 ])
-def test_bad_scripts_are_one_line_exit_2(tmp_path, capsys, name, text, where):
+def test_bad_scripts_are_one_line_exit_1(tmp_path, capsys, name, text, where):
     p = _write(tmp_path, name, text)
     with pytest.raises(touch.ScriptError) as e:
         touch.parse_script(p)
     msg = str(e.value)
     assert name in msg and where in msg and "\n" not in msg, msg
-    # The CLI: the same line on stderr, exit 2, before any model is built.
+    # The CLI: the same line on stderr, exit 1 (bad input), before any model is built.
     rc = main(["touch", "--shape", "ventricle", "--script", str(p), "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err
-    assert rc == 2 and err.startswith("palpate: error:") and where in err and err.count("\n") == 1, err
+    assert rc == 1 and err.startswith("palpate: error:") and where in err and err.count("\n") == 1, err
     assert "Traceback" not in err and not (tmp_path / "o").exists()
 
 
@@ -125,23 +125,26 @@ def test_slide_along_the_normal_is_refused(tmp_path):
         s.resolve(pts, np.array([[0, 1, 2]]), 0.005)
 
 
-@pytest.mark.parametrize("args, what", [
-    (["--dt", "0"], "--dt"), (["--dt", "nan"], "--dt"), (["--tool-radius", "-1"], "--tool-radius"),
-    (["--every", "0"], "--every"), (["--young", "-3"], "--young"), (["--poisson", "0.7"], "material"),
+@pytest.mark.parametrize("args, what, code", [
+    # usage (2): a flag's value outside its documented range, checked by the command
+    (["--dt", "0"], "--dt", 2), (["--dt", "nan"], "--dt", 2), (["--tool-radius", "-1"], "--tool-radius", 2),
+    (["--every", "0"], "--every", 2), (["--young", "-3"], "--young", 2),
+    # bad input (1): a value palpate's Material refuses (MaterialError)
+    (["--poisson", "0.7"], "material", 1),
 ])
-def test_bad_options_exit_2(tmp_path, capsys, args, what):
+def test_bad_options_exit_2_or_1(tmp_path, capsys, args, what, code):
     rc = main(["touch", "--shape", "ventricle", "--script", str(SCRIPTS / "press_release.csv"),
                "--out", str(tmp_path / "o"), *args])
     err = capsys.readouterr().err
-    assert rc == 2 and what in err and err.count("\n") == 1, err
+    assert rc == code and what in err and err.count("\n") == 1, err
 
 
 def test_model_or_shape_exactly_one(tmp_path, capsys, ventricle_file):
     csv_script = str(SCRIPTS / "press_release.csv")
-    assert main(["touch", "--script", csv_script]) == 2
-    assert main(["touch", str(ventricle_file), "--shape", "ventricle", "--script", csv_script]) == 2
+    assert main(["touch", "--script", csv_script]) == 2                                        # usage
+    assert main(["touch", str(ventricle_file), "--shape", "ventricle", "--script", csv_script]) == 2   # usage
     bad = _write(tmp_path, "bad.palpate", "not a model")
-    assert main(["touch", str(bad), "--script", csv_script]) == 2
+    assert main(["touch", str(bad), "--script", csv_script]) == 1                              # bad input
     assert "bad.palpate" in capsys.readouterr().err
 
 
@@ -227,13 +230,13 @@ class _Failing:
         return repr(self._sim)
 
 
-def test_step_error_exits_1_with_the_ticks_done(tmp_path, capsys, monkeypatch, ventricle_file):
+def test_step_error_exits_3_with_the_ticks_done(tmp_path, capsys, monkeypatch, ventricle_file):
     real = palpate._palpate.HybridSim
     monkeypatch.setattr(palpate._palpate, "HybridSim", lambda *a, **k: _Failing(real(*a, **k), 40))
     out = tmp_path / "out"
     rc = main(["touch", str(ventricle_file), "--script", str(SCRIPTS / "press_release.csv"), "--out", str(out)])
     cap = capsys.readouterr()
-    assert rc == 1
+    assert rc == 3     # a run that failed after its input was accepted
     assert "tick 40" in cap.err and "injected" in cap.err and cap.err.count("\n") == 1
     header, rows = _read_csv(out / "force.csv")
     assert rows.shape == (39, len(touch.COLUMNS)) and rows[-1, 0] == pytest.approx(0.039)

@@ -40,9 +40,10 @@ Long work (a model build, a scene run, a touch, a benchmark sweep) shows a progr
 stderr when it is a terminal, nothing otherwise; ``--quiet`` (run, build, touch, bench protocol,
 particles and hybrid) turns it off there too.
 
-Exit codes: 0 success, 1 a simulation failed (e.g. a step diverged), a hybrid build failed on
-valid surfaces or an output could not be written, 2 bad input (arguments, scene file, mesh,
-surface, model or touch script file), with one line on stderr and no traceback.
+Exit codes (the table is ``_common.EXIT_CODES``; ``palpate --help`` prints it): 0 success, 1 bad
+input (a file, model, parameter or value palpate refused), 2 usage (the command line as written),
+3 a run that failed after its input was accepted (a step diverged, an output could not be
+written, ...), 130 Ctrl-C; with one line on stderr and no traceback. A closed stdout ends quietly.
 """
 from __future__ import annotations
 
@@ -52,14 +53,15 @@ from typing import List, Optional
 
 from .. import __version__
 from . import bench, build, device, fit, haptic, info, run, soak, sweep, touch, view
-from ._common import Fail, Parser, run_guarded
+from ._common import EXIT_CODES_HELP, Fail, Parser, interrupted, quiet_pipe, run_guarded
 
 #: The commands, in the order of ``palpate --help``: each module adds its parser and handler.
 COMMANDS = (run, bench, build, info, touch, haptic, soak, device, view, sweep, fit)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = Parser(prog="palpate", description="Real-time soft-tissue FEM for haptic interaction (SI units).")
+    ap = Parser(prog="palpate", description="Real-time soft-tissue FEM for haptic interaction (SI units).",
+                epilog=EXIT_CODES_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--version", action="version", version=f"palpate {__version__}")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
@@ -69,6 +71,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:   # Ctrl-C outside a command (parsing); a command's own is run_guarded's
+        return interrupted()
+
+
+def _main(argv: Optional[List[str]]) -> int:
     ap = build_parser()
     try:
         a = ap.parse_args(argv)
@@ -76,7 +85,6 @@ def main(argv: Optional[List[str]] = None) -> int:
         code = e.code if isinstance(e.code, int) else 0
         return _flushed(code)
     except BrokenPipeError:
-        from ._common import quiet_pipe
         return quiet_pipe()
     if getattr(a, "steps", None) is not None and a.steps <= 0:
         ap.error("--steps must be positive")
@@ -97,7 +105,6 @@ def main(argv: Optional[List[str]] = None) -> int:
 def _flushed(code: int) -> int:
     """Flush stdout now, so that a reader that closed the pipe early (``| head``) ends the
     command quietly here rather than in Python's exit handler with a traceback."""
-    from ._common import quiet_pipe
     try:
         sys.stdout.flush()
     except BrokenPipeError:

@@ -1,21 +1,107 @@
-"""What the commands share: the error that ends a command with an exit code, number formats, and
-the description of a hybrid model (``palpate build`` and ``palpate info``)."""
+"""What the commands share: the exit codes and the errors that end a command with one, number
+formats, and the description of a hybrid model (``palpate build`` and ``palpate info``)."""
 from __future__ import annotations
 
 import argparse
 import math
 import os
 import sys
-from typing import Callable, List
+from typing import Callable, List, Optional, Tuple
+
+# The exit codes: the CLI's contract, kept here only (README "Exit codes", palpate --help's epilog
+# and RELIABILITY.md show this table). A command ends with one line on stderr for each code but 0.
+OK = 0
+#: Bad input: a file, a model, a parameter or a value that palpate refused (every PalpateError
+#: from input), or an input file that cannot be read.
+INPUT = 1
+#: Usage: the command line as written: what argparse refuses (an unknown option, a missing or
+#: malformed argument) and the commands' own checks of their flags (conflicting or missing flags,
+#: a flag's value outside its documented range), made before any input is read.
+USAGE = 2
+#: A run that failed after its input was accepted: a step diverged, a solve failed, a tick of a
+#: touch failed, a haptic device was lost (faults), an output could not be written, a data set
+#: could not be fetched, an optional package or a browser is missing, or a palpate bug.
+FAILED = 3
+#: Ctrl-C (128 + SIGINT): one line, ``palpate: interrupted``.
+INTERRUPTED = 130
+#: stdout closed by its reader (``palpate ... | head``): quiet, 128 + SIGPIPE as Unix tools.
+CLOSED_PIPE = 141
+
+#: The exit code of each kind of error that ends a command: (class, code), the first match wins.
+#: Names only, resolved on first use (the parser must build without importing the extension).
+EXIT_CODES: Tuple[Tuple[str, int], ...] = (
+    ("palpate.StepError", FAILED),          # a step went non-finite or diverged
+    ("palpate.SolveError", FAILED),         # a static solve that did not converge
+    ("palpate.touch.TouchFailed", FAILED),  # a tick of a scripted touch failed
+    ("palpate.data.DataError", FAILED),     # a data set that could not be fetched
+    ("palpate.InternalError", FAILED),      # a palpate bug caught at the binding
+    ("palpate.PalpateError", INPUT),        # every other palpate error: the input was refused
+    ("builtins.OSError", INPUT),            # an input file that cannot be read (writes: RunFailed)
+    ("builtins.MemoryError", FAILED),       # out of memory past the budget's checks
+)
+
+#: The table as ``palpate --help`` and the README show it.
+EXIT_CODES_HELP = f"""\
+exit codes:
+  {OK}    success
+  {INPUT}    bad input: a file, model, parameter or value palpate refused
+       (MeshError, ModelFileError, MaterialError, ParameterError, LimitError,
+       SceneError, ...), or an input file that cannot be read
+  {USAGE}    usage: an unknown option, a missing or malformed argument,
+       conflicting flags, a flag's value outside its documented range
+  {FAILED}    the run failed after its input was accepted: a step diverged
+       (StepError), a solve failed (SolveError), a touch's tick failed,
+       haptic faults (a device lost), an output could not be written, a data
+       set could not be fetched, an optional package is missing, a palpate bug
+  {INTERRUPTED}  interrupted (Ctrl-C)
+  {CLOSED_PIPE}  stdout closed by its reader (palpate ... | head), quietly
+every failure is one line on stderr (palpate: error: ...), never a traceback."""
+
+
+def _resolve(name: str) -> type:
+    import importlib
+
+    module, _, attr = name.rpartition(".")
+    return getattr(importlib.import_module(module), attr)
+
+
+def exit_code(e: BaseException) -> Optional[int]:
+    """The exit code of ``e`` by :data:`EXIT_CODES` (a :class:`Fail` carries its own), or None for
+    an exception the table does not know (a bug: the caller reports it as an internal error)."""
+    if isinstance(e, Fail):
+        return e.code
+    for name, code in EXIT_CODES:
+        if isinstance(e, _resolve(name)):
+            return code
+    return None
 
 
 class Fail(Exception):
-    """Ends a command: one line on stderr (``palpate: error: ...``) and exit ``code`` (2: bad input,
-    1: a simulation, build or write that failed)."""
+    """Ends a command: one line on stderr (``palpate: error: ...``) and exit :data:`INPUT` (bad
+    input); with ``cause`` (the library error it reports), the code :data:`EXIT_CODES` gives that
+    error, where the table knows it."""
 
-    def __init__(self, msg: str, code: int = 2):
+    code = INPUT
+
+    def __init__(self, msg: str, cause: Optional[BaseException] = None):
         super().__init__(msg)
-        self.code = code
+        code = None if cause is None else exit_code(cause)
+        if code is not None:
+            self.code = code
+
+
+class Usage(Fail):
+    """A command line that cannot run as written (a command's own check of its flags): exit
+    :data:`USAGE`, as argparse's own errors."""
+
+    code = USAGE
+
+
+class RunFailed(Fail):
+    """A run that failed after its input was accepted (an output that cannot be written, a missing
+    optional package, faults): exit :data:`FAILED`."""
+
+    code = FAILED
 
 
 class Parser(argparse.ArgumentParser):
@@ -23,16 +109,15 @@ class Parser(argparse.ArgumentParser):
     instead of argparse's usage block followed by the error."""
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+        self.exit(USAGE, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
 def run_guarded(func: Callable[[], int]) -> int:
-    """Run a command so that whatever it raises ends as one line on stderr and an exit code, never
-    a traceback: :class:`Fail` with its code; a palpate error with 1 when a simulation or build
-    failed (StepError, SolveError, InternalError) and 2 for bad input (every other PalpateError,
-    a missing or unreadable file: OSError); MemoryError 1; anything else is a bug: 1, one line
-    saying so (``PALPATE_DEBUG=1`` shows the traceback). A closed stdout (``palpate ... | head``)
-    ends quietly."""
+    """Run a command so that whatever it raises ends as one line on stderr and an exit code by
+    :data:`EXIT_CODES`, never a traceback: :class:`Fail` with its code, a palpate error, an
+    unreadable file (OSError) or MemoryError by the table; Ctrl-C 130; anything else is a bug:
+    :data:`FAILED`, one line saying so (``PALPATE_DEBUG=1`` shows the traceback). A closed stdout
+    (``palpate ... | head``) ends quietly."""
     from .. import _palpate as _p
 
     def say(msg: str, code: int) -> int:
@@ -46,20 +131,26 @@ def run_guarded(func: Callable[[], int]) -> int:
     except BrokenPipeError:
         return quiet_pipe()
     except KeyboardInterrupt:
-        print("palpate: interrupted", file=sys.stderr)
-        return 130
-    except (_p.StepError, _p.SolveError, _p.InternalError) as e:
-        return say(f"{type(e).__name__}: {e}", 1)
+        return interrupted()
     except _p.PalpateError as e:
-        return say(f"{type(e).__name__}: {e}", 2)
+        return say(f"{type(e).__name__}: {e}", exit_code(e))
     except OSError as e:
-        return say(f"{e.filename + ': ' if getattr(e, 'filename', None) else ''}{e.strerror or e}", 2)
-    except MemoryError:
-        return say("out of memory (lower the input's size, or see PALPATE_MAX_MEMORY)", 1)
+        return say(f"{e.filename + ': ' if getattr(e, 'filename', None) else ''}{e.strerror or e}", exit_code(e))
+    except MemoryError as e:
+        return say("out of memory (lower the input's size, or see PALPATE_MAX_MEMORY)", exit_code(e))
     except Exception as e:  # noqa: BLE001 - the promise is one line, never a traceback
         if os.environ.get("PALPATE_DEBUG"):
             raise
-        return say(f"internal error ({type(e).__name__}: {e}); please report it (PALPATE_DEBUG=1 shows the traceback)", 1)
+        return say(f"internal error ({type(e).__name__}: {e}); please report it (PALPATE_DEBUG=1 shows the traceback)", FAILED)
+
+
+def interrupted() -> int:
+    """Ctrl-C: one line on stderr and :data:`INTERRUPTED`, no traceback."""
+    try:
+        print("palpate: interrupted", file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
+    return INTERRUPTED
 
 
 def quiet_pipe() -> int:
@@ -71,7 +162,7 @@ def quiet_pipe() -> int:
         os.dup2(devnull, sys.stdout.fileno())
     except (OSError, ValueError, AttributeError):
         pass
-    return 141
+    return CLOSED_PIPE
 
 
 def add_quiet(parser) -> None:
@@ -108,8 +199,8 @@ def palpate_errors():
 
 def load_hybrid_model(model_spec: str, cmd: str):
     """``(name, model)`` of a hybrid model file or shape name (``bench_hybrid.load_model``), or a
-    :class:`Fail` naming ``palpate CMD``: exit 2 for a bad name or file, 1 for data that cannot be
-    fetched."""
+    :class:`Fail` naming ``palpate CMD``, its code by :data:`EXIT_CODES` (a bad name or file:
+    input; data that cannot be fetched: a failed run)."""
     from .. import bench_hybrid as bh
     from ..data import DataError
 
@@ -118,16 +209,16 @@ def load_hybrid_model(model_spec: str, cmd: str):
     except (ValueError, OSError) as e:
         raise Fail(f"palpate {cmd}: {e}") from None
     except DataError as e:
-        raise Fail(f"palpate {cmd}: {e}", 1) from None
+        raise Fail(f"palpate {cmd}: {e}", cause=e) from None
     except palpate_errors() as e:
-        raise Fail(f"palpate {cmd}: {model_spec}: {type(e).__name__}: {e}") from None
+        raise Fail(f"palpate {cmd}: {model_spec}: {type(e).__name__}: {e}", cause=e) from None
 
 
 def load_view_model(model_spec: str, cmd: str, unit: str = "m"):
     """``(name, model)`` for ``palpate view`` / ``palpate bench view``: a full-FEM
     :class:`palpate.viewer.fem.FemModel` for a protocol mesh name, a scene (.toml) or a tet mesh
     file (coordinates in ``unit``), else a hybrid model (:func:`load_hybrid_model`); a bad one is a
-    :class:`Fail` (exit 2) naming the file and the reason."""
+    :class:`Fail` naming the file and the reason (bad input, or by :data:`EXIT_CODES`)."""
     from ..viewer.fem import is_fem_spec, load_fem_model
 
     if not is_fem_spec(model_spec):
@@ -136,7 +227,7 @@ def load_view_model(model_spec: str, cmd: str, unit: str = "m"):
         return load_fem_model(model_spec, unit)
     except palpate_errors() as e:
         # The readers' and the scene's messages name the file already.
-        raise Fail(f"palpate {cmd}: {type(e).__name__}: {e}") from None
+        raise Fail(f"palpate {cmd}: {type(e).__name__}: {e}", cause=e) from None
     except (ValueError, OSError) as e:
         raise Fail(f"palpate {cmd}: {model_spec}: {e}") from None
 

@@ -15,7 +15,7 @@ from .. import _progress
 from .. import bench
 from .. import bench_hybrid as bh
 from .. import bench_particles as bp
-from ._common import Fail, add_quiet, fmt_mm, load_hybrid_model, load_view_model, num, palpate_errors
+from ._common import FAILED, Fail, RunFailed, Usage, add_quiet, fmt_mm, load_hybrid_model, load_view_model, num, palpate_errors
 
 
 def add_parser(sub) -> None:
@@ -68,7 +68,7 @@ def add_parser(sub) -> None:
                                     "or a shape: ellipsoids, ventricle, rodero), then time each tick of a scripted "
                                     f"press, hold, {num(bh.SLIDE * 1e3)} mm slide and release (one thread; see "
                                     "palpate/bench_hybrid.py for the probe point and the calibration rule). "
-                                    "Exit 1 if a tick fails.")
+                                    "Exit 3 if a tick fails.")
     h.add_argument("model", metavar="MODEL", help="model file (palpate build) or ellipsoids|ventricle|rodero")
     h.add_argument("--active", type=int, required=True, metavar="N", help="target number of active particles")
     h.add_argument("--ticks", type=int, default=bh.TICKS,
@@ -105,9 +105,9 @@ def cmd_bench_sweep(a) -> int:
     from ..sweep import bench as sb
 
     if a.scenarios < 2:
-        raise Fail("palpate bench sweep: --scenarios must be at least 2")
+        raise Usage("palpate bench sweep: --scenarios must be at least 2")
     if not 1 <= a.repeat <= 100:
-        raise Fail("palpate bench sweep: --repeat must be 1 to 100")
+        raise Usage("palpate bench sweep: --repeat must be 1 to 100")
     r = sb.run(a.mesh, a.scenarios, a.steps, a.repeat, log=None if a.json else print)
     if a.json:
         print(_json.dumps(r))
@@ -139,21 +139,21 @@ def _add_view(bsub) -> None:
 
 def cmd_bench_view(a) -> int:
     if not (a.seconds >= 5 and math.isfinite(a.seconds)):
-        raise Fail(f"palpate bench view: --seconds must be at least 5, got {a.seconds}")
+        raise Usage(f"palpate bench view: --seconds must be at least 5, got {a.seconds}")
     if not 250 <= a.rate <= 4000:
-        raise Fail(f"palpate bench view: --rate must be within 250 to 4000 Hz, got {a.rate}")
+        raise Usage(f"palpate bench view: --rate must be within 250 to 4000 Hz, got {a.rate}")
     if not (1 <= a.fps <= 120):
-        raise Fail(f"palpate bench view: --fps must be within 1 to 120, got {a.fps}")
+        raise Usage(f"palpate bench view: --fps must be within 1 to 120, got {a.fps}")
     try:
         import viser  # noqa: F401
     except ImportError:
-        raise Fail("palpate bench view: needs viser (pip install 'palpate[view]')", 1) from None
+        raise RunFailed("palpate bench view: needs viser (pip install 'palpate[view]')") from None
     from ..viewer.browser import find_chromium, have_playwright
 
     ok, why = have_playwright()
     exe, why2 = find_chromium()
     if not ok or exe is None:
-        raise Fail(f"palpate bench view: needs a browser: {why or why2}", 1)
+        raise RunFailed(f"palpate bench view: needs a browser: {why or why2}")
     from ..viewer import bench as vb
 
     name, model = load_view_model(a.model, "bench view", a.unit)
@@ -161,7 +161,7 @@ def cmd_bench_view(a) -> int:
     try:
         r = vb.bench(model, name, a.seconds, a.rate, a.fps, on_status=say, realtime=a.realtime)
     except palpate_errors() as e:
-        raise Fail(f"palpate bench view: {type(e).__name__}: {e}", 1) from None
+        raise Fail(f"palpate bench view: {type(e).__name__}: {e}", cause=e) from None
     if a.json:
         print(json.dumps(r), flush=True)
         return 0
@@ -201,14 +201,14 @@ def cmd_bench_haptic(a) -> int:
     from .. import haptics
 
     if not (a.seconds > 0 and math.isfinite(a.seconds)):
-        raise Fail(f"palpate bench haptic: --seconds must be positive, got {a.seconds}")
+        raise Usage(f"palpate bench haptic: --seconds must be positive, got {a.seconds}")
     if not 250 <= a.rate <= 4000:
-        raise Fail(f"palpate bench haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")
+        raise Usage(f"palpate bench haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")
     name, model = load_hybrid_model(a.model, "bench haptic")
     try:
         r = haptics.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name, realtime=a.realtime)
     except palpate_errors() as e:
-        raise Fail(f"palpate bench haptic: {type(e).__name__}: {e}", 1) from None
+        raise Fail(f"palpate bench haptic: {type(e).__name__}: {e}", cause=e) from None
     if a.json:
         print(json.dumps(r), flush=True)
     else:
@@ -222,7 +222,7 @@ def cmd_bench_haptic(a) -> int:
         if "idle" in r:
             row("idle", r["idle"])
         print(f"  max force {r['max_force_n']:.3f} N, faults {r['n_faults']}")
-    return 1 if r["n_faults"] else 0
+    return FAILED if r["n_faults"] else 0
 
 
 def _bench_cases(a):
@@ -230,7 +230,7 @@ def _bench_cases(a):
 
     if a.all:
         if a.mesh:
-            raise Fail("palpate bench protocol: give MESH or --all, not both")
+            raise Usage("palpate bench protocol: give MESH or --all, not both")
         shared = bench.shared_dir()
         if shared is None:
             raise Fail("palpate bench protocol --all: shared bench meshes not found "
@@ -241,7 +241,7 @@ def _bench_cases(a):
             yield (lambda p=p: bench.load_case(str(p), a.force))
         return
     if not a.mesh:
-        raise Fail("palpate bench protocol: give a MESH file (.msh, .vtu, .npz) or --all")
+        raise Usage("palpate bench protocol: give a MESH file (.msh, .vtu, .npz) or --all")
     if a.mesh == bench.GENERATED:
         yield (lambda: bench.generated_case(a.force))
         return
@@ -256,9 +256,9 @@ def _bench_cases(a):
 
 def cmd_bench_protocol(a) -> int:
     if not (math.isfinite(a.force) and a.force > 0):
-        raise Fail(f"palpate bench protocol: --force must be a positive number of newtons, got {a.force}")
+        raise Usage(f"palpate bench protocol: --force must be a positive number of newtons, got {a.force}")
     if a.steps < 1:
-        raise Fail("palpate bench protocol: --steps must be at least 1")
+        raise Usage("palpate bench protocol: --steps must be at least 1")
     newton = {"auto": None, "on": True, "off": False}[a.newton]
     if not a.json:
         print(f"palpate {__version__} bench protocol: {a.force:g} N, {a.steps} steps of {bench.DT * 1e3:g} ms, "
@@ -293,13 +293,13 @@ def _print_protocol_row(a, r) -> None:
 
 def cmd_bench_particles(a) -> int:
     if a.all == (a.n is not None):
-        raise Fail("palpate bench particles: give N or --all (not both)")
+        raise Usage("palpate bench particles: give N or --all (not both)")
     if a.spacing <= 0 or a.spacing != a.spacing:
-        raise Fail(f"palpate bench particles: --spacing must be positive, got {a.spacing}")
+        raise Usage(f"palpate bench particles: --spacing must be positive, got {a.spacing}")
     if a.ticks <= 0:
-        raise Fail("palpate bench particles: --ticks must be positive")
+        raise Usage("palpate bench particles: --ticks must be positive")
     if not (1.0 < a.support < 4.0):
-        raise Fail(f"palpate bench particles: --support must lie between 1 and 4 spacings, got {a.support}")
+        raise Usage(f"palpate bench particles: --support must lie between 1 and 4 spacings, got {a.support}")
     sizes = bp.ALL if a.all else [a.n]
     if not a.json:
         mhz = bp.cpu_mhz()
@@ -318,7 +318,7 @@ def cmd_bench_particles(a) -> int:
         for n in sizes:
             failed |= _particles_row(a, n)
             advance(1)
-    return 1 if failed else 0
+    return FAILED if failed else 0
 
 
 def _particles_row(a, n) -> bool:
@@ -328,7 +328,7 @@ def _particles_row(a, n) -> bool:
     except ValueError as e:
         raise Fail(f"palpate bench particles: {e}") from None
     except palpate_errors() as e:
-        raise Fail(f"palpate bench particles: N = {n}: {type(e).__name__}: {e}", 1) from None
+        raise Fail(f"palpate bench particles: N = {n}: {type(e).__name__}: {e}", cause=e) from None
     failed = r["error"] is not None and "wall-clock cap" not in r["error"]
     if a.json:
         print(json.dumps(r), flush=True)
@@ -345,11 +345,11 @@ def _particles_row(a, n) -> bool:
 
 def cmd_bench_hybrid(a) -> int:
     if a.active <= 0:
-        raise Fail(f"palpate bench hybrid: --active must be a positive number of particles, got {a.active}")
+        raise Usage(f"palpate bench hybrid: --active must be a positive number of particles, got {a.active}")
     if a.ticks < bh.MIN_TICKS:
-        raise Fail(f"palpate bench hybrid: --ticks must be at least {bh.MIN_TICKS}, got {a.ticks}")
+        raise Usage(f"palpate bench hybrid: --ticks must be at least {bh.MIN_TICKS}, got {a.ticks}")
     if a.radius is not None and not (a.radius > 0 and math.isfinite(a.radius)):
-        raise Fail(f"palpate bench hybrid: --radius must be a positive number of metres, got {a.radius}")
+        raise Usage(f"palpate bench hybrid: --radius must be a positive number of metres, got {a.radius}")
     # The model's build and the calibration take seconds: a spinner on a terminal (the timed
     # ticks measure the step call alone).
     with _progress.task(f"bench hybrid {a.model}: building", quiet=a.json):
@@ -360,7 +360,7 @@ def cmd_bench_hybrid(a) -> int:
     except ValueError as e:
         raise Fail(f"palpate bench hybrid: {e}") from None
     except palpate_errors() as e:
-        raise Fail(f"palpate bench hybrid: {type(e).__name__}: {e}", 1) from None
+        raise Fail(f"palpate bench hybrid: {type(e).__name__}: {e}", cause=e) from None
     if a.json:
         print(json.dumps(r), flush=True)
     else:
@@ -382,5 +382,5 @@ def cmd_bench_hybrid(a) -> int:
     if not r["stable"]:
         print(f"palpate: error: palpate bench hybrid: tick {r['failed_tick']} ({r['failed_phase']}) failed: "
               f"{r['error']}", file=sys.stderr)
-        return 1
+        return FAILED
     return 0

@@ -9,7 +9,7 @@ from typing import Optional
 from .. import _palpate as _p
 from .. import _progress
 from .. import defaults
-from ._common import Fail, add_quiet, mb, model_lines, num
+from ._common import Fail, RunFailed, Usage, add_quiet, mb, model_lines, num
 
 #: --projection: the Projection, a description and a note of each choice.
 _PROJECTIONS = {
@@ -69,9 +69,9 @@ def _int_list(text: Optional[str], flag: str):
     try:
         vals = [int(v) for v in text.split(",") if v.strip() != ""]
     except ValueError:
-        raise Fail(f"palpate build: {flag} takes comma-separated integer tag values, got {text!r}") from None
+        raise Usage(f"palpate build: {flag} takes comma-separated integer tag values, got {text!r}") from None
     if not vals:
-        raise Fail(f"palpate build: {flag} takes comma-separated integer tag values, got {text!r}")
+        raise Usage(f"palpate build: {flag} takes comma-separated integer tag values, got {text!r}")
     return vals
 
 
@@ -86,14 +86,14 @@ def cmd_build(a) -> int:
     files = a.files or []
     modes = [bool(files), a.tagged is not None, a.shape is not None]
     if sum(modes) != 1:
-        raise Fail("palpate build: give INNER OUTER (two nested surfaces), --tagged SURFACE or --shape NAME "
+        raise Usage("palpate build: give INNER OUTER (two nested surfaces), --tagged SURFACE or --shape NAME "
                    "(exactly one)")
     if files and len(files) != 2:
-        raise Fail(f"palpate build: give two surface files INNER OUTER, got {len(files)}")
+        raise Usage(f"palpate build: give two surface files INNER OUTER, got {len(files)}")
     if a.tagged is None and any(v is not None for v in (a.tag_array, a.inner, a.outer, a.base)):
-        raise Fail("palpate build: --tag-array, --inner, --outer and --base go with --tagged SURFACE")
+        raise Usage("palpate build: --tag-array, --inner, --outer and --base go with --tagged SURFACE")
     if a.shape is not None and a.unit is not None:
-        raise Fail("palpate build: --unit is for surface files, not --shape (the shapes are in metres)")
+        raise Usage("palpate build: --unit is for surface files, not --shape (the shapes are in metres)")
     unit = a.unit or "m"
     opts = {"projection": _PROJECTIONS[a.projection][0],
             "core_fraction": a.core_fraction, "core_triangles": a.core_triangles, "core_layers": a.core_layers,
@@ -104,10 +104,10 @@ def cmd_build(a) -> int:
                     ("--particles", a.particles), ("--min-region-particles", a.min_region_particles),
                     ("--field-voxels", a.field_voxels)):
         if v is not None and v < 0:
-            raise Fail(f"palpate build: {flag} must not be negative, got {v}")
+            raise Usage(f"palpate build: {flag} must not be negative, got {v}")
     for flag, v in (("--spacing", a.spacing), ("--density", a.density)):
         if v is not None and not (v > 0 and math.isfinite(v)):
-            raise Fail(f"palpate build: {flag} must be positive, got {v}")
+            raise Usage(f"palpate build: {flag} must be positive, got {v}")
     if files:
         what = f"inner {files[0]}, outer {files[1]}"
         build = lambda: hybrid.build_from_files(files[0], files[1], unit=unit, **opts)  # noqa: E731
@@ -129,11 +129,11 @@ def cmd_build(a) -> int:
         msg = str(e)
         if not any(os.path.basename(f) in msg for f in files + [a.tagged or ""] if f):
             msg = f"{what}: {msg}"
-        raise Fail(f"palpate build: {msg}") from None
+        raise Fail(f"palpate build: {msg}", cause=e) from None
     except OSError as e:
         raise Fail(f"palpate build: cannot read the input: {e}") from None
     except _p.PalpateError as e:
-        raise Fail(f"palpate build: {what}: the build failed: {e}", 1) from None
+        raise Fail(f"palpate build: {what}: the build failed: {e}", cause=e) from None
     wall = time.perf_counter() - t0
     info = model.info()
     print(f"palpate build: {what}: {info['projection']} projection, core fraction {info['core_fraction']:g}; "
@@ -145,6 +145,6 @@ def cmd_build(a) -> int:
     try:
         model.save(a.output)
     except (OSError, _p.ModelFileError) as e:
-        raise Fail(f"palpate build: cannot write the model: {e}", 1) from None
+        raise RunFailed(f"palpate build: cannot write the model: {e}") from None
     print(f"  wrote {a.output} ({mb(info['file_bytes'])})")
     return 0

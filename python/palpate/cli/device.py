@@ -2,12 +2,12 @@
 process that speaks the bridge protocol to ``palpate haptic MODEL --device bridge:PORT`` (so a
 vendor SDK never runs in the servo thread, and its crash cannot take the simulation down). Each
 vendor package is an optional extra, imported only here; without it, the command says what to
-install (exit code 2). The adapters and their unit and axis mappings: :mod:`palpate.devices`."""
+install (exit code 3: a failed run, see ``_common.EXIT_CODES``). The adapters and their unit and axis mappings: :mod:`palpate.devices`."""
 from __future__ import annotations
 
 import math
 
-from ._common import Fail
+from ._common import RunFailed, Usage
 
 ADAPTERS = ("touch", "forcedimension", "haply", "hapticmaster")
 
@@ -34,7 +34,7 @@ def make_adapter(a):
     try:
         place = bridge.Placement(a.scale, a.offset)
     except ValueError as e:
-        raise Fail(f"palpate device: {e}") from None
+        raise Usage(f"palpate device: {e}") from None
     if a.adapter == "touch":
         from ..devices.touch import TouchAdapter
         return TouchAdapter(place)
@@ -53,14 +53,14 @@ def cmd_device(a) -> int:
     from ..devices.bridge import run_adapter
 
     if not (a.rate > 0 and math.isfinite(a.rate)):
-        raise Fail(f"palpate device: --rate must be positive, got {a.rate}")
+        raise Usage(f"palpate device: --rate must be positive, got {a.rate}")
     adapter = make_adapter(a)
     try:
         s = run_adapter(adapter, a.host, a.port, a.rate, a.seconds, lambda line: print(line, flush=True))
     except MissingVendor as e:
-        raise Fail(str(e)) from None
+        raise RunFailed(str(e)) from None
     except OSError as e:
-        raise Fail(f"palpate device {a.adapter}: {e}", 1) from None
+        raise RunFailed(f"palpate device {a.adapter}: {e}") from None
     print(f"palpate device {a.adapter}: sent {s['sent']} states, got {s['forces']} forces (max {s['max_force_n']:.3f} N), "
           f"zeroed {s['silences']} times for silence")
     return 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 
-from ._common import Fail
+from ._common import Usage
 
 
 def add_parser(sub) -> None:
@@ -29,7 +29,7 @@ def cmd_fit(a) -> int:
     from ..sweep.fit import fit
 
     if a.workers is not None and a.workers < 0:
-        raise Fail("palpate fit: --workers must be 0 or more")
+        raise Usage("palpate fit: --workers must be 0 or more")
     params = [p.strip() for p in a.params.split(",") if p.strip()]
     r = fit(a.spec, a.measured, params, scheduler=a.scheduler, workers=a.workers, plot=a.plot or None,
             log=None if a.json else print)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import sys
 
-from ._common import Fail, load_hybrid_model, palpate_errors
+from ._common import FAILED, Fail, RunFailed, Usage, load_hybrid_model, palpate_errors
 
 DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand"
 KINDS = ("simulated", "bridge", "touch", "forcedimension", "haply", "hapticmaster")
@@ -50,7 +50,7 @@ def add_parser(sub) -> None:
 
 def _positive(cmd: str, flag: str, v) -> None:
     if v is not None and not (v > 0 and math.isfinite(v)):
-        raise Fail(f"palpate {cmd}: {flag} must be positive and finite, got {v}")
+        raise Usage(f"palpate {cmd}: {flag} must be positive and finite, got {v}")
 
 
 def record_ticks(a) -> int:
@@ -84,7 +84,7 @@ def make_loop(a, model, record_ticks: int):
     try:
         if kind == "scripted":
             if not arg:
-                raise Fail("palpate haptic: --device scripted:SCRIPT needs a script (.toml or .csv, as palpate touch)")
+                raise Usage("palpate haptic: --device scripted:SCRIPT needs a script (.toml or .csv, as palpate touch)")
             try:
                 t, k = haptics.script_trajectory(model, arg, a.tool_radius)
             except ScriptError as e:
@@ -99,9 +99,9 @@ def make_loop(a, model, record_ticks: int):
             try:
                 port = int(arg)
             except ValueError:
-                raise Fail(f"palpate haptic: --device bridge:PORT needs a port number, got {arg!r}") from None
+                raise Usage(f"palpate haptic: --device bridge:PORT needs a port number, got {arg!r}") from None
             if not 0 <= port <= 65535:
-                raise Fail(f"palpate haptic: port {port} out of range")
+                raise Usage(f"palpate haptic: port {port} out of range")
             return _p.HapticLoop(model, mat, "bridge", port=port, host=a.host, **common)
         if kind == "hand":
             import numpy as np
@@ -112,15 +112,15 @@ def make_loop(a, model, record_ticks: int):
     except _p.HapticsError as e:
         raise Fail(f"palpate haptic: {e}") from None
     except palpate_errors() as e:
-        raise Fail(f"palpate haptic: {type(e).__name__}: {e}", 1) from None
-    raise Fail(f"palpate haptic: unknown device {a.device!r}; expected {DEVICES}")
+        raise Fail(f"palpate haptic: {type(e).__name__}: {e}", cause=e) from None
+    raise Usage(f"palpate haptic: unknown device {a.device!r}; expected {DEVICES}")
 
 
 def cmd_haptic(a) -> int:
     from .. import haptics
 
     if not 250 <= a.rate <= 4000:
-        raise Fail(f"palpate haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")
+        raise Usage(f"palpate haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")
     _positive("haptic", "--seconds", a.seconds)
     _positive("haptic", "--max-force", a.max_force)
     _positive("haptic", "--tool-radius", a.tool_radius)
@@ -154,10 +154,10 @@ def cmd_haptic(a) -> int:
         try:
             n = loop.save_recording(a.record)
         except OSError as e:
-            raise Fail(f"palpate haptic: cannot write {a.record}: {e}", 1) from None
+            raise RunFailed(f"palpate haptic: cannot write {a.record}: {e}") from None
         print(f"  recorded {n} ticks: {a.record}")
         if r["recording_dropped_ticks"]:
             print(f"palpate haptic: warning: the recording buffer was full: the last {r['recording_dropped_ticks']} of "
                   f"{n + r['recording_dropped_ticks']} ticks were not recorded (--seconds S sizes it; 144 bytes a tick)",
                   file=sys.stderr)
-    return 1 if r["n_faults"] else 0
+    return FAILED if r["n_faults"] else 0

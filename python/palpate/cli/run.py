@@ -2,7 +2,7 @@
 series, with a progress bar over the steps on a terminal."""
 from __future__ import annotations
 
-from ._common import Fail, add_quiet, fmt_mm
+from ._common import Fail, RunFailed, add_quiet, fmt_mm
 
 
 def add_parser(sub) -> None:
@@ -31,9 +31,9 @@ def cmd_run(a) -> int:
         with _progress.task("running the scene", total=scene.steps) as advance:   # a terminal only
             s = run_scene(scene, advance=advance)
     except _p.StepError as e:
-        raise Fail(f"{a.scene}: simulation failed: {e}", 1) from None
+        raise Fail(f"{a.scene}: simulation failed: {e}", cause=e) from None
     except OSError as e:
-        raise Fail(f"{a.scene}: cannot write the output: {e}", 1) from None
+        raise RunFailed(f"{a.scene}: cannot write the output: {e}") from None
     print(f"  {s['steps']} steps in {s['wall_s']:.3f} s of stepping: {s['steps_per_s']:.1f} steps/s")
     print(f"  max |u| = {fmt_mm(s['max_disp_m'])} mm")
     print(f"  final energy: strain {s['strain_energy_J']:.6e} J, kinetic {s['kinetic_energy_J']:.6e} J")

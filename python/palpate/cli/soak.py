@@ -8,7 +8,7 @@ import json
 import math
 import sys
 
-from ._common import Fail, load_hybrid_model, palpate_errors
+from ._common import FAILED, Fail, Usage, load_hybrid_model, palpate_errors
 
 
 def add_parser(sub) -> None:
@@ -28,9 +28,9 @@ def cmd_soak(a) -> int:
     from .. import haptics
 
     if not (a.minutes > 0 and math.isfinite(a.minutes)):
-        raise Fail(f"palpate soak: --minutes must be positive, got {a.minutes}")
+        raise Usage(f"palpate soak: --minutes must be positive, got {a.minutes}")
     if not 250 <= a.rate <= 4000:
-        raise Fail(f"palpate soak: --rate must be within 250 to 4000 Hz, got {a.rate}")
+        raise Usage(f"palpate soak: --rate must be within 250 to 4000 Hz, got {a.rate}")
     name, model = load_hybrid_model(a.model, "soak")
     seconds = 60.0 * a.minutes
     t, k = haptics.random_palpation(model, seconds + 1.0, seed=a.seed)
@@ -38,7 +38,7 @@ def cmd_soak(a) -> int:
         loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, rate_hz=a.rate,
                              max_ticks=int(round(seconds * a.rate)), realtime=a.realtime)
     except palpate_errors() as e:
-        raise Fail(f"palpate soak: {type(e).__name__}: {e}", 1) from None
+        raise Fail(f"palpate soak: {type(e).__name__}: {e}", cause=e) from None
     show = None if a.json else (lambda line: print(line, flush=True))
     r = haptics.run_live(loop, None, show, every=5.0)
     r["model"], r["minutes"], r["seed"] = name, a.minutes, a.seed
@@ -51,4 +51,4 @@ def cmd_soak(a) -> int:
               f"{r['energy_into_user_j']:.3e} J; faults {r['n_faults']}")
         for f in r["faults"][:10]:
             print(f"  fault at tick {f['tick']} (t = {f['time']:.3f} s): {f['reason']}", file=sys.stderr)
-    return 1 if r["n_faults"] else 0
+    return FAILED if r["n_faults"] else 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 
-from ._common import Fail, add_quiet
+from ._common import Usage, add_quiet
 
 
 def add_parser(sub) -> None:
@@ -27,9 +27,9 @@ def cmd_sweep(a) -> int:
     from ..sweep import sweep
 
     if a.workers is not None and a.workers < 0:
-        raise Fail("palpate sweep: --workers must be 0 or more")
+        raise Usage("palpate sweep: --workers must be 0 or more")
     if a.scheduler is not None and a.workers is not None:
-        raise Fail("palpate sweep: --workers is for the local cluster; a --scheduler has its own workers")
+        raise Usage("palpate sweep: --workers is for the local cluster; a --scheduler has its own workers")
     r = sweep(a.spec, a.out, scheduler=a.scheduler, workers=a.workers, resume=a.resume, quiet=a.quiet or a.json,
               log=None if a.json else print)
     if a.json:

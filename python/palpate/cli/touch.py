@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from ._common import Fail, add_quiet, fmt_mm, num
+from ._common import Fail, RunFailed, Usage, add_quiet, fmt_mm, num
 
 #: Material defaults [Pa, -, kg/m^3]: those of the hybrid tests and the benchmark.
 YOUNG, POISSON, DENSITY = 3.0e4, 0.4, 1000.0
@@ -43,7 +43,7 @@ def _positive(flag: str, v, allow_zero: bool = False) -> None:
         return
     ok = (v >= 0 if allow_zero else v > 0) and math.isfinite(v)
     if not ok:
-        raise Fail(f"palpate touch: {flag} must be {'non-negative' if allow_zero else 'positive'} and finite, got {v}")
+        raise Usage(f"palpate touch: {flag} must be {'non-negative' if allow_zero else 'positive'} and finite, got {v}")
 
 
 def _model(a):
@@ -54,16 +54,16 @@ def _model(a):
     from ..data import DataError
 
     if (a.model is None) == (a.shape is None):
-        raise Fail("palpate touch: give a MODEL file or --shape NAME (exactly one)")
+        raise Usage("palpate touch: give a MODEL file or --shape NAME (exactly one)")
     if a.shape is not None:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", _p.MeshWarning)
                 return hybrid.build_shape(a.shape, density=a.density), f"shape {a.shape}"
         except DataError as e:
-            raise Fail(f"palpate touch: shape {a.shape}: {e}") from None
+            raise Fail(f"palpate touch: shape {a.shape}: {e}", cause=e) from None
         except _p.PalpateError as e:
-            raise Fail(f"palpate touch: shape {a.shape}: the build failed: {e}", 1) from None
+            raise Fail(f"palpate touch: shape {a.shape}: the build failed: {e}", cause=e) from None
     try:
         return _p.HybridModel.load(a.model), a.model
     except (_p.ModelFileError, OSError) as e:
@@ -81,7 +81,7 @@ def cmd_touch(a) -> int:
     for flag, v in (("--phi", a.phi), ("--psi", a.psi)):
         _positive(flag, v, allow_zero=True)
     if a.every is not None and a.every < 1:
-        raise Fail(f"palpate touch: --every must be at least 1, got {a.every}")
+        raise Usage(f"palpate touch: --every must be at least 1, got {a.every}")
     try:
         script = parse_script(a.script)
     except ScriptError as e:
@@ -97,7 +97,7 @@ def cmd_touch(a) -> int:
     except ValueError as e:
         raise Fail(f"palpate touch: {e}") from None
     except _p.PalpateError as e:
-        raise Fail(f"palpate touch: {what}: cannot simulate the model: {e}", 1) from None
+        raise Fail(f"palpate touch: {what}: cannot simulate the model: {e}", cause=e) from None
     radius = sim.tool_radius if a.tool_radius is None else a.tool_radius
     try:
         traj = script.resolve(sim.surface, sim.surface_triangles, radius)
@@ -114,9 +114,9 @@ def cmd_touch(a) -> int:
     except TouchFailed as e:
         _report(e.summary, sim.options["max_tool_step"])
         raise Fail(f"{a.script}: simulation failed at tick {e.tick} (t = {e.summary['t_failed_s']:.4f} s): "
-                   f"{e.reason}; wrote the {e.summary['ticks']} ticks before it", 1) from None
+                   f"{e.reason}; wrote the {e.summary['ticks']} ticks before it", cause=e) from None
     except OSError as e:
-        raise Fail(f"palpate touch: cannot write the output: {e}", 1) from None
+        raise RunFailed(f"palpate touch: cannot write the output: {e}") from None
     _report(s, sim.options["max_tool_step"])
     return 0
 

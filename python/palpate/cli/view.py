@@ -16,7 +16,7 @@ import math
 import sys
 import time
 
-from ._common import Fail, load_view_model, num
+from ._common import Fail, RunFailed, Usage, load_view_model, num
 
 #: Status lines on stdout every this many seconds (unless --quiet).
 STATUS_EVERY_S = 1.0
@@ -80,18 +80,18 @@ def _check(a) -> None:
     for flag, v in (("--tool-radius", a.tool_radius), ("--fps", a.fps), ("--seconds", a.seconds),
                     ("--max-force", a.max_force)):
         if v is not None and not (v > 0 and math.isfinite(v)):
-            raise Fail(f"palpate view: {flag} must be positive and finite, got {v}")
+            raise Usage(f"palpate view: {flag} must be positive and finite, got {v}")
     if not (a.press >= 0 and math.isfinite(a.press)):
-        raise Fail(f"palpate view: --press must be non-negative and finite, got {a.press}")
+        raise Usage(f"palpate view: --press must be non-negative and finite, got {a.press}")
     if not 250 <= a.rate <= 4000:
-        raise Fail(f"palpate view: --rate must be within 250 to 4000 Hz, got {a.rate}")
+        raise Usage(f"palpate view: --rate must be within 250 to 4000 Hz, got {a.rate}")
     if not 0 <= a.port <= 65535 or not 0 <= a.bridge_port <= 65535:
-        raise Fail("palpate view: ports must be within 0 to 65535")
+        raise Usage("palpate view: ports must be within 0 to 65535")
     try:
         ipaddress.ip_address(a.host)
     except ValueError:
         if a.host != "localhost":
-            raise Fail(f"palpate view: --host {a.host!r} is not an IP address") from None
+            raise Usage(f"palpate view: --host {a.host!r} is not an IP address") from None
 
 
 def status_line(s: dict, t: float) -> str:
@@ -107,7 +107,7 @@ def cmd_view(a) -> int:
     try:
         import viser  # noqa: F401
     except ImportError:
-        raise Fail("palpate view: needs viser (pip install 'palpate[view]')", 1) from None
+        raise RunFailed("palpate view: needs viser (pip install 'palpate[view]')") from None
     from .. import _palpate as _p
     from ..viewer import Viewer
     from ..viewer.app import PRESS_RANGE
@@ -118,9 +118,9 @@ def cmd_view(a) -> int:
         ok, why = have_playwright()
         exe, why2 = find_chromium()
         if not ok or exe is None:
-            raise Fail(f"palpate view: --screenshot needs a browser: {why or why2}", 1)
+            raise RunFailed(f"palpate view: --screenshot needs a browser: {why or why2}")
         if a.press > PRESS_RANGE[1] + a.tool_radius:
-            raise Fail(f"palpate view: --press {a.press} m is deeper than the viewer allows")
+            raise Usage(f"palpate view: --press {a.press} m is deeper than the viewer allows")
     name, model = load_view_model(a.model, "view", a.unit)
     if not is_loopback(a.host):
         print(f"palpate: warning: serving on {a.host}: anyone who can reach port {a.port} can watch and drive the "
@@ -134,12 +134,12 @@ def cmd_view(a) -> int:
     except _p.ParameterError as e:
         raise Fail(f"palpate view: {e}") from None
     except OSError as e:
-        raise Fail(f"palpate view: cannot serve on {a.host}:{a.port}: {e}", 1) from None
+        raise RunFailed(f"palpate view: cannot serve on {a.host}:{a.port}: {e}") from None
     if viewer.bounds_warning:
         print(f"palpate: warning: {viewer.bounds_warning}", file=sys.stderr)
     try:
         if not viewer.wait_ready(60.0):
-            raise Fail(f"palpate view: the loop did not start: {viewer.loop_error or 'timeout'}", 1)
+            raise RunFailed(f"palpate view: the loop did not start: {viewer.loop_error or 'timeout'}")
         where = f", bridge on udp://{viewer.bridge_address}" if viewer.bridge_address else ""
         print(f"palpate view: {name} on {viewer.url} (device {a.device}{where}; Ctrl-C stops)", flush=True)
         if a.screenshot:
@@ -175,9 +175,9 @@ def _screenshot(a, viewer) -> int:
     try:
         n = screenshot(viewer.url, a.screenshot)
     except RuntimeError as e:
-        raise Fail(f"palpate view: {e}", 1) from None
+        raise RunFailed(f"palpate view: {e}") from None
     except OSError as e:
-        raise Fail(f"palpate view: cannot write {a.screenshot}: {e}", 1) from None
+        raise RunFailed(f"palpate view: cannot write {a.screenshot}: {e}") from None
     s = viewer.status()
     print(f"palpate view: wrote {a.screenshot} ({n / 1e3:.0f} kB): force {s['force_n']:.3f} N, surface "
           f"{s['surface_mm']:.2f} mm", flush=True)
