@@ -121,6 +121,8 @@ pub(super) fn write_stats(m: &HybridModel, w: &mut Writer) {
     }
 }
 
+// A model file is input from anywhere: its section reader may not panic (as file.rs).
+#[deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 pub(super) fn read_stats(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     let mut t = [0.0; 5];
     for x in t.iter_mut() {

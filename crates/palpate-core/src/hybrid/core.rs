@@ -252,6 +252,8 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
     w.f64(q.max_volume);
 }
 
+// A model file is input from anywhere: its section reader may not panic (as file.rs).
+#[deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     m.core_points = r.vec3s("core points")?;
     m.core_tets = r.idx::<4>("core tets")?;

@@ -80,6 +80,8 @@ impl HybridModel {
 /// The wall's section: its volume.
 pub(super) fn write_wall(m: &HybridModel, w: &mut Writer) { w.f64(m.wall_volume); }
 
+// A model file is input from anywhere: its section reader may not panic (as file.rs).
+#[deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 pub(super) fn read_wall(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     m.wall_volume = r.f64("wall volume")?;
     Ok(())

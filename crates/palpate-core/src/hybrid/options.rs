@@ -113,6 +113,8 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
     w.u64(o.field_voxels as u64);
 }
 
+// A model file is input from anywhere: its section reader may not panic (as file.rs).
+#[deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     let projection = match r.u8("projection")? {
         0 => Projection::Transmural,

@@ -31,6 +31,8 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
 }
 
 /// The section; the adjacency is filled in by [`derive`] once the model is checked.
+// A model file is input from anywhere: its section reader may not panic (as file.rs).
+#[deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     m.outer_points = r.vec3s("outer points")?;
     m.outer_tris = r.idx::<3>("outer triangles")?;

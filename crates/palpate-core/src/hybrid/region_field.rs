@@ -126,6 +126,8 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
     w.u32s(&m.voxel_owner);
 }
 
+// A model file is input from anywhere: its section reader may not panic (as file.rs).
+#[deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     let origin = r.vec3("voxel grid")?;
     let h = r.f64("voxel grid")?;

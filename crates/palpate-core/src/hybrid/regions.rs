@@ -95,6 +95,8 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
     w.rows(&m.region_box, |w, x| w.u32(x));
 }
 
+// A model file is input from anywhere: its section reader may not panic (as file.rs).
+#[deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     m.region_rings = r.bytes("region rings")?;
     m.region_box = r.rows(4, "region boxes", |r| r.u32("region boxes"))?;

@@ -120,6 +120,8 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
     w.u32s(&m.tri_particle_ptr);
 }
 
+// A model file is input from anywhere: its section reader may not panic (as file.rs).
+#[deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     m.spacing = r.f64("spacing")?;
     m.particles = r.vec3s("particles")?;

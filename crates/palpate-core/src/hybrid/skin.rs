@@ -33,6 +33,8 @@ pub(super) fn write(m: &HybridModel, w: &mut Writer) {
     w.vec3s(&m.skin_offset);
 }
 
+// A model file is input from anywhere: its section reader may not panic (as file.rs).
+#[deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
     m.skin_face = r.u32s("skin faces")?;
     m.skin_bary = r.rows(8, "skin barycentric coordinates", |r| r.f64("skin barycentric coordinates"))?;
