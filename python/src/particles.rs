@@ -161,8 +161,9 @@ impl PyParticleBody {
     ///
     /// Returns a dict: ``ticks`` (completed), ``tick_wall_s`` (float64 (ticks,): wall time of each
     /// step [s]), ``substeps`` (per step), ``substep_dt`` [s], ``error`` (why the run stopped
-    /// early, else None). Stops early when a step fails or the summed wall time exceeds
-    /// ``max_wall_s`` [s].
+    /// early, else None). Stops early when a step fails, the summed wall time exceeds
+    /// ``max_wall_s`` [s], or the per-tick record would outgrow the memory budget
+    /// (``PALPATE_MAX_MEMORY``).
     #[pyo3(signature = (ticks, dt = 1e-3, max_wall_s = None))]
     fn run_timed<'py>(
         mut slf: PyRefMut<'py, Self>,
@@ -181,6 +182,14 @@ impl PyParticleBody {
             let mut out = TimedRun { tick_wall: Vec::with_capacity(ticks.min(1 << 16)), substeps, substep_dt: dt / substeps as f64, error: None };
             let mut total = 0.0;
             for k in 0..ticks {
+                // Before the record doubles: would it fit the memory budget? (Stop, not abort.)
+                if out.tick_wall.len() == out.tick_wall.capacity() {
+                    let budget = palpate_core::limits::max_memory();
+                    if 2.0 * out.tick_wall.capacity().max(1) as f64 * 8.0 > budget as f64 {
+                        out.error = Some(format!("stopped after {k} of {ticks} ticks: the per-tick record would grow past the memory budget of {} (raise it with PALPATE_MAX_MEMORY, or run fewer ticks at a time)", palpate_core::limits::human_bytes(budget as f64)));
+                        break;
+                    }
+                }
                 let t0 = Instant::now();
                 let r = palpate_core::meshfree::step(model, state, ws, dt);
                 let w = t0.elapsed().as_secs_f64();

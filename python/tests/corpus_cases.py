@@ -472,6 +472,13 @@ def _body_cases(c: Corpus):
         name, klass, code, expect = entry[:4]
         types = entry[4] if len(entry) > 4 else None
         c.api(name, klass, code, expect, types)
+    # Long runs with no wall-clock cap under a small memory budget: the per-step records stop
+    # growing at the budget (the run ends with the steps it took and says why), rather than
+    # growing until the process aborts.
+    c.api("body_run_probe_records_budget", "abort", _BODY + "b = body(); r = b.run_probe([20], (0, 0, -1e-3), 0.1, 10**11); "
+          "assert r['steps'] == 65536 and 'memory budget' in r['error'], (r['steps'], r['error'])", ["ok"], budget="1M")
+    c.api("pb_run_timed_records_budget", "abort", _PB + "b = pb(); r = b.run_timed(10**11); "
+          "assert r['ticks'] == 65536 and 'memory budget' in r['error'], (r['ticks'], r['error'])", ["ok"], budget="600K")
     # Divergence reported when it starts (issue 15, item 4), not at overflow: the step that passes
     # the speed bound fails with the state restored and every value still finite.
     diverging = ("    x0, v0, t0 = b.positions.copy(), b.velocities.copy(), b.time\n"

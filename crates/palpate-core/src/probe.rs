@@ -209,6 +209,10 @@ pub enum ProbeStop {
     BlewUp { step: usize, steps: usize, max_disp: f64 },
     /// The stepping time passed [`ProbeOptions::max_wall_s`].
     WallCap { step: usize, steps: usize, cap: f64 },
+    /// The per-step records would have grown past the memory budget
+    /// ([`crate::limits::max_memory`], `PALPATE_MAX_MEMORY`): a run of billions of steps stops
+    /// with the steps it took rather than abort the process when memory runs out.
+    RecordBudget { step: usize, steps: usize, budget: u64 },
 }
 
 impl std::fmt::Display for ProbeStop {
@@ -217,6 +221,11 @@ impl std::fmt::Display for ProbeStop {
             ProbeStop::Step { step, steps, error } => write!(f, "step {step} of {steps}: {error}"),
             ProbeStop::BlewUp { step, steps, max_disp } => write!(f, "blew up at step {step} of {steps}: max |u| = {max_disp:.3e} m"),
             ProbeStop::WallCap { step, steps, cap } => write!(f, "stopped after {step} of {steps} steps: wall-clock cap of {cap} s reached"),
+            ProbeStop::RecordBudget { step, steps, budget } => write!(
+                f,
+                "stopped after {step} of {steps} steps: the per-step records would grow past the memory budget of {} (raise it with PALPATE_MAX_MEMORY, or run fewer steps at a time)",
+                crate::limits::human_bytes(*budget as f64)
+            ),
         }
     }
 }
@@ -252,8 +261,9 @@ pub struct ProbeRun {
 /// failing step, a blow-up or the wall-clock cap stops the run and is reported in
 /// [`ProbeRun::stop`]. The per-step records grow as the steps are taken (reserved up to
 /// [`RESERVE_STEPS`] ahead): a requested count of 1e11 steps costs nothing until it is run
-/// (reserving it up front aborted the process), and a run stopped by its wall-clock cap holds
-/// only the steps it took.
+/// (reserving it up front aborted the process), a run stopped by its wall-clock cap holds only
+/// the steps it took, and records that would outgrow the memory budget stop the run
+/// ([`ProbeStop::RecordBudget`]) instead of exhausting memory.
 pub fn run_probe(model: &Model, state: &mut State, ws: &mut Workspace, loads: &[ProbeLoad], opts: &ProbeOptions, clock: &mut dyn StepClock) -> ProbeRun {
     let steps = opts.steps;
     let rest = model.mesh().points();
@@ -273,6 +283,16 @@ pub fn run_probe(model: &Model, state: &mut State, ws: &mut Workspace, loads: &[
     };
     let mut n_mean = 0usize;
     for k in 0..steps {
+        // The records grow by doubling: before a growth, check that the doubled arrays fit the
+        // memory budget (a check per doubling, not per step), else stop as a wall-clock cap does.
+        if out.step_s.len() == out.step_s.capacity() {
+            let need = 2.0 * (out.step_s.capacity().max(1) as f64) * 2.0 * std::mem::size_of::<f64>() as f64;
+            let budget = crate::limits::max_memory();
+            if need > budget as f64 {
+                out.stop = Some(ProbeStop::RecordBudget { step: k, steps, budget });
+                break;
+            }
+        }
         apply_loads(loads, &mut state.f_ext, state.t + opts.dt);
         let t0 = clock.now();
         let r = step(model, state, ws, opts.dt);
