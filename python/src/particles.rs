@@ -184,9 +184,8 @@ impl PyParticleBody {
             for k in 0..ticks {
                 // Before the record doubles: would it fit the memory budget? (Stop, not abort.)
                 if out.tick_wall.len() == out.tick_wall.capacity() {
-                    let budget = palpate_core::limits::max_memory();
-                    if 2.0 * out.tick_wall.capacity().max(1) as f64 * 8.0 > budget as f64 {
-                        out.error = Some(format!("stopped after {k} of {ticks} ticks: the per-tick record would grow past the memory budget of {} (raise it with PALPATE_MAX_MEMORY, or run fewer ticks at a time)", palpate_core::limits::human_bytes(budget as f64)));
+                    if let Err(e) = palpate_core::limits::check("the per-tick record", 2.0 * out.tick_wall.capacity().max(1) as f64, 8.0) {
+                        out.error = Some(format!("stopped after {k} of {ticks} ticks: the per-tick record would grow past the memory budget of {} (raise it with PALPATE_MAX_MEMORY, or run fewer ticks at a time)", palpate_core::limits::human_bytes(e.budget as f64)));
                         break;
                     }
                 }

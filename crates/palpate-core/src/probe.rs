@@ -286,10 +286,9 @@ pub fn run_probe(model: &Model, state: &mut State, ws: &mut Workspace, loads: &[
         // The records grow by doubling: before a growth, check that the doubled arrays fit the
         // memory budget (a check per doubling, not per step), else stop as a wall-clock cap does.
         if out.step_s.len() == out.step_s.capacity() {
-            let need = 2.0 * (out.step_s.capacity().max(1) as f64) * 2.0 * std::mem::size_of::<f64>() as f64;
-            let budget = crate::limits::max_memory();
-            if need > budget as f64 {
-                out.stop = Some(ProbeStop::RecordBudget { step: k, steps, budget });
+            // Two records (`step_s`, `probe_disp`) of f64, each about to double.
+            if let Err(e) = crate::limits::check("the run's per-step records", 4.0 * out.step_s.capacity().max(1) as f64, 8.0) {
+                out.stop = Some(ProbeStop::RecordBudget { step: k, steps, budget: e.budget });
                 break;
             }
         }

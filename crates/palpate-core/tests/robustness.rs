@@ -143,23 +143,17 @@ fn non_finite_external_force_is_refused_and_state_unchanged() {
 #[test]
 fn a_non_finite_state_given_to_the_step_is_refused_and_left_alone() {
     for (name, integ) in SCHEMES {
-        let model = clamped_wall(integ);
-        let mut s = State::rest(&model);
-        let mut ws = Workspace::new(&model);
-        for _ in 0..3 {
-            step(&model, &mut s, &mut ws, 1e-3).unwrap();
-        }
+        let (model, mut s, mut ws, _) = warmed_up(integ);
         let node = model.n_nodes() - 2;
+        let good = s.clone();
         for bad in [f64::NAN, f64::INFINITY] {
             for velocity in [false, true] {
-                let good = if velocity { s.v[node] } else { s.x[node] };
-                let slot = if velocity { &mut s.v[node] } else { &mut s.x[node] };
-                slot.y = bad;
+                (if velocity { &mut s.v } else { &mut s.x })[node].y = bad;
                 let before = s.clone();
                 let r = step(&model, &mut s, &mut ws, 1e-3);
                 assert!(matches!(r, Err(StepError::NonFinite { node: n, .. }) if n == node), "{name}: {bad} in {} gave {r:?}", if velocity { "v" } else { "x" });
                 assert!(same_state(&s, &before), "{name}: state changed by a refused step");
-                if velocity { s.v[node] = good } else { s.x[node] = good };
+                s.clone_from(&good);
             }
         }
         step(&model, &mut s, &mut ws, 1e-3).unwrap();

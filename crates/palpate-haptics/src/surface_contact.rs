@@ -222,9 +222,8 @@ impl SurfaceContact {
         let delta = REACH_MARGIN * radius;
         for &f in &self.near {
             let t = self.faces[f];
-            let (a, b, c) = (x[t[0]], x[t[1]], x[t[2]]);
             for w in &self.bary[self.start[f]..self.start[f + 1]] {
-                let r = (a * w[0] + b * w[1] + c * w[2] - centre).norm();
+                let r = (at(&t, w, x) - centre).norm();
                 let weight = ((radius + delta - r) / delta).clamp(0.0, 1.0) * self.area[f];
                 for k in 0..3 {
                     self.reach[t[k]] += weight * w[k];
@@ -258,8 +257,8 @@ impl SurfaceContact {
             let t = self.faces[f];
             let point = tool.sample(self.area[f]);
             for w in &self.bary[self.start[f]..self.start[f + 1]] {
-                let xs = x[t[0]] * w[0] + x[t[1]] * w[1] + x[t[2]] * w[2];
-                let vs = v[t[0]] * w[0] + v[t[1]] * w[1] + v[t[2]] * w[2];
+                let xs = at(&t, w, x);
+                let vs = at(&t, w, v);
                 if let Some(c) = point.contact(centre, tool_velocity, &xs, &vs) {
                     for k in 0..3 {
                         forces[t[k]] += c.force * w[k];
@@ -281,9 +280,16 @@ impl SurfaceContact {
         for (f, t) in self.faces.iter().enumerate() {
             let point = tool.sample(self.area[f]);
             for w in &self.bary[self.start[f]..self.start[f + 1]] {
-                e += point.potential(centre, &(x[t[0]] * w[0] + x[t[1]] * w[1] + x[t[2]] * w[2]));
+                e += point.potential(centre, &at(t, w, x));
             }
         }
         e
     }
+}
+
+/// The point of barycentric coordinates `w` in triangle `t` of the nodes `x` (positions or
+/// velocities): where a sample sits, and the transpose of how its force is spread.
+#[inline]
+fn at(t: &[usize; 3], w: &[f64; 3], x: &[Vec3]) -> Vec3 {
+    x[t[0]] * w[0] + x[t[1]] * w[1] + x[t[2]] * w[2]
 }

@@ -308,7 +308,7 @@ class Runner:
                     raise SweepError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
             else:
                 n = workers or os.cpu_count() or 1
-                with _worker_start_method():
+                with _local_cluster_settings():
                     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                            dashboard_address=_dashboard())
                 self._own.append(cluster)
@@ -409,7 +409,7 @@ LOCAL_CLUSTER_CONFIG = {
 
 
 @contextlib.contextmanager
-def _worker_start_method() -> Iterator[None]:
+def _local_cluster_settings() -> Iterator[None]:
     """The LocalCluster's settings (:data:`LOCAL_CLUSTER_CONFIG`), and its worker processes
     started by ``fork`` on Linux unless the user chose a method
     (``distributed.worker.multiprocessing-method`` in Dask's config): a forked worker inherits the
