@@ -96,6 +96,26 @@ def test_two_local_workers_give_the_in_process_table(sequential, tmp_path):
     assert list((tmp_path / "out" / "parts").glob("part-*.parquet"))
 
 
+def test_short_scenarios_go_in_batches_that_taper_at_the_tail():
+    b = sweep_runner.batch_size
+    assert b([], 64, 2) == 1                        # nothing timed yet: one at a time
+    assert b([0.1, 0.094, 0.3], 24, 2) == 3         # but four tasks a worker in the tail
+    assert b([0.2, 0.25, 0.3], 200, 2) == 4         # 1 s of the median 0.25 s
+    assert b([0.1] * 8, 20, 2) == 2                 # every worker keeps four tasks of the tail
+    assert b([0.1] * 8, 3, 2) == 1 and b([0.1], 0, 2) == 0
+    assert b([30.0], 500, 8) == 1                   # long scenarios: one a task
+
+
+def test_batched_tasks_give_the_same_table_and_a_lost_batch_is_retried_whole(sequential, tmp_path, monkeypatch):
+    from palpate.sweep import scenario
+    monkeypatch.setattr(sweep_runner, "batch_size", lambda walls, remaining, n: min(3, remaining))
+    marker = tmp_path / "crashed"
+    monkeypatch.setenv(scenario.CRASH_ONCE_ENV, str(marker))
+    r = ps.sweep(STUDY, tmp_path / "out", workers=2)
+    assert marker.exists()   # the first batch's worker killed itself on scenario 0
+    assert r.done == 8 and timeless(r.rows()) == timeless(sequential.rows())
+
+
 def test_a_failing_scenario_is_a_row_not_a_crashed_study(tmp_path):
     # Normal draws of Young's modulus around 0: the negative ones are refused by the material.
     doc = dict(STUDY, study={"seed": 1, "samples": 6}, parameters={"young": {"random": "normal", "mean": 1e4, "std": 3e4}})

@@ -1,6 +1,6 @@
 """Running a study on Dask ``distributed``: the model goes to every worker once
-(a task every scenario depends on), each scenario is a task, and rows reach the table as they
-finish.
+(a task every scenario depends on), scenarios run as tasks (short ones a few to a task:
+:func:`batch_size`), and rows reach the table as they finish.
 
 Where it runs (:func:`sweep`): ``client=`` an existing ``distributed.Client`` (a cluster of any
 size, unchanged code); ``scheduler="tcp://host:8786"`` connects to one; otherwise a
@@ -349,26 +349,34 @@ class Runner:
             self._model = client.submit(_model_task, self.payload, pure=False, key=f"palpate-model-{time.monotonic_ns()}")
         n_workers = max(1, len(client.scheduler_info().get("workers", {})))
         window = 4 * n_workers   # tasks in flight: a million-scenario study is not a million futures
-        it = iter(scenarios)
-        by_key: Dict[str, Dict[str, Any]] = {}
+        todo = list(scenarios)
+        nxt = 0
+        walls: List[float] = []
+        by_key: Dict[str, List[Dict[str, Any]]] = {}
 
-        def submit(s: Dict[str, Any]):
-            f = client.submit(run_scenario, self._model, s, curve, field, pure=False,
-                              key=f"palpate-scenario-{s['scenario']}-{time.monotonic_ns()}")
-            by_key[f.key] = s
+        def submit():
+            nonlocal nxt
+            b = batch_size(walls, len(todo) - nxt, n_workers)
+            batch = todo[nxt:nxt + b]
+            nxt += len(batch)
+            f = client.submit(run_batch, self._model, batch, curve, field, pure=False,
+                              key=f"palpate-scenarios-{batch[0]['scenario']}-{len(batch)}-{time.monotonic_ns()}")
+            by_key[f.key] = batch
             return f
 
-        ac = as_completed([submit(s) for _, s in zip(range(window), it)])
+        ac = as_completed([submit() for _ in range(window) if nxt < len(todo)])
         for fut in ac:
-            s = by_key.pop(fut.key)
+            batch = by_key.pop(fut.key)
             try:
-                row = fut.result()
+                rows = fut.result()
             except Exception as e:  # noqa: BLE001 - KilledWorker (lost too often), a cancelled task
-                row = {"status": "failed", "error": f"{type(e).__name__}: {e} (the task's worker was lost)"}
-            on_row(s, row)
-            nxt = next(it, None)
-            if nxt is not None:
-                ac.add(submit(nxt))
+                rows = [{"status": "failed", "error": f"{type(e).__name__}: {e} (the task's worker was lost)"} for _ in batch]
+            for s, row in zip(batch, rows):
+                if row.get("status") == "ok":
+                    walls.append(float(row.get("wall_s") or 0.0))
+                on_row(s, row)
+            if nxt < len(todo):
+                ac.add(submit())
 
     def map(self, scenarios: Sequence[Dict[str, Any]], *, curve: bool = True) -> List[Dict[str, Any]]:
         """The rows of ``scenarios`` (parameters and outcomes), in their order."""
@@ -380,6 +388,30 @@ class Runner:
             rows[id(s)] = full
         self.run(scenarios, got, curve=curve)
         return [rows[id(s)] for s in scenarios]
+
+
+#: A task runs scenarios for about this long [s] once their time is known: on 2 cores the
+#: driver's own work per task (scheduling, messages, results: ~5-7 ms) competes with the workers
+#: (BENCHMARKS.md, issue 17), so short scenarios go in batches.
+TASK_SECONDS = 1.0
+
+
+def batch_size(walls: Sequence[float], remaining: int, n_workers: int) -> int:
+    """Scenarios in the next task: one until a scenario has finished; then as many as fill
+    :data:`TASK_SECONDS` at the median scenario time so far, but never so many that a worker
+    would get fewer than four of the remaining tasks (the study's tail stays balanced)."""
+    if remaining <= 0:
+        return 0
+    if not walls:
+        return 1
+    med = float(np.median(walls))
+    fill = int(TASK_SECONDS / med) if med > 0 else remaining
+    return max(1, min(fill, remaining // (4 * n_workers)))
+
+
+def run_batch(payload: Payload, batch: Sequence[Dict[str, Any]], curve: bool, field: bool) -> List[Dict[str, Any]]:
+    """The rows of ``batch``, in its order (a task of :meth:`Runner.run`)."""
+    return [run_scenario(payload, s, curve, field) for s in batch]
 
 
 def _model_task(payload: Payload) -> Payload:
