@@ -125,29 +125,32 @@ impl PotentialWorkspace {
 fn evaluate(p: &StepProblem, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3], g: &mut [Vec3]) -> Eval {
     let model = p.model;
     f_el.iter_mut().for_each(|f| *f = Vec3::zeros());
-    let mut w = 0.0;
+    let (mut w, mut d, mut f2) = (0.0, 0.0, 0.0);
     let mut inverted = 0;
-    let mut f2 = 0.0;
-    for ((t, r), &k) in model.mesh.tets().iter().zip(&model.rest).zip(&model.tet_stiffness) {
-        let (e, f, det) = tet4::elastic_energy_forces(&t.map(|i| x[i]), r, &model.material);
-        w += e;
-        // Squared magnitude of the element's nodal forces, estimated from its energy as for a
-        // linear spring (|f|^2 ~ 2 W k): one multiply-add instead of four norms.
-        f2 += e * k;
-        inverted += (det <= 0.0) as usize;
-        for a in 0..4 {
-            f_el[t[a]] += f[a];
-        }
-    }
     let damped = !model.material.is_undamped();
-    let mut d = 0.0;
+    // Squared magnitude of the element's nodal forces, estimated from its energy as for a linear
+    // spring (|f|^2 ~ 2 W k): one multiply-add instead of four norms.
     if damped {
         f_visc.iter_mut().for_each(|f| *f = Vec3::zeros());
-        for (t, r) in model.mesh.tets().iter().zip(&model.rest) {
-            let (e, f) = viscous::step_dissipation(&t.map(|i| x[i]), &t.map(|i| p.x_n[i]), r, &model.material, p.h);
-            d += e;
+        for ((t, r), &k) in model.mesh.tets().iter().zip(&model.rest).zip(&model.tet_stiffness) {
+            let (e, f, det, dis, fv) = viscous::energy_dissipation_forces(&t.map(|i| x[i]), &t.map(|i| p.x_n[i]), r, &model.material, p.h);
+            w += e;
+            f2 += e * k;
+            d += dis;
+            inverted += (det <= 0.0) as usize;
             for a in 0..4 {
-                f_visc[t[a]] += f[a];
+                f_el[t[a]] += f[a];
+                f_visc[t[a]] += fv[a];
+            }
+        }
+    } else {
+        for ((t, r), &k) in model.mesh.tets().iter().zip(&model.rest).zip(&model.tet_stiffness) {
+            let (e, f, det) = tet4::elastic_energy_forces(&t.map(|i| x[i]), r, &model.material);
+            w += e;
+            f2 += e * k;
+            inverted += (det <= 0.0) as usize;
+            for a in 0..4 {
+                f_el[t[a]] += f[a];
             }
         }
     }
