@@ -30,6 +30,10 @@ fn main() {
     if let Some(c) = env("TOOL_C") {
         o.tool.damping = c;
     }
+    // SUPPORT: the kernel's support radius in lattice spacings (SimOptions::support_spacings).
+    if let Some(h) = env("SUPPORT") {
+        o.support_spacings = h;
+    }
     if std::env::var("MS").ok().as_deref() == Some("off") {
         o.mass_scaling = None;
     }
@@ -44,6 +48,7 @@ fn main() {
     let (press, hold, slide) = (ticks / 4, ticks / 10, ticks / 2);
     let mut times = Vec::with_capacity(ticks);
     let mut subs = 0usize;
+    let mut last_force = 0.0;
     // DEPTH_MM: the press's depth (default 3 mm); TRACE=FILE: one CSV row a tick (ms, active,
     // entered, left, sub-steps, core iterations) to tell what the slow ticks have in common.
     let depth = std::env::var("DEPTH_MM").ok().and_then(|s| s.parse::<f64>().ok()).unwrap_or(3.0) * 1e-3;
@@ -70,6 +75,9 @@ fn main() {
             writeln!(t, "{k},{ms:.4},{},{},{},{},{},{:.6e}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.force.norm()).unwrap();
         }
         subs += rep.substeps;
+        if k == press + hold - 1 {
+            last_force = rep.force.norm();
+        }
     }
     if std::env::var("SPIKES").is_ok() {
         let mut out = vec![Vec3::zeros(); sim.hybrid.outer_points.len()];
@@ -82,5 +90,5 @@ fn main() {
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
     let pct = |q: f64| percentile(&sorted, q);
-    println!("{path}: tick ms mean {:.3} p50 {:.3} p99 {:.3}; sub-steps per tick {:.1} (mass scaling {:?})", times.iter().sum::<f64>() / times.len() as f64, pct(0.5), pct(0.99), subs as f64 / ticks as f64, sim.particles.mass_scaling().applied);
+    println!("{path}: tick ms mean {:.3} p50 {:.3} p99 {:.3}; sub-steps per tick {:.1} (mass scaling {:?}); last force {:.4} N", times.iter().sum::<f64>() / times.len() as f64, pct(0.5), pct(0.99), subs as f64 / ticks as f64, sim.particles.mass_scaling().applied, last_force);
 }

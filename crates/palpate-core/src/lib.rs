@@ -16,9 +16,11 @@
 //!                         Workspace (scratch, factorisations) ◀─────────┘
 //!      step(&Model, &mut State, &mut Workspace, dt) -> Result<StepReport, StepError>
 //! ```
-// No unsafe code, except in one audited place: the AVX2 + FMA copy of the particle hot loop
+// No unsafe code, except in two audited places: the AVX2 + FMA copy of the particle hot loop
 // (`meshfree/pair_loop/avx2.rs`), which needs `unsafe` to call a `target_feature` function after
-// run-time detection and skips bounds checks on neighbour indices validated at compile time.
+// run-time detection and skips bounds checks on neighbour indices validated at compile time; and
+// the one call into the AVX2 + FMA copy of the FEM's element loop (`fem/lanes.rs`), after the same
+// detection.
 #![deny(unsafe_code)]
 // `!(x > 0.0)` is how this crate rejects NaN together with the out-of-range values (a NaN fails
 // every comparison); clippy's `partial_cmp` rewrite would hide exactly that.

@@ -127,6 +127,9 @@ impl Svk {
     /// `(lambda, mu)` \[Pa\].
     pub(crate) fn lame(&self) -> (f64, f64) { (self.lambda, self.mu) }
 
+    /// The same law with no viscous stress.
+    pub(crate) fn without_viscosity(self) -> Svk { Svk { viscous: None, ..self } }
+
     /// `true` when the viscous stress is not zero.
     pub(crate) fn is_damped(&self) -> bool { self.viscous.is_some() }
 

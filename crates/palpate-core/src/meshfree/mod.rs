@@ -89,6 +89,7 @@ pub use model::{barrier_energy_density, ParticleModel};
 /// [`ParticleModel::strain_energy`] (which includes it: tests/meshfree.rs).
 pub const COMPRESSION_FLOOR: f64 = 0.5;
 pub use pair_loop::{set_simd_enabled, simd_path};
+pub(crate) use pair_loop::simd_allowed;
 pub use stability::STABILITY_SAFETY;
 pub use state::{ParticleState, ParticleStepReport, ParticleWorkspace, SubStep};
 pub use step::{step, step_with, step_with_substeps};

@@ -102,10 +102,16 @@ impl LoopCopy for Baseline {
 
 static SIMD_ENABLED: AtomicBool = AtomicBool::new(true);
 
-/// Allow (default) or forbid the AVX2 + FMA copy of the particle hot loop, process-wide: for
-/// comparing the two copies and testing the portable one on a CPU that has AVX2.
+/// Allow (default) or forbid the AVX2 + FMA copies of the hot loops (the particle passes and the
+/// FEM's element loop, `fem/lanes.rs`), process-wide: for comparing the copies and testing the
+/// portable ones on a CPU that has AVX2.
 pub fn set_simd_enabled(enabled: bool) {
     SIMD_ENABLED.store(enabled, Ordering::Relaxed);
+}
+
+/// Whether [`set_simd_enabled`] allows the SIMD copies.
+pub(crate) fn simd_allowed() -> bool {
+    SIMD_ENABLED.load(Ordering::Relaxed)
 }
 
 /// The copy of the particle hot loop that runs: `"avx2+fma"` or `"baseline"` (portable).
