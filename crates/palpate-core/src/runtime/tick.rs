@@ -175,8 +175,25 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
         let hybrid = &sim.hybrid;
         let external = |sub: &meshfree::SubStep<'_>, f: &mut [Vec3]| {
             let c = prev + ((sub.index + 1) as f64 / k as f64) * (tool - prev);
+            // The coupling springs and, in the same pass (one sweep of the active list a
+            // sub-step, not two), the particles the wall must look at. The wall belongs to the
+            // core's regions: its reaction goes to the core through the particle's tie (momentum
+            // stays exact).
+            wall_check.clear();
             for &p in sub.active {
-                f[p] = Vec3::zeros();
+                f[p] = if sim.coupled[p] {
+                    let fc = sim.coupling.force(&tie_x[p], &tie_v[p], &sub.x[p], &sub.v[p]);
+                    to_core[p] -= fc;
+                    fc
+                } else {
+                    Vec3::zeros()
+                };
+                x_rest[p] = sub.x[p] - shift[p];
+                if (x_rest[p] - x0[p]).norm_squared() < free[p] * free[p] {
+                    continue;
+                }
+                f_wall[p] = Vec3::zeros();
+                wall_check.push(p);
             }
             // The tool meets the skin over the active particles, and the skin carries the force
             // to the particles under it: a surface, so the tool cannot slip between particles.
@@ -202,23 +219,6 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
                 }
             }
             report.particle_contacts = report.particle_contacts.max(count);
-            // The coupling springs and, in the same pass, the particles the wall must look at.
-            // The wall belongs to the core's regions: its reaction goes to the core through the
-            // particle's tie (momentum stays exact).
-            wall_check.clear();
-            for &p in sub.active {
-                if sim.coupled[p] {
-                    let fc = sim.coupling.force(&tie_x[p], &tie_v[p], &sub.x[p], &sub.v[p]);
-                    f[p] += fc;
-                    to_core[p] -= fc;
-                }
-                x_rest[p] = sub.x[p] - shift[p];
-                if (x_rest[p] - x0[p]).norm_squared() < free[p] * free[p] {
-                    continue;
-                }
-                f_wall[p] = Vec3::zeros();
-                wall_check.push(p);
-            }
             let wall = sim.confinement.apply(&hybrid.grid, &hybrid.voxel_owner, tri_count, x_rest, rest, Some(slacks), wall_check, f_wall);
             report.confined = report.confined.max(wall.pushed);
             if wall.pushed > 0 {

@@ -223,7 +223,7 @@ pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut Pa
             state.v[i] = Vec3::zeros();
         } else {
             ws.free.push(i);
-            ws.acc_ext[i] = super::p4(&(state.f_ext[i] / m.mass[i] + m.gravity));
+            ws.acc_ext[i] = super::p4(&(state.f_ext[i] * m.inv_mass[i] + m.gravity));
         }
     }
     // Sums over the sub-steps of the rim's B and displacement (for the ring's gather).
@@ -328,6 +328,6 @@ fn external_forces(m: &ParticleModel, state: &mut ParticleState, ws: &mut Partic
     let sub = crate::meshfree::SubStep { index: s, t: state.t + s as f64 * h, h, x: &state.x, v: &state.v, active: &state.active };
     ext(&sub, &mut ws.f_sub);
     for &i in &ws.free {
-        ws.acc_ext[i] = super::p4(&(ws.f_sub[i] / m.mass[i] + m.gravity));
+        ws.acc_ext[i] = super::p4(&(ws.f_sub[i] * m.inv_mass[i] + m.gravity));
     }
 }
