@@ -38,9 +38,9 @@ pub fn step_dissipation(x: &[Vec3; 4], x_n: &[Vec3; 4], rest: &TetRest, m: &Mate
 /// The element's elastic energy \[J\], elastic nodal forces \[N\] and `det F`
 /// ([`tet4::elastic_energy_forces`]) with its step dissipation \[J\] and viscous nodal forces
 /// \[N\] ([`step_dissipation`]), in one pass: what the incremental potential evaluates at every
-/// trial point of a damped body. For St. Venant-Kirchhoff the positions are read, `F` formed and
-/// its Green strain taken once, not twice (the two apart cost ~1.6x this, measured on the
-/// Rodero core's 900 tets); Neo-Hookean calls the two. Equal to the two calls to round-off.
+/// trial point of a damped body, one element at a time (for St. Venant-Kirchhoff `F` is formed
+/// and its Green strain taken once; Neo-Hookean calls the two). Equal to the two calls to
+/// round-off; the reference of the integrators' element loop in SIMD lanes (`fem/lanes.rs`).
 #[inline]
 pub fn energy_dissipation_forces(x: &[Vec3; 4], x_n: &[Vec3; 4], rest: &TetRest, m: &Material, h: f64) -> (f64, [Vec3; 4], f64, f64, [Vec3; 4]) {
     if m.law() != Law::StVenantKirchhoff {
