@@ -19,7 +19,7 @@
 //! has both (the crate's second audited place, beside `meshfree/pair_loop/avx2.rs`).
 
 use crate::fem::TetRest;
-use crate::material::linear::{green_strain_of, mm, Scalar, Svk, M3};
+use crate::material::linear::{det3, green_strain_of, mm, Scalar, Svk, M3};
 use crate::math::Vec3;
 
 /// Four values side by side; `FMA`: `madd` is fused (only in the AVX2 + FMA copy, where it is
@@ -232,15 +232,6 @@ fn run_lanes<const FMA: bool>(lp: &ElementLoop<'_>, x: &[Vec3], f_el: &mut [Vec3
         start += m;
     }
     sums
-}
-
-/// `det f`.
-#[inline(always)]
-fn det3<T: Scalar>(f: &M3<T>) -> T {
-    let c0 = f[1][1].mul(f[2][2]).sub(f[1][2].mul(f[2][1]));
-    let c1 = f[1][2].mul(f[2][0]).sub(f[1][0].mul(f[2][2]));
-    let c2 = f[1][0].mul(f[2][1]).sub(f[1][1].mul(f[2][0]));
-    f[0][0].mul(c0).add(f[0][1].mul(c1)).add(f[0][2].mul(c2))
 }
 
 #[cfg(test)]

@@ -48,6 +48,15 @@ pub(crate) fn mm<T: Scalar>(a: &M3<T>, b: &M3<T>) -> M3<T> {
     c
 }
 
+/// `det f` (the particles' and the FEM element loop's `det F`).
+#[inline(always)]
+pub(crate) fn det3<T: Scalar>(f: &M3<T>) -> T {
+    let c0 = f[1][1].mul(f[2][2]).sub(f[1][2].mul(f[2][1]));
+    let c1 = f[1][2].mul(f[2][0]).sub(f[1][0].mul(f[2][2]));
+    let c2 = f[1][0].mul(f[2][1]).sub(f[1][1].mul(f[2][0]));
+    f[0][0].mul(c0).add(f[0][1].mul(c1)).add(f[0][2].mul(c2))
+}
+
 /// `(a + a^T) / 2`.
 #[inline(always)]
 pub(crate) fn sym<T: Scalar>(a: &M3<T>) -> M3<T> {

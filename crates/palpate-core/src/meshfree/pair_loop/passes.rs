@@ -2,7 +2,7 @@
 //! (see [`super`]); the portable copy's per-particle gathers, which the AVX2 copy replaces.
 
 use super::{Cols, ExtForce, LoopCopy, P4};
-use crate::material::linear::{green_strain_of, mm, strain_rate_of, sym, Scalar, Svk, M3};
+use crate::material::linear::{det3, green_strain_of, mm, strain_rate_of, sym, Scalar, Svk, M3};
 use crate::math::Vec3;
 use crate::meshfree::{ParticleModel, ParticleState, ParticleWorkspace};
 
@@ -68,15 +68,6 @@ pub(super) fn b_matrix<T: Scalar>(k: &M3<T>, kv: Option<&M3<T>>, r: &M3<T>, gamm
         }
     }
     (mm(&pk, r), det)
-}
-
-/// `det f`.
-#[inline(always)]
-fn det3<T: Scalar>(f: &M3<T>) -> T {
-    let c0 = f[1][1].mul(f[2][2]).sub(f[1][2].mul(f[2][1]));
-    let c1 = f[1][2].mul(f[2][0]).sub(f[1][0].mul(f[2][2]));
-    let c2 = f[1][0].mul(f[2][1]).sub(f[1][1].mul(f[2][0]));
-    f[0][0].mul(c0).add(f[0][1].mul(c1)).add(f[0][2].mul(c2))
 }
 
 /// The compression barrier's part of `B` for a particle with `K` and `R = A^-1` whose
