@@ -188,7 +188,11 @@ def test_exit_codes_table_each_code_from_a_real_command(tmp_path):
 
     # Ctrl-C in the middle of a run: one line and 130 (the scene runs ~20 s unless interrupted).
     argv = ["run", REPO / "scenes" / "lv_probe.toml", "--steps", 200000, "--out", tmp_path / "long"]
-    p = subprocess.Popen([sys.executable, "-m", "palpate", *map(str, argv)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO)
+    # The child gets SIGINT's default disposition: a test runner started in the background by a
+    # shell without job control (`make test &` in a script) ignores SIGINT, its children inherit
+    # that, and Python then never installs its Ctrl-C handler (the run went on to exit 0).
+    p = subprocess.Popen([sys.executable, "-m", "palpate", *map(str, argv)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert p.stdout.readline().startswith("palpate run:")   # past the imports: the command is running
     time.sleep(0.5)
     p.send_signal(signal.SIGINT)
