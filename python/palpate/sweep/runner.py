@@ -23,8 +23,9 @@ the timing column ``wall_s``. A lost worker's task is re-run by the scheduler (u
 """
 from __future__ import annotations
 
-import hashlib
+import collections
 import contextlib
+import hashlib
 import json
 import os
 import sys
@@ -351,7 +352,9 @@ class Runner:
         window = 4 * n_workers   # tasks in flight: a million-scenario study is not a million futures
         todo = list(scenarios)
         nxt = 0
-        walls: List[float] = []
+        # The scenario times the batch size is taken from: the most recent ones (a median over a
+        # whole million-scenario study at every submission would be quadratic).
+        walls: "collections.deque[float]" = collections.deque(maxlen=RECENT_WALLS)
         by_key: Dict[str, List[Dict[str, Any]]] = {}
 
         def submit():
@@ -394,11 +397,13 @@ class Runner:
 #: driver's own work per task (scheduling, messages, results: ~5-7 ms) competes with the workers
 #: (BENCHMARKS.md, issue 17), so short scenarios go in batches.
 TASK_SECONDS = 1.0
+#: How many of the latest scenario times that median is taken over.
+RECENT_WALLS = 64
 
 
 def batch_size(walls: Sequence[float], remaining: int, n_workers: int) -> int:
     """Scenarios in the next task: one until a scenario has finished; then as many as fill
-    :data:`TASK_SECONDS` at the median scenario time so far, but never so many that a worker
+    :data:`TASK_SECONDS` at the median of ``walls`` (the latest scenario times), but never so many that a worker
     would get fewer than four of the remaining tasks (the study's tail stays balanced)."""
     if remaining <= 0:
         return 0

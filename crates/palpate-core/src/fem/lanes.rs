@@ -1,8 +1,9 @@
 //! The element loop of the incremental potential for St. Venant-Kirchhoff (the integrators'
 //! `evaluate`, `integrate/potential.rs`), four tetrahedra side by side in lanes: per element the
 //! energy `V psi(E)` and elastic nodal forces of eq. (12-22), `det F`, and, when damped, the step
-//! dissipation and viscous forces of `fem/viscous.rs` ([`super::viscous::energy_dissipation_forces`]
-//! is this loop's one-element reference; a unit test holds the two together).
+//! dissipation and viscous forces of `fem/viscous.rs` (its one-element references are
+//! [`super::tet4::elastic_energy_forces`] and [`super::viscous::step_dissipation`]; a unit test
+//! holds the loop to them).
 //!
 //! The law is the one of [`crate::material::linear`], written over its `Scalar` trait, here for
 //! a lane type of four `f64` ([`L4`]). On an x86-64 CPU with AVX2 and FMA (detected at run time,
@@ -12,8 +13,9 @@
 //! unfused). The two differ by round-off.
 //!
 //! Why: one element at a time, the 3x3 algebra of a tet (about 350 flops) left the SIMD units
-//! idle; the element loop was ~70 us of the Rodero hybrid tick's ~400 us (900 core tets) and most
-//! of a full-FEM step (BENCHMARKS.md, "the hybrid tick").
+//! idle; the element loop had 10% of the samples of a Rodero hybrid tick (900 damped core tets),
+//! 6.6% in lanes (BENCHMARKS.md, "the hybrid tick"). The protocol's full-FEM step is set by its
+//! factored solve, not by this loop, and did not change.
 //!
 //! `unsafe` here is one call: entering the AVX2 + FMA compiled copy after checking that the CPU
 //! has both (the crate's second audited place, beside `meshfree/pair_loop/avx2.rs`).
@@ -92,8 +94,13 @@ impl ElementLoop<'_> {
     /// Elastic forces into `f_el` and, when damped, viscous forces into `f_visc` (both added to:
     /// the caller zeroes them), at positions `x` \[m\]; the sums.
     pub(crate) fn run(&self, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3]) -> ElementSums {
+        self.run_copy(crate::meshfree::simd_allowed(), x, f_el, f_visc)
+    }
+
+    /// [`Self::run`] in the AVX2 + FMA copy when `simd` and the CPU has both, else portably.
+    fn run_copy(&self, simd: bool, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3]) -> ElementSums {
         #[cfg(target_arch = "x86_64")]
-        if crate::meshfree::simd_allowed() && is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
+        if simd && is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
             // SAFETY: a `target_feature` function needs only that the CPU has the features,
             // checked on the line above.
             #[allow(unsafe_code)]
@@ -268,7 +275,8 @@ mod tests {
         let (mut fe, mut fv) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n]);
         let mut want = ElementSums::default();
         for (k, (t, r)) in tets.iter().zip(&rests).enumerate() {
-            let (w, f, det, d, v) = viscous::energy_dissipation_forces(&t.map(|i| x[i]), &t.map(|i| xn[i]), r, &m, h);
+            let (w, f, det) = tet4::elastic_energy_forces(&t.map(|i| x[i]), r, &m);
+            let (d, v) = viscous::step_dissipation(&t.map(|i| x[i]), &t.map(|i| xn[i]), r, &m, h);
             want.w += w;
             want.d += d;
             want.f2 += w * stiffness[k];
@@ -283,11 +291,9 @@ mod tests {
         let d = m.damping();
         for viscous in [true, false] {
             for simd in [true, false] {
-                crate::meshfree::set_simd_enabled(simd);
                 let lp = ElementLoop { tets: &tets, rest: &rests, stiffness: &stiffness, law: Svk::of(&m), viscous: viscous.then_some(((d.phi, d.psi), &xn[..], h)) };
                 let (mut ge, mut gv) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n]);
-                let got = lp.run(&x, &mut ge, &mut gv);
-                crate::meshfree::set_simd_enabled(true);
+                let got = lp.run_copy(simd, &x, &mut ge, &mut gv);
                 assert!((got.w - want.w).abs() <= 1e-13 * want.w && (got.f2 - want.f2).abs() <= 1e-13 * want.f2);
                 assert_eq!(got.inverted, want.inverted);
                 for i in 0..n {

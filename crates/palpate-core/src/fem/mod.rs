@@ -4,7 +4,6 @@
 //! (`integrate/`). A model is validated once, by [`ModelBuilder::build`]; stepping then assumes
 //! validity. The particle body ([`crate::meshfree`]) has the same shape.
 
-#[allow(unsafe_code)]
 pub(crate) mod lanes;
 pub(crate) mod model;
 mod state;

@@ -15,8 +15,8 @@
 //! within the step has `E(x) = E(x_n)` and costs nothing (a rate `F^T Fdot` frozen at `x_n`
 //! would not be).
 
-use crate::fem::tet4::{self, deformation_gradient, svk_form_blocks, TetRest};
-use crate::material::{self, Law, Material};
+use crate::fem::tet4::{deformation_gradient, svk_form_blocks, TetRest};
+use crate::material::{self, Material};
 use crate::math::{Mat3, Vec3};
 
 /// Dissipation potential `D` \[J\] of one element over a step of `h` \[s\] from `x_n` to `x`
@@ -33,36 +33,6 @@ pub fn step_dissipation(x: &[Vec3; 4], x_n: &[Vec3; 4], rest: &TetRest, m: &Mate
     let hm = -rest.volume * (f * s) * rest.dm_inv.transpose();
     let (h1, h2, h3) = (hm.column(0).into_owned(), hm.column(1).into_owned(), hm.column(2).into_owned());
     (energy, [-(h1 + h2 + h3), h1, h2, h3])
-}
-
-/// The element's elastic energy \[J\], elastic nodal forces \[N\] and `det F`
-/// ([`tet4::elastic_energy_forces`]) with its step dissipation \[J\] and viscous nodal forces
-/// \[N\] ([`step_dissipation`]), in one pass: what the incremental potential evaluates at every
-/// trial point of a damped body, one element at a time (for St. Venant-Kirchhoff `F` is formed
-/// and its Green strain taken once; Neo-Hookean calls the two). Equal to the two calls to
-/// round-off; the reference of the integrators' element loop in SIMD lanes (`fem/lanes.rs`).
-#[inline]
-pub fn energy_dissipation_forces(x: &[Vec3; 4], x_n: &[Vec3; 4], rest: &TetRest, m: &Material, h: f64) -> (f64, [Vec3; 4], f64, f64, [Vec3; 4]) {
-    if m.law() != Law::StVenantKirchhoff {
-        let (w, f_el, det) = tet4::elastic_energy_forces(x, rest, m);
-        let (d, f_v) = step_dissipation(x, x_n, rest, m, h);
-        return (w, f_el, det, d, f_v);
-    }
-    let dmp = m.damping();
-    let f = deformation_gradient(x, rest);
-    let e = material::green_strain(&f);
-    let w = rest.volume * material::energy_density(m, &e);
-    let de = e - material::green_strain(&deformation_gradient(x_n, rest));
-    let tr = de.trace();
-    let d = rest.volume / h * (0.5 * dmp.phi * tr * tr + dmp.psi * de.norm_squared());
-    let s_v = (Mat3::from_diagonal_element(dmp.phi * tr) + 2.0 * dmp.psi * de) / h;
-    let g = -rest.volume * rest.dm_inv.transpose();
-    let split = |p: Mat3| {
-        let hm = p * g;
-        let (h1, h2, h3) = (hm.column(0).into_owned(), hm.column(1).into_owned(), hm.column(2).into_owned());
-        [-(h1 + h2 + h3), h1, h2, h3]
-    };
-    (w, split(f * material::stress(m, &e)), f.determinant(), d, split(f * s_v))
 }
 
 /// Hessian blocks `d^2 D / dx_a dx_b` (3x3 each, positive at rest) of [`step_dissipation`].
@@ -91,24 +61,6 @@ mod tests {
         let a = Mat3::new(1.05, 0.02, -0.03, 0.01, 0.97, 0.04, -0.02, 0.03, 1.02);
         let b = Mat3::new(1.1, 0.05, -0.03, 0.02, 0.93, 0.08, -0.04, 0.06, 1.07);
         (u, u.map(|p| a * p), u.map(|p| b * p + Vec3::new(1e-4, 0.0, -2e-4)))
-    }
-
-    #[test]
-    fn the_fused_pass_equals_the_two_apart() {
-        let (u, xn, x) = tets();
-        let (r, h) = (TetRest::new(&u), 1e-3);
-        let nh = Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, Damping { phi: 3.0, psi: 7.0 }).unwrap().with_law(Law::NeoHookean);
-        for m in [mat(), nh] {
-            let (w, f_el, det) = tet4::elastic_energy_forces(&x, &r, &m);
-            let (d, f_v) = step_dissipation(&x, &xn, &r, &m, h);
-            let (w2, f_el2, det2, d2, f_v2) = energy_dissipation_forces(&x, &xn, &r, &m, h);
-            assert!((w - w2).abs() <= 1e-13 * w.abs() && (d - d2).abs() <= 1e-13 * d.abs() && (det - det2).abs() <= 1e-14);
-            let (se, sv) = (f_el.iter().map(|f| f.norm()).fold(0.0, f64::max), f_v.iter().map(|f| f.norm()).fold(0.0, f64::max));
-            assert!(se > 0.0 && sv > 0.0);
-            for a in 0..4 {
-                assert!((f_el[a] - f_el2[a]).norm() <= 1e-13 * se && (f_v[a] - f_v2[a]).norm() <= 1e-13 * sv, "node {a}");
-            }
-        }
     }
 
     #[test]

@@ -170,8 +170,7 @@ unsafe fn gather_cols(nbr: &[u32], q: &[P4], w: &[P4], wi: &P4) -> [__m256d; 3] 
 
 /// [`gather_cols`] of two fields `w` and `y` (displacements and velocities) over the same pairs
 /// in one sweep: each neighbour's index and `q_ij` are read and broadcast once for both (the two
-/// fields' sums are the two independent accumulator chains). Pass 1 of a damped body spent ~40%
-/// of its time in its two gathers apart.
+/// fields' sums are the two independent accumulator chains).
 ///
 /// # Safety
 /// As [`gather_cols`], for both `w` and `y`.
