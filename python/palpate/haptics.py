@@ -158,19 +158,22 @@ def per_second(times_s, elapsed_s: float) -> list:
 
 
 def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle: bool = True,
-          name: str = "", on_status: Optional[Callable[[str], None]] = None, realtime: bool = False) -> Dict[str, Any]:
+          name: str = "", on_status: Optional[Callable[[str], None]] = None, realtime: bool = False,
+          threads: int = 1) -> Dict[str, Any]:
     """``palpate bench haptic``: the loop at ``rate_hz`` on ``model`` for ``seconds`` [s] with a
     repeated scripted palpation (:func:`palpation_cycle`), then (``idle``) the idle loop (no
     simulation, same device, same length) on the same clock. Returns the loop's report
     (:data:`BENCH_KEYS` and more; ``overruns_per_s``: the overruns in each second of wall time,
     from the first 100,000 logged), with ``idle`` the idle run's and the machine's description;
     ``realtime``: both loops' servo under ``SCHED_FIFO`` (see :class:`palpate.HapticLoop`; the
-    report's ``realtime`` says whether it was granted)."""
+    report's ``realtime`` says whether it was granted); ``threads``: the loop's particle passes on
+    that many threads (:class:`palpate.HapticLoop`; the idle loop has no physics to split)."""
     t, k = repeat(*palpation_cycle(model), seconds + 1.0)
     mat = material()
     loop = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz,
-                         max_ticks=int(round(seconds * rate_hz)), realtime=realtime)
+                         max_ticks=int(round(seconds * rate_hz)), realtime=realtime, threads=threads)
     r = run_live(loop, None, on_status)
+    r["threads"] = threads
     r["model"] = name
     r["seconds"] = seconds
     r["overruns_per_s"] = per_second(r.pop("overrun_times_s"), r["elapsed_s"])

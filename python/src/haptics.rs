@@ -50,7 +50,7 @@ fn busy(what: &str) -> PyErr {
 /// recording=None, port=None, host="127.0.0.1", kind=None, hand_start=None, idle=False,
 /// tool_radius=None, tool_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None,
 /// coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None,
-/// stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False)``
+/// stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1)``
 ///
 /// Parameters
 /// ----------
@@ -106,6 +106,12 @@ fn busy(what: &str) -> PyErr {
 ///     ``"refused: ..."``). The wait then sleeps to the deadline (``spin`` defaults to 0: a
 ///     real-time thread wakes on time, and one that spins the rest of each tick uses the whole
 ///     core and meets the kernel's real-time throttling, 50 ms without the CPU every second).
+/// threads : int
+///     Hybrid models only: the threads a tick's particle passes run on, 1 to 8 (default 1): the
+///     servo's and ``threads - 1`` helpers, which spin during a tick and park between ticks
+///     (under ``SCHED_FIFO`` with ``realtime``). The forces and states are bitwise those of one
+///     thread (a recording replays alike), only sooner: on a 2-core machine 2 threads take
+///     about a fifth off a Rodero tick (BENCHMARKS.md). Give it cores that are otherwise idle.
 ///
 /// Positions in metres, forces in newtons (on the user's hand), the model's world frame.
 #[pyclass(module = "palpate", name = "HapticLoop")]
@@ -217,7 +223,7 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
 #[pymethods]
 impl PyHapticLoop {
     #[new]
-    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False)")]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1)), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -248,12 +254,17 @@ impl PyHapticLoop {
         max_ticks: Option<errors::Int>,
         #[pyo3(from_py_with = conv::arg)] spin: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] realtime: bool,
+        threads: errors::Int,
     ) -> PyResult<Self> {
         // Counts as errors::Int: a negative one, or one beyond 64 bits, is a ParameterError
         // (pyo3's usize / u16 conversions raised OverflowError). The rest runs under the panic guard: a panic while opening a recording,
         // a device or the physics is an InternalError, not pyo3's PanicException.
         let record_ticks = errors::count(record_ticks, "record_ticks")?;
         let max_ticks = errors::count_opt(max_ticks, "max_ticks")?.map(|n| n as u64);
+        let threads = errors::count(threads, "threads")?;
+        if !(1..=palpate_core::parallel::MAX_WAYS).contains(&threads) {
+            return Err(errors::param_error_from(format!("threads = {threads}: must be 1 to {}", palpate_core::parallel::MAX_WAYS)));
+        }
         let port = match port {
             Some(p) => Some(match p {
                 errors::Int::Fits(v) => u16::try_from(v).ok(),
@@ -350,8 +361,12 @@ impl PyHapticLoop {
                 }
                 options.tool = tool;
                 let (hm, mat) = (hm.borrow().model.clone(), material.inner);
-                Box::new(py.detach(|| HybridPhysics::new(hm, mat, options)).map_err(errors::model_error)?)
+                let physics = py.detach(|| HybridPhysics::new(hm, mat, options)).map_err(errors::model_error)?;
+                Box::new(physics.with_threads(threads, realtime).map_err(|e| haptics_error(format!("cannot start {} helper threads: {e}", threads - 1)))?)
             } else if let Ok(body) = model.cast::<PyBody>() {
+                if threads > 1 {
+                    return Err(errors::param_error_from(format!("threads = {threads}: for a hybrid model only (a full-FEM body's tick runs on the servo's thread)")));
+                }
                 if tool_stiffness.is_some() {
                     return Err(errors::param_error_from("tool_stiffness: for a hybrid model only (a full-FEM Body's contact stiffness is per unit of surface area: tool_area_stiffness [N/m^3])"));
                 }

@@ -116,6 +116,9 @@ def test_bad_parameters_raise_value_errors(model):
         _p.HapticLoop(model, m, "joystick")
     with pytest.raises(ValueError, match="hand_start"):
         _p.HapticLoop(model, m, "hand")
+    for bad in (0, 9):
+        with pytest.raises(ValueError, match="threads"):
+            _p.HapticLoop(model, m, "scripted", times=t, knots=k, threads=bad)
 
 
 def test_loop_runs_while_python_sleeps_and_the_hand_follows(model):
@@ -573,6 +576,10 @@ def test_soak_and_bench_haptic_commands(capsys):
     assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--json", "--realtime"]) in (0, 3)
     r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert r["realtime"] == "SCHED_FIFO priority 80" or r["realtime"].startswith("refused: SCHED_FIFO"), r["realtime"]
+    # --threads 2: the particle passes on two threads (the servo's and a helper); same physics.
+    assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.3", "--json", "--no-idle", "--threads", "2"]) in (0, 3)
+    r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert r["threads"] == 2 and r["ticks"] == 300 and r["n_faults"] == r["watchdog_trips"] and "idle" not in r
 
 
 def test_full_fem_body_hand_worst_stays_finite():
@@ -620,3 +627,6 @@ def test_full_fem_body_contact_stiffness_is_per_unit_area(model):
         palpate.HapticLoop(m.body, m.material, "hand", hand_start=p, tool_area_stiffness=-1.0)
     with pytest.raises(palpate.ParameterError, match="full-FEM Body only"):
         palpate.HapticLoop(model, haptics.material(), "hand", hand_start=p, tool_area_stiffness=1e7)
+    # A body's tick is not split over threads (the hybrid model's particle passes are).
+    with pytest.raises(palpate.ParameterError, match="threads = 2: for a hybrid model only"):
+        palpate.HapticLoop(m.body, m.material, "hand", hand_start=p, threads=2)

@@ -16,11 +16,13 @@
 //!                         Workspace (scratch, factorisations) ◀─────────┘
 //!      step(&Model, &mut State, &mut Workspace, dt) -> Result<StepReport, StepError>
 //! ```
-// No unsafe code, except in two audited places: the AVX2 + FMA copy of the particle hot loop
+// No unsafe code, except in three audited places: the AVX2 + FMA copy of the particle hot loop
 // (`meshfree/pair_loop/avx2.rs`), which needs `unsafe` to call a `target_feature` function after
-// run-time detection and skips bounds checks on neighbour indices validated at compile time; and
-// the one call into the AVX2 + FMA copy of the FEM's element loop (`fem/lanes.rs`), after the same
-// detection.
+// run-time detection and skips bounds checks on neighbour indices validated at compile time; the
+// one call into the AVX2 + FMA copy of the FEM's element loop (`fem/lanes.rs`), after the same
+// detection; and the particle passes split over a caller's threads (`parallel.rs`: `Fork` is an
+// `unsafe trait`, each part run exactly once; `meshfree/pair_loop/disjoint.rs`: the parts write
+// disjoint particles of one array, which the active list allows when `touch` finds no repeat).
 #![deny(unsafe_code)]
 // `!(x > 0.0)` is how this crate rejects NaN together with the out-of-range values (a NaN fails
 // every comparison); clippy's `partial_cmp` rewrite would hide exactly that.
@@ -40,6 +42,7 @@ pub mod material;
 pub mod math;
 pub mod mesh;
 pub mod meshfree;
+pub mod parallel;
 pub mod probe;
 pub mod runtime;
 pub mod spatial;

@@ -5,9 +5,11 @@
 
 use palpate_core::hybrid::{file, HybridModel};
 use palpate_core::math::is_finite3;
-use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace, Tool};
+use palpate_core::parallel::Fork;
+use palpate_core::runtime::{tick, tick_with, Sim, SimOptions, SimState, SimWorkspace, Tool};
 use palpate_core::{step, Material, Model, ModelError, State, StepError, Vec3, Workspace};
 
+use crate::pool::SpinPool;
 use crate::surface_contact::{self, AreaTool, SurfaceContact};
 
 /// Who the simulation is, for a recording: replaying against another model (or the same model
@@ -76,6 +78,8 @@ pub struct HybridPhysics {
     ws: SimWorkspace,
     good: SimState,
     identity: Identity,
+    /// Helpers for the particle passes ([`HybridPhysics::with_threads`]); `None`: one thread.
+    pool: Option<SpinPool>,
 }
 
 impl HybridPhysics {
@@ -103,7 +107,22 @@ impl HybridPhysics {
         let state = SimState::rest(&sim);
         let ws = SimWorkspace::new(&sim);
         let good = state.clone();
-        HybridPhysics { sim, state, ws, good, identity }
+        HybridPhysics { sim, state, ws, good, identity, pool: None }
+    }
+
+    /// Split the particle passes of each tick over `threads` threads (the servo's and
+    /// `threads - 1` helpers of a [`SpinPool`], under `SCHED_FIFO` when `realtime`, as the servo
+    /// should be). The ticks are bitwise those of one thread ([`palpate_core::parallel`]), so
+    /// recordings replay alike either way; only their time changes. 1 (the default) starts no
+    /// thread.
+    pub fn with_threads(mut self, threads: usize, realtime: bool) -> std::io::Result<HybridPhysics> {
+        self.pool = if threads > 1 { Some(SpinPool::new(threads, realtime)?) } else { None };
+        Ok(self)
+    }
+
+    /// Threads a tick's particle passes run on (1 without helpers).
+    pub fn threads(&self) -> usize {
+        self.pool.as_ref().map_or(1, |p| p.ways())
     }
 
     pub fn sim(&self) -> &Sim {
@@ -120,7 +139,14 @@ impl HybridPhysics {
 
 impl Physics for HybridPhysics {
     fn tick(&mut self, tool: &Vec3, dt: f64) -> Result<Vec3, StepError> {
-        tick(&self.sim, &mut self.state, &mut self.ws, *tool, dt).map(|r| r.force)
+        match &self.pool {
+            Some(pool) => {
+                // The helpers wake while the tick's serial start (activation, ties) runs.
+                pool.wake();
+                tick_with(&self.sim, &mut self.state, &mut self.ws, *tool, dt, pool).map(|r| r.force)
+            }
+            None => tick(&self.sim, &mut self.state, &mut self.ws, *tool, dt).map(|r| r.force),
+        }
     }
     fn tool(&self) -> Option<Vec3> {
         self.state.tool

@@ -90,6 +90,27 @@ fn replay_is_bit_identical_offline_and_from_a_file() {
 }
 
 #[test]
+fn a_recording_made_on_two_threads_replays_bit_identically_on_one() {
+    // The particle passes split over a SpinPool (HybridPhysics::with_threads) give the ticks of
+    // one thread bit for bit, so the recording's forces and positions are the same either way.
+    let physics = hybrid().with_threads(2, false).unwrap();
+    assert_eq!(physics.threads(), 2);
+    let (p, n) = probe(&physics.sim().hybrid);
+    let r = physics.sim().options.tool.radius;
+    let (times, knots) = press_slide_release(p, n, r, 0.004, 0.004);
+    let mut dev = Scripted::new(times, knots).unwrap();
+    let (c, s) = DeviceKind::Simulated.defaults();
+    let mut core = HapticCore::new(Box::new(physics), 1000.0, c, s, 100, 2000);
+    assert_eq!(core.run_offline(&mut dev, 5000), 1100);
+    let rec = core.take_recording().unwrap();
+    assert!(rec.ticks.iter().map(|t| t.force.norm()).fold(0.0, f64::max) > 0.05, "the press must touch");
+    let mut replay = Replay::new(&rec);
+    let mut one = HapticCore::new(Box::new(hybrid()), rec.rate_hz, rec.coupling, rec.safety, 100, 2000);
+    assert_eq!(one.run_offline(&mut replay, 5000), 1100);
+    assert_eq!(compare(&rec, &one.take_recording().unwrap()), None, "one thread differs from two");
+}
+
+#[test]
 fn replay_through_the_real_time_servo_is_bit_identical() {
     // Same inputs through the thread (clock, pacing, watchdog) as offline: same bits.
     let (times, knots) = (vec![0.0, 0.2, 0.4], vec![Vec3::new(0.0, 0.0, 0.002), Vec3::new(0.001, 0.0, -0.003), Vec3::new(0.0, 0.0, 0.002)]);

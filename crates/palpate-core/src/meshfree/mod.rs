@@ -92,4 +92,4 @@ pub use pair_loop::{set_simd_enabled, simd_path};
 pub(crate) use pair_loop::simd_allowed;
 pub use stability::STABILITY_SAFETY;
 pub use state::{ParticleState, ParticleStepReport, ParticleWorkspace, SubStep};
-pub use step::{step, step_with, step_with_substeps};
+pub use step::{step, step_with, step_with_fork, step_with_substeps};

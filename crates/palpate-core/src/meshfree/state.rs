@@ -87,6 +87,9 @@ pub struct ParticleWorkspace {
     pub(crate) touched: Vec<usize>,
     pub(crate) mark: Vec<u64>,
     pub(crate) stamp: u64,
+    /// Whether the step's active list holds each particle once (`touch`): only then may its
+    /// passes be split over threads (each part writes its own particles).
+    pub(crate) unique: bool,
     /// Whether steps compute the ring ([`ParticleWorkspace::set_ring_forces`]).
     pub(crate) ring_on: bool,
     /// The ring (see [`ParticleWorkspace::ring`]) and its call-averaged forces.
@@ -128,6 +131,7 @@ impl ParticleWorkspace {
             touched: Vec::with_capacity(n),
             mark: vec![0; n],
             stamp: 0,
+            unique: false,
             ring_on: false,
             ring: Vec::with_capacity(n),
             ring_force: Vec::with_capacity(n),

@@ -6,6 +6,7 @@ use super::pair_loop::{self, p4, ExtForce};
 use super::state::{ParticleState, ParticleStepReport, ParticleWorkspace, SubStep};
 use crate::error::StepError;
 use crate::math::{is_finite3, Vec3};
+use crate::parallel::{Fork, Serial};
 
 /// Advance by `dt` \[s\] with the position-Verlet scheme of eq. (33), in as many equal
 /// sub-steps as stability needs ([`ParticleModel::substeps`]), only over the active particles.
@@ -40,7 +41,7 @@ pub fn step(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleW
 /// scan of the active set, the ring set-up) `k` times. A caller whose forces depend on the state
 /// at every sub-step should use [`step_with`], which is exactly this function's loop.
 pub fn step_with_substeps(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize) -> Result<ParticleStepReport, StepError> {
-    advance(model, state, ws, dt, substeps, None)
+    advance(model, state, ws, dt, substeps, None, &Serial)
 }
 
 /// [`step_with_substeps`] with external forces that the caller recomputes before each sub-step
@@ -59,7 +60,17 @@ pub fn step_with<E>(model: &ParticleModel, state: &mut ParticleState, ws: &mut P
 where
     E: FnMut(&SubStep<'_>, &mut [Vec3]),
 {
-    advance(model, state, ws, dt, substeps, Some(&mut external))
+    advance(model, state, ws, dt, substeps, Some(&mut external), &Serial)
+}
+
+/// [`step_with`] with the passes of each sub-step split over the caller's threads (`fork`, see
+/// [`crate::parallel`]): bitwise the same result. The callback runs on the calling thread,
+/// between the passes.
+pub fn step_with_fork<E>(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize, fork: &dyn Fork, mut external: E) -> Result<ParticleStepReport, StepError>
+where
+    E: FnMut(&SubStep<'_>, &mut [Vec3]),
+{
+    advance(model, state, ws, dt, substeps, Some(&mut external), fork)
 }
 
 /// The most particle-sub-steps one step may take (active particles x sub-steps, about a second
@@ -67,7 +78,7 @@ where
 pub const MAX_PARTICLE_SUBSTEPS: usize = 100_000_000;
 pub const MIN_SUBSTEP_CAP: usize = 1000;
 
-fn advance(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize, external: Option<ExtForce<'_>>) -> Result<ParticleStepReport, StepError> {
+fn advance(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize, external: Option<ExtForce<'_>>, fork: &dyn Fork) -> Result<ParticleStepReport, StepError> {
     // A ring left from an earlier step must not be mistaken for this one's if this one fails.
     ws.ring.clear();
     ws.ring_force.clear();
@@ -102,7 +113,7 @@ fn advance(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWo
     touch(model, state, ws);
     let h = dt / substeps as f64;
     // The physical speed bound (crate::divergence), checked every sub-step inside the loop.
-    let diverging = pair_loop::run_substeps(model, state, ws, h, substeps, external);
+    let diverging = pair_loop::run_substeps(model, state, ws, h, substeps, external, fork);
     let bad = state.active.iter().copied().find(|&i| !is_finite3(&state.x[i]) || !is_finite3(&state.v[i]));
     if let Some(node) = bad {
         for (k, &i) in state.active.iter().enumerate() {
@@ -145,10 +156,13 @@ fn touch(model: &ParticleModel, state: &ParticleState, ws: &mut ParticleWorkspac
         ws.u[j] = p4(&(state.x[j] - model.rest[j]));
         ws.v[j] = p4(&state.v[j]);
     };
+    ws.unique = true;
     for &i in &state.active {
         if ws.mark[i] != active {
             ws.mark[i] = active;
             load(ws, i);
+        } else {
+            ws.unique = false;
         }
     }
     for &i in &state.active {

@@ -51,5 +51,5 @@ pub use embed::Embedding;
 pub use sim::{Sim, SimOptions};
 pub use stability::Shell;
 pub use state::{SimSnapshot, SimState, SimWorkspace, SkinSweep};
-pub use tick::{tick, TickReport};
+pub use tick::{tick, tick_with, TickReport};
 pub use tool::{ContactSum, PointContact, Tool};

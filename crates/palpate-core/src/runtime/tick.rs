@@ -34,6 +34,7 @@ use crate::error::StepError;
 use crate::integrate::{step, StepReport};
 use crate::math::{is_finite3, Mat3, Vec3};
 use crate::meshfree;
+use crate::parallel::{Fork, Serial};
 use super::stability::stretch_bound;
 
 /// What a tick did.
@@ -72,6 +73,13 @@ pub struct TickReport {
 /// the start of the tick, but the activation keeps this tick's update (the regions the tool
 /// touched stay active, their particles at their ties).
 pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, dt: f64) -> Result<TickReport, StepError> {
+    tick_with(sim, state, ws, tool, dt, &Serial)
+}
+
+/// [`tick`] with the particle passes split over the caller's threads (`fork`, see
+/// [`crate::parallel`]): bitwise the same tick, sooner when the caller has a core to spare (the
+/// haptic servo's pool). Everything else runs on the calling thread.
+pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, dt: f64, fork: &dyn Fork) -> Result<TickReport, StepError> {
     if !(dt > 0.0 && dt.is_finite()) {
         return Err(StepError::BadTimeStep(dt));
     }
@@ -233,7 +241,7 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
                 to_core[p] += f[p];
             }
         };
-        if let Err(e) = meshfree::step_with(&sim.particles, particles, &mut ws.particles, dt, k, external) {
+        if let Err(e) = meshfree::step_with_fork(&sim.particles, particles, &mut ws.particles, dt, k, fork, external) {
             // Nothing of a failed step reaches the core (the buffers start the next tick empty).
             for &p in &particles.active {
                 ws.to_core[p] = Vec3::zeros();

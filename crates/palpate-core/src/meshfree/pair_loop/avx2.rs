@@ -7,8 +7,9 @@
 //! are smaller than its particle count (built so, never changed), while the passes check that
 //! every per-particle array has that length.
 
-use super::passes::{self, b_matrix};
-use super::{Cols, ExtForce, LoopCopy, P4};
+use super::passes::{self, b_matrix, Verlet};
+use super::{Cols, Disjoint, ExtForce, LoopCopy, P4};
+use crate::parallel::Fork;
 use crate::material::linear::{Scalar, Svk, M3};
 use crate::meshfree::{ParticleModel, ParticleState, ParticleWorkspace};
 use std::arch::x86_64::*;
@@ -29,10 +30,11 @@ impl Avx2 {
     }
 
     /// `substeps` Verlet sub-steps (see [`passes::substeps_impl`]) in this copy.
-    pub(super) fn run_substeps(self, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>) -> Option<(usize, f64)> {
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn run_substeps(self, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>, fork: &dyn Fork) -> Option<(usize, f64)> {
         // SAFETY: a `target_feature` function needs only that the CPU has the features, which
         // an `Avx2` proves.
-        unsafe { substeps_avx2(self, m, state, ws, h, substeps, ext) }
+        unsafe { substeps_avx2(self, m, state, ws, h, substeps, ext, fork) }
     }
 
     /// Forces of every particle (see [`passes::all_forces_impl`]) in this copy.
@@ -44,8 +46,19 @@ impl Avx2 {
 }
 
 #[target_feature(enable = "avx2,fma")]
-fn substeps_avx2(c: Avx2, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>) -> Option<(usize, f64)> {
-    passes::substeps_impl(c, m, state, ws, h, substeps, ext)
+#[allow(clippy::too_many_arguments)]
+fn substeps_avx2(c: Avx2, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>, fork: &dyn Fork) -> Option<(usize, f64)> {
+    passes::substeps_impl(c, m, state, ws, h, substeps, ext, fork)
+}
+
+/// Pass 2 and the Verlet update in this copy (a part of a split sub-step runs it on any thread).
+///
+/// # Safety
+/// The CPU has AVX2 and FMA, and the contract of [`LoopCopy::verlet_pass`].
+#[target_feature(enable = "avx2,fma")]
+unsafe fn verlet_avx2(c: Avx2, m: &ParticleModel, idx: &[usize], s: &Verlet<'_, '_>) -> (usize, f64) {
+    // SAFETY: the caller's contract.
+    unsafe { passes::verlet_impl(c, m, idx, s) }
 }
 
 #[target_feature(enable = "avx2,fma")]
@@ -58,12 +71,19 @@ impl LoopCopy for Avx2 {
     const FMA: bool = true;
 
     #[inline(always)]
-    fn stress_pass(self, m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4]>, linear: bool, b: &mut [Cols]) {
+    unsafe fn stress_pass(self, m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4]>, linear: bool, b: &Disjoint<'_, Cols>) {
         let n = m.n_particles();
         assert!(u.len() == n && v.is_none_or(|v| v.len() == n) && b.len() == n);
         // SAFETY: `self` proves the CPU features; the lengths are checked above, neighbour
-        // indices are `< n` (module docs) and `idx` entries are used with checked indexing.
+        // indices are `< n` (module docs), `idx` entries are used with checked indexing, and
+        // the caller's contract gives this call the entries of `b` at `idx`.
         unsafe { stress_pass(m, idx, u, v, linear, b) }
+    }
+
+    #[inline(always)]
+    unsafe fn verlet_pass(self, m: &ParticleModel, idx: &[usize], s: &Verlet<'_, '_>) -> (usize, f64) {
+        // SAFETY: `self` proves the CPU features; the rest is the caller's contract.
+        unsafe { verlet_avx2(self, m, idx, s) }
     }
 
     #[inline(always)]
@@ -202,9 +222,9 @@ unsafe fn gather_cols2(nbr: &[u32], q: &[P4], w: &[P4], wi: &P4, y: &[P4], yi: &
 ///
 /// # Safety
 /// The CPU has AVX2 and FMA; `u`, `v` and `b` have `m.n_particles()` entries (`idx` entries
-/// are used with checked indexing).
+/// are used with checked indexing); nothing else reaches the entries of `b` at `idx`.
 #[target_feature(enable = "avx2,fma")]
-unsafe fn stress_pass(m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4]>, linear: bool, b: &mut [Cols]) {
+unsafe fn stress_pass(m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4]>, linear: bool, b: &Disjoint<'_, Cols>) {
     let law = Svk::of(&m.material);
     let damped = !linear && v.is_some() && law.is_damped();
     let z = _mm256_setzero_pd();
@@ -232,18 +252,14 @@ unsafe fn stress_pass(m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4
         let r = to_lanes(&rc);
         let gamma = F4(_mm256_set_pd(g[3], g[2], g[1], g[0]));
         let (bm, det) = b_matrix(&k, kv.as_ref(), &r, gamma, law, linear);
-        for c in 0..3 {
-            let t = transpose(bm[0][c].0, bm[1][c].0, bm[2][c].0, z);
-            for (l, &i) in chunk.iter().enumerate() {
-                b[i][c] = store(t[l]);
-            }
-        }
-        // A particle compressed past the floor (rare) gets the barrier from the portable copy.
+        // (No closures here: they would not inherit this function's target features.)
+        let t = [transpose(bm[0][0].0, bm[1][0].0, bm[2][0].0, z), transpose(bm[0][1].0, bm[1][1].0, bm[2][1].0, z), transpose(bm[0][2].0, bm[1][2].0, bm[2][2].0, z)];
         let det = store(det.0);
         for (l, &i) in chunk.iter().enumerate() {
-            if det[l] < crate::meshfree::COMPRESSION_FLOOR {
-                b[i] = passes::particle_stress(m, i, u, v, linear);
-            }
+            // SAFETY: the caller's contract gives this call the entry at `i`.
+            let bi = unsafe { b.at(i) };
+            // A particle compressed past the floor (rare) gets the barrier from the portable copy.
+            *bi = if det[l] < crate::meshfree::COMPRESSION_FLOOR { passes::particle_stress(m, i, u, v, linear) } else { [store(t[0][l]), store(t[1][l]), store(t[2][l])] };
         }
     }
 }

@@ -42,10 +42,15 @@
 #[cfg(target_arch = "x86_64")]
 #[allow(unsafe_code)]
 mod avx2;
+mod disjoint;
 mod passes;
+
+pub(crate) use disjoint::Disjoint;
+use passes::Verlet;
 
 use super::{ParticleModel, ParticleState, ParticleWorkspace, SubStep};
 use crate::math::Vec3;
+use crate::parallel::Fork;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The per-sub-step external-force callback of [`super::step_with`].
@@ -68,16 +73,27 @@ pub(crate) fn v3(p: &P4) -> Vec3 {
 
 /// One copy of the two passes of a sub-step. Both take per-particle arrays `u`, `v`, `b`,
 /// `gamma` of one entry per particle of `m` (they panic otherwise) and particle indices `idx`.
-pub(crate) trait LoopCopy: Copy {
+#[allow(unsafe_code)]
+pub(crate) trait LoopCopy: Copy + Sync {
     /// `true` when `a * b + c` is one fused operation in this copy.
     const FMA: bool;
     /// Pass 1 over the particles `idx`: `b[i] = B_i` (see [`passes::b_matrix`]) from
     /// displacements `u` (and velocities `v` when damped); `linear`: the rest-linearised stress.
-    fn stress_pass(self, m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4]>, linear: bool, b: &mut [Cols]);
+    ///
+    /// # Safety
+    /// While it runs, nothing else reaches the entries of `b` at `idx` (another part of a split
+    /// pass has other particles).
+    unsafe fn stress_pass(self, m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4]>, linear: bool, b: &Disjoint<'_, Cols>);
     /// Pass 2 over the particles `idx`: `sink(i, f_i)` with the internal force `f_i` particle `i`
     /// receives, from the `B` of pass 1 and `gamma` (`gamma_j`, zero for frozen particles);
     /// `sink` is called once per entry of `idx`, in its order.
     fn force_pass(self, m: &ParticleModel, idx: &[usize], u: &[P4], b: &[Cols], gamma: &[f64], sink: impl FnMut(usize, P4));
+    /// Pass 2 and the Verlet update over the free particles `idx` ([`passes::verlet_impl`]):
+    /// the fastest of them and its squared speed relative to the mean velocity.
+    ///
+    /// # Safety
+    /// While it runs, nothing else reaches the entries of `s.vel` and `s.u_next` at `idx`.
+    unsafe fn verlet_pass(self, m: &ParticleModel, idx: &[usize], s: &Verlet<'_, '_>) -> (usize, f64);
 }
 
 /// The portable copy (any CPU; the reference the AVX2 copy is tested against).
@@ -87,9 +103,11 @@ pub(crate) struct Baseline;
 impl LoopCopy for Baseline {
     const FMA: bool = false;
     #[inline(always)]
-    fn stress_pass(self, m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4]>, linear: bool, b: &mut [Cols]) {
+    #[allow(unsafe_code)]
+    unsafe fn stress_pass(self, m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4]>, linear: bool, b: &Disjoint<'_, Cols>) {
         for &i in idx {
-            b[i] = passes::particle_stress(m, i, u, v, linear);
+            // SAFETY: the caller's contract (entry `i` is this call's alone).
+            *unsafe { b.at(i) } = passes::particle_stress(m, i, u, v, linear);
         }
     }
     #[inline(always)]
@@ -97,6 +115,12 @@ impl LoopCopy for Baseline {
         for &i in idx {
             sink(i, passes::particle_force(m, i, u, b, gamma));
         }
+    }
+    #[inline(always)]
+    #[allow(unsafe_code)]
+    unsafe fn verlet_pass(self, m: &ParticleModel, idx: &[usize], s: &Verlet<'_, '_>) -> (usize, f64) {
+        // SAFETY: the caller's contract.
+        unsafe { passes::verlet_impl(self, m, idx, s) }
     }
 }
 
@@ -136,7 +160,7 @@ fn avx2_copy() -> Option<avx2::Avx2> {
 
 /// Run the sub-steps with the best copy this CPU supports; stops early at a particle over the
 /// material's speed bound and returns it with its speed ([`passes::substeps_impl`]).
-pub(crate) fn run_substeps(m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>) -> Option<(usize, f64)> {
+pub(crate) fn run_substeps(m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>, fork: &dyn Fork) -> Option<(usize, f64)> {
     let n = m.n_particles();
     // The caller has already returned an error for a mismatched workspace or an out-of-range
     // active index; the passes check the lengths again (their unchecked reads rely on them).
@@ -144,9 +168,9 @@ pub(crate) fn run_substeps(m: &ParticleModel, state: &mut ParticleState, ws: &mu
     assert!(state.active.iter().all(|&i| i < n));
     #[cfg(target_arch = "x86_64")]
     if let Some(simd) = avx2_copy() {
-        return simd.run_substeps(m, state, ws, h, substeps, ext);
+        return simd.run_substeps(m, state, ws, h, substeps, ext, fork);
     }
-    passes::substeps_impl(Baseline, m, state, ws, h, substeps, ext)
+    passes::substeps_impl(Baseline, m, state, ws, h, substeps, ext, fork)
 }
 
 /// Forces of every particle with the best copy this CPU supports.

@@ -1,7 +1,8 @@
 //! The two passes of a sub-step and the Verlet update, written once for both copies of the loop
 //! (see [`super`]); the portable copy's per-particle gathers, which the AVX2 copy replaces.
 
-use super::{Cols, ExtForce, LoopCopy, P4};
+use super::{Cols, Disjoint, ExtForce, LoopCopy, P4};
+use crate::parallel::{part, Fork, MAX_WAYS};
 use crate::material::linear::{det3, green_strain_of, mm, strain_rate_of, sym, Scalar, Svk, M3};
 use crate::math::Vec3;
 use crate::meshfree::{ParticleModel, ParticleState, ParticleWorkspace};
@@ -176,10 +177,12 @@ pub(super) fn particle_force(m: &ParticleModel, i: usize, u: &[P4], b: &[Cols], 
 /// operator. `b`, `gamma` are scratch of length `n`.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
+#[allow(unsafe_code)]
 pub(super) fn all_forces_impl<C: LoopCopy>(c: C, m: &ParticleModel, u: &[P4], v: Option<&[P4]>, linear: bool, b: &mut [Cols], gamma: &mut [f64], out: &mut [P4]) {
     let n = m.n_particles();
     let all: Vec<usize> = (0..n).collect();
-    c.stress_pass(m, &all, u, v, linear, b);
+    // SAFETY: one call, which `b` is borrowed by alone.
+    unsafe { c.stress_pass(m, &all, u, v, linear, &Disjoint::new(b)) };
     gamma.copy_from_slice(&m.gamma);
     c.force_pass(m, &all, u, b, gamma, |i, f| out[i] = f);
 }
@@ -195,8 +198,11 @@ pub(super) fn all_forces_impl<C: LoopCopy>(c: C, m: &ParticleModel, u: &[P4], v:
 /// speed; the state then holds that sub-step's positions and velocities (finite), for the caller
 /// to restore. Checked every sub-step, fused into the force sweep, because an under-stepped shell
 /// goes from a few wave speeds to overflow within one tick's sub-steps.
+///
+/// `fork`: the passes run in its parts (bitwise the same result as in one).
 #[inline(always)]
-pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, mut ext: Option<ExtForce<'_>>) -> Option<(usize, f64)> {
+#[allow(unsafe_code, clippy::too_many_arguments)]
+pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, mut ext: Option<ExtForce<'_>>, fork: &dyn Fork) -> Option<(usize, f64)> {
     for &i in &ws.touched {
         ws.b[i] = [[0.0; 4]; 3];
         ws.gamma[i] = 0.0;
@@ -230,32 +236,46 @@ pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut Pa
     let bound = crate::divergence::speed_bound(&m.material);
     let bound2 = bound * bound;
     let mut over: Option<(usize, f64)> = None;
+    // Split over the caller's threads only when every particle is in the lists once (`touch`
+    // checks): each part then writes its own particles.
+    let ways = if ws.unique { fork.ways().clamp(1, MAX_WAYS) } else { 1 };
     for s in 0..substeps {
         if let Some(ext) = ext.as_mut() {
             external_forces(m, state, ws, *ext, s, h);
         }
-        c.stress_pass(m, &state.active, &ws.u, if damped { Some(&ws.v) } else { None }, false, &mut ws.b);
+        let (active, free) = (&state.active[..], &ws.free[..]);
+        {
+            let (u, v) = (&ws.u[..], if damped { Some(&ws.v[..]) } else { None });
+            let b = Disjoint::new(&mut ws.b);
+            if ways == 1 {
+                // SAFETY: one call, which `b` is borrowed by alone.
+                unsafe { c.stress_pass(m, active, u, v, false, &b) };
+            } else {
+                // SAFETY: part `k` runs once (`Fork`'s contract) on its own piece of the active
+                // list, which holds each particle once (`ws.unique`).
+                fork.fork(&|k| unsafe { c.stress_pass(m, &active[part(active.len(), ways, k)], u, v, false, &b) });
+            }
+        }
         if !ws.rim.is_empty() {
             accumulate_rim(&ws.rim, &ws.b, &ws.u, &mut ws.rim_sum);
         }
         // Forces and, in the same sweep, Verlet in velocity form (v += h a, u += h v) into the
         // other displacement buffer: this sweep still reads the current displacements of the
         // neighbours. (Velocities are read again only by the next sub-step's pass 1.)
-        let (vel, u_next, acc_ext, u_now) = (&mut ws.v, &mut ws.u_next, &ws.acc_ext, &ws.u);
-        let (mut fastest, mut top) = (usize::MAX, 0.0f64);
-        c.force_pass(m, &ws.free, &ws.u, &ws.b, &ws.gamma, |i, f| {
-            let (ae, im) = (&acc_ext[i], m.inv_mass[i]);
-            let (v, u, un) = (&mut vel[i], &u_now[i], &mut u_next[i]);
-            let mut s2 = 0.0;
-            for l in 0..3 {
-                v[l] = madd::<C>(h, madd::<C>(f[l], im, ae[l]), v[l]);
-                un[l] = madd::<C>(h, v[l], u[l]);
-                s2 += (v[l] - mean[l]) * (v[l] - mean[l]);
-            }
-            if s2 > top {
-                (fastest, top) = (i, s2);
-            }
-        });
+        let (vel, u_next) = (Disjoint::new(&mut ws.v), Disjoint::new(&mut ws.u_next));
+        let args = Verlet { u: &ws.u, b: &ws.b, gamma: &ws.gamma, acc_ext: &ws.acc_ext, h, mean, vel: &vel, u_next: &u_next };
+        let (fastest, top) = if ways == 1 {
+            // SAFETY: one call, which `vel` and `u_next` are borrowed by alone.
+            unsafe { c.verlet_pass(m, free, &args) }
+        } else {
+            let mut tops = [(usize::MAX, 0.0f64); MAX_WAYS];
+            let out = Disjoint::new(&mut tops);
+            // SAFETY: as for pass 1, with the free list (part of the active list); `tops[k]` is
+            // part `k`'s.
+            fork.fork(&|k| unsafe { *out.at(k) = c.verlet_pass(m, &free[part(free.len(), ways, k)], &args) });
+            // The first of the fastest, as one sweep in list order finds it.
+            tops[..ways].iter().fold((usize::MAX, 0.0f64), |best, &t| if t.1 > best.1 { t } else { best })
+        };
         std::mem::swap(&mut ws.u, &mut ws.u_next);
         // Frozen and fixed particles keep their displacement in both buffers.
         if top > bound2 {
@@ -285,6 +305,49 @@ pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut Pa
     out.clear();
     c.force_pass(m, &ws.ring, &ws.u_next, &ws.b, &ws.gamma, |_, f| out.push(super::v3(&f)));
     None
+}
+
+/// What pass 2 and the Verlet update of a sub-step read (`u`: the displacements at its start;
+/// `b`, `gamma`: pass 1's; `acc_ext`: the external accelerations; `mean`: the free particles'
+/// mean velocity at the step's start, for the speed check) and write (`vel`, `u_next`: the
+/// velocities, updated in place, and the displacements at its end).
+pub(crate) struct Verlet<'a, 'b> {
+    pub u: &'a [P4],
+    pub b: &'a [Cols],
+    pub gamma: &'a [f64],
+    pub acc_ext: &'a [P4],
+    pub h: f64,
+    pub mean: P4,
+    pub vel: &'a Disjoint<'b, P4>,
+    pub u_next: &'a Disjoint<'b, P4>,
+}
+
+/// Pass 2 over the free particles `idx` and, as each force arrives, the Verlet update in velocity
+/// form (`v += h a`, `u_next = u + h v`): returns the fastest particle and its squared speed
+/// relative to `s.mean` (`(usize::MAX, 0)` for none faster than 0).
+///
+/// # Safety
+/// While it runs, nothing else reaches the entries of `s.vel` and `s.u_next` at `idx`.
+#[inline(always)]
+#[allow(unsafe_code)]
+pub(super) unsafe fn verlet_impl<C: LoopCopy>(c: C, m: &ParticleModel, idx: &[usize], s: &Verlet<'_, '_>) -> (usize, f64) {
+    let (h, mean) = (s.h, s.mean);
+    let (mut fastest, mut top) = (usize::MAX, 0.0f64);
+    c.force_pass(m, idx, s.u, s.b, s.gamma, |i, f| {
+        let (ae, im, u) = (&s.acc_ext[i], m.inv_mass[i], &s.u[i]);
+        // SAFETY: the caller's contract gives this call the entries at `i` (in `idx`).
+        let (v, un) = unsafe { (s.vel.at(i), s.u_next.at(i)) };
+        let mut s2 = 0.0;
+        for l in 0..3 {
+            v[l] = madd::<C>(h, madd::<C>(f[l], im, ae[l]), v[l]);
+            un[l] = madd::<C>(h, v[l], u[l]);
+            s2 += (v[l] - mean[l]) * (v[l] - mean[l]);
+        }
+        if s2 > top {
+            (fastest, top) = (i, s2);
+        }
+    });
+    (fastest, top)
 }
 
 /// Add the rim's `B` and displacement of this sub-step to their sums (kept out of line: inlined,
