@@ -49,8 +49,9 @@ fn main() {
     let mut times = Vec::with_capacity(ticks);
     let mut subs = 0usize;
     let mut last_force = 0.0;
-    // DEPTH_MM: the press's depth (default 3 mm); TRACE=FILE: one CSV row a tick (ms, active,
-    // entered, left, sub-steps, core iterations) to tell what the slow ticks have in common.
+    // DEPTH_MM: the press's depth (default 3 mm); TRACE=FILE: one CSV row a tick (k, ms, active,
+    // entered, left, sub-steps, core iterations, force [N], skin vertices refreshed away from the
+    // tool) to tell what the slow ticks have in common.
     let depth = std::env::var("DEPTH_MM").ok().and_then(|s| s.parse::<f64>().ok()).unwrap_or(3.0) * 1e-3;
     let mut trace = std::env::var("TRACE").ok().map(|f| std::io::BufWriter::new(std::fs::File::create(f).unwrap()));
     for k in 0..ticks {
@@ -72,7 +73,7 @@ fn main() {
         }
         if let Some(t) = trace.as_mut() {
             use std::io::Write;
-            writeln!(t, "{k},{ms:.4},{},{},{},{},{},{:.6e}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.force.norm()).unwrap();
+            writeln!(t, "{k},{ms:.4},{},{},{},{},{},{:.6e},{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.force.norm(), rep.skin_refreshed).unwrap();
         }
         subs += rep.substeps;
         if k == press + hold - 1 {

@@ -13,7 +13,8 @@
 //! - [`stability`]: how many particle sub-steps a tick needs (stretch, springs, contact);
 //! - [`sim`], [`state`]: the compiled simulation, its state and workspace, and the state as
 //!   plain values to save and restore ([`SimSnapshot`]);
-//! - [`tick`](mod@tick): the one ordered tick, tool in, force out.
+//! - [`tick`](mod@tick): the one ordered tick, tool in, force out; [`tick_with`] the same with
+//!   the particle passes split over a caller's threads ([`crate::parallel`]), bitwise equal.
 //!
 //! **Status (issue 12, in progress).** Each exchange is exact: the tick conserves linear
 //! momentum to round-off with the tool away and changes it by the tool's impulse with the tool
