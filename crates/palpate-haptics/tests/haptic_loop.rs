@@ -23,7 +23,7 @@ use std::time::Duration;
 use palpate_core::Vec3;
 use palpate_haptics::devices::{Hand, HandParams, Replay, Scripted};
 use palpate_haptics::record::compare;
-use palpate_haptics::{CouplingParams, Device, DeviceInput, DeviceKind, Fault, ForceSink, HapticCore, Physics, Recording, SafetyParams, Servo, ServoConfig, Wall};
+use palpate_haptics::{CouplingParams, Device, DeviceInput, DeviceKind, Fault, ForceSink, HapticCore, HybridPhysics, Physics, Recording, SafetyParams, Servo, ServoConfig, Wall};
 use support::*;
 
 fn wall() -> Wall {
@@ -57,18 +57,21 @@ fn fast_ramp() -> SafetyParams {
     SafetyParams { ramp: 0.02, ..Default::default() }
 }
 
-#[test]
-fn replay_is_bit_identical_offline_and_from_a_file() {
-    let physics = hybrid();
+/// The recording of a 4 mm press, 4 mm slide and release at the probe, run offline (1100 ticks).
+fn record_press(physics: HybridPhysics) -> Recording {
     let (p, n) = probe(&physics.sim().hybrid);
     let r = physics.sim().options.tool.radius;
     let (times, knots) = press_slide_release(p, n, r, 0.004, 0.004);
     let mut dev = Scripted::new(times, knots).unwrap();
     let (c, s) = DeviceKind::Simulated.defaults();
     let mut core = HapticCore::new(Box::new(physics), 1000.0, c, s, 100, 2000);
-    let n_ticks = core.run_offline(&mut dev, 5000);
-    assert_eq!(n_ticks, 1100);
-    let rec = core.take_recording().unwrap();
+    assert_eq!(core.run_offline(&mut dev, 5000), 1100);
+    core.take_recording().unwrap()
+}
+
+#[test]
+fn replay_is_bit_identical_offline_and_from_a_file() {
+    let rec = record_press(hybrid());
     assert_eq!(rec.faults, 0);
     let fmax = rec.ticks.iter().map(|t| t.force.norm()).fold(0.0, f64::max);
     assert!(fmax > 0.05, "the press must touch: max force {fmax} N");
@@ -95,14 +98,7 @@ fn a_recording_made_on_two_threads_replays_bit_identically_on_one() {
     // one thread bit for bit, so the recording's forces and positions are the same either way.
     let physics = hybrid().with_threads(2, false).unwrap();
     assert_eq!(physics.threads(), 2);
-    let (p, n) = probe(&physics.sim().hybrid);
-    let r = physics.sim().options.tool.radius;
-    let (times, knots) = press_slide_release(p, n, r, 0.004, 0.004);
-    let mut dev = Scripted::new(times, knots).unwrap();
-    let (c, s) = DeviceKind::Simulated.defaults();
-    let mut core = HapticCore::new(Box::new(physics), 1000.0, c, s, 100, 2000);
-    assert_eq!(core.run_offline(&mut dev, 5000), 1100);
-    let rec = core.take_recording().unwrap();
+    let rec = record_press(physics);
     assert!(rec.ticks.iter().map(|t| t.force.norm()).fold(0.0, f64::max) > 0.05, "the press must touch");
     let mut replay = Replay::new(&rec);
     let mut one = HapticCore::new(Box::new(hybrid()), rec.rate_hz, rec.coupling, rec.safety, 100, 2000);
