@@ -316,6 +316,24 @@ fn a_slide_keeps_the_active_count_within_the_regions() {
             hi = hi.max(k);
             sum += k;
             ticks += 1;
+            // The active triangles' list is the triangles some active region covers, each once,
+            // after every update and in a restored copy.
+            let want: Vec<u32> = (0..a.n_triangles() as u32).filter(|&t| a.is_triangle_active(t)).collect();
+            let sorted = |x: &[u32]| {
+                let mut v = x.to_vec();
+                v.sort_unstable();
+                v
+            };
+            assert_eq!(sorted(a.active_triangles()), want, "tick {tick}: the active triangles' list");
+            if tick % 250 == 0 {
+                let mut b = Activation::new(m, linger);
+                b.restore(a.last_touched(), a.active_regions()).unwrap();
+                assert_eq!(sorted(b.active_triangles()), want, "tick {tick}: restored");
+                b.clear();
+                assert!(b.active_triangles().is_empty());
+                b.clone_from(&a);
+                assert_eq!(sorted(b.active_triangles()), want, "tick {tick}: cloned");
+            }
         }
         println!(
             "5 mm tool, {:.1} mm deep, linger {linger}: active particles min {lo} mean {:.0} max {hi} over {ticks} ticks, {changes} ticks with changes (paper: 50-600, mean 200)",

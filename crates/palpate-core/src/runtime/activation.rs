@@ -56,6 +56,9 @@ pub struct Activation {
     tri_particle_ptr: Arc<[u32]>,
     /// Active regions covering each outer triangle.
     tri_count: Vec<u32>,
+    /// The triangles with a positive count (unordered): the skin's update visits each once
+    /// (through the regions, a triangle shared by k active regions was visited k times).
+    triangles: Vec<u32>,
     /// Per region: the tick of its last contact ([`NEVER`] if none).
     last_touched: Vec<u64>,
     /// Per region: in `regions` (active) or in `pending`.
@@ -84,6 +87,7 @@ impl Clone for Activation {
             region_tris: self.region_tris.clone(),
             tri_particle_ptr: self.tri_particle_ptr.clone(),
             tri_count: Vec::new(),
+            triangles: Vec::new(),
             last_touched: Vec::new(),
             is_active: Vec::new(),
             is_pending: Vec::new(),
@@ -106,7 +110,7 @@ impl Clone for Activation {
     /// with the capacities the updates rely on to allocate nothing.
     fn clone_from(&mut self, s: &Self) {
         // Exhaustive: a new field is a compile error here until it is copied.
-        let Activation { region_tris, tri_particle_ptr, tri_count, last_touched, is_active, is_pending, pending, regions, linger, tri_on, tri_off, active, scratch, entered, left, mean_edge } = self;
+        let Activation { region_tris, tri_particle_ptr, tri_count, triangles, last_touched, is_active, is_pending, pending, regions, linger, tri_on, tri_off, active, scratch, entered, left, mean_edge } = self;
         if !Arc::ptr_eq(region_tris, &s.region_tris) {
             *region_tris = s.region_tris.clone();
         }
@@ -115,6 +119,7 @@ impl Clone for Activation {
         }
         let (n_regions, n_tris, n_particles) = (s.last_touched.len(), s.tri_count.len(), s.active.capacity().max(s.scratch.capacity()));
         copy_into(tri_count, &s.tri_count, n_tris);
+        copy_into(triangles, &s.triangles, n_tris);
         copy_into(last_touched, &s.last_touched, n_regions);
         copy_into(is_active, &s.is_active, n_regions);
         copy_into(is_pending, &s.is_pending, n_regions);
@@ -184,6 +189,7 @@ impl Activation {
             region_tris: Arc::new(region_tris),
             tri_particle_ptr: tri_particle_ptr.into(),
             tri_count: vec![0; n_tris],
+            triangles: Vec::with_capacity(n_tris),
             last_touched: vec![NEVER; n_regions],
             is_active: vec![false; n_regions],
             is_pending: vec![false; n_regions],
@@ -302,6 +308,11 @@ impl Activation {
         }
         // A triangle turned on then off in one update cannot happen (arrivals are not expired),
         // but one turned off may have been on before: tri_on and tri_off are disjoint.
+        if !self.tri_off.is_empty() {
+            let count = &self.tri_count;
+            self.triangles.retain(|&t| count[t as usize] > 0);
+        }
+        self.triangles.extend_from_slice(&self.tri_on);
         self.tri_on.sort_unstable();
         self.tri_off.sort_unstable();
         self.entered.clear();
@@ -362,6 +373,9 @@ impl Activation {
     /// [`super::confinement`] reads.
     pub fn triangle_counts(&self) -> &[u32] { &self.tri_count }
 
+    /// The outer triangles under an active region, each once, in no particular order.
+    pub fn active_triangles(&self) -> &[u32] { &self.triangles }
+
     /// Per region: the tick of its last contact (`u64::MAX`: never touched).
     pub fn last_touched(&self) -> &[u64] { &self.last_touched }
 
@@ -397,6 +411,7 @@ impl Activation {
         // out sorted, as update's merge keeps it.
         for (t, &c) in self.tri_count.iter().enumerate() {
             if c > 0 {
+                self.triangles.push(t as u32);
                 self.active.extend(self.tri_particle_ptr[t] as usize..self.tri_particle_ptr[t + 1] as usize);
             }
         }
@@ -414,6 +429,7 @@ impl Activation {
         self.regions.clear();
         self.pending.clear();
         self.tri_count.iter_mut().for_each(|c| *c = 0);
+        self.triangles.clear();
         self.last_touched.iter_mut().for_each(|t| *t = NEVER);
         self.active.clear();
         self.entered.clear();

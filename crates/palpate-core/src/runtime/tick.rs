@@ -446,8 +446,9 @@ fn skin_travel(sim: &Sim, core_x: &[Vec3], frames: &[Option<Mat3>], ref_x: &[Vec
 }
 
 /// The core's face frames are computed once (`frames`), not per vertex, and the vertices over
-/// active triangles are found from the active regions (`over[v] == stamp`) rather than by asking
-/// every vertex's triangles. Then, unless the skin's travel bound calls for a whole update: the
+/// active triangles are found from the active triangles' list (`over[v] == stamp`) rather than
+/// by asking every vertex's triangles (or every active region's: neighbouring regions share
+/// most of their triangles, and that loop was 2% of the Rodero tick). Then, unless the skin's travel bound calls for a whole update: the
 /// vertices of `live` within [`live_radius`] of the tool, and those no longer carried by
 /// particles, go to their ties (a fine outer surface, the Rodero model's 31,788 vertices, made
 /// the whole skin's update a third of its tick); the list is rebuilt when the tool has moved
@@ -460,15 +461,13 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
         let carried = if over { skin_over_particles(sim, activation, v, &particles.x, core_x, Some(frames)) } else { None };
         carried.unwrap_or_else(|| sim.skin.position_framed(v, core_x, frames))
     };
-    for &s in activation.active_regions() {
-        for &t in activation.region_triangles(s as usize) {
-            for &v in &sim.hybrid.outer_tris[t as usize] {
-                if over[v] != stamp {
-                    over[v] = stamp;
-                    skin[v] = place(v, true);
-                    live.carried[v] = true;
-                    live.add(v);
-                }
+    for &t in activation.active_triangles() {
+        for &v in &sim.hybrid.outer_tris[t as usize] {
+            if over[v] != stamp {
+                over[v] = stamp;
+                skin[v] = place(v, true);
+                live.carried[v] = true;
+                live.add(v);
             }
         }
     }
