@@ -517,6 +517,12 @@ def test_haptic_command_scripted_record_and_replay(tmp_path, capsys):
     assert main(["haptic", "ellipsoids", "--device", f"replay:{rec}"]) in (0, 3)
     out = capsys.readouterr().out
     assert "500 ticks" in out and "Hz" in out and "overruns" in out
+    # The replay on two threads (the particle passes split; bitwise the same ticks, which the
+    # haptics crate's tests check).
+    assert main(["haptic", "ellipsoids", "--device", f"replay:{rec}", "--threads", "2", "--quiet"]) in (0, 3)
+    assert "500 ticks" in capsys.readouterr().out
+    assert main(["haptic", "ellipsoids", "--device", f"replay:{rec}", "--threads", "0"]) == 2     # usage
+    assert "--threads must be 1 to 8" in capsys.readouterr().err
     assert main(["haptic", "ellipsoids", "--device", "joystick"]) == 2     # usage
     assert "unknown device" in capsys.readouterr().err
 

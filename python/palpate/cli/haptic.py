@@ -44,6 +44,10 @@ def add_parser(sub) -> None:
     h.add_argument("--realtime", action="store_true",
                    help="run the servo under SCHED_FIFO so that other work cannot preempt a tick (needs root, "
                         "CAP_SYS_NICE or an rtprio limit; refused otherwise, with a warning)")
+    h.add_argument("--threads", type=int, default=1, metavar="N",
+                   help="threads a tick's particle passes run on, 1 to 8 (default 1): the servo's and N-1 helpers "
+                        "that spin while the loop runs; the same forces bit for bit, sooner only where the helpers "
+                        "have idle cores (on a 2-core machine they did not help: BENCHMARKS.md)")
     h.add_argument("--quiet", action="store_true", help="no status line")
     h.set_defaults(func=cmd_haptic)
 
@@ -75,7 +79,7 @@ def make_loop(a, model, record_ticks: int):
 
     kind, _, arg = a.device.partition(":")
     common = dict(rate_hz=a.rate, record_ticks=record_ticks, max_force=a.max_force, tool_radius=a.tool_radius,
-                  realtime=a.realtime)
+                  realtime=a.realtime, threads=a.threads)
     if a.kind is not None:
         common["kind"] = a.kind
     if a.seconds is not None and kind != "replay":
@@ -124,6 +128,8 @@ def cmd_haptic(a) -> int:
     _positive("haptic", "--seconds", a.seconds)
     _positive("haptic", "--max-force", a.max_force)
     _positive("haptic", "--tool-radius", a.tool_radius)
+    if not 1 <= a.threads <= 8:
+        raise Usage(f"palpate haptic: --threads must be 1 to 8, got {a.threads}")
     name, model = load_hybrid_model(a.model, "haptic")
     loop = make_loop(a, model, record_ticks(a))
     where = f" on {loop.bridge_address}" if loop.bridge_address else ""
