@@ -73,6 +73,31 @@ fn a_press_and_slide_split_over_threads_is_bitwise_the_serial_one() {
     assert!(busiest > 100 && moved > 50, "active at most {busiest}, {moved} entered or left");
 }
 
+/// A hand's worst on two threads: a 15 mm press in 60 ticks, then a 0.5 m/s slide (the simulated
+/// tool follows at its step cap): finite, and bitwise the serial run.
+#[test]
+fn a_deep_press_and_fast_slide_on_two_threads_stay_finite_and_serial() {
+    let (_, model) = walls::ellipsoids();
+    let sim = Sim::new(model.clone(), material(), SimOptions::default()).unwrap();
+    let (p0, n) = press::press_point(&sim.hybrid.outer_points);
+    let t = n.cross(&Vec3::z()).normalize();
+    let r = sim.options.tool.radius;
+    let (mut a, mut wa) = (SimState::rest(&sim), SimWorkspace::new(&sim));
+    let (mut b, mut wb) = (SimState::rest(&sim), SimWorkspace::new(&sim));
+    let mut fmax = 0.0f64;
+    for k in 0..120usize {
+        let depth = 15e-3 * (k.min(60) as f64 / 60.0);
+        let slide = 0.5e-3 * k.saturating_sub(60) as f64;
+        let tool = p0 + n * (r - depth) + t * slide;
+        let x = tick(&sim, &mut a, &mut wa, tool, 1e-3).unwrap();
+        let y = tick_with(&sim, &mut b, &mut wb, tool, 1e-3, &Threads(2)).unwrap();
+        assert!(x.force.iter().all(|f| f.is_finite()) && x.force == y.force, "tick {k}");
+        assert!(same_state(&a, &b), "tick {k}: the states differ");
+        fmax = fmax.max(x.force.norm());
+    }
+    assert!(fmax > 0.1, "the press must load the tool: {fmax} N");
+}
+
 #[test]
 fn an_active_list_with_a_repeat_runs_on_one_thread_and_gives_the_serial_step() {
     let (_, model) = walls::ellipsoids();

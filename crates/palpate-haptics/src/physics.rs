@@ -5,8 +5,8 @@
 
 use palpate_core::hybrid::{file, HybridModel};
 use palpate_core::math::is_finite3;
-use palpate_core::parallel::Fork;
-use palpate_core::runtime::{tick, tick_with, Sim, SimOptions, SimState, SimWorkspace, Tool};
+use palpate_core::parallel::{Fork, Serial};
+use palpate_core::runtime::{tick_with, Sim, SimOptions, SimState, SimWorkspace, Tool};
 use palpate_core::{step, Material, Model, ModelError, State, StepError, Vec3, Workspace};
 
 use crate::pool::SpinPool;
@@ -139,14 +139,15 @@ impl HybridPhysics {
 
 impl Physics for HybridPhysics {
     fn tick(&mut self, tool: &Vec3, dt: f64) -> Result<Vec3, StepError> {
-        match &self.pool {
+        let fork: &dyn Fork = match &self.pool {
             Some(pool) => {
                 // The helpers wake while the tick's serial start (activation, ties) runs.
                 pool.wake();
-                tick_with(&self.sim, &mut self.state, &mut self.ws, *tool, dt, pool).map(|r| r.force)
+                pool
             }
-            None => tick(&self.sim, &mut self.state, &mut self.ws, *tool, dt).map(|r| r.force),
-        }
+            None => &Serial,
+        };
+        tick_with(&self.sim, &mut self.state, &mut self.ws, *tool, dt, fork).map(|r| r.force)
     }
     fn tool(&self) -> Option<Vec3> {
         self.state.tool

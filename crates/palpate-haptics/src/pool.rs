@@ -11,10 +11,10 @@
 //! pass whose part panics is re-raised on the calling thread after every part has returned (the
 //! parts borrow the caller's data).
 //!
-//! **Measured (2026-11-26, the 2-core machine of BENCHMARKS.md).** Alone, a Rodero tick of
-//! `palpate bench haptic`'s palpation took 16% less on two threads than on one (mean, the
-//! helper spinning between ticks; with 150 us spins it parked between ticks and the wake-up ate
-//! the gain). Inside the servo it did not pay on that machine: the process's other threads (the
+//! **Measured (2026-11-26, the 2-core machine of BENCHMARKS.md).** Alone
+//! (`examples/pool_tick.rs`), a Rodero tick took 13% and 16% less on two threads than on one in
+//! two runs and 9% more in a third, on a busier minute (means, the helper spinning between
+//! ticks; with 150 us spins it parked between ticks and the wake-up ate the gain). Inside the servo it did not pay on that machine: the process's other threads (the
 //! watchdog, Python's) and the machine's own work preempt one of the two busy threads, and a
 //! pass then waits for a descheduled helper for milliseconds (compute p99 1.6-1.7 ms against
 //! 1.2-1.4 ms on one thread). Give the helpers cores that nothing else uses.
@@ -118,8 +118,13 @@ impl SpinPool {
     pub fn wake(&self) {
         let s = &self.shared;
         s.spin_until.store(now_ns(s) + s.spin_ns, Ordering::SeqCst);
+        self.unpark_sleepers();
+    }
+
+    /// Unpark the helpers that parked or are about to.
+    fn unpark_sleepers(&self) {
         for (k, h) in self.helpers.iter().enumerate() {
-            if s.asleep[k + 1].load(Ordering::SeqCst) {
+            if self.shared.asleep[k + 1].load(Ordering::SeqCst) {
                 h.thread().unpark();
             }
         }
@@ -197,11 +202,7 @@ unsafe impl Fork for SpinPool {
         s.done.store(0, Ordering::Relaxed);
         s.spin_until.fetch_max(now_ns(s) + s.spin_ns, Ordering::Relaxed);
         s.round.fetch_add(1, Ordering::SeqCst);
-        for (k, h) in self.helpers.iter().enumerate() {
-            if s.asleep[k + 1].load(Ordering::SeqCst) {
-                h.thread().unpark();
-            }
-        }
+        self.unpark_sleepers();
         let mine = catch_unwind(AssertUnwindSafe(|| job(0)));
         while s.done.load(Ordering::Acquire) < self.ways - 1 {
             std::hint::spin_loop();
