@@ -20,7 +20,7 @@ use super::file::{Reader, Res, Writer};
 use super::model::HybridModel;
 use super::shell::Projector;
 use super::transmural;
-use super::{core, options, outer, region_field, regions, shell, skin};
+use super::{core, options, order, outer, region_field, regions, shell, skin};
 use crate::error::HybridError;
 use crate::spatial::{TetGrid, TriangleGrid};
 use std::time::Instant;
@@ -105,6 +105,7 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     let t0 = Instant::now();
     stats.fallback_skin = skin::build(&mut m, &project);
     regions::build(&mut m);
+    order::apply(&mut m);
     stats.regions_s = t0.elapsed().as_secs_f64();
     stats.total_s = t_start.elapsed().as_secs_f64();
     m.stats = stats;

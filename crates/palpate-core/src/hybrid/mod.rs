@@ -14,6 +14,7 @@ mod core;
 pub mod file;
 mod model;
 pub mod options;
+mod order;
 mod outer;
 mod region_field;
 mod regions;

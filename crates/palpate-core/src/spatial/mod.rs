@@ -5,6 +5,7 @@
 
 pub mod csr;
 pub mod grid3;
+pub mod morton;
 pub mod tet_grid;
 pub mod triangle_grid;
 
