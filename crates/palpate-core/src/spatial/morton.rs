@@ -13,8 +13,8 @@ pub fn code(p: &Vec3, lo: &Vec3, extent: f64) -> u64 {
     let cells = (1u64 << BITS) as f64;
     let q = |x: f64, l: f64| -> u64 {
         let t = if extent > 0.0 { (x - l) / extent } else { 0.0 };
-        // NaN becomes 0 through the clamp's comparisons failing: `max` returns the other operand.
-        (t.max(0.0).min(1.0) * (cells - 1.0)) as u64
+        // A NaN stays NaN through the clamp and casts to 0.
+        (t.clamp(0.0, 1.0) * (cells - 1.0)) as u64
     };
     spread(q(p.x, lo.x)) | (spread(q(p.y, lo.y)) << 1) | (spread(q(p.z, lo.z)) << 2)
 }
