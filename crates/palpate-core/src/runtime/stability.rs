@@ -34,6 +34,19 @@
 //! forced to 9 on the synthetic ventricle, the tick after the first past one wave speed
 //! (tests/runtime_hand.rs).
 //!
+//! **Open (found 2026-11-26, fifth session): region entries in a press deeper than the wall.**
+//! The bound covers the active particles; their inactive neighbours (the ring) sit at their ties.
+//! 20 mm into the synthetic ventricle's 6 mm wall, active particles are carried one to two
+//! spacings from their ties, and ring particles beside them are inverted (`det F` to -13,
+//! `s^2` ~370). When such a particle's region enters, its stiffening asks ~20 times the rest
+//! count, past the cap, and the tick diverges (contained and reported). The shipped models pass
+//! the press toward 2 N (tests/runtime_hand.rs), but a model built with different ties (the
+//! outer triangles sorted before the build's stages, tried) failed it at 20 mm; starting
+//! entering particles at their active neighbours' displacement moved the failure to another
+//! entry. Counting the ring in the bound (tried) took 30-47 sub-steps a tick on average in an
+//! ordinary 4 mm press on Rodero, against 10-11: the ring is always distorted. A boundary for the active zone that follows it, or entries deferred while
+//! the ring is inverted, are the candidates.
+//!
 //! **Adopted since: selective mass scaling** (`crate::meshfree` `mass_scaling.rs`, on by default
 //! through [`super::SimOptions::mass_scaling`]): the few poorly supported particles below get the
 //! mass that brings their Gershgorin rate to the 95th percentile's, which lowers `omega_max^2`
