@@ -157,9 +157,15 @@ def per_second(times_s, elapsed_s: float) -> list:
         if len(times_s) else [0] * n
 
 
+#: The ``spin`` [s] of :class:`palpate.HapticLoop` that never sleeps: longer than any period
+#: (``spin`` takes 0 to 1 s). The servo then keeps a core busy, and its compute tail is shorter
+#: (the compute p99 4-20% lower on the Rodero palpation; BENCHMARKS.md).
+BUSY_SPIN = 1.0
+
+
 def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle: bool = True,
           name: str = "", on_status: Optional[Callable[[str], None]] = None, realtime: bool = False,
-          threads: int = 1) -> Dict[str, Any]:
+          threads: int = 1, busy_wait: bool = False) -> Dict[str, Any]:
     """``palpate bench haptic``: the loop at ``rate_hz`` on ``model`` for ``seconds`` [s] with a
     repeated scripted palpation (:func:`palpation_cycle`), then (``idle``) the idle loop (no
     simulation, same device, same length) on the same clock. Returns the loop's report
@@ -167,19 +173,23 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
     from the first 100,000 logged), with ``idle`` the idle run's and the machine's description;
     ``realtime``: both loops' servo under ``SCHED_FIFO`` (see :class:`palpate.HapticLoop`; the
     report's ``realtime`` says whether it was granted); ``threads``: the loop's particle passes on
-    that many threads (:class:`palpate.HapticLoop`; the idle loop has no physics to split)."""
+    that many threads (:class:`palpate.HapticLoop`; the idle loop has no physics to split);
+    ``busy_wait``: both loops' servo spins through each whole period instead of sleeping
+    (:data:`BUSY_SPIN`; the report's ``busy_wait``)."""
     t, k = repeat(*palpation_cycle(model), seconds + 1.0)
     mat = material()
+    spin = BUSY_SPIN if busy_wait else None
     loop = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz,
-                         max_ticks=int(round(seconds * rate_hz)), realtime=realtime, threads=threads)
+                         max_ticks=int(round(seconds * rate_hz)), realtime=realtime, threads=threads, spin=spin)
     r = run_live(loop, None, on_status)
     r["threads"] = threads
+    r["busy_wait"] = busy_wait
     r["model"] = name
     r["seconds"] = seconds
     r["overruns_per_s"] = per_second(r.pop("overrun_times_s"), r["elapsed_s"])
     if idle:
         il = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz, idle=True,
-                           max_ticks=int(round(seconds * rate_hz)), realtime=realtime)
+                           max_ticks=int(round(seconds * rate_hz)), realtime=realtime, spin=spin)
         ir = run_live(il, None, None)
         r["idle"] = {key: ir[key] for key in ("ticks", "achieved_hz", "elapsed_s", "period_us_p50", "period_us_p99",
                                               "period_us_max", "compute_us_p99", "overruns", "realtime")}

@@ -98,6 +98,12 @@ fn busy(what: &str) -> PyErr {
 ///     not recorded but counted (the report's ``recording_dropped_ticks``).
 /// max_ticks : int, optional
 ///     Stop after this many ticks (a scripted or replayed device also stops at its end).
+/// spin : float, optional
+///     The last part of each wait that the servo spins rather than sleeps [s], 0 to 1 (default
+///     200 us; 0 with ``realtime``). A whole period or more (``1 / rate_hz``): the servo never
+///     sleeps and keeps a core busy, which shortens the tick's tail (the Rodero palpation at
+///     1 kHz: compute p99 4-20% lower; the overruns follow the machine's bursts either way;
+///     BENCHMARKS.md). ``palpate haptic --busy-wait`` sets it.
 /// realtime : bool
 ///     Run the servo thread under ``SCHED_FIFO`` (priority 80; the watchdog 81) so that the
 ///     machine's other work cannot preempt a tick. Needs root, ``CAP_SYS_NICE`` or an

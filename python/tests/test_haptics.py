@@ -119,6 +119,10 @@ def test_bad_parameters_raise_value_errors(model):
     for bad in (0, 9):
         with pytest.raises(ValueError, match="threads"):
             _p.HapticLoop(model, m, "scripted", times=t, knots=k, threads=bad)
+    # spin: 0 to 1 s (a whole period or more: the servo never sleeps).
+    for bad in (-1e-3, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="spin"):
+            _p.HapticLoop(model, m, "scripted", times=t, knots=k, spin=bad)
 
 
 def test_loop_runs_while_python_sleeps_and_the_hand_follows(model):
@@ -523,6 +527,11 @@ def test_haptic_command_scripted_record_and_replay(tmp_path, capsys):
     assert "500 ticks" in capsys.readouterr().out
     assert main(["haptic", "ellipsoids", "--device", f"replay:{rec}", "--threads", "0"]) == 2     # usage
     assert "--threads must be 1 to 8" in capsys.readouterr().err
+    # --busy-wait: the servo spins instead of sleeping; the same ticks. Not with --realtime.
+    assert main(["haptic", "ellipsoids", "--device", f"replay:{rec}", "--busy-wait", "--quiet"]) in (0, 3)
+    assert "500 ticks" in capsys.readouterr().out
+    assert main(["haptic", "ellipsoids", "--device", f"replay:{rec}", "--busy-wait", "--realtime"]) == 2     # usage
+    assert "--busy-wait and --realtime" in capsys.readouterr().err
     assert main(["haptic", "ellipsoids", "--device", "joystick"]) == 2     # usage
     assert "unknown device" in capsys.readouterr().err
 
@@ -586,6 +595,12 @@ def test_soak_and_bench_haptic_commands(capsys):
     assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.3", "--json", "--no-idle", "--threads", "2"]) in (0, 3)
     r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert r["threads"] == 2 and r["ticks"] == 300 and r["n_faults"] == r["watchdog_trips"] and "idle" not in r
+    # --busy-wait: both runs' servo spins through its periods (same tick counts); not with --realtime.
+    assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.3", "--json", "--busy-wait"]) in (0, 3)
+    r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert r["busy_wait"] is True and r["ticks"] == 300 and r["idle"]["ticks"] == 300
+    assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--busy-wait", "--realtime"]) == 2
+    assert "--busy-wait and --realtime" in capsys.readouterr().err
 
 
 def test_full_fem_body_hand_worst_stays_finite():

@@ -499,3 +499,24 @@ fn a_servo_nobody_reads_refreshes_its_surface_rarely() {
     h.stop();
     assert!(fresh, "a reader did not bring the snapshots back to surface_every");
 }
+
+/// A busy-waiting servo (`spin` of a whole period or more: it never sleeps) still keeps its
+/// deadlines: it does not run ahead of its rate (a wait that returned at once would), and a
+/// `spin` past 1 s is refused.
+#[test]
+fn a_busy_waiting_servo_keeps_its_deadlines() {
+    let hand = Hand::new(HandParams::default(), Vec3::new(0.0, 0.0, 0.005));
+    let cfg = ServoConfig { rate_hz: 2000.0, spin: 1.0, max_ticks: Some(400), safety: Some(fast_ramp()), ..Default::default() };
+    let core = HapticCore::with_config(Box::new(wall()), &cfg, &hand).unwrap();
+    let start = std::time::Instant::now();
+    let h = Servo::start(core, Box::new(hand), &cfg).unwrap();
+    while h.snapshot().is_none_or(|s| s.tick < 400) && start.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let report = h.stop();
+    assert_eq!(report.stats.ticks, 400);
+    // 400 deadlines 0.5 ms apart: the last is 199.5 ms after the first tick's start.
+    assert!(report.stats.elapsed >= 0.1995, "ran ahead of its rate: {} s for 400 ticks", report.stats.elapsed);
+    assert!(ServoConfig { spin: 1.5, ..Default::default() }.check().is_err());
+    assert!(ServoConfig { spin: f64::NAN, ..Default::default() }.check().is_err());
+}

@@ -195,6 +195,8 @@ def _add_haptic(bsub) -> None:
                         "whether it was granted)")
     k.add_argument("--threads", type=int, default=1, metavar="N",
                    help="threads a tick's particle passes run on, 1 to 8 (default 1; see palpate haptic --help)")
+    k.add_argument("--busy-wait", action="store_true",
+                   help="both runs' servo spins through each period instead of sleeping (see palpate haptic --help)")
     k.add_argument("--json", action="store_true", help="one JSON object (keys: " + ", ".join(haptics.BENCH_KEYS) + ", ...)")
     k.set_defaults(func=cmd_bench_haptic)
 
@@ -208,9 +210,13 @@ def cmd_bench_haptic(a) -> int:
         raise Usage(f"palpate bench haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")
     if not 1 <= a.threads <= 8:
         raise Usage(f"palpate bench haptic: --threads must be 1 to 8, got {a.threads}")
+    if a.busy_wait and a.realtime:
+        raise Usage("palpate bench haptic: --busy-wait and --realtime together: a real-time thread that never sleeps "
+                    "meets the kernel's real-time throttling")
     name, model = load_hybrid_model(a.model, "bench haptic")
     try:
-        r = haptics.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name, realtime=a.realtime, threads=a.threads)
+        r = haptics.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name, realtime=a.realtime, threads=a.threads,
+                          busy_wait=a.busy_wait)
     except palpate_errors() as e:
         raise Fail(f"palpate bench haptic: {type(e).__name__}: {e}", cause=e) from None
     if a.json:
@@ -218,7 +224,7 @@ def cmd_bench_haptic(a) -> int:
     else:
         print(f"palpate {__version__} bench haptic: {name}, {a.rate:g} Hz for {a.seconds:g} s, scripted palpation "
               f"({r['cpu_count']} CPUs, load {r['load_avg']}, {r['date']}; servo scheduling: {r['realtime']}; "
-              f"{r['threads']} thread{'s' if r['threads'] > 1 else ''})")
+              f"{r['threads']} thread{'s' if r['threads'] > 1 else ''}{'; busy-wait' if r['busy_wait'] else ''})")
         def row(label, x):
             print(f"  {label:<7} ticks {x['ticks']:>7}  {x['achieved_hz']:8.1f} Hz  period p50 {x['period_us_p50']:7.1f} "
                   f"p99 {x['period_us_p99']:8.1f} max {x['period_us_max']:8.1f} us  compute p99 {x['compute_us_p99']:8.1f} us  "

@@ -48,6 +48,9 @@ def add_parser(sub) -> None:
                    help="threads a tick's particle passes run on, 1 to 8 (default 1): the servo's and N-1 helpers "
                         "that spin while the loop runs; the same forces bit for bit, sooner only where the helpers "
                         "have idle cores (on a 2-core machine they did not help: BENCHMARKS.md)")
+    h.add_argument("--busy-wait", action="store_true",
+                   help="the servo spins through each period instead of sleeping: a core kept busy, a shorter "
+                        "compute tail (BENCHMARKS.md); not with --realtime")
     h.add_argument("--quiet", action="store_true", help="no status line")
     h.set_defaults(func=cmd_haptic)
 
@@ -80,6 +83,8 @@ def make_loop(a, model, record_ticks: int):
     kind, _, arg = a.device.partition(":")
     common = dict(rate_hz=a.rate, record_ticks=record_ticks, max_force=a.max_force, tool_radius=a.tool_radius,
                   realtime=a.realtime, threads=a.threads)
+    if a.busy_wait:
+        common["spin"] = haptics.BUSY_SPIN
     if a.kind is not None:
         common["kind"] = a.kind
     if a.seconds is not None and kind != "replay":
@@ -130,6 +135,9 @@ def cmd_haptic(a) -> int:
     _positive("haptic", "--tool-radius", a.tool_radius)
     if not 1 <= a.threads <= 8:
         raise Usage(f"palpate haptic: --threads must be 1 to 8, got {a.threads}")
+    if a.busy_wait and a.realtime:
+        raise Usage("palpate haptic: --busy-wait and --realtime together: a real-time thread that never sleeps "
+                    "meets the kernel's real-time throttling (50 ms without the CPU every second)")
     name, model = load_hybrid_model(a.model, "haptic")
     loop = make_loop(a, model, record_ticks(a))
     where = f" on {loop.bridge_address}" if loop.bridge_address else ""
