@@ -6,10 +6,11 @@
 //! Why: the particles are stored grouped by the outer triangle above them, in the triangles'
 //! order, and a surface read from a file may list its triangles in any order. The Rodero et al.
 //! ventricle's did: a 400-particle ball of its shell spanned 24,600 of its 28,039 particle
-//! indices (108 pages of a per-particle array of 96 bytes; 21 after this stage), and the hybrid
-//! tick spent a quarter of its time waiting on memory (BENCHMARKS.md: -25% at ~400 active
-//! particles, -14% at ~200). The builder's own stages keep the input's order, so their ties
-//! (a voxel equally near two triangles) resolve as before.
+//! indices (108 pages of a per-particle array of 96 bytes; 21 after this stage), and its hybrid
+//! tick takes 27% less time at ~400 active particles in this order, 18% less at ~200
+//! (BENCHMARKS.md). The builder's own stages keep the input's order, so their ties (a voxel as
+//! near to two triangles) resolve as before: sorting the triangles first gave a slightly
+//! different model (see `runtime/stability.rs` for what that showed).
 
 use super::model::HybridModel;
 use super::region_field::VOXEL_CORE;
@@ -28,7 +29,7 @@ pub(super) fn apply(m: &mut HybridModel) {
 /// Lists `m`'s outer vertices in the order `by_vertex` and its outer triangles in the order
 /// `by_tri` (`by_x[new] = old`), every index into them renamed, and its particles grouped by
 /// their triangle's new index (in their old order within a group).
-pub(crate) fn relabel(m: &mut HybridModel, by_vertex: &[usize], by_tri: &[usize]) {
+fn relabel(m: &mut HybridModel, by_vertex: &[usize], by_tri: &[usize]) {
     let new_vertex = inverse(by_vertex);
     m.outer_points = gather(&m.outer_points, by_vertex);
     m.region_rings = gather(&m.region_rings, by_vertex);
