@@ -40,17 +40,24 @@ fn material() -> Material {
     Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, Damping::from_paper(0.05, 0.05)).unwrap()
 }
 
+/// The ellipsoids' sim, the press point, its inward normal, a tangent there and the tool radius
+/// \[m\].
+fn press_case() -> (Sim, Vec3, Vec3, Vec3, f64) {
+    let (_, model) = walls::ellipsoids();
+    let sim = Sim::new(model.clone(), material(), SimOptions::default()).unwrap();
+    let (p0, n) = press::press_point(&sim.hybrid.outer_points);
+    let t = n.cross(&Vec3::z()).normalize();
+    let r = sim.options.tool.radius;
+    (sim, p0, n, t, r)
+}
+
 fn same_state(a: &SimState, b: &SimState) -> bool {
     a.core.x == b.core.x && a.core.v == b.core.v && a.particles.x == b.particles.x && a.particles.v == b.particles.v && a.skin == b.skin && a.tool == b.tool
 }
 
 #[test]
 fn a_press_and_slide_split_over_threads_is_bitwise_the_serial_one() {
-    let (_, model) = walls::ellipsoids();
-    let sim = Sim::new(model.clone(), material(), SimOptions::default()).unwrap();
-    let (p0, n) = press::press_point(&sim.hybrid.outer_points);
-    let t = n.cross(&Vec3::z()).normalize();
-    let r = sim.options.tool.radius;
+    let (sim, p0, n, t, r) = press_case();
     let mut serial = (SimState::rest(&sim), SimWorkspace::new(&sim));
     let mut split: Vec<(Threads, SimState, SimWorkspace)> = [2, 3].into_iter().map(|w| (Threads(w), SimState::rest(&sim), SimWorkspace::new(&sim))).collect();
     let (mut busiest, mut moved) = (0, 0);
@@ -77,11 +84,7 @@ fn a_press_and_slide_split_over_threads_is_bitwise_the_serial_one() {
 /// tool follows at its step cap): finite, and bitwise the serial run.
 #[test]
 fn a_deep_press_and_fast_slide_on_two_threads_stay_finite_and_serial() {
-    let (_, model) = walls::ellipsoids();
-    let sim = Sim::new(model.clone(), material(), SimOptions::default()).unwrap();
-    let (p0, n) = press::press_point(&sim.hybrid.outer_points);
-    let t = n.cross(&Vec3::z()).normalize();
-    let r = sim.options.tool.radius;
+    let (sim, p0, n, t, r) = press_case();
     let (mut a, mut wa) = (SimState::rest(&sim), SimWorkspace::new(&sim));
     let (mut b, mut wb) = (SimState::rest(&sim), SimWorkspace::new(&sim));
     let mut fmax = 0.0f64;
