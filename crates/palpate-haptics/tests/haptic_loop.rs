@@ -135,6 +135,14 @@ fn replay_through_the_real_time_servo_is_bit_identical() {
 
 #[test]
 fn watchdog_zeroes_force_within_30ms_of_a_stall() {
+    // A sleeping servo (the default) and a busy-waiting one (it never sleeps, and the watchdog
+    // must still get a core to run on).
+    for spin in [ServoConfig::default().spin, 1.0] {
+        stall_case(spin);
+    }
+}
+
+fn stall_case(spin: f64) {
     let mut faulty = Faulty::new(wall(), 300);
     faulty.stall = Some(Duration::from_millis(300));
     let (stalled_at, restores) = (faulty.stalled_at.clone(), faulty.restores.clone());
@@ -143,7 +151,7 @@ fn watchdog_zeroes_force_within_30ms_of_a_stall() {
     // Held 12 mm into the wall: the coupling (300 N/m) in series with the wall (2000 N/m), 3.1 N,
     // capped at 3 N.
     let dev = Pressing { z: |_t: f64| -0.012, sink: log.clone(), ticks: 600 };
-    let cfg = ServoConfig { safety: Some(fast_ramp()), ..Default::default() };
+    let cfg = ServoConfig { safety: Some(fast_ramp()), spin, ..Default::default() };
     let core = HapticCore::with_config(Box::new(faulty), &cfg, &dev).unwrap();
     let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();
     let t_stall = stalled_at.lock().unwrap().expect("the stall happened");
