@@ -138,9 +138,15 @@ fn fill(lattice: &Lattice, density: f64, mut keep: impl FnMut(f64, f64, &mut Vec
 }
 
 /// Lattice indices `k` whose height lies in `[lo, hi]`.
+///
+/// The bounds are clamped to the lattice in floating point before the cast: a column crossing of
+/// a near-degenerate triangle can lie far outside the bounding box (or be NaN), and a saturated
+/// `usize` plus one overflows (found by the `tri_surface` fuzz target).
 fn k_range(l: &Lattice, lo: f64, hi: f64) -> std::ops::Range<usize> {
-    let k0 = ((lo - l.origin.z) / l.s).floor().max(0.0) as usize;
-    let k1 = (((hi - l.origin.z) / l.s).ceil() as usize + 1).min(l.n[2]);
+    let n = l.n[2] as f64;
+    // `as usize` maps NaN to 0: an empty range.
+    let k0 = ((lo - l.origin.z) / l.s).floor().clamp(0.0, n) as usize;
+    let k1 = (((hi - l.origin.z) / l.s).ceil() + 1.0).clamp(0.0, n) as usize;
     k0.min(k1)..k1
 }
 
@@ -201,6 +207,18 @@ mod tests {
     use super::*;
     use std::f64::consts::PI;
     use std::time::Instant;
+
+    #[test]
+    fn k_range_clamps_crossings_far_outside_the_lattice() {
+        let l = Lattice { origin: Vec3::zeros(), n: [4, 4, 10], s: 0.1 };
+        assert_eq!(k_range(&l, 0.25, 0.55), 2..7);
+        // A crossing of a near-degenerate triangle can be huge, negative-huge or NaN.
+        assert_eq!(k_range(&l, -1e300, 1e300), 0..10);
+        assert_eq!(k_range(&l, 1e300, 1e300), 10..10);
+        assert_eq!(k_range(&l, -1e300, -1e300), 0..0);
+        assert!(k_range(&l, f64::NAN, f64::NAN).is_empty());
+        assert_eq!(k_range(&l, f64::NEG_INFINITY, f64::INFINITY), 0..10);
+    }
 
     #[test]
     fn sample_sphere_volume_converges() {
