@@ -1,8 +1,10 @@
 """The hybrid tick under the worst a hand gives (issue 12): a fast slide, a device that stalls
 then jumps, a jab, presses to 10 and 15 mm, on a shipped model (default the synthetic ventricle;
 undamped material, 5 mm tool, at palpate.touch.probe_point along the inward normal). Prints, per
-scenario, whether every tick stayed finite, the largest force and the p99 tick time, or the tick
-where it stopped and why.
+scenario, whether every tick stayed finite, the largest force, the p99 tick time and how many ticks
+shed the shell (its step failed: HybridSim's ``shell_fallback``, the tick going on with the core
+and the skin), or the tick where it stopped and why. ``FALLBACK=0`` turns the fallback off (a
+failed shell step then stops the scenario, as before 2026-11-26).
 
     .venv/bin/python bench/hybrid_hand.py [ventricle|ellipsoids|rodero]
     PHI=0.5 .venv/bin/python bench/hybrid_hand.py   # with the paper's viscosity (phi = psi [Pa s])
@@ -28,8 +30,8 @@ def main():
     mat = palpate.Material(young=3e4, poisson=0.4, density=1000.0, phi=damp, psi=damp)
 
     def run(name, path):
-        sim = palpate.HybridSim(m, mat)
-        fmax, times = 0.0, []
+        sim = palpate.HybridSim(m, mat, shell_fallback=os.environ.get("FALLBACK", "1") != "0")
+        fmax, times, shed, off = 0.0, [], [], 0
         for k, (depth, slide) in enumerate(path):
             t0 = time.perf_counter()
             try:
@@ -39,7 +41,11 @@ def main():
                 return
             times.append(time.perf_counter() - t0)
             fmax = max(fmax, float(np.linalg.norm(f)))
-        print(f"{name}: {len(path)} ticks finite, max force {fmax:.3f} N, tick p99 {np.percentile(times, 99) * 1e3:.2f} ms")
+            if sim.last["shell_failed"]:
+                shed.append(k)
+            off += sim.last["shell_off"]
+        print(f"{name}: {len(path)} ticks finite, max force {fmax:.3f} N, tick p99 {np.percentile(times, 99) * 1e3:.2f} ms, "
+              f"shell shed at ticks {shed or 'none'} ({off} ticks off)")
 
     ramp = [(3e-3 * min(1, (k + 1) / 200), 0.0) for k in range(300)]
     run("fast slide 0.5 m/s at 3 mm", ramp + [(3e-3, 5e-4 * (k + 1)) for k in range(40)] + [(3e-3, 0.02)] * 100)

@@ -21,7 +21,7 @@ use crate::material::PyMaterial;
 ///
 /// ``HybridSim(model, material, *, tool_radius=0.005, tool_stiffness=None, hold=True,
 /// activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None,
-/// mass_scaling=None)``
+/// mass_scaling=None, shell_fallback=True, shell_pause=None)``
 ///
 /// Parameters
 /// ----------
@@ -50,6 +50,14 @@ use crate::material::PyMaterial;
 ///     down to it, kept only if that lowers the shell's top frequency by 10%. Fewer sub-steps a
 ///     tick on irregular lattices (Rodero: 16 -> 9 at rest for 0.9% added mass); statics
 ///     unchanged. ``options`` reports what was added.
+/// shell_fallback : bool
+///     What a failed shell step does (the particles' step diverging: a press the shell's
+///     explicit sub-steps cannot follow, e.g. beside a held base, see ``last``). True (default):
+///     the tick goes on without the shell (every particle back at its tie, the tool meeting the
+///     skin and the core, so the hand still feels the organ) and the shell stays off for
+///     ``shell_pause`` ticks. False: ``step`` raises ``StepError`` with the state as it was.
+/// shell_pause : int, optional
+///     Ticks the shell stays off after a failure (default 100: 0.1 s at 1 kHz).
 ///
 /// ``get_state()`` / ``set_state(s)`` save and restore everything a tick carries to the next (the
 /// ticks after a restore repeat the original's bit for bit); a ``HybridSim`` pickles (its model,
@@ -67,7 +75,7 @@ pub struct PyHybridSim {
 #[pymethods]
 impl PyHybridSim {
     #[new]
-    #[pyo3(signature = (model, material, *, tool_radius = None, tool_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None))]
+    #[pyo3(signature = (model, material, *, tool_radius = None, tool_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -81,8 +89,11 @@ impl PyHybridSim {
         linger_ticks: Option<errors::Int>,
         max_substeps: Option<errors::Int>,
         #[pyo3(from_py_with = conv::arg)] mass_scaling: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] shell_fallback: bool,
+        shell_pause: Option<errors::Int>,
     ) -> PyResult<Self> {
         let (linger_ticks, max_substeps) = (errors::count_opt(linger_ticks, "linger_ticks")?, errors::count_opt(max_substeps, "max_substeps")?);
+        let shell_pause = errors::count_opt(shell_pause, "shell_pause")?;
         let mut tool = Tool::default();
         if let Some(r) = tool_radius {
             if !(r > 0.0 && r.is_finite()) {
@@ -124,6 +135,11 @@ impl PyHybridSim {
             }
             options.mass_scaling = Some(q);
         }
+        options.shell_fallback = match (shell_fallback, shell_pause) {
+            (false, _) => None,
+            (true, Some(n)) => Some(n as u64),
+            (true, None) => options.shell_fallback,
+        };
         let (hm, mat) = (model.model.clone(), material.inner);
         let sim = errors::guard("HybridSim", || py.detach(|| Sim::new(hm, mat, options)).map_err(errors::model_error))?;
         let state = SimState::rest(&sim);
@@ -152,7 +168,8 @@ impl PyHybridSim {
 
     /// The last tick's statistics: ``force`` (3,) [N], ``particle_contacts`` (skin vertices in
     /// contact over active particles), ``skin_contacts`` (over the core alone), ``core_contacts``, ``max_depth_m``, ``active``, ``entered``, ``left``, ``substeps``,
-    /// ``confined``, ``core_iterations``.
+    /// ``confined``, ``core_iterations``, ``shell_failed`` (the shell's step failed and was shed:
+    /// see ``shell_fallback``) and ``shell_off`` (the shell was off, within its pause).
     #[getter]
     fn last<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let r = &self.last;
@@ -168,6 +185,8 @@ impl PyHybridSim {
         d.set_item("substeps", r.substeps)?;
         d.set_item("confined", r.confined)?;
         d.set_item("core_iterations", r.core.iterations)?;
+        d.set_item("shell_failed", r.shell_failed)?;
+        d.set_item("shell_off", r.shell_off)?;
         Ok(d)
     }
 
@@ -260,6 +279,8 @@ impl PyHybridSim {
         d.set_item("linger_ticks", o.linger_ticks)?;
         d.set_item("max_substeps", o.max_substeps)?;
         d.set_item("hold", o.hold)?;
+        d.set_item("shell_fallback", o.shell_fallback.is_some())?;
+        d.set_item("shell_pause", o.shell_fallback)?;
         d.set_item("coupling_stiffness", self.sim.coupling.stiffness)?;
         d.set_item("coupling_damping", self.sim.coupling.damping)?;
         d.set_item("confinement_stiffness", self.sim.confinement.stiffness)?;

@@ -492,7 +492,7 @@ def _body_cases(c: Corpus):
           "for k in range(300):\n" + diverging, ["error"], ["StepError"], contains="diverging")
     c.api("hybrid_sim_under_stepped_diverging", "silent",
           "m = palpate.build_shape('ellipsoids', particles=400, field_voxels=20000)\n"
-          "s = palpate.HybridSim(m, palpate.Material.myocardium(), max_substeps=1)\n"
+          "s = palpate.HybridSim(m, palpate.Material.myocardium(), max_substeps=1, shell_fallback=False)\n"
           "o = s.surface; p = o[np.argmax(o[:, 0])]; r = s.tool_radius\n"
           "for k in range(500):\n"
           "    x0 = s.core_positions.copy()\n"

@@ -153,3 +153,40 @@ def test_the_rodero_ventricle_survives_a_15_mm_press_and_a_press_toward_2_n(lv_p
     f2 = _deep_press(sim, m, 20e-3, 400, force_cap=2.0)
     assert 0.05 < f15 < 5.0 and 0.05 < f2 <= 5.0, (f15, f2)
     assert np.isfinite(sim.surface).all() and np.isfinite(sim.particle_positions()).all()
+
+
+def test_a_failed_shell_is_shed_and_the_press_goes_on(ventricle, material):
+    """``shell_fallback`` (default True): a shell under-stepped by its cap (3 sub-steps a tick
+    where it needs ~12) diverges under a 3 mm press; the tick goes on with the core and the skin
+    (``last["shell_failed"]``), the shell stays off ``shell_pause`` ticks (``shell_off``), the
+    force stays finite and pushes back. With ``shell_fallback=False`` the same press raises
+    ``StepError`` with the core as it was."""
+    p, n = None, None
+    for fallback in (True, False):
+        sim = palpate.HybridSim(ventricle, material, max_substeps=3, shell_fallback=fallback, shell_pause=20)
+        assert sim.options["shell_fallback"] is fallback and sim.options["shell_pause"] == (20 if fallback else None)
+        p, n = _press_point(sim)
+        failed, off, raised = [], 0, False
+        for k in range(150):
+            depth = 3e-3 * min(1.0, (k + 1) / 50)
+            x0 = sim.core_positions.copy()
+            try:
+                f = sim.step(p + n * (0.005 - depth))
+            except palpate.StepError as e:
+                assert not fallback and "diverging" in str(e)
+                assert (sim.core_positions == x0).all()
+                raised = True
+                break
+            assert np.all(np.isfinite(f)) and np.all(np.isfinite(sim.surface))
+            if sim.last["shell_failed"]:
+                failed.append(k)
+                assert sim.last["active"] == 0 and sim.active.size == 0
+            off += sim.last["shell_off"]
+            if off and sim.last["shell_off"]:
+                assert f @ n > 0.0, "the skin and the core push back while the shell is off"
+        if fallback:
+            assert failed and not raised and off >= 20, (failed, off)
+            # The shell comes back after each pause (and, under-stepped, fails again).
+            assert all(b - a >= 21 for a, b in zip(failed, failed[1:])), failed
+        else:
+            assert raised

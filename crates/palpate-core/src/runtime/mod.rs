@@ -24,7 +24,9 @@
 //! (tests/runtime_hand.rs, `bench/hybrid_hand.py`) rests on four things: the shell's sub-step
 //! count from its current stretch, springs and contact ([`stability`]); ties whose offsets turn
 //! with their faces ([`embed`]); held (lone) particles carried by their ties every tick; and a
-//! compression barrier in the particle law (`crate::meshfree::COMPRESSION_FLOOR`). Measured: 15 mm presses, a press toward
+//! compression barrier in the particle law (`crate::meshfree::COMPRESSION_FLOOR`); where they do not
+//! suffice (a press beside a held base, see [`stability`]) the tick sheds the failed shell and goes
+//! on with the core and the skin ([`SimOptions::shell_fallback`]). Measured: 15 mm presses, a press toward
 //! 2 N over 20 mm of travel, a 0.5 m/s slide, a 5 mm jump after a stall and a 10 mm jab stay
 //! finite on the synthetic ventricle and the paper's ellipsoids, damped or not; a slow slide over
 //! 50 region changes moves the force by at most 20% of the 0.01 N allowance per tick. The shell's

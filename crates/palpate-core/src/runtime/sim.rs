@@ -64,6 +64,13 @@ pub struct SimOptions {
     /// (`MassScaling::applied`). Statics are unchanged; the
     /// core carries the shell's physical mass.
     pub mass_scaling: Option<f64>,
+    /// What a failed shell step does (diverging past the speed bound of [`crate::divergence`],
+    /// or non-finite). `Some(n)` (default `Some(100)`: 0.1 s at 1 kHz): the tick goes on without
+    /// the shell (every particle back at its tie, the tool meeting the skin and the core) and the
+    /// shell stays off for `n` ticks before regions may enter again ([`super::TickReport`]'s
+    /// `shell_failed`, `shell_off`); the hand keeps feeling the organ. `None`: the tick fails
+    /// with the error, the state as it was (studies of the shell's own stability).
+    pub shell_fallback: Option<u64>,
     /// Hold the core (default true: at its base, or, for a closed wall, at its lowest nodes);
     /// false leaves the organ free (momentum studies).
     pub hold: bool,
@@ -83,6 +90,7 @@ impl Default for SimOptions {
             max_tool_step: 5e-4,
             max_substeps: 64,
             mass_scaling: Some(0.95),
+            shell_fallback: Some(100),
             hold: true,
         }
     }

@@ -47,6 +47,22 @@
 //! ordinary 4 mm press on Rodero, against 10-11: the ring is always distorted. A boundary for the active zone that follows it, or entries deferred while
 //! the ring is inverted, are the candidates.
 //!
+//! **Measured (2026-11-26, sixth session): the same failure at most probe points, and why.**
+//! `examples/press_sweep.rs` presses toward 2 N (the test's script) at 24 points of the
+//! synthetic ventricle (4 heights x 6 angles), undamped: 18 of 24 shell steps diverged, from
+//! 17-20 mm of travel at mid-height and from 6-11 mm 6 mm below the held base (with the paper's
+//! damping they hold but take the 64 sub-step cap). Traced at the worst point: the SVK core's
+//! elements between the tool and the base flatten (volume ratio 0.85 -> 0.06 over ~5 ticks, a
+//! tick-to-tick alternation first), the faces under the shell turn with them, and the ties,
+//! rigid in their faces' frames, carry the ring and the entering particles to places whose
+//! deformation gradients are inverted or stretched 5-8x (`s^2` to 60), past what 64 sub-steps
+//! hold. Softer or 10x stiffer coupling springs, entering particles at their active neighbours'
+//! displacement, and a Neo-Hookean core (which flattens later, ~11 mm) each moved the failure,
+//! none removed it. What would: a core that resists flattening as the shell's law does (its
+//! compression barrier) together with ties that interpolate the core's deformation smoothly
+//! across faces. Until then the tick sheds a failed shell ([`super::SimOptions::shell_fallback`],
+//! tests/runtime_hand.rs `a_press_toward_2_n_beside_the_held_base_never_fails_a_tick`).
+//!
 //! **Adopted since: selective mass scaling** (`crate::meshfree` `mass_scaling.rs`, on by default
 //! through [`super::SimOptions::mass_scaling`]): the few poorly supported particles below get the
 //! mass that brings their Gershgorin rate to the 95th percentile's, which lowers `omega_max^2`

@@ -35,6 +35,9 @@ pub struct SimState {
     pub ticks: u64,
     /// Per particle: in the active set?
     pub(crate) is_active: Vec<bool>,
+    /// The shell is off (no region activates) until `ticks` reaches this, after a failed shell
+    /// step ([`super::SimOptions::shell_fallback`]); 0: on.
+    pub(crate) shell_off_until: u64,
     /// The skin vertices the tick looks at between whole updates (see [`LiveSkin`]).
     pub(crate) live: LiveSkin,
 }
@@ -50,11 +53,12 @@ impl Clone for SimState {
             ticks: self.ticks,
             is_active: self.is_active.clone(),
             live: self.live.clone(),
+            shell_off_until: self.shell_off_until,
         }
     }
     fn clone_from(&mut self, s: &Self) {
         // Exhaustive: a new field is a compile error here until it is copied.
-        let SimState { core, particles, skin, tool, activation, ticks, is_active, live } = self;
+        let SimState { core, particles, skin, tool, activation, ticks, is_active, live, shell_off_until } = self;
         core.clone_from(&s.core);
         particles.clone_from(&s.particles);
         skin.clone_from(&s.skin);
@@ -63,6 +67,7 @@ impl Clone for SimState {
         *ticks = s.ticks;
         is_active.clone_from(&s.is_active);
         live.clone_from(&s.live);
+        *shell_off_until = s.shell_off_until;
     }
 }
 
@@ -249,6 +254,7 @@ impl SimState {
             activation: Activation::new(&sim.hybrid, sim.options.linger_ticks),
             ticks: 0,
             is_active: vec![false; sim.n_particles()],
+            shell_off_until: 0,
             live: LiveSkin::new(sim.hybrid.outer_points.len(), sim.core.n_nodes(), sim.hybrid.core_faces.len()),
         }
     }

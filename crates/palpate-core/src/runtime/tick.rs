@@ -12,7 +12,13 @@
 //! 3. **Particle sub-steps** (Verlet, as many as the shell's stability needs): before each,
 //!    the tool's penalty contact ([`super::tool`]), the coupling springs to the core faces
 //!    ([`super::coupling`]) and the confinement wall ([`super::confinement`]) on the active
-//!    particles. The tool's centre moves linearly over the tick's sub-steps.
+//!    particles. The tool's centre moves linearly over the tick's sub-steps. If the shell's step
+//!    fails (diverging or non-finite: a press it cannot follow, see [`super::stability`]), the
+//!    tick sheds the shell, every particle back at its tie and no region active, and goes on
+//!    with the core and the skin; the shell stays off for a pause
+//!    ([`super::SimOptions::shell_fallback`]). The hand keeps feeling the organ; the force
+//!    changes at the switch (the skin returns to its ties: measured up to ~3 N in one tick at
+//!    20 mm of travel, which the servo's rate limit spreads over a few ms).
 //! 4. **Skin contact** where no particle is active: the tool presses the skin vertices, and
 //!    their ties carry the force to the core.
 //! 5. **The core step** (the default integrator, stable at any press) under the sub-step average
@@ -62,14 +68,23 @@ pub struct TickReport {
     pub substeps: usize,
     /// Particles the confinement wall pushed (most over the sub-steps).
     pub confined: usize,
+    /// The shell's step failed this tick (diverging or non-finite): the shell was shed and the
+    /// tick went on with the core and the skin ([`super::SimOptions::shell_fallback`]).
+    pub shell_failed: bool,
+    /// The shell was off this tick (within its fallback's pause after a failure): the tool met
+    /// the skin and the core only.
+    pub shell_off: bool,
     /// The core's step.
     pub core: StepReport,
 }
 
 /// Advance the hybrid model by one tick of `dt` \[s\] with the device's tool centre at `tool`
 /// \[m\] (world frame; the simulated tool moves toward it by at most
-/// [`super::SimOptions::max_tool_step`], and [`SimState::tool`] says where it is). Allocates nothing. A bad `dt` or tool position changes nothing; a failed,
-/// non-finite or diverging (past the speed bound of [`crate::divergence`]) particle or core step leaves the core and the particles' motion as they were at
+/// [`super::SimOptions::max_tool_step`], and [`SimState::tool`] says where it is). Allocates nothing. A bad `dt` or tool position changes nothing. A failed,
+/// non-finite or diverging (past the speed bound of [`crate::divergence`]) particle step sheds
+/// the shell and the tick goes on ([`TickReport::shell_failed`]; with
+/// [`super::SimOptions::shell_fallback`] `None` it fails instead). A failed core step (or a
+/// failed particle step without the fallback) leaves the core and the particles' motion as they were at
 /// the start of the tick, but the activation keeps this tick's update (the regions the tool
 /// touched stay active, their particles at their ties).
 pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, dt: f64) -> Result<TickReport, StepError> {
@@ -86,7 +101,7 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
     if !is_finite3(&tool) {
         return Err(StepError::NonFiniteTool);
     }
-    let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active, live } = state;
+    let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active, live, shell_off_until } = state;
     // The shell's clock is the core's (it advances only while particles are active).
     particles.t = core.t;
     // The core's face frames and their rates, once: every tie on a face shares them.
@@ -97,10 +112,14 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
     // The simulated tool follows the device at most `max_tool_step` a tick (SimOptions).
     let tool = prev + (tool - prev).cap_magnitude(o.max_tool_step);
     let tool_v = (tool - prev) / dt;
-    let mut report = TickReport::default();
+    // (Activation is skipped while the shell is off after a failed shell step: see
+    // SimOptions::shell_fallback.)
+    let mut report = TickReport { shell_off: *ticks < *shell_off_until, ..TickReport::default() };
 
     // 1. Activation.
-    activation.touch_sphere_among(&tool, o.tool.radius, o.activation_margin, skin, live.iter());
+    if !report.shell_off {
+        activation.touch_sphere_among(&tool, o.tool.radius, o.activation_margin, skin, live.iter());
+    }
     let sets = activation.update(*ticks);
     for &p in sets.entered {
         is_active[p] = true;
@@ -249,27 +268,42 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
             for &v in &ws.near {
                 ws.skin_to_core[v] = Vec3::zeros();
             }
-            return Err(e);
-        }
-        report.substeps = k;
-        let inv_k = 1.0 / k as f64;
-        for &p in &particles.active {
-            let f = std::mem::replace(&mut ws.to_core[p], Vec3::zeros());
-            if f != Vec3::zeros() {
-                tie.spread(p, f * inv_k, &core.x, &mut ws.f_core);
+            let Some(off_ticks) = o.shell_fallback else { return Err(e) };
+            // The fallback: the shell is shed (every particle back at its tie, no region active)
+            // and stays off `off_ticks` ticks; this tick goes on with the core and the skin, so
+            // the hand still feels the organ (the skin contact below) rather than nothing.
+            for &p in &particles.active {
+                is_active[p] = false;
+                particles.x[p] = tie.position_framed(p, &core.x, &ws.frames);
+                particles.v[p] = tie.velocity_framed(p, &core.v, &ws.rates);
             }
-        }
-        for &v in &ws.near {
-            let f = std::mem::replace(&mut ws.skin_to_core[v], Vec3::zeros());
-            if f != Vec3::zeros() {
-                sim.skin.spread(v, f * inv_k, &core.x, &mut ws.f_core);
+            report.left += particles.active.len();
+            particles.active.clear();
+            activation.clear();
+            ws.near.clear();
+            *shell_off_until = *ticks + 1 + off_ticks;
+            (report.shell_failed, report.active, report.particle_contacts, report.confined, tool_force) = (true, 0, 0, 0, Vec3::zeros());
+        } else {
+            report.substeps = k;
+            let inv_k = 1.0 / k as f64;
+            for &p in &particles.active {
+                let f = std::mem::replace(&mut ws.to_core[p], Vec3::zeros());
+                if f != Vec3::zeros() {
+                    tie.spread(p, f * inv_k, &core.x, &mut ws.f_core);
+                }
             }
-        }
-        tool_force *= inv_k;
-        // The ring: frozen neighbours (at their ties) and held active particles (lone lattice
-        // particles, see Sim::new): both carried by the core.
-        for (&j, &f) in ws.particles.ring().iter().zip(ws.particles.ring_forces()) {
-            tie.spread(j, f, &core.x, &mut ws.f_core);
+            for &v in &ws.near {
+                let f = std::mem::replace(&mut ws.skin_to_core[v], Vec3::zeros());
+                if f != Vec3::zeros() {
+                    sim.skin.spread(v, f * inv_k, &core.x, &mut ws.f_core);
+                }
+            }
+            tool_force *= inv_k;
+            // The ring: frozen neighbours (at their ties) and held active particles (lone lattice
+            // particles, see Sim::new): both carried by the core.
+            for (&j, &f) in ws.particles.ring().iter().zip(ws.particles.ring_forces()) {
+                tie.spread(j, f, &core.x, &mut ws.f_core);
+            }
         }
     }
 

@@ -1,0 +1,109 @@
+//! Study: the runtime_hand test's press toward 2 N (50 mm/s until the force reaches 2 N, travel
+//! capped at 20 mm, 500 ticks) at 24 probe points of a model (4 heights x 6 angles around its
+//! vertical axis, inward horizontal presses), printing per point the largest force, the most
+//! sub-steps a tick took, how often the shell's step failed (and was shed: `shell_fallback`), the
+//! ticks the shell was off and the largest tick-to-tick force change.
+//!
+//! `cargo run --release --example press_sweep -- [ventricle|ellipsoids|MODEL_FILE] [damped] [nofallback]`
+//!
+//! Measured 2026-11-26 on the synthetic ventricle, undamped: 18 of the 24 shells failed (from
+//! 17-20 mm of travel at mid-height, from 6-11 mm beside the held base); see
+//! `runtime::stability` for the trace and why.
+#[path = "support/mod.rs"]
+mod support;
+
+use palpate_core::hybrid::HybridModel;
+use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace};
+use palpate_core::Vec3;
+use support::tissue;
+
+struct Outcome {
+    fmax: f64,
+    most_substeps: usize,
+    shed: Vec<(usize, f64)>,
+    off: usize,
+    jump: f64,
+    error: Option<String>,
+}
+
+/// The outer vertex nearest the ray from the outer surface's centroid along `theta` at height `z`.
+fn probe(sim: &Sim, z: f64, theta: f64) -> (Vec3, Vec3) {
+    let dir = Vec3::new(theta.cos(), theta.sin(), 0.0);
+    let outer = &sim.hybrid.outer_points;
+    let c = outer.iter().fold(Vec3::zeros(), |a, b| a + b) / outer.len() as f64;
+    let off_ray = |q: &Vec3| {
+        let d = q - c;
+        let r = d - dir * d.dot(&dir);
+        r.x.powi(2) + r.y.powi(2) + (q.z - z).powi(2)
+    };
+    let p = *outer.iter().filter(|q| (*q - c).dot(&dir) > 0.0).min_by(|a, b| off_ray(a).total_cmp(&off_ray(b))).unwrap();
+    (p, -dir)
+}
+
+fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
+    let (p, n) = probe(sim, z, theta);
+    let r = sim.options.tool.radius;
+    let mut st = SimState::rest(sim);
+    let mut ws = SimWorkspace::new(sim);
+    let mut o = Outcome { fmax: 0.0, most_substeps: 0, shed: vec![], off: 0, jump: 0.0, error: None };
+    let (mut depth, mut last) = (0.0f64, None::<Vec3>);
+    for k in 0..500 {
+        match tick(sim, &mut st, &mut ws, p - n * (r - depth), 1e-3) {
+            Ok(rep) => {
+                if rep.shell_failed {
+                    o.shed.push((k, depth));
+                }
+                o.off += rep.shell_off as usize;
+                if let Some(f0) = last {
+                    o.jump = o.jump.max((rep.force - f0).norm());
+                }
+                last = Some(rep.force);
+                o.fmax = o.fmax.max(rep.force.norm());
+                o.most_substeps = o.most_substeps.max(rep.substeps);
+                if rep.force.norm() < 2.0 {
+                    depth = (depth + 5e-5).min(20e-3);
+                }
+            }
+            Err(e) => {
+                o.error = Some(format!("tick {k} at {:.1} mm: {e}", depth * 1e3));
+                return o;
+            }
+        }
+    }
+    o
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let which = args.get(1).map_or("ventricle", |s| s.as_str());
+    let (damped, fallback) = (args.iter().any(|a| a == "damped"), !args.iter().any(|a| a == "nofallback"));
+    let model: HybridModel = match which {
+        "ventricle" | "ellipsoids" => support::wall_model(which),
+        f => HybridModel::load(std::path::Path::new(f)).unwrap(),
+    };
+    let options = SimOptions { shell_fallback: if fallback { SimOptions::default().shell_fallback } else { None }, ..SimOptions::default() };
+    let sim = Sim::new(model, tissue(damped), options).unwrap();
+    let (lo, hi) = sim.hybrid.outer_points.iter().fold((Vec3::repeat(f64::MAX), Vec3::repeat(f64::MIN)), |(l, h), p| (l.inf(p), h.sup(p)));
+    let mut failed = 0;
+    for zi in 1..=4 {
+        let z = lo.z + (hi.z - lo.z) * zi as f64 / 5.0;
+        for ti in 0..6 {
+            let theta = ti as f64 * std::f64::consts::PI / 3.0 + 0.3;
+            let o = press(&sim, z, theta);
+            failed += (!o.shed.is_empty() || o.error.is_some()) as usize;
+            let shed: Vec<String> = o.shed.iter().map(|(k, d)| format!("{k} ({:.1} mm)", d * 1e3)).collect();
+            println!(
+                "z {:5.1} mm, theta {:.2}: max force {:.3} N, most sub-steps {:2}, shell shed at ticks [{}], {} ticks off, largest force change {:.3} N{}",
+                z * 1e3,
+                theta,
+                o.fmax,
+                o.most_substeps,
+                shed.join(", "),
+                o.off,
+                o.jump,
+                o.error.map(|e| format!(", STOPPED {e}")).unwrap_or_default()
+            );
+        }
+    }
+    println!("{which} ({}): the shell failed at {failed} of 24 points", if damped { "damped" } else { "undamped" });
+}
