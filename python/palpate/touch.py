@@ -521,6 +521,7 @@ def run_touch(sim, script: Union[Script, "Trajectory"], out_dir: PathLike, *, dt
     rows: List[List[float]] = []
     tick_s = np.zeros(n)
     failed: Optional[Tuple[int, str]] = None
+    shed = off = 0
     with open(csv_path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(COLUMNS)
@@ -534,6 +535,9 @@ def run_touch(sim, script: Union[Script, "Trajectory"], out_dir: PathLike, *, dt
                 break
             tick_s[k] = time.perf_counter() - t0
             last = sim.last
+            # A failed shell step is shed and the tick goes on (HybridSim's shell_fallback).
+            shed += bool(last.get("shell_failed", False))
+            off += bool(last.get("shell_off", False))
             row = [times[k], c[0], c[1], c[2], depths[k], f[0], f[1], f[2], float(np.linalg.norm(f)),
                    float(f @ traj.normal), last["active"], last["particle_contacts"] + last["skin_contacts"],
                    last["core_contacts"], last["substeps"], 1e3 * tick_s[k]]
@@ -564,6 +568,7 @@ def run_touch(sim, script: Union[Script, "Trajectory"], out_dir: PathLike, *, dt
         "point": traj.point.tolist(), "normal": traj.normal.tolist(), "vertex": traj.vertex,
         "csv": csv_path, "png": png_path if plot else None, "pvd": series.pvd,
         "error": None, "t_failed_s": None,
+        "shell_shed": shed, "shell_off_ticks": off,
     }
     if failed is not None:
         tick, reason = failed

@@ -55,9 +55,10 @@ use crate::material::PyMaterial;
 ///     explicit sub-steps cannot follow, e.g. beside a held base, see ``last``). True (default):
 ///     the tick goes on without the shell (every particle back at its tie, the tool meeting the
 ///     skin and the core, so the hand still feels the organ) and the shell stays off for
-///     ``shell_pause`` ticks. False: ``step`` raises ``StepError`` with the state as it was.
+///     ``shell_pause`` ticks and until the tool lets go of the organ. False: ``step`` raises
+///     ``StepError`` with the state as it was.
 /// shell_pause : int, optional
-///     Ticks the shell stays off after a failure (default 100: 0.1 s at 1 kHz).
+///     Ticks the shell stays off at least after a failure (default 100: 0.1 s at 1 kHz).
 ///
 /// ``get_state()`` / ``set_state(s)`` save and restore everything a tick carries to the next (the
 /// ticks after a restore repeat the original's bit for bit); a ``HybridSim`` pickles (its model,

@@ -5,6 +5,7 @@
 //! ticks the shell was off and the largest tick-to-tick force change.
 //!
 //! `cargo run --release --example press_sweep -- [ventricle|ellipsoids|MODEL_FILE] [damped] [nofallback]`
+//! (`POINT=zi,ti` runs one point: height `zi` in 1..=4, angle `ti` in 0..6)
 //!
 //! Measured 2026-11-26 on the synthetic ventricle, undamped: 18 of the 24 shells failed (from
 //! 17-20 mm of travel at mid-height, from 6-11 mm beside the held base); see
@@ -88,6 +89,12 @@ fn main() {
     for zi in 1..=4 {
         let z = lo.z + (hi.z - lo.z) * zi as f64 / 5.0;
         for ti in 0..6 {
+            // POINT=zi,ti: one point only (zi in 1..=4, ti in 0..6).
+            if let Ok(pt) = std::env::var("POINT") {
+                if pt != format!("{zi},{ti}") {
+                    continue;
+                }
+            }
             let theta = ti as f64 * std::f64::consts::PI / 3.0 + 0.3;
             let o = press(&sim, z, theta);
             failed += (!o.shed.is_empty() || o.error.is_some()) as usize;

@@ -127,6 +127,9 @@ def _report(s, max_tool_step: float) -> None:
               f"{s['tick_ms_median']:.3f} ms, p99 {s['tick_ms_p99']:.3f} ms, max {s['tick_ms_max']:.3f} ms")
         print(f"  max |f| {s['max_force_N']:.4f} N, max normal force {s['max_normal_force_N']:.4f} N, max depth "
               f"{fmt_mm(s['max_depth_m'])} mm, max active particles {s['max_active']}")
+    if s.get("shell_shed"):
+        print(f"  note: the shell's step failed {s['shell_shed']} time(s) and was shed (the core and the skin answered "
+              f"for {s['shell_off_ticks']} ticks while it was off): a press the particles could not follow")
     if s["max_step_m"] > max_tool_step * (1 + 1e-9):
         print(f"  note: the script moves the tool up to {fmt_mm(s['max_step_m'])} mm a tick; the simulated tool follows "
               f"at most {fmt_mm(max_tool_step)} mm a tick (force.csv logs the commanded position)")

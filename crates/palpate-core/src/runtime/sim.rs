@@ -67,8 +67,9 @@ pub struct SimOptions {
     /// What a failed shell step does (diverging past the speed bound of [`crate::divergence`],
     /// or non-finite). `Some(n)` (default `Some(100)`: 0.1 s at 1 kHz): the tick goes on without
     /// the shell (every particle back at its tie, the tool meeting the skin and the core) and the
-    /// shell stays off for `n` ticks before regions may enter again ([`super::TickReport`]'s
-    /// `shell_failed`, `shell_off`); the hand keeps feeling the organ. `None`: the tick fails
+    /// shell stays off for `n` ticks and until the tool has let go of the organ (no contact)
+    /// before regions may enter again ([`super::TickReport`]'s `shell_failed`, `shell_off`); the
+    /// hand keeps feeling the organ. `None`: the tick fails
     /// with the error, the state as it was (studies of the shell's own stability).
     pub shell_fallback: Option<u64>,
     /// Hold the core (default true: at its base, or, for a closed wall, at its lowest nodes);

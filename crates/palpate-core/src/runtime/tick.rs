@@ -333,6 +333,14 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
         }
     }
 
+    // A shell off after a failure waits for the tool to let go of the organ as well as for its
+    // pause: back under a held press it failed again at once (measured, examples/press_sweep.rs
+    // on the synthetic ventricle: 16 of 22 returns failed within 2 ticks), each return a failed
+    // tick and two force steps.
+    if report.shell_off && report.skin_contacts + report.core_contacts > 0 {
+        *shell_off_until = (*shell_off_until).max(*ticks + 2);
+    }
+
     // 5. The core.
     core.f_ext.copy_from_slice(&ws.f_core);
     report.core = match step(&sim.core, core, &mut ws.core, dt) {
