@@ -224,6 +224,7 @@ class HybridSimState(TypedDict):
     skin_sweep_next: Optional[int]
     skin_sweep_reference: Optional[_FloatArray]
     skin_sweep_slack: float
+    shell_off_until: int
 
 @final
 class Body:

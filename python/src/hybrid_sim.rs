@@ -320,7 +320,8 @@ impl PyHybridSim {
     /// particles), ``skin_reference`` [m] (core positions at the last whole update),
     /// ``skin_reference_tool`` [m], ``skin_slack`` [m], and the sweep of the whole skin in
     /// progress: ``skin_sweep_next`` (its next vertex, None without a sweep),
-    /// ``skin_sweep_reference`` [m] (n_core, 3) or None, ``skin_sweep_slack`` [m]. Positions world frame. Plain Python and numpy values: it pickles.
+    /// ``skin_sweep_reference`` [m] (n_core, 3) or None, ``skin_sweep_slack`` [m], and
+    /// ``shell_off_until`` (the tick the shell may return at after a failure, 0: on). Positions world frame. Plain Python and numpy values: it pickles.
     fn get_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let s = self.state.snapshot(&self.ws);
         let d = PyDict::new(py);
@@ -346,6 +347,7 @@ impl PyHybridSim {
         d.set_item("skin_sweep_next", s.sweep.as_ref().map(|w| w.next))?;
         d.set_item("skin_sweep_reference", s.sweep.as_ref().map(|w| conv::vec3s_to_py(py, &w.ref_x)))?;
         d.set_item("skin_sweep_slack", s.sweep.as_ref().map_or(0.0, |w| w.slack))?;
+        d.set_item("shell_off_until", s.shell_off_until)?;
         Ok(d)
     }
 
@@ -402,6 +404,14 @@ impl PyHybridSim {
                         ref_x: conv::vec3s(&reference, "skin_sweep_reference", n_core, true)?,
                         slack: conv::arg(&item("skin_sweep_slack")?)?,
                     })
+                }
+            },
+            // Absent from states saved before the shell fallback: the shell on.
+            shell_off_until: match opt("shell_off_until")? {
+                None => 0,
+                Some(t) => {
+                    let t: i64 = conv::arg(&t)?;
+                    u64::try_from(t).map_err(|_| errors::param_error_from(format!("shell_off_until = {t}: must not be negative")))?
                 }
             },
         };

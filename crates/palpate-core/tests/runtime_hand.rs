@@ -299,6 +299,12 @@ fn a_failed_shell_step_is_shed_and_the_tick_goes_on_with_the_core() {
             None => {}
             Some(f) if !lifted => {
                 assert!(rep.shell_off && rep.active == 0 && !rep.shell_failed, "tick {k}: the shell is back under the held press ({rep:?})");
+                if k == f + 10 {
+                    // The pause is part of the state: a restored state stays off as the original.
+                    let (mut st2, mut ws2) = SimState::restore(&sim, &st.snapshot(&ws)).unwrap();
+                    let rep2 = tick(&sim, &mut st2, &mut ws2, p - n * (r - depth), 1e-3).unwrap();
+                    assert!(rep2.shell_off && rep2.active == 0, "a restored state's shell came back during its pause: {rep2:?}");
+                }
                 assert!(rep.force.norm() > 0.01 && rep.skin_contacts > 0, "tick {k}: the tool should meet the skin, force {:.4} N", rep.force.norm());
                 let _ = f;
             }

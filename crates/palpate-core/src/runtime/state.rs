@@ -286,6 +286,7 @@ impl SimState {
             live_ref_tool: self.live.ref_tool,
             live_slack: self.live.slack,
             sweep: self.live.sweep_next.map(|next| SkinSweep { next, ref_x: self.live.sweep_ref_x.clone(), slack: self.live.sweep_slack }),
+            shell_off_until: self.shell_off_until,
         }
     }
 
@@ -347,6 +348,7 @@ impl SimState {
         state.skin.clone_from(&snap.skin);
         state.tool = snap.tool;
         state.ticks = snap.ticks;
+        state.shell_off_until = snap.shell_off_until;
         let live = &mut state.live;
         live.carried.clone_from(&snap.carried);
         live.ref_x.clone_from(&snap.live_ref_x);
@@ -407,6 +409,9 @@ pub struct SimSnapshot {
     /// The skin's slack \[m\] and the sweep in progress, if any (see `LiveSkin`).
     pub live_slack: f64,
     pub sweep: Option<SkinSweep>,
+    /// The tick the shell may return at after a failed shell step (0: on; see
+    /// [`super::SimOptions::shell_fallback`]).
+    pub shell_off_until: u64,
 }
 
 /// A sweep of the whole skin in progress ([`SimSnapshot::sweep`]): the next vertex it places,
