@@ -80,8 +80,12 @@ test: cargo-test pytest lint fuzz-ci
 cargo-test:
 	cargo test --release -q
 
+# The session's temporary files in the clone (.pytest-tmp, emptied at each start), not under the
+# machine's shared /tmp/pytest-of-<user>, whose numbered folders another session on the same
+# machine may clean away mid-run (a CI run of 2026-11-26 saw every tmp_path fixture fail from
+# its 231st test on, which a fresh clone here never reproduced).
 pytest: setup wheel browser
-	$(BIN)/python -m pytest -q python/tests
+	$(BIN)/python -m pytest -q --basetemp=$(CURDIR)/.pytest-tmp python/tests
 
 # The browser test's Chromium (python/tests/test_view.py): Debian's package, installed where the
 # set-up runs as root with apt-get (~90 s, once); elsewhere the browser tests skip, saying why.
@@ -119,7 +123,7 @@ stubtest: setup $(VENV)/.lint-deps
 
 clean:
 	rm -f $(VENV)/.built python/palpate/*.so
-	rm -rf out $(DIST)
+	rm -rf out $(DIST) .pytest-tmp
 
 distclean: clean
 	rm -rf $(VENV) target
