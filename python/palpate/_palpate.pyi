@@ -225,6 +225,9 @@ class HybridSimState(TypedDict):
     skin_sweep_reference: Optional[_FloatArray]
     skin_sweep_slack: float
     shell_off_until: int
+    skin_lift_vertices: _IntArray
+    skin_lift_offsets: _FloatArray
+    skin_lift_start: int
 
 @final
 class Body:

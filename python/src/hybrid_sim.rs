@@ -321,7 +321,9 @@ impl PyHybridSim {
     /// ``skin_reference_tool`` [m], ``skin_slack`` [m], and the sweep of the whole skin in
     /// progress: ``skin_sweep_next`` (its next vertex, None without a sweep),
     /// ``skin_sweep_reference`` [m] (n_core, 3) or None, ``skin_sweep_slack`` [m], and
-    /// ``shell_off_until`` (the tick the shell may return at after a failure, 0: on). Positions world frame. Plain Python and numpy values: it pickles.
+    /// ``shell_off_until`` (the tick the shell may return at after a failure, 0: on), and the
+    /// skin a shed shell left lifted off its ties, fading back: ``skin_lift_vertices`` (k,),
+    /// ``skin_lift_offsets`` [m] (k, 3), ``skin_lift_start`` (the shed tick). Positions world frame. Plain Python and numpy values: it pickles.
     fn get_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let s = self.state.snapshot(&self.ws);
         let d = PyDict::new(py);
@@ -348,6 +350,10 @@ impl PyHybridSim {
         d.set_item("skin_sweep_reference", s.sweep.as_ref().map(|w| conv::vec3s_to_py(py, &w.ref_x)))?;
         d.set_item("skin_sweep_slack", s.sweep.as_ref().map_or(0.0, |w| w.slack))?;
         d.set_item("shell_off_until", s.shell_off_until)?;
+        let (lv, lo): (Vec<u32>, Vec<_>) = s.skin_lift.iter().copied().unzip();
+        d.set_item("skin_lift_vertices", conv::u32s_to_py(py, &lv))?;
+        d.set_item("skin_lift_offsets", conv::vec3s_to_py(py, &lo))?;
+        d.set_item("skin_lift_start", s.skin_lift_start)?;
         Ok(d)
     }
 
@@ -414,7 +420,18 @@ impl PyHybridSim {
                     u64::try_from(t).map_err(|_| errors::param_error_from(format!("shell_off_until = {t}: must not be negative")))?
                 }
             },
+            skin_lift: Vec::new(),
+            skin_lift_start: 0,
         };
+        // The skin's lift after a shed shell (absent from older states: none).
+        let mut snap = snap;
+        if let Some(vertices) = state.get_item("skin_lift_vertices")?.filter(|v| !v.is_none()) {
+            let vertices = conv::indices(&vertices, "skin_lift_vertices", n_skin, skin_items, true)?;
+            let offsets = conv::vec3s(&item("skin_lift_offsets")?, "skin_lift_offsets", vertices.len(), true)?;
+            snap.skin_lift = vertices.iter().map(|&v| v as u32).zip(offsets).collect();
+            let t: i64 = conv::arg(&item("skin_lift_start")?)?;
+            snap.skin_lift_start = u64::try_from(t).map_err(|_| errors::param_error_from(format!("skin_lift_start = {t}: must not be negative")))?;
+        }
         let sim = &self.sim;
         let (state, ws) = py.detach(|| SimState::restore(sim, &snap)).map_err(|e| errors::step_error(e, "in set_state"))?;
         (self.state, self.ws, self.last) = (state, ws, TickReport::default());

@@ -167,6 +167,7 @@ def test_a_failed_shell_is_shed_and_the_press_goes_on(ventricle, material):
         assert sim.options["shell_fallback"] is fallback and sim.options["shell_pause"] == (20 if fallback else None)
         p, n = _press_point(sim)
         failed, off, raised = [], 0, False
+        copy, compared = None, False
         for k in range(150):
             depth = 3e-3 * min(1.0, (k + 1) / 50)
             x0 = sim.core_positions.copy()
@@ -184,8 +185,22 @@ def test_a_failed_shell_is_shed_and_the_press_goes_on(ventricle, material):
             off += sim.last["shell_off"]
             if off and sim.last["shell_off"]:
                 assert f @ n > 0.0, "the skin and the core push back while the shell is off"
+            if fallback and failed and k == failed[0] + 5:
+                # Mid-fade: the skin the shell left is lifted off its ties, and a restored copy
+                # (through a pickle-able dict) ticks as the original, bit for bit.
+                state = sim.get_state()
+                assert state["skin_lift_vertices"].size > 0 and state["skin_lift_offsets"].shape == (state["skin_lift_vertices"].size, 3)
+                assert state["skin_lift_start"] == failed[0]
+                copy = palpate.HybridSim(ventricle, material, max_substeps=3, shell_fallback=True, shell_pause=20)
+                stale = dict(state, skin_lift_vertices=np.array([10**9]), skin_lift_offsets=np.zeros((1, 3)))
+                with pytest.raises(ValueError):
+                    copy.set_state(stale)
+                copy.set_state(state)
+            elif copy is not None:
+                assert (copy.step(p + n * (0.005 - depth)) == f).all(), "the restored copy's tick differs"
+                copy, compared = None, True
         if fallback:
-            assert failed and not raised and off >= 20, (failed, off)
+            assert failed and not raised and off >= 20 and compared, (failed, off, compared)
             # The shell comes back after each pause (and, under-stepped, fails again).
             assert all(b - a >= 21 for a, b in zip(failed, failed[1:])), failed
         else:

@@ -2,7 +2,8 @@
 //! capped at 20 mm, 500 ticks) at 24 probe points of a model (4 heights x 6 angles around its
 //! vertical axis, inward horizontal presses), printing per point the largest force, the most
 //! sub-steps a tick took, how often the shell's step failed (and was shed: `shell_fallback`), the
-//! ticks the shell was off and the largest tick-to-tick force change.
+//! ticks the shell was off and the largest tick-to-tick force change, with the shell on, over
+//! the shed tick and the 10 after it, and with the shell off.
 //!
 //! `cargo run --release --example press_sweep -- [ventricle|ellipsoids|MODEL_FILE] [damped] [nofallback]`
 //! (`POINT=zi,ti` runs one point: height `zi` in 1..=4, angle `ti` in 0..6)
@@ -23,7 +24,11 @@ struct Outcome {
     most_substeps: usize,
     shed: Vec<(usize, f64)>,
     off: usize,
+    /// Largest tick-to-tick force change with the shell on, and off (core and skin alone).
     jump: f64,
+    jump_off: f64,
+    /// Largest change over the shed tick and the 10 after it.
+    jump_shed: f64,
     error: Option<String>,
 }
 
@@ -46,7 +51,7 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
     let r = sim.options.tool.radius;
     let mut st = SimState::rest(sim);
     let mut ws = SimWorkspace::new(sim);
-    let mut o = Outcome { fmax: 0.0, most_substeps: 0, shed: vec![], off: 0, jump: 0.0, error: None };
+    let mut o = Outcome { fmax: 0.0, most_substeps: 0, shed: vec![], off: 0, jump: 0.0, jump_off: 0.0, jump_shed: 0.0, error: None };
     let (mut depth, mut last) = (0.0f64, None::<Vec3>);
     for k in 0..500 {
         match tick(sim, &mut st, &mut ws, p - n * (r - depth), 1e-3) {
@@ -56,7 +61,9 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
                 }
                 o.off += rep.shell_off as usize;
                 if let Some(f0) = last {
-                    o.jump = o.jump.max((rep.force - f0).norm());
+                    let near_shed = o.shed.last().is_some_and(|&(s, _)| k <= s + 10);
+                    let j = if near_shed { &mut o.jump_shed } else if rep.shell_off { &mut o.jump_off } else { &mut o.jump };
+                    *j = j.max((rep.force - f0).norm());
                 }
                 last = Some(rep.force);
                 o.fmax = o.fmax.max(rep.force.norm());
@@ -100,7 +107,7 @@ fn main() {
             failed += (!o.shed.is_empty() || o.error.is_some()) as usize;
             let shed: Vec<String> = o.shed.iter().map(|(k, d)| format!("{k} ({:.1} mm)", d * 1e3)).collect();
             println!(
-                "z {:5.1} mm, theta {:.2}: max force {:.3} N, most sub-steps {:2}, shell shed at ticks [{}], {} ticks off, largest force change {:.3} N{}",
+                "z {:5.1} mm, theta {:.2}: max force {:.3} N, most sub-steps {:2}, shell shed at ticks [{}], {} ticks off, largest force change {:.3} N (at the shed: {:.3} N, shell off: {:.3} N){}",
                 z * 1e3,
                 theta,
                 o.fmax,
@@ -108,6 +115,8 @@ fn main() {
                 shed.join(", "),
                 o.off,
                 o.jump,
+                o.jump_shed,
+                o.jump_off,
                 o.error.map(|e| format!(", STOPPED {e}")).unwrap_or_default()
             );
         }

@@ -20,6 +20,10 @@
 //!     the step's displacement), undamped and damped; and the quasi-Newton step with no history
 //!     and one iteration is the rest-linearised step (the documented "first iteration = the
 //!     linearised step") to round-off.
+//! (e) A caller's potential inside the step (`integrate::step_with_potential`, the tool's contact
+//!     with the hybrid core while its shell is off): a spring 25 times past the explicit limit
+//!     stays stable, each step is backward Euler with the spring's force at the end of the step,
+//!     the same spring taken explicitly diverges.
 //! (d) Known issue, pinned: with no load, a body at rest makes the minimising integrators run to
 //!     their limits (all line-search trials, or the iteration cap) every step.
 //!
@@ -44,7 +48,7 @@ mod common;
 mod protocol;
 
 use common::*;
-use palpate_core::integrate::{incremental_potential, incremental_potential_gradient};
+use palpate_core::integrate::{incremental_potential, incremental_potential_gradient, step_with_potential, CorePotential};
 use palpate_core::probe::apply_loads;
 use palpate_core::mesh::generate::{base_nodes, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
 use palpate_core::{step, Integrator, Mat3, Material, Model, ModelBuilder, State, Vec3, Workspace};
@@ -411,7 +415,7 @@ fn newton_and_quasi_newton_reach_the_same_step_solution() {
         }
         s.f_ext[top] = Vec3::new(-1.2, 0.5, -1.0); // a new load for the compared step
         let newton = Integrator::BackwardEulerNewton { max_iterations: 100, tolerance: 1e-10 };
-        let qn = Integrator::BackwardEulerQuasiNewton { max_iterations: 1000, tolerance: 1e-10, history: 5 };
+        let qn = Integrator::BackwardEulerQuasiNewton { max_iterations: 1000, tolerance: 1e-9, history: 5 };
         let (sn, rn) = one_step(model_of, newton, &s, 1e-3);
         let (sq, rq) = one_step(model_of, qn, &s, 1e-3);
         let disp = s.x.iter().zip(&sn.x).map(|(a, b)| (a - b).norm_squared()).sum::<f64>().sqrt();
@@ -546,4 +550,70 @@ fn steps_at_rest_cost_one_iteration() {
     assert!(tail[19].inverted > 0, "no dent left after the release: the scenario changed ({:?})", tail[19]);
     let worst = tail.iter().map(|r| r.evaluations).max().unwrap();
     assert!(capped == 0 && worst <= 3, "{capped} of the last 20 steps at rest ran to the cap, worst {worst} evaluations");
+}
+
+// ---------------------------------------------------------------------------------------------
+// (e) A caller's potential inside the step (integrate::step_with_potential)
+// ---------------------------------------------------------------------------------------------
+
+/// A stiff spring pulling node `node` toward `anchor`: `U = k/2 |x - anchor|^2`.
+struct Spring {
+    node: usize,
+    anchor: Vec3,
+    k: f64,
+}
+
+impl CorePotential for Spring {
+    fn energy_forces(&self, x: &[Vec3], f: &mut [Vec3]) -> f64 {
+        let d = x[self.node] - self.anchor;
+        f[self.node] -= self.k * d;
+        0.5 * self.k * d.norm_squared()
+    }
+}
+
+/// A spring 25 times past the explicit limit (`k h^2 / m = 100`, where central differences
+/// need `< 4`) on the apex of the small wall: inside the minimised potential each step ends at
+/// backward Euler's solution with the spring's force at the end of the step (the gradient of
+/// `Phi` without the spring equals the spring's force there), the potential decreases, and 300
+/// steps settle the apex at the anchor's equilibrium. The same spring taken explicitly (the
+/// semi-implicit scheme, which takes the potential's forces at the start of the step) diverges:
+/// the check can fail. The caller's external forces are left as they were.
+#[test]
+fn a_stiff_potential_inside_the_step_is_stable_and_is_backward_euler() {
+    let mat = material(3.0e4, 0.4, 1000.0, 0.0, 0.0);
+    let dt = 1e-3;
+    let qn = Integrator::BackwardEulerQuasiNewton { max_iterations: 1000, tolerance: 1e-9, history: 5 };
+    let model = small_wall(mat, qn, Vec3::zeros());
+    let top = top_node(&model);
+    let spring = Spring { node: top, anchor: model.mesh().points()[top] + Vec3::new(0.004, -0.002, -0.003), k: 100.0 * model.masses()[top] / (dt * dt) };
+    let mut s = State::rest(&model);
+    let mut ws = Workspace::new(&model);
+    s.f_ext[top] = Vec3::new(0.0, 0.0, -0.2);
+    let f_ext = s.f_ext.clone();
+    for k in 0..300 {
+        let (x_n, v_n) = (s.x.clone(), s.v.clone());
+        let rep = step_with_potential(&model, &mut s, &mut ws, dt, &spring).unwrap_or_else(|e| panic!("step {k}: {e}"));
+        assert!(rep.potential_change <= 0.0 && rep.converged, "step {k}: {rep:?}");
+        assert_eq!(s.f_ext, f_ext, "the caller's forces changed");
+        if k % 50 == 0 {
+            // Backward Euler with the spring's force at the end of the step.
+            let g = incremental_potential_gradient(&model, &s.x, &x_n, &v_n, &s.f_ext, dt);
+            let mut f = vec![Vec3::zeros(); model.n_nodes()];
+            spring.energy_forces(&s.x, &mut f);
+            let scale = f[top].norm() + s.f_ext[top].norm();
+            for i in 0..model.n_nodes() {
+                assert!((g[i] - f[i]).norm() <= 1e-6 * scale, "step {k}, node {i}: grad Phi {:?} vs the spring's force {:?}", g[i], f[i]);
+            }
+        }
+    }
+    let gap = (s.x[top] - spring.anchor).norm();
+    let pull = (spring.anchor - model.mesh().points()[top]).norm();
+    println!("apex {gap:.2e} m from the anchor (pulled {pull:.1e} m), speed {:.2e} m/s", s.v[top].norm());
+    assert!(gap < 0.05 * pull && s.v[top].norm() < 1e-3, "the apex did not settle at the anchor: gap {gap}, speed {}", s.v[top].norm());
+
+    let explicit = small_wall(mat, Integrator::SemiImplicit { filter: palpate_core::integrate::Filter::Stable }, Vec3::zeros());
+    let mut s = State::rest(&explicit);
+    let mut ws = Workspace::new(&explicit);
+    let diverged = (0..50).any(|_| step_with_potential(&explicit, &mut s, &mut ws, dt, &spring).is_err());
+    assert!(diverged, "the explicit spring did not diverge: apex at {:?}", s.x[top]);
 }

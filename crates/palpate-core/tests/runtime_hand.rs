@@ -285,12 +285,20 @@ fn a_failed_shell_step_is_shed_and_the_tick_goes_on_with_the_core() {
     let mut st = SimState::rest(&sim);
     let mut ws = SimWorkspace::new(&sim);
     let (mut failed_at, mut touched_after_lift) = (None, 0);
+    let (mut restored, mut checked_restore) = (None, false);
     for k in 0..600 {
         // Pressed to 3 mm and held until 150 ticks past the failure, then lifted 0.5 mm clear.
         let lifted = failed_at.is_some_and(|f| k > f + pause as usize + 50);
         let depth = if lifted { -0.5e-3 } else { 3e-3 * ((k + 1) as f64 / 100.0).min(1.0) };
         let rep = tick(&sim, &mut st, &mut ws, p - n * (r - depth), 1e-3).unwrap_or_else(|e| panic!("tick {k}: {e} (the fallback should have caught it)"));
         assert!(rep.force.iter().all(|c| c.is_finite()) && st.core.x.iter().chain(&st.skin).all(|x| x.iter().all(|c| c.is_finite())), "tick {k}: not finite");
+        if let Some((mut st2, mut ws2)) = restored.take() {
+            // The copy restored after the last tick, given this tick's input.
+            let rep2 = tick(&sim, &mut st2, &mut ws2, p - n * (r - depth), 1e-3).unwrap();
+            assert!(rep2.shell_off && rep2.active == 0, "a restored state's shell came back during its pause: {rep2:?}");
+            assert_eq!(rep2.force, rep.force, "tick {k}: the restored state's force differs (its fade or pause was not restored)");
+            checked_restore = true;
+        }
         match failed_at {
             None if rep.shell_failed => {
                 assert_eq!((rep.active, st.particles.active.len()), (0, 0), "tick {k}: the shell was not shed");
@@ -300,11 +308,11 @@ fn a_failed_shell_step_is_shed_and_the_tick_goes_on_with_the_core() {
             Some(f) if !lifted => {
                 assert!(rep.shell_off && rep.active == 0 && !rep.shell_failed, "tick {k}: the shell is back under the held press ({rep:?})");
                 if k == f + 10 {
-                    // The pause is part of the state: a restored state stays off as the original.
-                    let (mut st2, mut ws2) = SimState::restore(&sim, &st.snapshot(&ws)).unwrap();
-                    let rep2 = tick(&sim, &mut st2, &mut ws2, p - n * (r - depth), 1e-3).unwrap();
-                    assert!(rep2.shell_off && rep2.active == 0, "a restored state's shell came back during its pause: {rep2:?}");
+                    // The pause and the skin's fade are part of the state: a restored state stays
+                    // off as the original, and its next tick gives the same force, bit for bit.
+                    restored = Some(SimState::restore(&sim, &st.snapshot(&ws)).unwrap());
                 }
+
                 assert!(rep.force.norm() > 0.01 && rep.skin_contacts > 0, "tick {k}: the tool should meet the skin, force {:.4} N", rep.force.norm());
                 let _ = f;
             }
@@ -319,6 +327,7 @@ fn a_failed_shell_step_is_shed_and_the_tick_goes_on_with_the_core() {
                     assert_eq!(k, touched_after_lift + 2, "tick {k}: the shell came back late or early");
                     assert!(rep.active > 0 || rep.shell_failed, "tick {k}: the shell did not come back (failed at {f}): {rep:?}");
                     println!("shell failed at tick {f}, off until the tool let go, back at tick {k}: {} particles entered, failed again: {}", rep.entered, rep.shell_failed);
+                    assert!(checked_restore, "the restored state was never ticked");
                     return;
                 }
             }
@@ -341,9 +350,18 @@ fn a_press_toward_2_n_beside_the_held_base_never_fails_a_tick() {
     let mut st = SimState::rest(&sim);
     let mut ws = SimWorkspace::new(&sim);
     let (mut depth, mut fmax, mut failures, mut off) = (0.0f64, 0.0f64, 0, 0);
+    // The largest tick-to-tick force change from the shed tick on (the shell off).
+    let (mut last, mut shed_at, mut off_jump) = (Vec3::zeros(), None, 0.0f64);
     for k in 0..500 {
         let rep = tick(&sim, &mut st, &mut ws, p - n * (r - depth), 1e-3).unwrap_or_else(|e| panic!("tick {k} at {:.1} mm: {e}", depth * 1e3));
         assert!(rep.force.iter().all(|c| c.is_finite()), "tick {k}: force not finite");
+        if rep.shell_failed {
+            shed_at = Some(k);
+        }
+        if shed_at.is_some() {
+            off_jump = off_jump.max((rep.force - last).norm());
+        }
+        last = rep.force;
         fmax = fmax.max(rep.force.norm());
         failures += rep.shell_failed as usize;
         off += rep.shell_off as usize;
@@ -351,7 +369,12 @@ fn a_press_toward_2_n_beside_the_held_base_never_fails_a_tick() {
             depth = (depth + 5e-5).min(20e-3);
         }
     }
-    println!("beside the base: largest force {fmax:.3} N, shell shed {failures} times, off {off} ticks of 500");
+    println!("beside the base: largest force {fmax:.3} N, shell shed {failures} times, off {off} ticks of 500, largest force change a tick from the shed on {off_jump:.3} N");
+    // Before 2026-11-27 this was 1.53 N: the contact held explicitly over the core's step
+    // chattered, and the skin went back to its ties at once (runtime::core_contact, SkinLift).
+    // Measured since: 0.112 N, at the shed tick (0.25 -> 0.14 N: the core, pressed directly
+    // now, gives way where the particles held), then at most 0.05 N a tick.
+    assert!(off_jump < 0.15, "from the shed on the force changed by {off_jump:.3} N in a tick");
     assert!(fmax < 5.0, "largest force {fmax} N");
     assert!(failures <= 5, "{failures} failures in 500 ticks: more than one per pause");
     assert!(st.skin.iter().chain(&st.core.x).all(|x| x.iter().all(|c| c.is_finite())));

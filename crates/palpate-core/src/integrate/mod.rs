@@ -32,7 +32,7 @@ pub use statics::{static_solve, StaticOptions, StaticSolution};
 
 use crate::error::StepError;
 use crate::fem::{Model, State, Workspace};
-use crate::math::is_finite3;
+use crate::math::{is_finite3, Vec3};
 
 /// The filter of the paper's semi-implicit scheme (eq. 34).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -171,12 +171,47 @@ pub struct StepReport {
     pub potential_change: f64,
 }
 
+/// A conservative force field of the caller's on the nodes (a tool's penalty contact), to be
+/// taken implicitly: [`step_with_potential`] adds its energy to the incremental potential that
+/// the minimising integrators minimise, so its stiffness needs no time-step bound (an explicit
+/// force held over the step does: `omega h < 2` on the nodes it acts on).
+pub trait CorePotential {
+    /// The energy \[J\] at node positions `x` `(n_nodes)`; adds the forces `-dU/dx` \[N\] to `f`.
+    fn energy_forces(&self, x: &[Vec3], f: &mut [Vec3]) -> f64;
+}
+
 /// Advance `state` by `dt` \[s\] with the model's integrator.
 ///
 /// Errors leave `state` as it was: a non-positive or non-finite `dt`, a non-finite external
 /// force, position or velocity given, a failed factorisation, or a non-finite result (reported
 /// with the first bad node).
 pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Result<StepReport, StepError> {
+    step_inner(model, state, ws, dt, None)
+}
+
+/// [`step`] with the potential `external` as part of the step: implicit (in the incremental
+/// potential) for the minimising integrators; the one-shot schemes (semi-implicit, linearised
+/// backward Euler) take its forces at the start of the step, explicitly. On a body without fixed
+/// nodes the step's linear momentum then changes by `dt` times the forces at the end of the step
+/// only to the iterations' tolerance (the exact rigid translation of the free-body step assumes
+/// internal forces alone, translation invariant).
+pub fn step_with_potential(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64, external: &dyn CorePotential) -> Result<StepReport, StepError> {
+    match model.integrator {
+        Integrator::SemiImplicit { .. } | Integrator::BackwardEulerLinear => {
+            let mut f = std::mem::take(&mut ws.potential.f_pot);
+            f.iter_mut().for_each(|v| *v = Vec3::zeros());
+            external.energy_forces(&state.x, &mut f);
+            state.f_ext.iter_mut().zip(&f).for_each(|(a, b)| *a += b);
+            let r = step_inner(model, state, ws, dt, None);
+            state.f_ext.iter_mut().zip(&f).for_each(|(a, b)| *a -= b);
+            ws.potential.f_pot = f;
+            r
+        }
+        _ => step_inner(model, state, ws, dt, Some(external)),
+    }
+}
+
+fn step_inner(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64, external: Option<&dyn CorePotential>) -> Result<StepReport, StepError> {
     if !(dt > 0.0 && dt.is_finite()) {
         return Err(StepError::BadTimeStep(dt));
     }
@@ -202,10 +237,10 @@ pub fn step(model: &Model, state: &mut State, ws: &mut Workspace, dt: f64) -> Re
         Integrator::BackwardEulerLinear => backward_euler::step_linear(model, state, ws, dt),
         // The minimising schemes share the frame (potential::minimise) and differ in their iterations.
         Integrator::BackwardEulerQuasiNewton { max_iterations, tolerance, .. } => {
-            potential::minimise(model, state, ws, dt, tolerance, |p, x, xt, ws, pr| quasi_newton::iterate(p, x, xt, ws, pr, max_iterations))
+            potential::minimise(model, state, ws, dt, tolerance, external, |p, x, xt, ws, pr| quasi_newton::iterate(p, x, xt, ws, pr, max_iterations))
         }
         Integrator::BackwardEulerNewton { max_iterations, tolerance } => {
-            potential::minimise(model, state, ws, dt, tolerance, |p, x, xt, ws, pr| newton::iterate(p, x, xt, ws, pr, max_iterations))
+            potential::minimise(model, state, ws, dt, tolerance, external, |p, x, xt, ws, pr| newton::iterate(p, x, xt, ws, pr, max_iterations))
         }
     };
     let bad = match &result {

@@ -43,6 +43,8 @@ pub(crate) struct StepProblem<'a> {
     pub v_n: &'a [Vec3],
     pub f_ext: &'a [Vec3],
     pub h: f64,
+    /// A potential of the caller's (a tool's contact) added to `Phi`, if any.
+    pub external: Option<&'a dyn super::CorePotential>,
 }
 
 /// The potential at one point, with what the integrators report of it.
@@ -83,6 +85,8 @@ pub(crate) struct PotentialWorkspace {
     /// Gradient of `Phi` at the current iterate and at the trial point, `(n_free)`, free-node order.
     pub g: Vec<Vec3>,
     pub g_trial: Vec<Vec3>,
+    /// The external potential's forces at the point evaluated, `(n_nodes)` (scratch).
+    pub f_pot: Vec<Vec3>,
     /// Positions at which `f_el` was last evaluated at the end of a step, its strain energy and
     /// inverted count, and whether they are valid.
     cache_x: Vec<Vec3>,
@@ -102,6 +106,7 @@ impl PotentialWorkspace {
             f_visc_trial: z(n),
             g: z(nf),
             g_trial: z(nf),
+            f_pot: z(n),
             cache_x: z(n),
             cache_w: 0.0,
             cache_f2: 0.0,
@@ -125,7 +130,7 @@ impl PotentialWorkspace {
 
 /// Evaluate `Phi` at `x` `(n_nodes)`: forces into `f_el` (and `f_visc` if damped), the gradient
 /// into `g` `(n_free)`.
-fn evaluate(p: &StepProblem, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3], g: &mut [Vec3]) -> Eval {
+fn evaluate(p: &StepProblem, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3], g: &mut [Vec3], f_pot: &mut [Vec3]) -> Eval {
     let model = p.model;
     f_el.iter_mut().for_each(|f| *f = Vec3::zeros());
     let damped = !model.material.is_undamped();
@@ -167,13 +172,21 @@ fn evaluate(p: &StepProblem, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3],
         }
         (w, d, f2, inverted)
     };
-    finish(p, x, w, d, inverted, f2, f_el, damped.then_some(&*f_visc), g)
+    finish(p, x, w, d, inverted, f2, f_el, damped.then_some(&*f_visc), g, f_pot)
 }
 
 /// The nodal terms of `Phi` and its gradient, given the element terms `W` and `D`.
 #[allow(clippy::too_many_arguments)]
-fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64, f_el: &[Vec3], f_visc: Option<&[Vec3]>, g: &mut [Vec3]) -> Eval {
+fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64, f_el: &[Vec3], f_visc: Option<&[Vec3]>, g: &mut [Vec3], f_pot: &mut [Vec3]) -> Eval {
     let model = p.model;
+    // The caller's potential (a tool's contact): its energy and forces at `x`.
+    let u = match p.external {
+        Some(ext) => {
+            f_pot.iter_mut().for_each(|f| *f = Vec3::zeros());
+            ext.energy_forces(x, f_pot)
+        }
+        None => 0.0,
+    };
     let inv_h2 = 1.0 / (p.h * p.h);
     let inv_h = 1.0 / p.h;
     let (mut inertia, mut work, mut work_abs, mut gnorm2, mut scale2) = (0.0, 0.0, 0.0, 0.0, 0.0);
@@ -190,6 +203,9 @@ fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64,
         if let Some(fv) = f_visc {
             gi -= fv[i];
         }
+        if p.external.is_some() {
+            gi -= f_pot[i];
+        }
         gnorm2 += gi.norm_squared();
         scale2 += fa.norm_squared() + (m * inv_h * p.v_n[i]).norm_squared();
         g[fi] = gi;
@@ -199,7 +215,7 @@ fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64,
     // and the inertial term's positions (`sum m^2 |x|^2 / h^4`, at rest: a scale, not a value).
     let noise2 = model.mass_position2 * inv_h2 * inv_h2;
     let floor = ROUND_OFF_FACTOR * f64::EPSILON * (f2 + noise2 + model.position_noise2).sqrt();
-    Eval { phi: inertia + w + d - work, w, magnitude: inertia + w + d + work_abs, inverted, gnorm2, scale2, elastic_f2: f2, floor }
+    Eval { phi: inertia + w + d + u - work, w, magnitude: inertia + w + d + u.abs() + work_abs, inverted, gnorm2, scale2, elastic_f2: f2, floor }
 }
 
 /// `Phi` at the start of the step (`x = x_n`, where the dissipation and its force vanish), into
@@ -207,14 +223,14 @@ fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64,
 /// point they were computed at.
 /// Returns the evaluation and whether it was computed afresh (no cache).
 pub(crate) fn evaluate_start(p: &StepProblem, pw: &mut PotentialWorkspace) -> (Eval, bool) {
-    let PotentialWorkspace { f_el, f_visc, g, cache_x, cache_w, cache_f2, cache_inverted, cache_valid, .. } = pw;
+    let PotentialWorkspace { f_el, f_visc, g, f_pot, cache_x, cache_w, cache_f2, cache_inverted, cache_valid, .. } = pw;
     if *cache_valid && cache_x.as_slice() == p.x_n {
         if !p.model.material.is_undamped() {
             f_visc.iter_mut().for_each(|f| *f = Vec3::zeros());
         }
-        return (finish(p, p.x_n, *cache_w, 0.0, *cache_inverted, *cache_f2, f_el, None, g), false);
+        return (finish(p, p.x_n, *cache_w, 0.0, *cache_inverted, *cache_f2, f_el, None, g, f_pot), false);
     }
-    (evaluate(p, p.x_n, f_el, f_visc, g), true)
+    (evaluate(p, p.x_n, f_el, f_visc, g, f_pot), true)
 }
 
 /// Remember the end-of-step elastic forces (in the current buffer) for the next step's start.
@@ -321,6 +337,7 @@ pub(crate) fn minimise(
     ws: &mut Workspace,
     dt: f64,
     tolerance: f64,
+    external: Option<&dyn super::CorePotential>,
     iterate: impl FnOnce(&StepProblem, &mut [Vec3], &mut [Vec3], &mut Workspace, &mut Progress) -> (usize, bool),
 ) -> Result<crate::StepReport, StepError> {
     factor::ensure(model, ws, dt)?;
@@ -328,7 +345,7 @@ pub(crate) fn minimise(
     let (x_n, v_n) = (std::mem::take(&mut ws.x_save), std::mem::take(&mut ws.v_save));
     let mut x_trial = std::mem::take(&mut ws.x_trial);
     x_trial.copy_from_slice(&state.x);
-    let p = StepProblem { model, x_n: &x_n, v_n: &v_n, f_ext: &state.f_ext, h: dt };
+    let p = StepProblem { model, x_n: &x_n, v_n: &v_n, f_ext: &state.f_ext, h: dt, external };
     let (start, fresh) = evaluate_start(&p, &mut ws.potential);
     let mut pr = Progress::start(start, fresh, tolerance);
     let (surplus, struggled) = iterate(&p, &mut state.x, &mut x_trial, ws, &mut pr);
@@ -377,7 +394,7 @@ pub(crate) fn line_search(
         for (fi, &i) in model.free_nodes.iter().enumerate() {
             x_trial[i] = x[i] + alpha * d[fi];
         }
-        let e = evaluate(p, x_trial, &mut pw.f_el_trial, &mut pw.f_visc_trial, &mut pw.g_trial);
+        let e = evaluate(p, x_trial, &mut pw.f_el_trial, &mut pw.f_visc_trial, &mut pw.g_trial, &mut pw.f_pot);
         *evaluations += 1;
         if e.phi.is_finite() && e.phi <= cur.phi + ARMIJO_C1 * alpha * gd + round_off + noise_per_alpha * alpha {
             for &i in &model.free_nodes {
@@ -431,8 +448,8 @@ pub fn incremental_potential_gradient(model: &Model, x: &[Vec3], x_n: &[Vec3], v
 /// [`evaluate`] with buffers of its own; returns the evaluation and the gradient `(n_free)`.
 fn evaluate_alone(model: &Model, x: &[Vec3], x_n: &[Vec3], v_n: &[Vec3], f_ext: &[Vec3], h: f64) -> (Eval, Vec<Vec3>) {
     let n = model.n_nodes();
-    let p = StepProblem { model, x_n, v_n, f_ext, h };
+    let p = StepProblem { model, x_n, v_n, f_ext, h, external: None };
     let (mut f_el, mut f_visc, mut g) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n], vec![Vec3::zeros(); model.free_nodes.len()]);
-    let e = evaluate(&p, x, &mut f_el, &mut f_visc, &mut g);
+    let e = evaluate(&p, x, &mut f_el, &mut f_visc, &mut g, &mut []);
     (e, g)
 }

@@ -8,6 +8,8 @@
 //!   hysteresis, and the particles that entered and left;
 //! - [`confinement`]: the elastic wall that keeps the active particles inside the union of their
 //!   regions (the paper's B(p_s) gradient field, computed locally);
+//! - [`core_contact`]: the tool against the skin and the core's surface inside the core's
+//!   implicit step, while the shell is off;
 //! - [`coupling`]: damped springs between the first-layer active particles and their core faces,
 //!   momentum-exact (where and why this departs from the paper: see the module);
 //! - [`stability`]: how many particle sub-steps a tick needs (stretch, springs, contact);
@@ -39,6 +41,7 @@
 
 pub mod activation;
 pub mod confinement;
+pub mod core_contact;
 pub mod coupling;
 pub mod embed;
 pub mod sim;
@@ -49,10 +52,11 @@ pub mod tool;
 
 pub use activation::{ActiveSets, Activation};
 pub use confinement::{Confinement, ConfinementSum, Placement, Push};
+pub use core_contact::{CoreContact, CoreContactSum};
 pub use coupling::Coupling;
 pub use embed::Embedding;
 pub use sim::{Sim, SimOptions};
 pub use stability::Shell;
-pub use state::{SimSnapshot, SimState, SimWorkspace, SkinSweep};
+pub use state::{SimSnapshot, SimState, SimWorkspace, SkinSweep, SHED_FADE_TICKS};
 pub use tick::{tick, tick_with, TickReport};
 pub use tool::{ContactSum, PointContact, Tool};

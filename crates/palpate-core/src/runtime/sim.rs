@@ -69,7 +69,9 @@ pub struct SimOptions {
     /// the shell (every particle back at its tie, the tool meeting the skin and the core) and the
     /// shell stays off for `n` ticks and until the tool has let go of the organ (no contact)
     /// before regions may enter again ([`super::TickReport`]'s `shell_failed`, `shell_off`); the
-    /// hand keeps feeling the organ. `None`: the tick fails
+    /// hand keeps feeling the organ: the skin the particles carried fades back to its ties over
+    /// [`super::state::SHED_FADE_TICKS`] (or the pause, if shorter), and the tool meets the core
+    /// inside its implicit step ([`super::core_contact`]). `None`: the tick fails
     /// with the error, the state as it was (studies of the shell's own stability).
     pub shell_fallback: Option<u64>,
     /// Hold the core (default true: at its base, or, for a closed wall, at its lowest nodes);

@@ -63,6 +63,15 @@
 //! across faces. Until then the tick sheds a failed shell ([`super::SimOptions::shell_fallback`],
 //! tests/runtime_hand.rs `a_press_toward_2_n_beside_the_held_base_never_fails_a_tick`).
 //!
+//! **Measured (2026-11-27, seventh session): not the core's inversions.** With the shell's
+//! compression barrier added to the core's St. Venant-Kirchhoff law (a trial, not kept), no core
+//! element inverted at the press beside the base (without it: 6 at the shed, up to 190 at 20 mm
+//! of travel), yet the shell failed at the same tick (155, 7.75 mm). What the shed leaves has
+//! since been made smooth instead: the skin fades back to its ties (`SkinLift`), and the tool
+//! meets the core inside its implicit step ([`super::core_contact`]); the force changes by
+//! 0.03-0.15 N a tick at the switch and 0.01-0.11 N while the shell is off, against 0.65-3.2 N
+//! and up to 1.5 N before (`examples/press_sweep.rs`, 18 shed points of the synthetic ventricle).
+//!
 //! **Adopted since: selective mass scaling** (`crate::meshfree` `mass_scaling.rs`, on by default
 //! through [`super::SimOptions::mass_scaling`]): the few poorly supported particles below get the
 //! mass that brings their Gershgorin rate to the 95th percentile's, which lowers `omega_max^2`

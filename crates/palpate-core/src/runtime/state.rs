@@ -38,8 +38,52 @@ pub struct SimState {
     /// The shell is off (no region activates) until `ticks` reaches this, after a failed shell
     /// step ([`super::SimOptions::shell_fallback`]); 0: on.
     pub(crate) shell_off_until: u64,
+    /// The skin's lift off its ties after a shed shell, fading (see [`SkinLift`]).
+    pub(crate) lift: SkinLift,
     /// The skin vertices the tick looks at between whole updates (see [`LiveSkin`]).
     pub(crate) live: LiveSkin,
+}
+
+/// Where a shed shell left the skin (see [`super::tick`], step 3): when the shell is shed, the
+/// skin vertices the particles carried sit off their ties by `offset` (the press the particles
+/// took), and put back at once the tool's force jumped (measured 0.09-1.4 N in one tick on the
+/// synthetic ventricle, `examples/press_sweep.rs`). Instead each stays lifted off its tie by
+/// `offset` scaled down linearly from 1 at the shed tick to 0 [`SHED_FADE_TICKS`] later (or at the
+/// end of a shorter pause), in the contact and in the drawn skin. The offsets are constant: the
+/// contact's forces stay the gradient of its energy.
+#[derive(Debug, Clone)]
+pub(crate) struct SkinLift {
+    /// Per skin vertex \[m\] (zero unless listed).
+    pub offset: Vec<Vec3>,
+    /// The lifted vertices.
+    pub list: Vec<u32>,
+    /// The shed tick, and the ticks the fade takes.
+    pub start: u64,
+    pub ticks: u64,
+}
+
+/// Ticks over which a shed shell's skin returns to its ties (`SkinLift` in this module): 50 ms, so that the
+/// largest step measured (1.4 N) reaches the hand as ~0.03 N a tick.
+pub const SHED_FADE_TICKS: u64 = 50;
+
+impl SkinLift {
+    fn new(n_skin: usize) -> SkinLift {
+        SkinLift { offset: vec![Vec3::zeros(); n_skin], list: Vec::with_capacity(n_skin), start: 0, ticks: 1 }
+    }
+    /// The scale of the offsets at tick `t` (0 when nothing is lifted).
+    pub fn scale(&self, t: u64) -> f64 {
+        if self.list.is_empty() {
+            return 0.0;
+        }
+        (1.0 - t.saturating_sub(self.start) as f64 / self.ticks as f64).max(0.0)
+    }
+    /// Nothing lifted.
+    pub fn clear(&mut self) {
+        for &v in &self.list {
+            self.offset[v as usize] = Vec3::zeros();
+        }
+        self.list.clear();
+    }
 }
 
 impl Clone for SimState {
@@ -54,11 +98,12 @@ impl Clone for SimState {
             is_active: self.is_active.clone(),
             live: self.live.clone(),
             shell_off_until: self.shell_off_until,
+            lift: self.lift.clone(),
         }
     }
     fn clone_from(&mut self, s: &Self) {
         // Exhaustive: a new field is a compile error here until it is copied.
-        let SimState { core, particles, skin, tool, activation, ticks, is_active, live, shell_off_until } = self;
+        let SimState { core, particles, skin, tool, activation, ticks, is_active, live, shell_off_until, lift } = self;
         core.clone_from(&s.core);
         particles.clone_from(&s.particles);
         skin.clone_from(&s.skin);
@@ -68,6 +113,9 @@ impl Clone for SimState {
         is_active.clone_from(&s.is_active);
         live.clone_from(&s.live);
         *shell_off_until = s.shell_off_until;
+        lift.offset.clone_from(&s.lift.offset);
+        lift.list.clone_from(&s.lift.list);
+        (lift.start, lift.ticks) = (s.lift.start, s.lift.ticks);
     }
 }
 
@@ -255,6 +303,7 @@ impl SimState {
             ticks: 0,
             is_active: vec![false; sim.n_particles()],
             shell_off_until: 0,
+            lift: SkinLift::new(sim.hybrid.outer_points.len()),
             live: LiveSkin::new(sim.hybrid.outer_points.len(), sim.core.n_nodes(), sim.hybrid.core_faces.len()),
         }
     }
@@ -287,6 +336,8 @@ impl SimState {
             live_slack: self.live.slack,
             sweep: self.live.sweep_next.map(|next| SkinSweep { next, ref_x: self.live.sweep_ref_x.clone(), slack: self.live.sweep_slack }),
             shell_off_until: self.shell_off_until,
+            skin_lift: self.lift.list.iter().map(|&v| (v, self.lift.offset[v as usize])).collect(),
+            skin_lift_start: self.lift.start,
         }
     }
 
@@ -326,6 +377,9 @@ impl SimState {
                 return Err(bad(format!("skin sweep reference: row {i} is not finite")));
             }
         }
+        if let Some(&(v, d)) = snap.skin_lift.iter().find(|&&(v, d)| v as usize >= n_skin || !d.iter().all(|c| c.is_finite())) {
+            return Err(bad(format!("skin lift: vertex {v} ({n_skin} vertices), offset {d:?} m: out of range or not finite")));
+        }
         if let Some(list) = &snap.live {
             if let Some(&v) = list.iter().find(|&&v| v as usize >= n_skin) {
                 return Err(bad(format!("live skin vertex {v} out of range ({n_skin} vertices)")));
@@ -349,6 +403,14 @@ impl SimState {
         state.tool = snap.tool;
         state.ticks = snap.ticks;
         state.shell_off_until = snap.shell_off_until;
+        state.lift.start = snap.skin_lift_start;
+        state.lift.ticks = shed_fade_ticks(&sim.options);
+        for &(v, d) in &snap.skin_lift {
+            if state.lift.offset[v as usize] == Vec3::zeros() && d != Vec3::zeros() {
+                state.lift.list.push(v);
+            }
+            state.lift.offset[v as usize] = d;
+        }
         let live = &mut state.live;
         live.carried.clone_from(&snap.carried);
         live.ref_x.clone_from(&snap.live_ref_x);
@@ -412,6 +474,16 @@ pub struct SimSnapshot {
     /// The tick the shell may return at after a failed shell step (0: on; see
     /// [`super::SimOptions::shell_fallback`]).
     pub shell_off_until: u64,
+    /// The skin's lift off its ties after a shed shell: `(vertex, offset [m])` pairs and the shed
+    /// tick (see `SkinLift`; empty: none).
+    pub skin_lift: Vec<(u32, Vec3)>,
+    pub skin_lift_start: u64,
+}
+
+/// The ticks a shed shell's skin takes back to its ties: [`SHED_FADE_TICKS`], or the shell's
+/// pause if shorter.
+pub(crate) fn shed_fade_ticks(o: &super::SimOptions) -> u64 {
+    SHED_FADE_TICKS.min(o.shell_fallback.unwrap_or(SHED_FADE_TICKS)).max(1)
 }
 
 /// A sweep of the whole skin in progress ([`SimSnapshot::sweep`]): the next vertex it places,
@@ -452,6 +524,8 @@ pub struct SimWorkspace {
     pub(crate) placed: Vec<u64>,
     /// Skin vertices over active triangles within the tool's reach this tick.
     pub(crate) near: Vec<usize>,
+    /// Skin vertices within reach of the tool for the core's implicit contact (shell off).
+    pub(crate) reach: Vec<usize>,
     /// Start-of-tick positions and velocities of the active particles (rollback).
     pub(crate) save: Vec<(Vec3, Vec3)>,
     /// Per particle, the tool contact's Gershgorin row sum `sum_v w_p / (W_v m_p)` \[1/kg\]
@@ -499,6 +573,7 @@ impl SimWorkspace {
             placed: vec![0; n],
             save: Vec::with_capacity(n),
             near: Vec::with_capacity(sim.hybrid.outer_points.len()),
+            reach: Vec::with_capacity(sim.hybrid.outer_points.len()),
             contact_share: vec![0.0; n],
             tie_x: vec![Vec3::zeros(); n],
             tie_v: vec![Vec3::zeros(); n],

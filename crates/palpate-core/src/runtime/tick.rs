@@ -16,11 +16,15 @@
 //!    fails (diverging or non-finite: a press it cannot follow, see [`super::stability`]), the
 //!    tick sheds the shell, every particle back at its tie and no region active, and goes on
 //!    with the core and the skin; the shell stays off for a pause
-//!    ([`super::SimOptions::shell_fallback`]). The hand keeps feeling the organ; the force
-//!    changes at the switch (the skin returns to its ties: measured up to ~3 N in one tick at
-//!    20 mm of travel, which the servo's rate limit spreads over a few ms).
+//!    ([`super::SimOptions::shell_fallback`]). The hand keeps feeling the organ: the skin the
+//!    particles carried stays where they left it and fades back to its ties over 50 ticks
+//!    (`SkinLift` in `state.rs`). Measured on the synthetic ventricle's 18 shed presses
+//!    (`examples/press_sweep.rs`): the force changes by 0.03-0.15 N in a tick at the switch
+//!    (before: 0.65-3.2 N, the skin back at its ties at once and the core's contact explicit).
 //! 4. **Skin contact** where no particle is active: the tool presses the skin vertices, and
-//!    their ties carry the force to the core.
+//!    their ties carry the force to the core. While the shell is off, that contact and the
+//!    core surface's are taken inside the core's implicit step instead ([`super::core_contact`]:
+//!    held explicitly over the step on the coarse core, they chattered under a deep press).
 //! 5. **The core step** (the default integrator, stable at any press) under the sub-step average
 //!    of every reaction: the coupling springs', the ring's (the active particles' stresses on
 //!    their frozen neighbours, spread by the ties' weights), the skin's.
@@ -29,7 +33,8 @@
 //! Every force between two bodies is one of an equal and opposite pair and every tie spreads
 //! a force into shares that sum to it, so with the tool away (and no confinement push) the total
 //! linear momentum of the core and the active particles is conserved to round-off, and with the
-//! tool its change is the tool's impulse (tests/runtime.rs). A failed tick leaves the core and the
+//! tool its change is the tool's impulse (tests/runtime.rs); while the shell is off, to the core
+//! step's tolerance (the contact is then part of the step's minimisation). A failed tick leaves the core and the
 //! particles' motion as they were (see [`tick`]).
 
 use super::activation::Activation;
@@ -37,7 +42,8 @@ use super::embed;
 use super::sim::Sim;
 use super::state::{LiveSkin, SimState, SimWorkspace};
 use crate::error::StepError;
-use crate::integrate::{step, StepReport};
+use crate::integrate::{step, step_with_potential, StepReport};
+use super::core_contact::CoreContact;
 use crate::math::{is_finite3, Mat3, Vec3};
 use crate::meshfree;
 use crate::parallel::{Fork, Serial};
@@ -101,7 +107,7 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
     if !is_finite3(&tool) {
         return Err(StepError::NonFiniteTool);
     }
-    let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active, live, shell_off_until } = state;
+    let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active, live, shell_off_until, lift } = state;
     // The shell's clock is the core's (it advances only while particles are active).
     particles.t = core.t;
     // The core's face frames and their rates, once: every tie on a face shares them.
@@ -115,6 +121,10 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
     // (Activation is skipped while the shell is off after a failed shell step: see
     // SimOptions::shell_fallback.)
     let mut report = TickReport { shell_off: *ticks < *shell_off_until, ..TickReport::default() };
+    if !report.shell_off && !lift.list.is_empty() {
+        // The shell is back (a pause shorter than the fade): the particles carry the skin again.
+        lift.clear();
+    }
 
     // 1. Activation.
     if !report.shell_off {
@@ -278,6 +288,19 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
                 particles.v[p] = tie.velocity_framed(p, &core.v, &ws.rates);
             }
             report.left += particles.active.len();
+            // The skin the particles carried stays where they left it, and fades back to its
+            // ties (SkinLift): put back at once, the force jumped.
+            lift.clear();
+            (lift.start, lift.ticks) = (*ticks, super::state::shed_fade_ticks(o));
+            for v in live.iter() {
+                if live.carried[v] {
+                    let d = skin[v] - sim.skin.position_framed(v, &core.x, &ws.frames);
+                    if d != Vec3::zeros() && is_finite3(&d) {
+                        lift.offset[v] = d;
+                        lift.list.push(v as u32);
+                    }
+                }
+            }
             particles.active.clear();
             activation.clear();
             ws.near.clear();
@@ -307,9 +330,17 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
         }
     }
 
-    // 4. Skin contact where no particle is active under the tool.
-    let reach = o.tool.radius;
-    for v in live.iter() {
+    // 4. Skin contact where no particle is active under the tool. With the shell off (after a
+    // failure) the tool meets the core through the skin alone: that contact is taken inside the
+    // core's implicit step instead (super::core_contact: explicit, it chattered).
+    let implicit = report.shell_off || report.shell_failed;
+    ws.reach.clear();
+    if implicit {
+        let reach = o.tool.radius + super::tick::SKIN_LIVE_MARGIN;
+        ws.reach.extend(live.iter().filter(|&v| (skin[v] - tool).norm_squared() < reach * reach));
+    }
+    let reach = if implicit { 0.0 } else { o.tool.radius };
+    for v in live.iter().filter(|_| !implicit) {
         let x = &skin[v];
         if (x - tool).norm_squared() >= reach * reach || over_active(sim, activation, v) {
             continue;
@@ -324,13 +355,34 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
     }
 
     // The core's surface, where the tool has pushed the shell aside (a deep press).
-    for &a in &sim.core_surface {
+    for &a in sim.core_surface.iter().filter(|_| !implicit) {
         if let Some(c) = o.tool.contact(&tool, &tool_v, &core.x[a], &core.v[a]) {
             ws.f_core[a] += c.force;
             tool_force -= c.force;
             report.core_contacts += 1;
             report.max_depth = report.max_depth.max(c.depth);
         }
+    }
+
+    // 5. The core.
+    core.f_ext.copy_from_slice(&ws.f_core);
+    let contact = CoreContact { sim, centre: tool, skin: &ws.reach, lift: &lift.offset, lift_scale: lift.scale(*ticks) };
+    let stepped = if implicit { step_with_potential(&sim.core, core, &mut ws.core, dt, &contact) } else { step(&sim.core, core, &mut ws.core, dt) };
+    report.core = match stepped {
+        Ok(r) => r,
+        Err(e) => {
+            for (&p, &(x, v)) in particles.active.iter().zip(&ws.save) {
+                (particles.x[p], particles.v[p]) = (x, v);
+            }
+            particles.t -= dt;
+            return Err(e);
+        }
+    };
+    if implicit {
+        let c = contact.sum(&core.x);
+        tool_force -= c.force;
+        (report.skin_contacts, report.core_contacts) = (c.skin_contacts, c.core_contacts);
+        report.max_depth = report.max_depth.max(c.max_depth);
     }
 
     // A shell off after a failure waits for the tool to let go of the organ as well as for its
@@ -341,22 +393,20 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
         *shell_off_until = (*shell_off_until).max(*ticks + 2);
     }
 
-    // 5. The core.
-    core.f_ext.copy_from_slice(&ws.f_core);
-    report.core = match step(&sim.core, core, &mut ws.core, dt) {
-        Ok(r) => r,
-        Err(e) => {
-            for (&p, &(x, v)) in particles.active.iter().zip(&ws.save) {
-                (particles.x[p], particles.v[p]) = (x, v);
-            }
-            particles.t -= dt;
-            return Err(e);
-        }
-    };
-
     // 6. The skin.
     // Near the tool every tick; everywhere every SKIN_REFRESH_TICKS ticks.
     report.skin_refreshed = update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, stamp, tool, live, skin);
+    // A shed shell's skin, lifted off its ties as the next tick's contact will see it.
+    if !lift.list.is_empty() {
+        let scale = lift.scale(*ticks + 1);
+        for &v in &lift.list {
+            let v = v as usize;
+            skin[v] = sim.skin.position_framed(v, &core.x, &ws.frames) + scale * lift.offset[v];
+        }
+        if scale == 0.0 {
+            lift.clear();
+        }
+    }
     report.force = tool_force;
     *last_tool = Some(tool);
     *ticks += 1;

@@ -1,0 +1,108 @@
+//! The tool's contact with the skin and the core's surface taken inside the core's implicit step
+//! (the incremental potential of [`crate::integrate::step_with_potential`]), used while the shell
+//! is off ([`super::SimOptions::shell_fallback`]): the tool then meets the coarse core through
+//! the skin alone.
+//!
+//! Why implicit there: held over the core's 1 ms step, the explicit penalty (60 N/m a skin
+//! vertex) on a coarse core under a deep press made the force chatter. Measured with
+//! `examples/press_sweep.rs` on the synthetic ventricle, undamped (2026-11-27): with the shell
+//! off the largest tick-to-tick change of the force was 0.69-3.18 N at the 18 points whose shell
+//! was shed, against 0.02-0.24 N with the shell on; the contact set alternated (23 <-> 61 skin
+//! vertices a tick), and a tick of a quarter of a millisecond calmed it (a time-step limit, not
+//! the tissue: a compression barrier in the core removed every inverted element and left the
+//! chatter). In the potential the contact's stiffness is part of what the step minimises, so no
+//! tick bound applies.
+//!
+//! The energy is the penalty's, `k d^2 / 2` per point (`d` the depth in the sphere, see
+//! [`super::tool`]), over the skin vertices within reach (each at its tie, a function of the
+//! core's nodes, [`super::embed::Embedding::position`]; the forces go to the nodes through the
+//! tie's exact transpose, [`super::embed::Embedding::spread`]) and the core's surface nodes. The
+//! approach damping is left out (backward Euler damps the contact's own oscillation). The tool
+//! receives minus the sum of the point forces at the end of the step.
+
+use super::sim::Sim;
+use crate::integrate::CorePotential;
+use crate::math::Vec3;
+
+/// The tool at `centre` against the skin vertices `skin` (at their ties) and the core's surface.
+pub struct CoreContact<'a> {
+    /// The compiled simulation (its tool's radius and stiffness, skin ties, core surface).
+    pub sim: &'a Sim,
+    /// The tool's centre \[m\], world frame.
+    pub centre: Vec3,
+    /// Skin vertices that may touch (indices into the outer surface).
+    pub skin: &'a [usize],
+    /// Per skin vertex, a constant offset \[m\] off its tie, times `lift_scale` (a shed shell's
+    /// skin fading back to its ties; zeros: none).
+    pub lift: &'a [Vec3],
+    pub lift_scale: f64,
+}
+
+/// The forces a [`CoreContact`] gave at the end of a step.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct CoreContactSum {
+    /// Sum of the forces on the tissue \[N\] (the tool receives the opposite).
+    pub force: Vec3,
+    /// Skin vertices and core surface nodes in contact.
+    pub skin_contacts: usize,
+    pub core_contacts: usize,
+    /// Deepest penetration \[m\].
+    pub max_depth: f64,
+}
+
+impl CoreContact<'_> {
+    /// Depth and outward normal of point `p` in the sphere, if inside.
+    #[inline]
+    fn depth(&self, p: &Vec3) -> Option<(f64, Vec3)> {
+        let r = p - self.centre;
+        let dist = r.norm();
+        let d = self.sim.options.tool.radius - dist;
+        (d > 0.0 && dist > 0.0 && d.is_finite()).then(|| (d, r / dist))
+    }
+
+    /// Visit every point in contact at core positions `x`: `(is_skin, index, depth, force on it)`.
+    fn each(&self, x: &[Vec3], mut visit: impl FnMut(bool, usize, f64, Vec3)) {
+        let k = self.sim.options.tool.stiffness;
+        for &v in self.skin {
+            if let Some((d, n)) = self.depth(&(self.sim.skin.position(v, x) + self.lift_scale * self.lift[v])) {
+                visit(true, v, d, k * d * n);
+            }
+        }
+        for &a in &self.sim.core_surface {
+            if let Some((d, n)) = self.depth(&x[a]) {
+                visit(false, a, d, k * d * n);
+            }
+        }
+    }
+
+    /// The contact's forces at core positions `x` (the end of the step).
+    pub fn sum(&self, x: &[Vec3]) -> CoreContactSum {
+        let mut s = CoreContactSum::default();
+        self.each(x, |skin, _, d, f| {
+            s.force += f;
+            if skin {
+                s.skin_contacts += 1;
+            } else {
+                s.core_contacts += 1;
+            }
+            s.max_depth = s.max_depth.max(d);
+        });
+        s
+    }
+}
+
+impl CorePotential for CoreContact<'_> {
+    fn energy_forces(&self, x: &[Vec3], f: &mut [Vec3]) -> f64 {
+        let k = self.sim.options.tool.stiffness;
+        let mut u = 0.0;
+        self.each(x, |skin, i, d, fp| {
+            u += 0.5 * k * d * d;
+            if skin {
+                self.sim.skin.spread(i, fp, x, f);
+            } else {
+                f[i] += fp;
+            }
+        });
+        u
+    }
+}
