@@ -21,6 +21,7 @@
 //! receives minus the sum of the point forces at the end of the step.
 
 use super::sim::Sim;
+use super::tool::PointContact;
 use crate::integrate::CorePotential;
 use crate::math::Vec3;
 
@@ -51,26 +52,21 @@ pub struct CoreContactSum {
 }
 
 impl CoreContact<'_> {
-    /// Depth and outward normal of point `p` in the sphere, if inside.
-    #[inline]
-    fn depth(&self, p: &Vec3) -> Option<(f64, Vec3)> {
-        let r = p - self.centre;
-        let dist = r.norm();
-        let d = self.sim.options.tool.radius - dist;
-        (d > 0.0 && dist > 0.0 && d.is_finite()).then(|| (d, r / dist))
-    }
-
-    /// Visit every point in contact at core positions `x`: `(is_skin, index, depth, force on it)`.
-    fn each(&self, x: &[Vec3], mut visit: impl FnMut(bool, usize, f64, Vec3)) {
-        let k = self.sim.options.tool.stiffness;
+    /// Visit every point in contact at core positions `x`: `(is_skin, index, contact)`, the
+    /// contact being the tool's penalty at rest ([`super::Tool::contact`] with no velocities:
+    /// the damping is left out, see the module docs).
+    fn each(&self, x: &[Vec3], mut visit: impl FnMut(bool, usize, PointContact)) {
+        let tool = &self.sim.options.tool;
+        let at_rest = Vec3::zeros();
         for &v in self.skin {
-            if let Some((d, n)) = self.depth(&(self.sim.skin.position(v, x) + self.lift_scale * self.lift[v])) {
-                visit(true, v, d, k * d * n);
+            let p = self.sim.skin.position(v, x) + self.lift_scale * self.lift[v];
+            if let Some(c) = tool.contact(&self.centre, &at_rest, &p, &at_rest) {
+                visit(true, v, c);
             }
         }
         for &a in &self.sim.core_surface {
-            if let Some((d, n)) = self.depth(&x[a]) {
-                visit(false, a, d, k * d * n);
+            if let Some(c) = tool.contact(&self.centre, &at_rest, &x[a], &at_rest) {
+                visit(false, a, c);
             }
         }
     }
@@ -78,14 +74,14 @@ impl CoreContact<'_> {
     /// The contact's forces at core positions `x` (the end of the step).
     pub fn sum(&self, x: &[Vec3]) -> CoreContactSum {
         let mut s = CoreContactSum::default();
-        self.each(x, |skin, _, d, f| {
-            s.force += f;
+        self.each(x, |skin, _, c| {
+            s.force += c.force;
             if skin {
                 s.skin_contacts += 1;
             } else {
                 s.core_contacts += 1;
             }
-            s.max_depth = s.max_depth.max(d);
+            s.max_depth = s.max_depth.max(c.depth);
         });
         s
     }
@@ -93,14 +89,13 @@ impl CoreContact<'_> {
 
 impl CorePotential for CoreContact<'_> {
     fn energy_forces(&self, x: &[Vec3], f: &mut [Vec3]) -> f64 {
-        let k = self.sim.options.tool.stiffness;
         let mut u = 0.0;
-        self.each(x, |skin, i, d, fp| {
-            u += 0.5 * k * d * d;
+        self.each(x, |skin, i, c| {
+            u += c.energy;
             if skin {
-                self.sim.skin.spread(i, fp, x, f);
+                self.sim.skin.spread(i, c.force, x, f);
             } else {
-                f[i] += fp;
+                f[i] += c.force;
             }
         });
         u

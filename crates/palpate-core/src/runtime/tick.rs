@@ -336,31 +336,31 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
     let implicit = report.shell_off || report.shell_failed;
     ws.reach.clear();
     if implicit {
-        let reach = o.tool.radius + super::tick::SKIN_LIVE_MARGIN;
+        let reach = o.tool.radius + SKIN_LIVE_MARGIN;
         ws.reach.extend(live.iter().filter(|&v| (skin[v] - tool).norm_squared() < reach * reach));
-    }
-    let reach = if implicit { 0.0 } else { o.tool.radius };
-    for v in live.iter().filter(|_| !implicit) {
-        let x = &skin[v];
-        if (x - tool).norm_squared() >= reach * reach || over_active(sim, activation, v) {
-            continue;
+    } else {
+        let reach = o.tool.radius;
+        for v in live.iter() {
+            let x = &skin[v];
+            if (x - tool).norm_squared() >= reach * reach || over_active(sim, activation, v) {
+                continue;
+            }
+            let vel = sim.skin.velocity(v, &core.x, &core.v);
+            if let Some(c) = o.tool.contact(&tool, &tool_v, x, &vel) {
+                sim.skin.spread(v, c.force, &core.x, &mut ws.f_core);
+                tool_force -= c.force;
+                report.skin_contacts += 1;
+                report.max_depth = report.max_depth.max(c.depth);
+            }
         }
-        let vel = sim.skin.velocity(v, &core.x, &core.v);
-        if let Some(c) = o.tool.contact(&tool, &tool_v, x, &vel) {
-            sim.skin.spread(v, c.force, &core.x, &mut ws.f_core);
-            tool_force -= c.force;
-            report.skin_contacts += 1;
-            report.max_depth = report.max_depth.max(c.depth);
-        }
-    }
-
-    // The core's surface, where the tool has pushed the shell aside (a deep press).
-    for &a in sim.core_surface.iter().filter(|_| !implicit) {
-        if let Some(c) = o.tool.contact(&tool, &tool_v, &core.x[a], &core.v[a]) {
-            ws.f_core[a] += c.force;
-            tool_force -= c.force;
-            report.core_contacts += 1;
-            report.max_depth = report.max_depth.max(c.depth);
+        // The core's surface, where the tool has pushed the shell aside (a deep press).
+        for &a in &sim.core_surface {
+            if let Some(c) = o.tool.contact(&tool, &tool_v, &core.x[a], &core.v[a]) {
+                ws.f_core[a] += c.force;
+                tool_force -= c.force;
+                report.core_contacts += 1;
+                report.max_depth = report.max_depth.max(c.depth);
+            }
         }
     }
 
