@@ -150,6 +150,16 @@ def run_live(loop: "_p.HapticLoop", seconds: Optional[float], on_status: Optiona
     return report
 
 
+def steal_seconds() -> Optional[float]:
+    """The machine's steal time so far [s] (all CPUs, ``/proc/stat``), or None off Linux."""
+    try:
+        with open("/proc/stat") as f:
+            fields = f.readline().split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK") if fields[0] == "cpu" and len(fields) > 8 else None
+    except (OSError, ValueError, IndexError):
+        return None
+
+
 def per_second(times_s, elapsed_s: float) -> list:
     """Counts of events per whole second of wall time since the start (``times_s`` [s])."""
     n = max(1, int(math.ceil(elapsed_s)))
@@ -170,7 +180,9 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
     repeated scripted palpation (:func:`palpation_cycle`), then (``idle``) the idle loop (no
     simulation, same device, same length) on the same clock. Returns the loop's report
     (:data:`BENCH_KEYS` and more; ``overruns_per_s``: the overruns in each second of wall time,
-    from the first 100,000 logged), with ``idle`` the idle run's and the machine's description;
+    from the first 100,000 logged; ``overruns_own`` / ``overruns_machine``: the overruns whose
+    compute alone passed the period on the CPU, and the rest, see :meth:`palpate.HapticLoop.stop`;
+    ``steal_s``: the hypervisor's steal time over the run, all CPUs), with ``idle`` the idle run's and the machine's description;
     ``realtime``: both loops' servo under ``SCHED_FIFO`` (see :class:`palpate.HapticLoop`; the
     report's ``realtime`` says whether it was granted); ``threads``: the loop's particle passes on
     that many threads (:class:`palpate.HapticLoop`; the idle loop has no physics to split);
@@ -181,7 +193,12 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
     spin = BUSY_SPIN if busy_wait else None
     loop = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz,
                          max_ticks=int(round(seconds * rate_hz)), realtime=realtime, threads=threads, spin=spin)
+    steal0 = steal_seconds()
     r = run_live(loop, None, on_status)
+    steal1 = steal_seconds()
+    # The hypervisor's share: time this VM's CPUs were ready but ran another guest (None where
+    # /proc/stat is not there). The servo cannot see it as time off the CPU.
+    r["steal_s"] = None if steal0 is None or steal1 is None else steal1 - steal0
     r["threads"] = threads
     r["busy_wait"] = busy_wait
     r["model"] = name
@@ -192,7 +209,8 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
                            max_ticks=int(round(seconds * rate_hz)), realtime=realtime, spin=spin)
         ir = run_live(il, None, None)
         r["idle"] = {key: ir[key] for key in ("ticks", "achieved_hz", "elapsed_s", "period_us_p50", "period_us_p99",
-                                              "period_us_max", "compute_us_p99", "overruns", "realtime")}
+                                              "period_us_max", "compute_us_p99", "cpu_us_p99", "overruns",
+                                              "overruns_own", "overruns_machine", "realtime")}
         r["idle"]["overruns_per_s"] = per_second(ir["overrun_times_s"], ir["elapsed_s"])
     r["cpu_count"] = os.cpu_count()
     r["machine"] = platform.processor() or platform.machine()

@@ -207,7 +207,12 @@ fn stats_dict(d: &Bound<'_, PyDict>, s: &Stats) -> PyResult<()> {
     d.set_item("compute_us_p50", s.compute_p50 * 1e6)?;
     d.set_item("compute_us_p99", s.compute_p99 * 1e6)?;
     d.set_item("compute_us_max", s.compute_max * 1e6)?;
+    d.set_item("cpu_us_p50", s.cpu_p50 * 1e6)?;
+    d.set_item("cpu_us_p99", s.cpu_p99 * 1e6)?;
+    d.set_item("cpu_us_max", s.cpu_max * 1e6)?;
     d.set_item("overruns", s.overruns)?;
+    d.set_item("overruns_own", s.own_overruns)?;
+    d.set_item("overruns_machine", s.overruns - s.own_overruns)?;
     d.set_item("overrun_times_s", s.overrun_at.iter().map(|x| x.1).collect::<Vec<f64>>())?;
     Ok(())
 }
@@ -499,8 +504,12 @@ impl PyHapticLoop {
 
     /// Stops the loop (its last act sends zero force) and returns its report: ``rate_hz``,
     /// ``achieved_hz``, ``ticks``, ``elapsed_s``, ``period_us_p50`` / ``_p99`` / ``_max``,
-    /// ``compute_us_p50`` / ``_p99`` / ``_max``, ``overruns``, ``overrun_times_s`` (wall time
-    /// since the start of each logged overrun), ``max_force_n``, ``energy_into_user_j``,
+    /// ``compute_us_p50`` / ``_p99`` / ``_max`` (wall clock), ``cpu_us_p50`` / ``_p99`` / ``_max``
+    /// (the servo thread's CPU time over the same compute: without the time the machine kept it
+    /// off the CPU), ``overruns``, ``overruns_own`` (those whose CPU time alone passed the period,
+    /// and the late ticks right after one: the physics' own), ``overruns_machine`` (the rest: the
+    /// thread kept off the CPU, or woken late), ``overrun_times_s`` (wall time since the start of
+    /// each logged overrun), ``max_force_n``, ``energy_into_user_j``,
     /// ``bad_inputs``, ``n_faults``, ``faults`` (list of dicts ``tick``, ``time``, ``reason``),
     /// ``watchdog_trips``, ``recording_dropped_ticks`` (ticks past the recording buffer, not
     /// recorded: nonzero means the recording holds only the run's beginning), ``realtime`` (the

@@ -586,6 +586,11 @@ def test_soak_and_bench_haptic_commands(capsys):
     assert r["ticks"] == 1000 and r["rate_hz"] == 2000.0
     assert r["idle"]["ticks"] == 1000
     assert r["realtime"] == "off" and r["idle"]["realtime"] == "off"
+    # Overruns split into the physics' own (CPU time past the period) and the machine's.
+    for x in (r, r["idle"]):
+        assert x["overruns_own"] + x["overruns_machine"] == x["overruns"] and x["overruns_own"] >= 0
+        assert 0 <= x["cpu_us_p99"] <= x["compute_us_p99"] * 1.0001 + 1.0
+    assert r["steal_s"] is None or r["steal_s"] >= 0
     # --realtime: SCHED_FIFO where privileged, else refused with the reason (crates/palpate-haptics/
     # tests/realtime.rs checks that a grant is real).
     assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--json", "--realtime"]) in (0, 3)

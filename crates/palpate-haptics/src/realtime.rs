@@ -75,3 +75,21 @@ pub fn current_thread_is_fifo() -> bool {
 pub fn current_thread_is_fifo() -> bool {
     false
 }
+
+/// The calling thread's CPU time \[s\] (`CLOCK_THREAD_CPUTIME_ID`): the time it ran, without the
+/// time it waited while the machine ran something else. The servo reads it around each tick's
+/// compute to tell an overrun of the physics' own work (its CPU time longer than the period)
+/// from one of the machine's (the thread off the CPU mid-tick, or woken late). `None` where the
+/// clock is unavailable.
+#[cfg(unix)]
+pub fn thread_cpu_time() -> Option<f64> {
+    let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: a valid out-pointer; the clock id is a constant of the platform.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    (rc == 0).then_some(ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9)
+}
+
+#[cfg(not(unix))]
+pub fn thread_cpu_time() -> Option<f64> {
+    None
+}

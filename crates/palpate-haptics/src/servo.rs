@@ -589,6 +589,7 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
             break;
         }
         let t0 = Instant::now();
+        let c0 = crate::realtime::thread_cpu_time();
         let sample = device.read(core.tick, core.dt);
         let mut out = core.step(sample);
         // The physics is back: beat before taking the watchdog's flag, or the watchdog would
@@ -605,15 +606,20 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
             sink.send(&out.force);
         }
         let t1 = Instant::now();
+        let c1 = crate::realtime::thread_cpu_time();
         shared.heartbeat.store(shared.now_ns().max(1), Ordering::Release);
         n += 1;
         let p = last_start.map_or(cfg.dt(), |s| (t0 - s).as_secs_f64());
         last_start = Some(t0);
         let compute = (t1 - t0).as_secs_f64();
+        let cpu = match (c0, c1) {
+            (Some(a), Some(b)) => (b - a).clamp(0.0, compute),
+            _ => compute,
+        };
         deadline += period;
         let late = t1.saturating_duration_since(deadline);
         let overrun = t1 > deadline;
-        times.push(p, compute, overrun, (t1 - start).as_secs_f64(), core.tick);
+        times.push(p, compute, cpu, overrun, (t1 - start).as_secs_f64(), core.tick);
         let snap = Snapshot {
             tick: core.tick,
             time: core.tick as f64 * core.dt,

@@ -12,7 +12,9 @@
 //! - the device's position sent straight to a stiff contact (no coupling), or a coupling spring
 //!   with the wrong sign, puts energy into the user over a press and release (`passivity_*`; the
 //!   direct rendering is checked to be active, so the measure can see it);
-//! - a hand that ignores the rendered force walks into the wall (`hand_*`).
+//! - a hand that ignores the rendered force walks into the wall (`hand_*`);
+//! - overruns told apart by their wall-clock compute alone blame the physics for the machine's
+//!   preemptions, or the machine for the physics' own work (`overruns_are_told_apart_*`).
 
 mod support;
 
@@ -527,4 +529,30 @@ fn a_busy_waiting_servo_keeps_its_deadlines() {
     assert!(report.stats.elapsed >= 0.1995, "ran ahead of its rate: {} s for 400 ticks", report.stats.elapsed);
     assert!(ServoConfig { spin: 1.5, ..Default::default() }.check().is_err());
     assert!(ServoConfig { spin: f64::NAN, ..Default::default() }.check().is_err());
+}
+
+/// An overrun is the physics' own when the tick's CPU time alone passed the period: a tick that
+/// works 5 ms on the CPU is one; a tick kept 5 ms off the CPU (a sleep: what a preemption looks
+/// like to the servo) overruns as much by the wall clock and is the machine's.
+#[test]
+fn overruns_are_told_apart_by_the_servo_threads_cpu_time() {
+    let run = |burn: bool| {
+        let mut faulty = Faulty::new(wall(), 20);
+        if burn {
+            faulty.burn = Some(Duration::from_millis(5));
+        } else {
+            faulty.stall = Some(Duration::from_millis(5));
+        }
+        let dev = Pressing { z: |_t: f64| 0.01, sink: Arc::new(LogSink::default()), ticks: 60 };
+        let cfg = ServoConfig { safety: Some(fast_ramp()), ..Default::default() };
+        let core = HapticCore::with_config(Box::new(faulty), &cfg, &dev).unwrap();
+        Servo::start(core, Box::new(dev), &cfg).unwrap().join().stats
+    };
+    let slept = run(false);
+    assert!(slept.overruns >= 1 && slept.compute_max >= 5e-3, "{slept:?}");
+    assert_eq!(slept.own_overruns, 0, "a tick off the CPU is the machine's: {slept:?}");
+    assert!(slept.cpu_max < 1e-3, "{slept:?}");
+    let burnt = run(true);
+    assert!(burnt.own_overruns >= 1 && burnt.cpu_max >= 5e-3, "a tick working past its period is its own: {burnt:?}");
+    assert!(burnt.own_overruns <= burnt.overruns);
 }

@@ -227,8 +227,9 @@ def cmd_bench_haptic(a) -> int:
               f"{r['threads']} thread{'s' if r['threads'] > 1 else ''}{'; busy-wait' if r['busy_wait'] else ''})")
         def row(label, x):
             print(f"  {label:<7} ticks {x['ticks']:>7}  {x['achieved_hz']:8.1f} Hz  period p50 {x['period_us_p50']:7.1f} "
-                  f"p99 {x['period_us_p99']:8.1f} max {x['period_us_max']:8.1f} us  compute p99 {x['compute_us_p99']:8.1f} us  "
-                  f"overruns {x['overruns']}")
+                  f"p99 {x['period_us_p99']:8.1f} max {x['period_us_max']:8.1f} us  compute p99 {x['compute_us_p99']:8.1f} us "
+                  f"(on the CPU {x['cpu_us_p99']:8.1f})  overruns {x['overruns']} (own {x['overruns_own']}, "
+                  f"the machine's {x['overruns_machine']})")
         row("haptic", r)
         if "idle" in r:
             row("idle", r["idle"])

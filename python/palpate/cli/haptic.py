@@ -153,7 +153,7 @@ def cmd_haptic(a) -> int:
         print()
     print(f"  {r['ticks']} ticks in {r['elapsed_s']:.2f} s ({r['achieved_hz']:.1f} Hz): period p50 {r['period_us_p50']:.0f} us, "
           f"p99 {r['period_us_p99']:.0f} us, max {r['period_us_max']:.0f} us; compute p99 {r['compute_us_p99']:.0f} us; "
-          f"overruns {r['overruns']}; max force {r['max_force_n']:.3f} N; faults {r['n_faults']}")
+          f"overruns {r['overruns']} (own {r['overruns_own']}, the machine's {r['overruns_machine']}); max force {r['max_force_n']:.3f} N; faults {r['n_faults']}")
     for f in r["faults"][:10]:
         print(f"  fault at tick {f['tick']} (t = {f['time']:.3f} s): {f['reason']}")
     if a.realtime:

@@ -47,7 +47,7 @@ def cmd_soak(a) -> int:
     else:
         print(f"palpate soak: {name}, {a.minutes:g} min at {a.rate:g} Hz (seed {a.seed}): {r['ticks']} ticks, "
               f"{r['achieved_hz']:.1f} Hz achieved; period p99 {r['period_us_p99']:.0f} us, max {r['period_us_max']:.0f} us; "
-              f"overruns {r['overruns']}; max force {r['max_force_n']:.3f} N; energy into the user "
+              f"overruns {r['overruns']} (own {r['overruns_own']}, the machine's {r['overruns_machine']}); max force {r['max_force_n']:.3f} N; energy into the user "
               f"{r['energy_into_user_j']:.3e} J; faults {r['n_faults']}")
         for f in r["faults"][:10]:
             print(f"  fault at tick {f['tick']} (t = {f['time']:.3f} s): {f['reason']}", file=sys.stderr)

@@ -61,6 +61,9 @@ pub struct Faulty<P: Physics> {
     pub inner: P,
     pub at: u64,
     pub stall: Option<Duration>,
+    /// Work on the CPU this long at tick `at` (the thread's CPU clock, so the time is the
+    /// physics' own however busy the machine is).
+    pub burn: Option<Duration>,
     pub nan: bool,
     pub corrupt: Option<fn(&mut P)>,
     pub bad_state_from: Option<u64>,
@@ -73,7 +76,7 @@ pub struct Faulty<P: Physics> {
 
 impl<P: Physics> Faulty<P> {
     pub fn new(inner: P, at: u64) -> Faulty<P> {
-        Faulty { inner, at, stall: None, nan: false, corrupt: None, bad_state_from: None, ticks: 0, since_restore: 0, stalled_at: Arc::default(), restores: Arc::default() }
+        Faulty { inner, at, stall: None, burn: None, nan: false, corrupt: None, bad_state_from: None, ticks: 0, since_restore: 0, stalled_at: Arc::default(), restores: Arc::default() }
     }
 }
 
@@ -86,6 +89,12 @@ impl<P: Physics> Physics for Faulty<P> {
             if let Some(d) = self.stall {
                 *self.stalled_at.lock().unwrap() = Some(Instant::now());
                 std::thread::sleep(d);
+            }
+            if let Some(d) = self.burn {
+                let c0 = palpate_haptics::realtime::thread_cpu_time().expect("a thread CPU clock");
+                while palpate_haptics::realtime::thread_cpu_time().unwrap() - c0 < d.as_secs_f64() {
+                    std::hint::spin_loop();
+                }
             }
             if let Some(corrupt) = self.corrupt {
                 corrupt(&mut self.inner);
