@@ -155,6 +155,40 @@ def test_the_rodero_ventricle_survives_a_15_mm_press_and_a_press_toward_2_n(lv_p
     assert np.isfinite(sim.surface).all() and np.isfinite(sim.particle_positions()).all()
 
 
+def test_a_hard_press_held_on_rodero_does_not_chatter(lv_path, material):
+    """The tool pressed 11.35 mm in and held near the Rodero ventricle's base (examples/
+    press_sweep.rs's probe at 4/5 of the height, 3.44 rad), where the wall is thinner than a
+    particle layer under part of the skin: those skin vertices move with the core, and their
+    contact, held over the core's 1 ms step as an explicit force, made the force alternate tick
+    by tick (2.2 <-> 4.8 N, median change 1.3 N a tick, as long as the tool was held). Taken
+    inside the core's implicit step it settles: over 200 ticks of the hold (undamped tissue) the
+    median change is under 0.01 N a tick and the largest 0.14 N, once (asserted: 0.03 and 0.3 N,
+    where the chatter gave ~1.3 N and ~2.5 N)."""
+    m = palpate.build_shape("rodero")
+    sim = palpate.HybridSim(m, material)
+    outer = m.outer_points
+    lo, hi = outer.min(axis=0), outer.max(axis=0)
+    z, theta = lo[2] + 0.8 * (hi[2] - lo[2]), np.pi + 0.3
+    c = outer.mean(axis=0)
+    u = np.array([np.cos(theta), np.sin(theta), 0.0])
+    d = outer - c
+    side = d - np.outer(d @ u, u)
+    off_ray = side[:, 0] ** 2 + side[:, 1] ** 2 + (outer[:, 2] - z) ** 2
+    p = outer[np.argmin(np.where(d @ u > 0, off_ray, np.inf))]
+    r = sim.tool_radius
+    forces = []
+    for k in range(328 + 250):
+        depth = min(11.35e-3, -5e-3 + 5e-5 * k)  # 50 mm/s from 5 mm outside, then held
+        f = sim.step(p + u * (r - depth))
+        assert np.isfinite(f).all()
+        forces.append(np.linalg.norm(f))
+    assert not sim.last["shell_off"], "the shell carries the press (it is not shed)"
+    hold = np.array(forces[-200:])
+    assert hold.min() > 1.0, hold.min()  # a hard press: 2-3 N
+    change = np.abs(np.diff(hold))
+    assert np.median(change) < 0.03 and change.max() < 0.3, (np.median(change), change.max())
+
+
 def test_a_failed_shell_is_shed_and_the_press_goes_on(ventricle, material):
     """``shell_fallback`` (default True): a shell under-stepped by its cap (3 sub-steps a tick
     where it needs ~12) diverges under a 3 mm press; the tick goes on with the core and the skin

@@ -98,7 +98,7 @@ fn core_contact_forces_are_minus_the_gradient_of_its_energy() {
         let reach: Vec<usize> = (0..sim.hybrid.outer_points.len()).filter(|&v| (sim.skin.position(v, &x) - centre).norm() < r + 5e-3).collect();
         // A lift as a shed shell leaves the skin (constant offsets: the gradient holds with them).
         let lift: Vec<Vec3> = (0..sim.hybrid.outer_points.len()).map(|v| if v % 3 == 0 { 3e-4 * rng.vec() } else { Vec3::zeros() }).collect();
-        let contact = CoreContact { sim: &sim, centre, skin: &reach, lift: &lift, lift_scale: 0.7 };
+        let contact = CoreContact { sim: &sim, centre, skin: &reach, core: &sim.core_surface, lift: &lift, lift_scale: 0.7 };
         let mut f = vec![Vec3::zeros(); x.len()];
         let u = contact.energy_forces(&x, &mut f);
         let sum = contact.sum(&x);

@@ -8,8 +8,8 @@
 //!   hysteresis, and the particles that entered and left;
 //! - [`confinement`]: the elastic wall that keeps the active particles inside the union of their
 //!   regions (the paper's B(p_s) gradient field, computed locally);
-//! - [`core_contact`]: the tool against the skin and the core's surface inside the core's
-//!   implicit step, while the shell is off;
+//! - [`core_contact`]: the tool against what moves with the core (the skin no particle carries,
+//!   the core's surface) inside the core's implicit step;
 //! - [`coupling`]: damped springs between the first-layer active particles and their core faces,
 //!   momentum-exact (where and why this departs from the paper: see the module);
 //! - [`stability`]: how many particle sub-steps a tick needs (stretch, springs, contact);

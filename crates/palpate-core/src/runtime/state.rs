@@ -524,8 +524,11 @@ pub struct SimWorkspace {
     pub(crate) placed: Vec<u64>,
     /// Skin vertices over active triangles within the tool's reach this tick.
     pub(crate) near: Vec<usize>,
-    /// Skin vertices within reach of the tool for the core's implicit contact (shell off).
+    /// Skin vertices and core surface nodes within reach of the tool for the core's implicit
+    /// contact; the near skin vertices no particle carries (weightless: at their ties).
     pub(crate) reach: Vec<usize>,
+    pub(crate) core_reach: Vec<usize>,
+    pub(crate) uncarried: Vec<usize>,
     /// Start-of-tick positions and velocities of the active particles (rollback).
     pub(crate) save: Vec<(Vec3, Vec3)>,
     /// Per particle, the tool contact's Gershgorin row sum `sum_v w_p / (W_v m_p)` \[1/kg\]
@@ -573,7 +576,9 @@ impl SimWorkspace {
             placed: vec![0; n],
             save: Vec::with_capacity(n),
             near: Vec::with_capacity(sim.hybrid.outer_points.len()),
-            reach: Vec::with_capacity(sim.hybrid.outer_points.len()),
+            reach: Vec::with_capacity(2 * sim.hybrid.outer_points.len()),
+            core_reach: Vec::with_capacity(sim.core_surface.len()),
+            uncarried: Vec::with_capacity(sim.hybrid.outer_points.len()),
             contact_share: vec![0.0; n],
             tie_x: vec![Vec3::zeros(); n],
             tie_v: vec![Vec3::zeros(); n],
