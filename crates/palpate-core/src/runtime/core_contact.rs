@@ -1,9 +1,9 @@
 //! The tool's contact with what moves with the core, taken inside the core's implicit step (the
 //! incremental potential of [`crate::integrate::step_with_potential`]): the skin where no
 //! particle carries it and the core's surface. With the shell on, those are the skin vertices
-//! over no active particle or over particles that give them no weight (where the shell is
-//! thinner than a particle layer: near the Rodero ventricle's base), and the core's surface where
-//! the tool has pushed the shell aside; with the shell off ([`super::SimOptions::shell_fallback`])
+//! over no active particle or with no particle under their carrier triangles
+//! ([`super::sim::SkinCarriers`]), and the core's surface where the tool has pushed the shell
+//! aside; with the shell off ([`super::SimOptions::shell_fallback`])
 //! the tool meets the coarse core through the skin alone.
 //!
 //! Why implicit: held over the core's 1 ms step, the explicit penalty (60 N/m a skin vertex) on

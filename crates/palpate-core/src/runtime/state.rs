@@ -582,9 +582,9 @@ impl SimWorkspace {
             contact_share: vec![0.0; n],
             tie_x: vec![Vec3::zeros(); n],
             tie_v: vec![Vec3::zeros(); n],
-            // Each particle lies under one outer triangle, whose three vertices may be near.
+            // Each particle carries the vertices its triangle is a carrier of (SkinCarriers).
             near_ptr: Vec::with_capacity(sim.hybrid.outer_points.len() + 1),
-            near_items: Vec::with_capacity(3 * n),
+            near_items: Vec::with_capacity(sim.skin_carriers.max_items.max(3 * n)),
             near_base: Vec::with_capacity(sim.hybrid.outer_points.len()),
             to_core: vec![Vec3::zeros(); n],
             frames: vec![None; sim.hybrid.core_faces.len()],

@@ -331,14 +331,14 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
     }
 
     // 4. The tool against what moves with the core: the skin where no particle carries it (over
-    // no active particle, or over particles that give it no weight: where the shell is thinner
-    // than a particle layer) and the core's surface (where the tool has pushed the shell aside).
+    // no active particle, or with no particle under its carrier triangles: see SkinCarriers) and
+    // the core's surface (where the tool has pushed the shell aside).
     // That contact is taken inside the core's implicit step (super::core_contact): held over the
     // 1 ms step as an explicit force it chattered, with the shell off (after a failure) and with
     // it on (measured on the Rodero ventricle, `examples/press_sweep.rs`, the paper's damping, the
     // tool held 11.35 mm in at the 75.8 mm, 3.44 rad probe, 2026-11-27: the force alternated
-    // between 2.2 and 4.8 N tick by tick, median change 1.3 N a tick, through the skin vertices
-    // over weightless particles; with their contact in the step, at most 0.014 N a tick).
+    // between 2.2 and 4.8 N tick by tick, median change 1.3 N a tick, through skin vertices no
+    // particle carried; with their contact in the step, at most 0.014 N a tick).
     let implicit = report.shell_off || report.shell_failed;
     ws.reach.clear();
     ws.core_reach.clear();
@@ -485,12 +485,15 @@ fn near_lists(sim: &Sim, activation: &Activation, core_x: &[Vec3], core_v: &[Vec
     ws.near.truncate(kept);
 }
 
-/// The particles under outer vertex `v`'s active triangles with their weights in its placement:
-/// each tie's squared depth over its core face, so that the outermost particles, just under the
-/// skin, count most.
+/// The particles that carry outer vertex `v` over an active zone (none unless one of its own
+/// triangles is active): those under its active carrier triangles ([`super::sim::SkinCarriers`]:
+/// its own triangles, or, where none has a particle under it, the next rings'), with their weights
+/// in its placement: each tie's squared depth over its core face, so that the outermost
+/// particles, just under the skin, count most.
 fn skin_weights<'a>(sim: &'a Sim, activation: &'a Activation, v: usize) -> impl Iterator<Item = (usize, f64)> + 'a {
     let h = &sim.hybrid;
-    h.outer_adjacency.vertex_tris.get(v).iter().filter(|&&t| activation.is_triangle_active(t)).flat_map(move |&t| {
+    let carriers = if over_active(sim, activation, v) { sim.skin_carriers.get(v) } else { &[] };
+    carriers.iter().filter(|&&t| activation.is_triangle_active(t)).flat_map(move |&t| {
         (h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize).map(move |p| (p, sim.particle_tie.offsets()[p].norm_squared()))
     })
 }
