@@ -168,7 +168,7 @@ impl PyHybridSim {
     }
 
     /// The last tick's statistics: ``force`` (3,) [N], ``particle_contacts`` (skin vertices in
-    /// contact over active particles), ``skin_contacts`` (over the core alone), ``core_contacts``, ``max_depth_m``, ``active``, ``entered``, ``left``, ``substeps``,
+    /// contact over active particles), ``skin_contacts`` (those no particle carries: the core takes their force), ``core_contacts``, ``max_depth_m``, ``active``, ``entered``, ``left``, ``substeps``,
     /// ``confined``, ``core_iterations``, ``shell_failed`` (the shell's step failed and was shed:
     /// see ``shell_fallback``) and ``shell_off`` (the shell was off, within its pause).
     #[getter]

@@ -59,7 +59,8 @@ pub struct TickReport {
     /// skin, or all of it at once: see `LiveSkin`); the ones near the tool are not counted.
     pub skin_refreshed: usize,
     /// Skin vertices in contact over active particles (most over the sub-steps; the particles
-    /// under them carry the force), and over the core alone.
+    /// under them carry the force), and those no particle carries (at their ties: the core
+    /// takes the force, inside its step).
     pub particle_contacts: usize,
     pub skin_contacts: usize,
     /// Core surface nodes in contact (a press deeper than the shell).
