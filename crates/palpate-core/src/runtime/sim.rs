@@ -164,7 +164,12 @@ impl SkinCarriers {
     pub fn new(h: &HybridModel) -> SkinCarriers {
         let n = h.outer_points.len();
         let adj = &h.outer_adjacency.vertex_tris;
-        let count = |t: usize| (h.tri_particle_ptr[t + 1] - h.tri_particle_ptr[t]) as usize;
+        // (A damaged table, which a model file's check refuses, counts as no particle.)
+        let ptr = &h.tri_particle_ptr;
+        let count = |t: usize| match (ptr.get(t), ptr.get(t + 1)) {
+            (Some(&a), Some(&b)) => b.saturating_sub(a) as usize,
+            _ => 0,
+        };
         let (mut ptr, mut tris, mut max_items) = (Vec::with_capacity(n + 1), Vec::new(), 0);
         ptr.push(0u32);
         let (mut seen, mut ring, mut next) = (vec![false; h.outer_tris.len()], Vec::new(), Vec::new());
