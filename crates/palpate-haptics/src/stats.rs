@@ -56,7 +56,6 @@ impl TickTimes {
     /// tick `tick`. An overrun is the physics' own when `cpu` alone is longer than the period
     /// (`1 / rate_hz`: on a core of its own it would still have overrun), or when it follows an
     /// own overrun with no tick on time between (it started late for that reason).
-    #[allow(clippy::too_many_arguments)]
     pub fn push(&mut self, period: f64, compute: f64, cpu: f64, overrun: bool, at: f64, tick: u64) {
         if self.period.len() < self.cap {
             self.period.push(period as f32);

@@ -13,6 +13,7 @@ use crate::hybrid::HybridModel;
 use crate::material::Material;
 use crate::math::Vec3;
 use crate::mesh::TetMesh;
+use crate::spatial::csr::Buckets;
 use crate::meshfree::{ParticleModel, ParticleModelBuilder};
 use crate::Integrator;
 
@@ -129,9 +130,8 @@ pub struct Sim {
     pub skin_face_reach: Vec<(f64, f64)>,
     /// The shell's mass carried by each core node \[kg\] `(n_core_nodes)` (in `core`'s masses).
     pub shell_mass: Vec<f64>,
-    /// The skin's carriers: per outer vertex `v`, `skin_carrier_tris[skin_carrier_ptr[v]..
-    /// skin_carrier_ptr[v + 1]]` are the outer triangles whose particles carry it over an active
-    /// zone ([`SkinCarriers`]).
+    /// The skin's carriers: per outer vertex `v`, `skin_carriers.get(v)` are the outer triangles
+    /// whose particles carry it over an active zone ([`SkinCarriers`]).
     pub skin_carriers: SkinCarriers,
     pub options: SimOptions,
 }
@@ -150,8 +150,8 @@ pub struct Sim {
 /// untouched by them.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SkinCarriers {
-    pub ptr: Vec<u32>,
-    pub tris: Vec<u32>,
+    /// Per outer vertex, its carrier triangles.
+    pub tris: Buckets,
     /// The most `(particle, weight)` items all vertices together can give (the tick's buffer).
     pub max_items: usize,
 }
@@ -170,14 +170,15 @@ impl SkinCarriers {
             (Some(&a), Some(&b)) => b.saturating_sub(a) as usize,
             _ => 0,
         };
-        let (mut ptr, mut tris, mut max_items) = (Vec::with_capacity(n + 1), Vec::new(), 0);
-        ptr.push(0u32);
-        let (mut seen, mut ring, mut next) = (vec![false; h.outer_tris.len()], Vec::new(), Vec::new());
+        let (mut offsets, mut tris, mut max_items) = (Vec::with_capacity(n + 1), Vec::new(), 0);
+        offsets.push(0u32);
+        let (mut seen, mut ring, mut next, mut all) = (vec![false; h.outer_tris.len()], Vec::new(), Vec::new(), Vec::new());
         for v in 0..n {
             ring.clear();
             ring.extend(adj.get(v).iter().map(|&t| t as usize));
             ring.iter().for_each(|&t| seen[t] = true);
-            let mut all = ring.clone();
+            all.clear();
+            all.extend_from_slice(&ring);
             for _ in 0..Self::MAX_RINGS {
                 let start = tris.len();
                 tris.extend(ring.iter().filter(|&&t| count(t) > 0).map(|&t| t as u32));
@@ -200,15 +201,15 @@ impl SkinCarriers {
                 std::mem::swap(&mut ring, &mut next);
             }
             all.iter().for_each(|&t| seen[t] = false);
-            ptr.push(tris.len() as u32);
+            offsets.push(tris.len() as u32);
         }
-        SkinCarriers { ptr, tris, max_items }
+        SkinCarriers { tris: Buckets { ptr: offsets, items: tris }, max_items }
     }
 
     /// The carrier triangles of outer vertex `v`.
     #[inline]
     pub fn get(&self, v: usize) -> &[u32] {
-        &self.tris[self.ptr[v] as usize..self.ptr[v + 1] as usize]
+        self.tris.get(v)
     }
 }
 
@@ -282,7 +283,8 @@ impl Sim {
     pub fn skin_positions(&self, state: &SimState, out: &mut [Vec3]) {
         let x = &state.core.x;
         for (i, o) in out.iter_mut().enumerate() {
-            *o = super::tick::skin_over_particles(self, &state.activation, i, &state.particles.x, x, None).unwrap_or_else(|| self.skin.position(i, x));
+            let carried = if super::tick::over_active(self, &state.activation, i) { super::tick::skin_over_particles(self, &state.activation, i, &state.particles.x, x, None) } else { None };
+            *o = carried.unwrap_or_else(|| self.skin.position(i, x));
         }
     }
 

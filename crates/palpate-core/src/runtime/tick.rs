@@ -436,7 +436,7 @@ fn substeps(sim: &Sim, particles: &meshfree::ParticleState, ws: &mut SimWorkspac
 }
 
 /// Is outer vertex `v` on a triangle with active particles?
-fn over_active(sim: &Sim, activation: &Activation, v: usize) -> bool {
+pub(crate) fn over_active(sim: &Sim, activation: &Activation, v: usize) -> bool {
     sim.hybrid.outer_adjacency.vertex_tris.get(v).iter().any(|&t| activation.is_triangle_active(t))
 }
 
@@ -486,22 +486,21 @@ fn near_lists(sim: &Sim, activation: &Activation, core_x: &[Vec3], core_v: &[Vec
     ws.near.truncate(kept);
 }
 
-/// The particles that carry outer vertex `v` over an active zone (none unless one of its own
-/// triangles is active): those under its active carrier triangles ([`super::sim::SkinCarriers`]:
-/// its own triangles, or, where none has a particle under it, the next rings'), with their weights
-/// in its placement: each tie's squared depth over its core face, so that the outermost
-/// particles, just under the skin, count most.
+/// The particles that carry outer vertex `v` (one of whose own triangles is active: every
+/// caller asks only for such vertices) over an active zone: those under its active carrier
+/// triangles ([`super::sim::SkinCarriers`]: its own triangles, or, where none has a particle under
+/// it, the next rings'), with their weights in its placement: each tie's squared depth over its
+/// core face, so that the outermost particles, just under the skin, count most.
 fn skin_weights<'a>(sim: &'a Sim, activation: &'a Activation, v: usize) -> impl Iterator<Item = (usize, f64)> + 'a {
     let h = &sim.hybrid;
-    let carriers = if over_active(sim, activation, v) { sim.skin_carriers.get(v) } else { &[] };
-    carriers.iter().filter(|&&t| activation.is_triangle_active(t)).flat_map(move |&t| {
+    sim.skin_carriers.get(v).iter().filter(|&&t| activation.is_triangle_active(t)).flat_map(move |&t| {
         (h.tri_particle_ptr[t as usize] as usize..h.tri_particle_ptr[t as usize + 1] as usize).map(move |p| (p, sim.particle_tie.offsets()[p].norm_squared()))
     })
 }
 
-/// Where outer vertex `v` is, over active triangles: its tie to the core moved by the weighted
-/// mean displacement of the particles under it from their own ties ([`skin_weights`]); `None`
-/// over no active triangle. (The sub-steps place the near vertices the same way through
+/// Where outer vertex `v` is, over active triangles (the caller checks that it is: [`over_active`]):
+/// its tie to the core moved by the weighted mean displacement of the particles that carry it
+/// from their own ties ([`skin_weights`]); `None` when no active particle carries it. (The sub-steps place the near vertices the same way through
 /// [`NearLists`], with the ties computed once a tick.) With the core's face `frames` at `core_x`
 /// ([`embed::face_frames`]), the ties take them instead of computing a frame per particle.
 pub(crate) fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, x: &[Vec3], core_x: &[Vec3], frames: Option<&[Option<Mat3>]>) -> Option<Vec3> {
