@@ -47,7 +47,8 @@ the tool at the script's position for the end of the tick, and writes to ``out_d
 - ``force.csv``: per tick ``t`` [s], tool ``x, y, z`` [m] (commanded), ``depth`` [m],
   ``fx, fy, fz, f`` [N] (force on the tool, its magnitude), ``fn`` [N] (its component along the
   outward normal: positive when the tissue pushes back), ``active`` (active particles),
-  ``contacts`` (skin vertices in contact), ``core_contacts``, ``substeps``, ``tick_ms`` (wall
+  ``contacts`` (skin vertices in contact), ``core_contacts`` (1 when the tool touches the core's
+  surface), ``substeps``, ``tick_ms`` (wall
   time of ``sim.step``);
 - ``force.png``: normal force against depth, force against time;
 - ``touch.pvd`` and ``surface_NNNNN.vtu`` (triangles; point data ``displacement`` [m]),

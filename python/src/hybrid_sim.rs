@@ -168,7 +168,7 @@ impl PyHybridSim {
     }
 
     /// The last tick's statistics: ``force`` (3,) [N], ``particle_contacts`` (skin vertices in
-    /// contact over active particles), ``skin_contacts`` (those no particle carries: the core takes their force), ``core_contacts``, ``max_depth_m``, ``active``, ``entered``, ``left``, ``substeps``,
+    /// contact over active particles), ``skin_contacts`` (those no particle carries: the core takes their force), ``core_contacts`` (1 when the tool touches the core's surface), ``max_depth_m``, ``active``, ``entered``, ``left``, ``substeps``,
     /// ``confined``, ``core_iterations``, ``shell_failed`` (the shell's step failed and was shed:
     /// see ``shell_fallback``) and ``shell_off`` (the shell was off, within its pause).
     #[getter]
@@ -263,7 +263,8 @@ impl PyHybridSim {
     }
 
     /// The options the simulation was made with: ``tool_radius`` [m], ``tool_stiffness`` [N/m],
-    /// ``tool_damping`` [N s/m], ``activation_margin`` [m], ``max_tool_step`` [m],
+    /// ``tool_damping`` [N s/m], ``core_contact_stiffness`` [N/m] (the tool against the core's
+    /// surface), ``activation_margin`` [m], ``max_tool_step`` [m],
     /// ``linger_ticks``, ``max_substeps``, ``hold``, ``mass_scaling`` (the quantile), the resolved
     /// ``coupling_stiffness`` [N/m], ``coupling_damping`` [N s/m] and ``confinement_stiffness``
     /// [N/m], and what the mass scaling did: ``mass_scaling_applied``, ``added_mass_fraction``
@@ -275,6 +276,7 @@ impl PyHybridSim {
         d.set_item("tool_radius", o.tool.radius)?;
         d.set_item("tool_stiffness", o.tool.stiffness)?;
         d.set_item("tool_damping", o.tool.damping)?;
+        d.set_item("core_contact_stiffness", o.core_contact_stiffness)?;
         d.set_item("activation_margin", o.activation_margin)?;
         d.set_item("max_tool_step", o.max_tool_step)?;
         d.set_item("linger_ticks", o.linger_ticks)?;

@@ -24,7 +24,7 @@ fn main() {
     let el = Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 };
     println!("{which}: {} particles, spacing {:.2} mm", m.particles.len(), m.spacing * 1e3);
     println!("quantile  bound(1/s^2)  omega^2(power)  sub damped  sub undamped  scaled  added  max factor  build s");
-    for q in [None, Some(0.999), Some(0.99), Some(0.98), Some(0.95), Some(0.9), Some(0.8)] {
+    for q in [None, Some(0.999), Some(0.99), Some(0.98), Some(0.95), Some(0.9), Some(0.8), Some(0.7), Some(0.5)] {
         let mut row = Vec::new();
         for damped in [true, false] {
             let mat = Material::new(el, 1000.0, if damped { Damping::from_paper(0.5, 0.5) } else { Damping::NONE }).unwrap();

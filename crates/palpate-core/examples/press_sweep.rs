@@ -7,9 +7,12 @@
 //!
 //! `cargo run --release --example press_sweep -- [ventricle|ellipsoids|MODEL_FILE] [damped] [nofallback]`
 //! (`POINT=zi,ti` runs one point: height `zi` in 1..=4, angle `ti` in 0..6; `TRACE=1` prints
-//! each tick's force, sub-steps, active set and contacts; `TOOL_K`, `TOOL_C`: the contact's
+//! each tick's force, sub-steps, active set and contacts, `TRACE=2` also the skin vertices inside
+//! the tool, `TRACE=3` the core's surface contact; `TOOL_K`, `TOOL_C`: the contact's
 //! stiffness \[N/m\] and damping \[N s/m\] per point; `HOLD_MM`: press to that depth and
-//! hold, whatever the force)
+//! hold, whatever the force). Per point it also prints how far the force along the press fell
+//! below its running maximum while the tool went on in ("gave way": the organ letting the tool
+//! through, a slope the tool slid down, or a hollow wall caving in).
 //!
 //! Measured 2026-11-26 on the synthetic ventricle, undamped: 18 of the 24 shells failed (from
 //! 17-20 mm of travel at mid-height, from 6-11 mm beside the held base); see
@@ -34,6 +37,11 @@ struct Outcome {
     jump_off: f64,
     /// Largest change over the shed tick and the 10 after it.
     jump_shed: f64,
+    /// The press's force along its direction at the end, and the largest fall of that force
+    /// below its running maximum while the tool went on pressing in (the organ giving way under
+    /// the tool: a tool that slips through the surface).
+    f_end: f64,
+    gave_way: f64,
     error: Option<String>,
 }
 
@@ -56,7 +64,8 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
     let r = sim.options.tool.radius;
     let mut st = SimState::rest(sim);
     let mut ws = SimWorkspace::new(sim);
-    let mut o = Outcome { fmax: 0.0, most_substeps: 0, shed: vec![], off: 0, jump: 0.0, jump_off: 0.0, jump_shed: 0.0, error: None };
+    let mut o = Outcome { fmax: 0.0, most_substeps: 0, shed: vec![], off: 0, jump: 0.0, jump_off: 0.0, jump_shed: 0.0, f_end: 0.0, gave_way: 0.0, error: None };
+    let mut f_top = 0.0f64;
     // From 5 mm outside the probe vertex: a tool starting tangent to it is already up to 4 mm
     // into the skin beside it where the surface slants (the Rodero ventricle), a first-tick
     // jump of the script, not of the tissue.
@@ -73,11 +82,30 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
                     let core_mm = near.iter().map(|&a| along(&st.core.x[a])).sum::<f64>() / near.len().max(1) as f64;
                     let close: Vec<usize> = st.particles.active.iter().copied().filter(|&q| (st.particles.x[q] - c).norm() < 1.5 * r).collect();
                     let part_mm = close.iter().map(|&q| along(&st.particles.x[q])).sum::<f64>() / close.len().max(1) as f64;
+                    if std::env::var("TRACE").as_deref() == Ok("3") {
+                        let faces: Vec<usize> = (0..sim.hybrid.core_faces.len()).collect();
+                        let cc = palpate_core::runtime::CoreContact { sim, centre: c, skin: &[], core: &faces, lift: &[], lift_scale: 0.0 };
+                        if let Some((t, w, pc)) = cc.surface(&st.core.x) {
+                            let [a, b, cn] = sim.hybrid.core_faces[t];
+                            let nf = (st.core.x[b] - st.core.x[a]).cross(&(st.core.x[cn] - st.core.x[a])).normalize();
+                            println!("    core face {t} {:?} w {:.3?} depth {:.2} mm dir {:.2?} face normal {:.2?} press {:.2?}", [a, b, cn], w, pc.depth * 1e3, pc.normal.as_slice(), nf.as_slice(), n.as_slice());
+                        }
+                    }
+                    if std::env::var("TRACE").as_deref() == Ok("2") {
+                        for (v, x) in st.skin.iter().enumerate() {
+                            let d = x - c;
+                            if d.norm() < r {
+                                let a = d.dot(&n);
+                                println!("    skin {v}: along {:.2} mm, lateral {:.2} mm, depth {:.2} mm", a * 1e3, (d - n * a).norm() * 1e3, (r - d.norm()) * 1e3);
+                            }
+                        }
+                    }
                     print!("  core {core_mm:.3} mm ({} nodes), particles {part_mm:.3} mm ({}),", near.len(), close.len());
                     println!(
-                        "  tick {k} depth {:.2} mm: force {:.3} N, sub-steps {}, active {} (+{} -{}), contacts {}+{}+{}, confined {}, max depth {:.2} mm{}{}",
+                        "  tick {k} depth {:.2} mm: force {:.3} N (along the press {:.3} N), sub-steps {}, active {} (+{} -{}), contacts {}+{}+{}, confined {}, max depth {:.2} mm{}{}",
                         depth * 1e3,
                         rep.force.norm(),
+                        -rep.force.dot(&n),
                         rep.substeps,
                         rep.active,
                         rep.entered,
@@ -101,6 +129,10 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
                     *j = j.max((rep.force - f0).norm());
                 }
                 last = Some(rep.force);
+                let along = -rep.force.dot(&n);
+                f_top = f_top.max(along);
+                o.gave_way = o.gave_way.max(f_top - along);
+                o.f_end = along;
                 o.fmax = o.fmax.max(rep.force.norm());
                 o.most_substeps = o.most_substeps.max(rep.substeps);
                 // HOLD_MM: press to that depth and hold it, whatever the force (no feedback).
@@ -153,10 +185,12 @@ fn main() {
             failed += (!o.shed.is_empty() || o.error.is_some()) as usize;
             let shed: Vec<String> = o.shed.iter().map(|(k, d)| format!("{k} ({:.1} mm)", d * 1e3)).collect();
             println!(
-                "z {:5.1} mm, theta {:.2}: max force {:.3} N, most sub-steps {:2}, shell shed at ticks [{}], {} ticks off, largest force change {:.3} N (at the shed: {:.3} N, shell off: {:.3} N){}",
+                "z {:5.1} mm, theta {:.2}: max force {:.3} N (at the end {:.3} N, gave way by {:.3} N), most sub-steps {:2}, shell shed at ticks [{}], {} ticks off, largest force change {:.3} N (at the shed: {:.3} N, shell off: {:.3} N){}",
                 z * 1e3,
                 theta,
                 o.fmax,
+                o.f_end,
+                o.gave_way,
                 o.most_substeps,
                 shed.join(", "),
                 o.off,

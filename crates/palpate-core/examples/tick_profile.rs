@@ -92,4 +92,6 @@ fn main() {
     sorted.sort_by(f64::total_cmp);
     let pct = |q: f64| percentile(&sorted, q);
     println!("{path}: tick ms mean {:.3} p50 {:.3} p99 {:.3}; sub-steps per tick {:.1} (mass scaling {:?}); last force {:.4} N", times.iter().sum::<f64>() / times.len() as f64, pct(0.5), pct(0.99), subs as f64 / ticks as f64, sim.particles.mass_scaling().applied, last_force);
+    let sh = &sim.shell;
+    println!("shell: omega2 {:.3e} /s^2, damping {:.3e} /s, springs {:.3e} /s^2 (coupling {:.1} N/m, wall {:.1} N/m), spring damping {:.3e} /s; rest sub-steps a 1 ms tick {}, without the springs {}", sh.omega2, sh.damping, sh.spring_rate, sim.coupling.stiffness, sim.confinement.stiffness, sh.spring_damping, sh.substeps(1e-3, 1.0, 0.0, 0.0, 1000), palpate_core::runtime::Shell { spring_rate: 0.0, spring_damping: 0.0, ..*sh }.substeps(1e-3, 1.0, 0.0, 0.0, 1000));
 }

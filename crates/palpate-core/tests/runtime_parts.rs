@@ -94,15 +94,21 @@ fn core_contact_forces_are_minus_the_gradient_of_its_energy() {
     let skin_point = sim.skin.position(v0, &x);
     let outward = Vec3::new(skin_point.x, skin_point.y, 0.0).normalize();
     let (mut skin_checked, mut core_checked) = (0, 0);
-    for centre in [skin_point + outward * (r - 1.5e-3), x[a0] + outward * (r - 1.0e-3)] {
+    let faces: Vec<usize> = (0..sim.hybrid.core_faces.len()).collect();
+    // A core face's centroid and outward normal: the tool pressed into it from outside, and with
+    // its centre 1 mm beneath it (the contact's sign keeps pushing the tool out).
+    let [fa, fb, fc] = sim.hybrid.core_faces[sim.hybrid.core_faces.len() / 3];
+    let centroid = (x[fa] + x[fb] + x[fc]) / 3.0;
+    let nf = (x[fb] - x[fa]).cross(&(x[fc] - x[fa])).normalize();
+    for centre in [skin_point + outward * (r - 1.5e-3), x[a0] + outward * (r - 1.0e-3), centroid + nf * (r - 1.0e-3), centroid - nf * 1.0e-3] {
         let reach: Vec<usize> = (0..sim.hybrid.outer_points.len()).filter(|&v| (sim.skin.position(v, &x) - centre).norm() < r + 5e-3).collect();
         // A lift as a shed shell leaves the skin (constant offsets: the gradient holds with them).
         let lift: Vec<Vec3> = (0..sim.hybrid.outer_points.len()).map(|v| if v % 3 == 0 { 3e-4 * rng.vec() } else { Vec3::zeros() }).collect();
-        let contact = CoreContact { sim: &sim, centre, skin: &reach, core: &sim.core_surface, lift: &lift, lift_scale: 0.7 };
+        let contact = CoreContact { sim: &sim, centre, skin: &reach, core: &faces, lift: &lift, lift_scale: 0.7 };
         let mut f = vec![Vec3::zeros(); x.len()];
         let u = contact.energy_forces(&x, &mut f);
         let sum = contact.sum(&x);
-        assert!(u > 0.0 && sum.skin_contacts > 0, "the tool touches nothing");
+        assert!(u > 0.0 && sum.skin_contacts + sum.core_contacts > 0, "the tool touches nothing");
         skin_checked += sum.skin_contacts;
         core_checked += sum.core_contacts;
         let total: Vec3 = f.iter().sum();
@@ -122,8 +128,32 @@ fn core_contact_forces_are_minus_the_gradient_of_its_energy() {
             }
         }
     }
-    println!("checked with {skin_checked} skin vertices and {core_checked} core nodes in contact");
-    assert!(core_checked > 0, "the second press did not reach the core's surface");
+    println!("checked with {skin_checked} skin vertices and {core_checked} core surface contacts");
+    assert!(core_checked >= 3, "the presses did not reach the core's surface");
+    // Beneath a face the contact is deeper than the tool's radius and still pushes the tool out
+    // (the tissue's force points inward): a sign taken from the distance alone would let it
+    // through (measured: the tool passed the held core of the paper's ellipsoids, 7 mm in).
+    let beneath = CoreContact { sim: &sim, centre: centroid - nf * 1.0e-3, skin: &[], core: &faces, lift: &[], lift_scale: 0.0 };
+    let s = beneath.sum(&x);
+    assert!(s.core_contacts == 1 && (s.max_depth - (r + 1.0e-3)).abs() < 1e-9, "depth {} beneath the face", s.max_depth);
+    assert!(s.force.dot(&nf) < -0.99 * s.force.norm(), "the force on the tissue {:?} does not push it in along {nf:?}", s.force);
+}
+
+/// The core's faces point out of the core (towards the shell), as the tool's contact with the
+/// core's surface assumes for its side (`runtime::core_contact`): each face's normal points away
+/// from the fourth node of the core tetrahedron it bounds.
+#[test]
+fn core_faces_point_out_of_the_core() {
+    let m = ventricle();
+    let x = &m.core_points;
+    for (f, face) in m.core_faces.iter().enumerate() {
+        let mut sorted = *face;
+        sorted.sort_unstable();
+        let tet = m.core_tets.iter().find(|t| sorted.iter().all(|a| t.contains(a))).unwrap_or_else(|| panic!("face {f} bounds no tetrahedron"));
+        let fourth = *tet.iter().find(|a| !face.contains(a)).unwrap();
+        let n = (x[face[1]] - x[face[0]]).cross(&(x[face[2]] - x[face[0]]));
+        assert!(n.dot(&(x[fourth] - x[face[0]])) < 0.0, "face {f} points into the core");
+    }
 }
 
 #[test]

@@ -24,16 +24,45 @@
 //! The energy is the penalty's, `k d^2 / 2` per point (`d` the depth in the sphere, see
 //! [`super::tool`]), over the skin vertices within reach (each at its tie, a function of the
 //! core's nodes, [`super::embed::Embedding::position`]; the forces go to the nodes through the
-//! tie's exact transpose, [`super::embed::Embedding::spread`]) and the core's surface nodes. The
-//! approach damping is left out (backward Euler damps the contact's own oscillation). The tool
-//! receives minus the sum of the point forces at the end of the step; on a body with no fixed
-//! node, minus what the step gave the core (see [`super::tick`](mod@super::tick) step 5: the minimisation's
-//! residual included, so that linear momentum stays exact).
+//! tie's exact transpose, [`super::embed::Embedding::spread`]), plus the core's surface below.
+//! The approach damping is left out (backward Euler damps the contact's own oscillation). The
+//! tool receives minus the sum of the point forces at the end of the step; on a body with no
+//! fixed node, minus what the step gave the core (see [`super::tick`](mod@super::tick) step 5:
+//! the minimisation's residual included, so that linear momentum stays exact).
+//!
+//! # The core's surface: a wall the tool cannot pass
+//! The core's surface meets the tool as a surface, not as its nodes: the point of the core's
+//! faces within reach nearest the tool's centre, `p` (with barycentric weights `w` on its face),
+//! at the signed distance `s` (positive on the side the face's outward normal points to), has the
+//! depth `R - s` and the energy `k_core (R - s)^2 / 2`, [`super::SimOptions::core_contact_stiffness`].
+//! Its force on the face's nodes is `k_core (R - s) w_a u`, `u` the unit vector from the centre
+//! to `p` (reversed when the centre is beneath the face): the exact gradient (the closest point's
+//! own motion drops out of `d|c - p|`, as it is the minimiser).
+//!
+//! Why (measured 2026-11-27, ninth session, `examples/press_sweep.rs` with `HOLD_MM=25`: the tool
+//! pressed 25 mm in at 50 mm/s): the core's nodes alone, at the skin's 60 N/m a point, let the
+//! tool through the organ. A point sphere penalty gives at most `k R = 0.3 N` before the
+//! tool's centre passes the point, and the coarse core's nodes are farther apart than the tool
+//! is wide: on the paper's ellipsoids beside the held base, the force rose to 0.69 N at 6 mm,
+//! turned to pull the tool in (-0.47 N at 7.45 mm) and was zero past 11 mm, the tool through the
+//! wall; on the Rodero ventricle, 2.75 N fell to zero at one point and 2.98 N to a pull at
+//! another. The surface's nearest point cannot be passed between nodes, the sign keeps pushing
+//! the tool out even from beneath a face, and the stiffness is the core's own (in the implicit
+//! step, no sub-step bound applies): 10 times the tissue's under the sphere (Hertz, `~E* R`,
+//! 180 N/m for the myocardium and a 5 mm sphere), 2 mm of penetration at 4 N.
 
 use super::sim::Sim;
 use super::tool::PointContact;
 use crate::integrate::CorePotential;
 use crate::math::Vec3;
+use crate::spatial::closest_on_triangle;
+
+/// The cosine past which the tool's centre counts as beneath the core's surface (see
+/// [`CoreContact::surface`]).
+const BENEATH_COSINE: f64 = 0.5;
+
+/// Default tool stiffness against the core's surface \[N/m\] (see the module docs).
+pub const CORE_CONTACT_STIFFNESS: f64 = 2000.0;
 
 /// The tool at `centre` against the skin vertices `skin` (at their ties) and the core's surface.
 pub struct CoreContact<'a> {
@@ -43,7 +72,8 @@ pub struct CoreContact<'a> {
     pub centre: Vec3,
     /// Skin vertices that may touch (indices into the outer surface).
     pub skin: &'a [usize],
-    /// Core surface nodes that may touch (a subset of [`Sim::core_surface`]).
+    /// Core faces that may touch (indices into the model's `core_faces`): the tool meets their
+    /// point nearest its centre (see the module docs).
     pub core: &'a [usize],
     /// Per skin vertex, a constant offset \[m\] off its tie, times `lift_scale` (a shed shell's
     /// skin fading back to its ties; zeros: none).
@@ -56,7 +86,8 @@ pub struct CoreContact<'a> {
 pub struct CoreContactSum {
     /// Sum of the forces on the tissue \[N\] (the tool receives the opposite).
     pub force: Vec3,
-    /// Skin vertices and core surface nodes in contact.
+    /// Skin vertices in contact, and whether the core's surface is (0 or 1: the tool meets it at
+    /// one point, see the module docs).
     pub skin_contacts: usize,
     pub core_contacts: usize,
     /// Deepest penetration \[m\].
@@ -64,37 +95,96 @@ pub struct CoreContactSum {
 }
 
 impl CoreContact<'_> {
-    /// Visit every point in contact at core positions `x`: `(is_skin, index, contact)`, the
+    /// Visit every skin vertex in contact at core positions `x`: `(vertex, contact)`, the
     /// contact being the tool's penalty at rest ([`super::Tool::contact`] with no velocities:
     /// the damping is left out, see the module docs).
-    fn each(&self, x: &[Vec3], mut visit: impl FnMut(bool, usize, PointContact)) {
+    fn each_skin(&self, x: &[Vec3], mut visit: impl FnMut(usize, PointContact)) {
         let tool = &self.sim.options.tool;
         let at_rest = Vec3::zeros();
         for &v in self.skin {
             let p = self.sim.skin.position(v, x) + self.lift_scale * self.lift[v];
             if let Some(c) = tool.contact(&self.centre, &at_rest, &p, &at_rest) {
-                visit(true, v, c);
+                visit(v, c);
             }
         }
-        for &a in self.core {
-            if let Some(c) = tool.contact(&self.centre, &at_rest, &x[a], &at_rest) {
-                visit(false, a, c);
+    }
+
+    /// The core's surface against the tool at core positions `x`: the face of [`Self::core`]
+    /// nearest the centre, the barycentric weights of its nearest point, and the contact there
+    /// (module docs); `None` outside contact.
+    pub fn surface(&self, x: &[Vec3]) -> Option<(usize, [f64; 3], PointContact)> {
+        let faces = &self.sim.hybrid.core_faces;
+        let mut best: Option<(f64, usize, Vec3, [f64; 3])> = None;
+        for &t in self.core {
+            let [a, b, c] = faces[t];
+            let (p, w) = closest_on_triangle(&self.centre, &x[a], &x[b], &x[c]);
+            let d2 = (p - self.centre).norm_squared();
+            if best.is_none_or(|(b2, ..)| d2 < b2) {
+                best = Some((d2, t, p, w));
             }
         }
+        let (d2, t, p, w) = best?;
+        // The side: the surface's angle-weighted pseudonormal at the nearest point (Baerentzen and
+        // Aanaes 2005): the face's normal inside it; on an edge or a vertex, the normals of every
+        // face sharing that point (those of the candidates as near), each weighted by its angle
+        // there (an edge's two faces: pi each). A single face's normal there can point the
+        // wrong way on a non-convex surface and flip the side, and the force with it, by `2 k d`.
+        let mut normal = Vec3::zeros();
+        for &u in self.core {
+            let [a, b, c] = faces[u];
+            let (q, wq) = if u == t { (p, w) } else { closest_on_triangle(&self.centre, &x[a], &x[b], &x[c]) };
+            if (q - p).norm_squared() > 1e-18 * (d2 + 1e-12) {
+                continue;
+            }
+            let n = (x[b] - x[a]).cross(&(x[c] - x[a]));
+            let Some(n) = n.try_normalize(0.0) else { continue };
+            // The angle at a vertex the point is on, else pi (an edge's or the face's inside).
+            let angle = match wq.iter().position(|&wi| wi == 1.0) {
+                Some(k) => {
+                    let [o, e1, e2] = [[a, b, c][k], [a, b, c][(k + 1) % 3], [a, b, c][(k + 2) % 3]];
+                    (x[e1] - x[o]).angle(&(x[e2] - x[o]))
+                }
+                None => std::f64::consts::PI,
+            };
+            normal += angle * n;
+        }
+        let d = d2.sqrt();
+        // The centre on the surface's outward side (or on it): the distance counts as positive;
+        // beneath it, negative, so that the depth keeps growing past the surface. Beneath only
+        // when clearly so: the offset at least 60 degrees past the tangent plane (through a face,
+        // exactly opposite its normal; past an edge or a vertex whose faces meet at less than
+        // 120 degrees, always). Where a crushed core folds its faces over (their normals
+        // swinging by tens of degrees a tick, measured on the Rodero ventricle pressed 5.5 mm
+        // at 3/5 of its height, 2.39 rad), the offset lies near the tangent plane, and a strict
+        // sign flipped the side, and the force by `2 k d` (4.5 N), every few ticks.
+        let outside = !((self.centre - p).dot(&normal) < -BENEATH_COSINE * d * normal.norm());
+        let depth = self.sim.options.tool.radius - if outside { d } else { -d };
+        if !(depth > 0.0 && depth.is_finite()) {
+            return None;
+        }
+        // From the centre to the point (reversed beneath the face); on the face, into it.
+        let dir = if d > 0.0 {
+            (p - self.centre) / if outside { d } else { -d }
+        } else {
+            -normal.try_normalize(0.0)?
+        };
+        let k = self.sim.options.core_contact_stiffness;
+        Some((t, w, PointContact { depth, normal: dir, force: k * depth * dir, energy: 0.5 * k * depth * depth }))
     }
 
     /// The contact's forces at core positions `x` (the end of the step).
     pub fn sum(&self, x: &[Vec3]) -> CoreContactSum {
         let mut s = CoreContactSum::default();
-        self.each(x, |skin, _, c| {
+        self.each_skin(x, |_, c| {
             s.force += c.force;
-            if skin {
-                s.skin_contacts += 1;
-            } else {
-                s.core_contacts += 1;
-            }
+            s.skin_contacts += 1;
             s.max_depth = s.max_depth.max(c.depth);
         });
+        if let Some((_, _, c)) = self.surface(x) {
+            s.force += c.force;
+            s.core_contacts = 1;
+            s.max_depth = s.max_depth.max(c.depth);
+        }
         s
     }
 }
@@ -102,14 +192,16 @@ impl CoreContact<'_> {
 impl CorePotential for CoreContact<'_> {
     fn energy_forces(&self, x: &[Vec3], f: &mut [Vec3]) -> f64 {
         let mut u = 0.0;
-        self.each(x, |skin, i, c| {
+        self.each_skin(x, |v, c| {
             u += c.energy;
-            if skin {
-                self.sim.skin.spread(i, c.force, x, f);
-            } else {
-                f[i] += c.force;
-            }
+            self.sim.skin.spread(v, c.force, x, f);
         });
+        if let Some((t, w, c)) = self.surface(x) {
+            u += c.energy;
+            for (&a, &w) in self.sim.hybrid.core_faces[t].iter().zip(&w) {
+                f[a] += w * c.force;
+            }
+        }
         u
     }
 }

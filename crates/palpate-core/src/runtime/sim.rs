@@ -75,6 +75,11 @@ pub struct SimOptions {
     /// inside its implicit step ([`super::core_contact`]). `None`: the tick fails
     /// with the error, the state as it was (studies of the shell's own stability).
     pub shell_fallback: Option<u64>,
+    /// The tool's penalty stiffness against the core's surface \[N/m\] (default
+    /// [`super::core_contact::CORE_CONTACT_STIFFNESS`], 2000 N/m): taken inside the core's implicit
+    /// step, at the surface's point nearest the tool's centre, so that a hard press cannot pass
+    /// the tool through the coarse core ([`super::core_contact`]).
+    pub core_contact_stiffness: f64,
     /// Hold the core (default true: at its base, or, for a closed wall, at its lowest nodes);
     /// false leaves the organ free (momentum studies).
     pub hold: bool,
@@ -95,6 +100,7 @@ impl Default for SimOptions {
             max_substeps: 64,
             mass_scaling: Some(0.95),
             shell_fallback: Some(100),
+            core_contact_stiffness: super::core_contact::CORE_CONTACT_STIFFNESS,
             hold: true,
         }
     }

@@ -524,8 +524,8 @@ pub struct SimWorkspace {
     pub(crate) placed: Vec<u64>,
     /// Skin vertices over active triangles within the tool's reach this tick.
     pub(crate) near: Vec<usize>,
-    /// Skin vertices and core surface nodes within reach of the tool for the core's implicit
-    /// contact; the near skin vertices no particle carries (weightless: at their ties).
+    /// Skin vertices and core faces within reach of the tool for the core's implicit contact;
+    /// the near skin vertices no particle carries (weightless: at their ties).
     pub(crate) reach: Vec<usize>,
     pub(crate) core_reach: Vec<usize>,
     pub(crate) uncarried: Vec<usize>,
@@ -577,7 +577,7 @@ impl SimWorkspace {
             save: Vec::with_capacity(n),
             near: Vec::with_capacity(sim.hybrid.outer_points.len()),
             reach: Vec::with_capacity(2 * sim.hybrid.outer_points.len()),
-            core_reach: Vec::with_capacity(sim.core_surface.len()),
+            core_reach: Vec::with_capacity(sim.hybrid.core_faces.len()),
             uncarried: Vec::with_capacity(sim.hybrid.outer_points.len()),
             contact_share: vec![0.0; n],
             tie_x: vec![Vec3::zeros(); n],

@@ -21,10 +21,12 @@
 //!    (`SkinLift` in `state.rs`). Measured on the synthetic ventricle's 18 shed presses
 //!    (`examples/press_sweep.rs`): the force changes by 0.03-0.15 N in a tick at the switch
 //!    (before: 0.65-3.2 N, the skin back at its ties at once and the core's contact explicit).
-//! 4. **Skin contact** where no particle is active: the tool presses the skin vertices, and
-//!    their ties carry the force to the core. While the shell is off, that contact and the
-//!    core surface's are taken inside the core's implicit step instead ([`super::core_contact`]:
-//!    held explicitly over the step on the coarse core, they chattered under a deep press).
+//! 4. **Skin and core contact** where no particle carries the skin: the tool presses the skin
+//!    vertices, and their ties carry the force to the core; the core's surface meets the tool as
+//!    a surface (its point nearest the tool's centre, stiff and signed, so that a hard press
+//!    cannot pass the tool through the coarse core). Both are taken inside the core's implicit
+//!    step ([`super::core_contact`]: held explicitly over the step on the coarse core, they
+//!    chattered under a deep press).
 //! 5. **The core step** (the default integrator, stable at any press) under the sub-step average
 //!    of every reaction: the coupling springs', the ring's (the active particles' stresses on
 //!    their frozen neighbours, spread by the ties' weights), the skin's.
@@ -47,6 +49,7 @@ use super::core_contact::CoreContact;
 use crate::math::{is_finite3, Mat3, Vec3};
 use crate::meshfree;
 use crate::parallel::{Fork, Serial};
+use crate::spatial::closest_on_triangle;
 use super::stability::stretch_bound;
 
 /// What a tick did.
@@ -63,7 +66,8 @@ pub struct TickReport {
     /// takes the force, inside its step).
     pub particle_contacts: usize,
     pub skin_contacts: usize,
-    /// Core surface nodes in contact (a press deeper than the shell).
+    /// 1 when the tool touches the core's surface (a press deeper than the shell), else 0: it
+    /// meets the surface's point nearest its centre ([`super::core_contact`]).
     pub core_contacts: usize,
     /// Deepest penetration of the tool \[m\].
     pub max_depth: f64,
@@ -351,7 +355,23 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
         ws.reach.extend(live.iter().filter(|&v| (skin[v] - tool).norm_squared() < reach * reach && !over_active(sim, activation, v)));
         ws.reach.extend(ws.uncarried.iter().copied().filter(|&v| (skin[v] - tool).norm_squared() < reach * reach));
     }
-    ws.core_reach.extend(sim.core_surface.iter().copied().filter(|&a| (core.x[a] - tool).norm_squared() < reach * reach));
+    // The core's faces within reach of their nearest point (a face can reach the tool with its
+    // three nodes out of it), and a radius more: a face the tool's centre has been pushed
+    // beneath stays in the contact (whose sign then keeps pushing the tool out, see
+    // super::core_contact) up to a radius beneath it.
+    let core_reach = reach + o.tool.radius;
+    ws.core_reach.extend(sim.hybrid.core_faces.iter().enumerate().filter_map(|(t, &[a, b, c])| {
+        let (pa, pb, pc) = (core.x[a], core.x[b], core.x[c]);
+        // Most faces are far: their bounding sphere (about the centroid) tells, cheaper than the
+        // nearest point (300 faces on the Rodero ventricle's core, every tick).
+        let centroid = (pa + pb + pc) / 3.0;
+        let bound = core_reach + (pa - centroid).norm_squared().max((pb - centroid).norm_squared()).max((pc - centroid).norm_squared()).sqrt();
+        if !((centroid - tool).norm_squared() < bound * bound) {
+            return None;
+        }
+        let (p, _) = closest_on_triangle(&tool, &pa, &pb, &pc);
+        ((p - tool).norm_squared() < core_reach * core_reach).then_some(t)
+    }));
 
     // 5. The core.
     core.f_ext.copy_from_slice(&ws.f_core);
@@ -523,7 +543,7 @@ pub(crate) fn skin_over_particles(sim: &Sim, activation: &Activation, v: usize, 
 /// last whole update, and the vertices within this of the tool's reach every tick.
 pub const SKIN_LIVE_MARGIN: f64 = 0.005;
 
-/// With the shell on, the skin vertices and core surface nodes the core's implicit contact looks
+/// With the shell on, the skin vertices and core faces the core's implicit contact looks
 /// at (step 4) are those within the tool's radius plus this \[m\] at the tick's start: more than
 /// the core's nodes move in a tick under a hand's press (a node that moves farther into the tool
 /// meets it the tick after). With the shell off it is [`SKIN_LIVE_MARGIN`].
