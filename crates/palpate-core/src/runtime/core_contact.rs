@@ -50,6 +50,13 @@
 //! the tool out even from beneath a face, and the stiffness is the core's own (in the implicit
 //! step, no sub-step bound applies): 10 times the tissue's under the sphere (Hertz, `~E* R`,
 //! 180 N/m for the myocardium and a 5 mm sphere), 2 mm of penetration at 4 N.
+//!
+//! Limits, past what a device renders (measured with the tool driven by position, 25 mm in): the
+//! coarse core crushed under 7-20 N folds its faces, the nearest point can then change sides
+//! (on Rodero at 3/5 of the height, 2.39 rad: 7.5 -> 12.9 N in a tick at 6.7 mm), and a face the
+//! centre is more than a radius beneath leaves the faces within reach (the same press lost the
+//! contact for 12 ticks at 18.6 N). Up to 5 N the 24-point sweeps of the Rodero ventricle and the
+//! ellipsoids change the force by at most 0.27 N a tick (BENCHMARKS.md, ninth session).
 
 use super::sim::Sim;
 use super::tool::PointContact;
