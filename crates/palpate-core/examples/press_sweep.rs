@@ -84,11 +84,12 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
                     let part_mm = close.iter().map(|&q| along(&st.particles.x[q])).sum::<f64>() / close.len().max(1) as f64;
                     if std::env::var("TRACE").as_deref() == Ok("3") {
                         let faces: Vec<usize> = (0..sim.hybrid.core_faces.len()).collect();
-                        let cc = palpate_core::runtime::CoreContact { sim, centre: c, skin: &[], core: &faces, lift: &[], lift_scale: 0.0 };
+                        let beneath = palpate_core::runtime::CoreContact::centre_is_beneath(sim, &st.core.x, &c);
+                        let cc = palpate_core::runtime::CoreContact { sim, centre: c, skin: &[], core: &faces, lift: &[], lift_scale: 0.0, beneath };
                         if let Some((t, w, pc)) = cc.surface(&st.core.x) {
                             let [a, b, cn] = sim.hybrid.core_faces[t];
                             let nf = (st.core.x[b] - st.core.x[a]).cross(&(st.core.x[cn] - st.core.x[a])).normalize();
-                            println!("    core face {t} {:?} w {:.3?} depth {:.2} mm dir {:.2?} face normal {:.2?} press {:.2?}", [a, b, cn], w, pc.depth * 1e3, pc.normal.as_slice(), nf.as_slice(), n.as_slice());
+                            println!("    core face {t} {:?} w {:.3?} depth {:.2} mm dir {:.2?} face normal {:.2?} press {:.2?} beneath {beneath}", [a, b, cn], w, pc.depth * 1e3, pc.normal.as_slice(), nf.as_slice(), n.as_slice());
                         }
                     }
                     if std::env::var("TRACE").as_deref() == Ok("2") {

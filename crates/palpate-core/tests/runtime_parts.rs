@@ -104,7 +104,7 @@ fn core_contact_forces_are_minus_the_gradient_of_its_energy() {
         let reach: Vec<usize> = (0..sim.hybrid.outer_points.len()).filter(|&v| (sim.skin.position(v, &x) - centre).norm() < r + 5e-3).collect();
         // A lift as a shed shell leaves the skin (constant offsets: the gradient holds with them).
         let lift: Vec<Vec3> = (0..sim.hybrid.outer_points.len()).map(|v| if v % 3 == 0 { 3e-4 * rng.vec() } else { Vec3::zeros() }).collect();
-        let contact = CoreContact { sim: &sim, centre, skin: &reach, core: &faces, lift: &lift, lift_scale: 0.7 };
+        let contact = CoreContact { sim: &sim, centre, skin: &reach, core: &faces, lift: &lift, lift_scale: 0.7, beneath: CoreContact::centre_is_beneath(&sim, &x, &centre) };
         let mut f = vec![Vec3::zeros(); x.len()];
         let u = contact.energy_forces(&x, &mut f);
         let sum = contact.sum(&x);
@@ -133,7 +133,9 @@ fn core_contact_forces_are_minus_the_gradient_of_its_energy() {
     // Beneath a face the contact is deeper than the tool's radius and still pushes the tool out
     // (the tissue's force points inward): a sign taken from the distance alone would let it
     // through (measured: the tool passed the held core of the paper's ellipsoids, 7 mm in).
-    let beneath = CoreContact { sim: &sim, centre: centroid - nf * 1.0e-3, skin: &[], core: &faces, lift: &[], lift_scale: 0.0 };
+    let inside = centroid - nf * 1.0e-3;
+    assert!(CoreContact::centre_is_beneath(&sim, &x, &inside) && !CoreContact::centre_is_beneath(&sim, &x, &(centroid + nf * 1.0e-3)), "the core's faces' winding tells no side");
+    let beneath = CoreContact { sim: &sim, centre: inside, skin: &[], core: &faces, lift: &[], lift_scale: 0.0, beneath: true };
     let s = beneath.sum(&x);
     assert!(s.core_contacts == 1 && (s.max_depth - (r + 1.0e-3)).abs() < 1e-9, "depth {} beneath the face", s.max_depth);
     assert!(s.force.dot(&nf) < -0.99 * s.force.norm(), "the force on the tissue {:?} does not push it in along {nf:?}", s.force);

@@ -33,10 +33,11 @@
 //! # The core's surface: a wall the tool cannot pass
 //! The core's surface meets the tool as a surface, not as its nodes: the point of the core's
 //! faces within reach nearest the tool's centre, `p` (with barycentric weights `w` on its face),
-//! at the signed distance `s` (positive on the side the face's outward normal points to), has the
-//! depth `R - s` and the energy `k_core (R - s)^2 / 2`, [`super::SimOptions::core_contact_stiffness`].
+//! at the signed distance `s` (positive outside the surface, negative beneath it: the side is told
+//! by the solid angle the core's faces subtend at the centre, [`CoreContact::centre_is_beneath`]),
+//! has the depth `R - s` and the energy `k_core (R - s)^2 / 2`, [`super::SimOptions::core_contact_stiffness`].
 //! Its force on the face's nodes is `k_core (R - s) w_a u`, `u` the unit vector from the centre
-//! to `p` (reversed when the centre is beneath the face): the exact gradient (the closest point's
+//! to `p` (reversed when the centre is beneath the surface): the exact gradient (the closest point's
 //! own motion drops out of `d|c - p|`, as it is the minimiser).
 //!
 //! Why (measured 2026-11-27, ninth session, `examples/press_sweep.rs` with `HOLD_MM=25`: the tool
@@ -52,21 +53,19 @@
 //! 180 N/m for the myocardium and a 5 mm sphere), 2 mm of penetration at 4 N.
 //!
 //! Limits, past what a device renders (measured with the tool driven by position, 25 mm in): the
-//! coarse core crushed under 7-20 N folds its faces, the nearest point can then change sides
-//! (on Rodero at 3/5 of the height, 2.39 rad: 7.5 -> 12.9 N in a tick at 6.7 mm), and a face the
-//! centre is more than a radius beneath leaves the faces within reach (the same press lost the
-//! contact for 12 ticks at 18.6 N). Up to 5 N the 24-point sweeps of the Rodero ventricle and the
-//! ellipsoids change the force by at most 0.27 N a tick (BENCHMARKS.md, ninth session).
+//! side is taken only where the centre is within a radius of the surface at the tick's start, so
+//! a centre pushed more than a radius beneath (`2 k R` = 20 N at the default) loses the contact;
+//! and the coarse core crushed under 7-20 N can fold through itself, where no side is defined (on
+//! Rodero at 3/5 of the height, 2.39 rad: 7.4 -> 13.2 N in a tick at 6.7 mm of travel, the
+//! surface's winding changing 1.5 mm from it). Up to 5 N the 24-point sweeps of the Rodero
+//! ventricle and the ellipsoids change the force by at most 0.27 N a tick (BENCHMARKS.md, ninth
+//! session).
 
 use super::sim::Sim;
 use super::tool::PointContact;
 use crate::integrate::CorePotential;
 use crate::math::Vec3;
 use crate::spatial::closest_on_triangle;
-
-/// The cosine past which the tool's centre counts as beneath the core's surface (see
-/// [`CoreContact::surface`]).
-const BENEATH_COSINE: f64 = 0.5;
 
 /// Default tool stiffness against the core's surface \[N/m\] (see the module docs).
 pub const CORE_CONTACT_STIFFNESS: f64 = 2000.0;
@@ -86,6 +85,9 @@ pub struct CoreContact<'a> {
     /// skin fading back to its ties; zeros: none).
     pub lift: &'a [Vec3],
     pub lift_scale: f64,
+    /// The tool's centre is beneath the core's surface ([`CoreContact::centre_is_beneath`] at the
+    /// tick's start): the side of the surface's signed distance, fixed over the step.
+    pub beneath: bool,
 }
 
 /// The forces a [`CoreContact`] gave at the end of a step.
@@ -102,6 +104,27 @@ pub struct CoreContactSum {
 }
 
 impl CoreContact<'_> {
+    /// Whether `centre` \[m\] is beneath the core's surface at core positions `x`: the solid
+    /// angle all the core's faces subtend there (van Oosterom and Strackee 1983) past `2 pi`,
+    /// i.e. the surface's generalised winding number past 1/2 (Jacobson, Kavan and
+    /// Sorkine-Hornung 2013): it changes only where the centre crosses the surface, and a fold of
+    /// a crushed core, seen from both sides, cancels in it. Taken once a tick (300 faces on the
+    /// Rodero ventricle's core, ~10 us) and fixed over the step, whose minimisation then sees a
+    /// smooth energy: within a tick the tool moves less than a millimetre, and where it crosses
+    /// the surface the two sides' depths `R - d` and `R + d` meet.
+    ///
+    /// Why not a local normal (measured on the Rodero ventricle pressed 25 mm in at 3/5 of its
+    /// height, 2.39 rad, `examples/press_sweep.rs`): the nearest face's normal, and the nearest
+    /// point's angle-weighted pseudonormal (Baerentzen and Aanaes 2005), turned over with the
+    /// crushed core's faces and flipped the side with the centre millimetres from the surface
+    /// (the force by `2 k d`, 4.5 N, every few ticks); the pseudonormal with a cosine threshold
+    /// lost the side past an edge (18.6 N, then no contact); the solid angle of the faces within
+    /// reach alone switched sides 2 mm beneath the surface (7.3 -> 13.0 N in a tick).
+    pub fn centre_is_beneath(sim: &Sim, x: &[Vec3], centre: &Vec3) -> bool {
+        let omega: f64 = sim.hybrid.core_faces.iter().map(|&[a, b, c]| solid_angle(&(x[a] - centre), &(x[b] - centre), &(x[c] - centre))).sum();
+        omega > 2.0 * std::f64::consts::PI
+    }
+
     /// Visit every skin vertex in contact at core positions `x`: `(vertex, contact)`, the
     /// contact being the tool's penalty at rest ([`super::Tool::contact`] with no velocities:
     /// the damping is left out, see the module docs).
@@ -131,49 +154,18 @@ impl CoreContact<'_> {
             }
         }
         let (d2, t, p, w) = best?;
-        // The side: the surface's angle-weighted pseudonormal at the nearest point (Baerentzen and
-        // Aanaes 2005): the face's normal inside it; on an edge or a vertex, the normals of every
-        // face sharing that point (those of the candidates as near), each weighted by its angle
-        // there (an edge's two faces: pi each). A single face's normal there can point the
-        // wrong way on a non-convex surface and flip the side, and the force with it, by `2 k d`.
-        let mut normal = Vec3::zeros();
-        for &u in self.core {
-            let [a, b, c] = faces[u];
-            let (q, wq) = if u == t { (p, w) } else { closest_on_triangle(&self.centre, &x[a], &x[b], &x[c]) };
-            if (q - p).norm_squared() > 1e-18 * (d2 + 1e-12) {
-                continue;
-            }
-            let n = (x[b] - x[a]).cross(&(x[c] - x[a]));
-            let Some(n) = n.try_normalize(0.0) else { continue };
-            // The angle at a vertex the point is on, else pi (an edge's or the face's inside).
-            let angle = match wq.iter().position(|&wi| wi == 1.0) {
-                Some(k) => {
-                    let [o, e1, e2] = [[a, b, c][k], [a, b, c][(k + 1) % 3], [a, b, c][(k + 2) % 3]];
-                    (x[e1] - x[o]).angle(&(x[e2] - x[o]))
-                }
-                None => std::f64::consts::PI,
-            };
-            normal += angle * n;
-        }
+        let outside = !self.beneath;
         let d = d2.sqrt();
-        // The centre on the surface's outward side (or on it): the distance counts as positive;
-        // beneath it, negative, so that the depth keeps growing past the surface. Beneath only
-        // when clearly so: the offset at least 60 degrees past the tangent plane (through a face,
-        // exactly opposite its normal; past an edge or a vertex whose faces meet at less than
-        // 120 degrees, always). Where a crushed core folds its faces over (their normals
-        // swinging by tens of degrees a tick, measured on the Rodero ventricle pressed 5.5 mm
-        // at 3/5 of its height, 2.39 rad), the offset lies near the tangent plane, and a strict
-        // sign flipped the side, and the force by `2 k d` (4.5 N), every few ticks.
-        let outside = !((self.centre - p).dot(&normal) < -BENEATH_COSINE * d * normal.norm());
         let depth = self.sim.options.tool.radius - if outside { d } else { -d };
         if !(depth > 0.0 && depth.is_finite()) {
             return None;
         }
-        // From the centre to the point (reversed beneath the face); on the face, into it.
+        // From the centre to the point (reversed beneath the surface); on it, into the face.
         let dir = if d > 0.0 {
             (p - self.centre) / if outside { d } else { -d }
         } else {
-            -normal.try_normalize(0.0)?
+            let [a, b, c] = faces[t];
+            -(x[b] - x[a]).cross(&(x[c] - x[a])).try_normalize(0.0)?
         };
         let k = self.sim.options.core_contact_stiffness;
         Some((t, w, PointContact { depth, normal: dir, force: k * depth * dir, energy: 0.5 * k * depth * depth }))
@@ -211,4 +203,14 @@ impl CorePotential for CoreContact<'_> {
         }
         u
     }
+}
+
+/// The signed solid angle \[sr\] triangle `(a, b, c)` (vertices relative to the viewpoint)
+/// subtends: positive when the viewpoint is on the side opposite its normal `(b - a) x (c - a)`
+/// (van Oosterom and Strackee 1983).
+fn solid_angle(a: &Vec3, b: &Vec3, c: &Vec3) -> f64 {
+    let (la, lb, lc) = (a.norm(), b.norm(), c.norm());
+    let det = a.dot(&b.cross(c));
+    let div = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
+    2.0 * det.atan2(div)
 }

@@ -360,6 +360,7 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
     // beneath stays in the contact (whose sign then keeps pushing the tool out, see
     // super::core_contact) up to a radius beneath it.
     let core_reach = reach + o.tool.radius;
+    let mut nearest2 = f64::INFINITY;
     ws.core_reach.extend(sim.hybrid.core_faces.iter().enumerate().filter_map(|(t, &[a, b, c])| {
         let (pa, pb, pc) = (core.x[a], core.x[b], core.x[c]);
         // Most faces are far: their bounding sphere (about the centroid) tells, cheaper than the
@@ -370,12 +371,18 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
             return None;
         }
         let (p, _) = closest_on_triangle(&tool, &pa, &pb, &pc);
-        ((p - tool).norm_squared() < core_reach * core_reach).then_some(t)
+        let d2 = (p - tool).norm_squared();
+        nearest2 = nearest2.min(d2);
+        (d2 < core_reach * core_reach).then_some(t)
     }));
 
     // 5. The core.
     core.f_ext.copy_from_slice(&ws.f_core);
-    let contact = CoreContact { sim, centre: tool, skin: &ws.reach, core: &ws.core_reach, lift: &lift.offset, lift_scale: lift.scale(*ticks) };
+    // The side of the core's surface the tool's centre is on, where it matters: within a radius
+    // of the surface (farther out there is no contact; a centre more than a radius beneath,
+    // 2 k R = 20 N at the default stiffness, counts as out).
+    let beneath = nearest2 < o.tool.radius * o.tool.radius && CoreContact::centre_is_beneath(sim, &core.x, &tool);
+    let contact = CoreContact { sim, centre: tool, skin: &ws.reach, core: &ws.core_reach, lift: &lift.offset, lift_scale: lift.scale(*ticks), beneath };
     let touched = !ws.reach.is_empty() || !ws.core_reach.is_empty();
     let momentum_before = if touched && sim.core.is_free_body() { Some(sim.core.momentum(&core.v)) } else { None };
     let stepped = if touched { step_with_potential(&sim.core, core, &mut ws.core, dt, &contact) } else { step(&sim.core, core, &mut ws.core, dt) };
