@@ -190,6 +190,40 @@ def test_a_hard_press_held_on_rodero_does_not_chatter(lv_path, material):
     assert np.median(change) < 0.03 and change.max() < 0.3, (np.median(change), change.max())
 
 
+def test_a_press_toward_5_n_on_rodero_meets_the_core_as_a_wall(lv_path, material):
+    """A hand pressing toward 5 N at 50 mm/s where the Rodero ventricle's shell is thin
+    (examples/press_sweep.rs's probe at 3/5 of the height, 2.39 rad): the tool reaches the core.
+    The core's surface met the tool through its nodes, at 60 N/m a point, which let the tool
+    through the organ (the force peaked at 2.75 N, then fell to zero with the tool 25 mm in); now
+    the core's surface is a stiff, signed wall (runtime/core_contact.rs): 5 N is reached at
+    2.7 mm of travel, the force changing by at most 0.12 N a tick on the way (asserted: 0.3 N),
+    and ``last["core_contacts"]`` says the tool touches the core."""
+    m = palpate.build_shape("rodero")
+    sim = palpate.HybridSim(m, material)
+    outer = m.outer_points
+    lo, hi = outer.min(axis=0), outer.max(axis=0)
+    z, theta = lo[2] + 0.6 * (hi[2] - lo[2]), 2 * np.pi / 3 + 0.3
+    c = outer.mean(axis=0)
+    u = np.array([np.cos(theta), np.sin(theta), 0.0])
+    d = outer - c
+    side = d - np.outer(d @ u, u)
+    off_ray = side[:, 0] ** 2 + side[:, 1] ** 2 + (outer[:, 2] - z) ** 2
+    p = outer[np.argmin(np.where(d @ u > 0, off_ray, np.inf))]
+    r = sim.tool_radius
+    forces, core = [], 0
+    for k in range(600):
+        depth = min(25e-3, -5e-3 + 5e-5 * k)  # 50 mm/s from 5 mm outside, 25 mm at most
+        f = np.linalg.norm(sim.step(p + u * (r - depth)))
+        assert np.isfinite(f)
+        forces.append(f)
+        core = max(core, sim.last["core_contacts"])
+        if f >= 5.0:
+            break
+    assert forces[-1] >= 5.0, f"the organ gave at most {max(forces):.3f} N over 25 mm of travel"
+    assert core == 1, "the tool never touched the core"
+    assert np.abs(np.diff(forces)).max() < 0.3, np.abs(np.diff(forces)).max()
+
+
 def test_a_failed_shell_is_shed_and_the_press_goes_on(ventricle, material):
     """``shell_fallback`` (default True): a shell under-stepped by its cap (3 sub-steps a tick
     where it needs ~12) diverges under a 3 mm press; the tick goes on with the core and the skin
