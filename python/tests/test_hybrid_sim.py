@@ -155,6 +155,20 @@ def test_the_rodero_ventricle_survives_a_15_mm_press_and_a_press_toward_2_n(lv_p
     assert np.isfinite(sim.surface).all() and np.isfinite(sim.particle_positions()).all()
 
 
+def _sweep_probe(m, height, theta):
+    """examples/press_sweep.rs's probe: the outer vertex nearest the horizontal ray from the outer
+    surface's centroid at ``height`` (a fraction of the model's) and angle ``theta`` [rad], and
+    the ray's unit direction (outward, horizontal)."""
+    outer = m.outer_points
+    lo, hi = outer.min(axis=0), outer.max(axis=0)
+    z = lo[2] + height * (hi[2] - lo[2])
+    u = np.array([np.cos(theta), np.sin(theta), 0.0])
+    d = outer - outer.mean(axis=0)
+    side = d - np.outer(d @ u, u)
+    off_ray = side[:, 0] ** 2 + side[:, 1] ** 2 + (outer[:, 2] - z) ** 2
+    return outer[np.argmin(np.where(d @ u > 0, off_ray, np.inf))], u
+
+
 def test_a_hard_press_held_on_rodero_does_not_chatter(lv_path, material):
     """The tool pressed 11.35 mm in and held near the Rodero ventricle's base (examples/
     press_sweep.rs's probe at 4/5 of the height, 3.44 rad). There the skin vertices with no
@@ -167,15 +181,7 @@ def test_a_hard_press_held_on_rodero_does_not_chatter(lv_path, material):
     chatter gave ~1.3 N and ~2.5 N)."""
     m = palpate.build_shape("rodero")
     sim = palpate.HybridSim(m, material)
-    outer = m.outer_points
-    lo, hi = outer.min(axis=0), outer.max(axis=0)
-    z, theta = lo[2] + 0.8 * (hi[2] - lo[2]), np.pi + 0.3
-    c = outer.mean(axis=0)
-    u = np.array([np.cos(theta), np.sin(theta), 0.0])
-    d = outer - c
-    side = d - np.outer(d @ u, u)
-    off_ray = side[:, 0] ** 2 + side[:, 1] ** 2 + (outer[:, 2] - z) ** 2
-    p = outer[np.argmin(np.where(d @ u > 0, off_ray, np.inf))]
+    p, u = _sweep_probe(m, 0.8, np.pi + 0.3)
     r = sim.tool_radius
     forces = []
     for k in range(328 + 250):
@@ -200,15 +206,7 @@ def test_a_press_toward_5_n_on_rodero_meets_the_core_as_a_wall(lv_path, material
     and ``last["core_contacts"]`` says the tool touches the core."""
     m = palpate.build_shape("rodero")
     sim = palpate.HybridSim(m, material)
-    outer = m.outer_points
-    lo, hi = outer.min(axis=0), outer.max(axis=0)
-    z, theta = lo[2] + 0.6 * (hi[2] - lo[2]), 2 * np.pi / 3 + 0.3
-    c = outer.mean(axis=0)
-    u = np.array([np.cos(theta), np.sin(theta), 0.0])
-    d = outer - c
-    side = d - np.outer(d @ u, u)
-    off_ray = side[:, 0] ** 2 + side[:, 1] ** 2 + (outer[:, 2] - z) ** 2
-    p = outer[np.argmin(np.where(d @ u > 0, off_ray, np.inf))]
+    p, u = _sweep_probe(m, 0.6, 2 * np.pi / 3 + 0.3)
     r = sim.tool_radius
     forces, core = [], 0
     for k in range(600):
