@@ -526,6 +526,7 @@ class HybridSim:
         *,
         tool_radius: Optional[float] = None,
         tool_stiffness: Optional[float] = None,
+        core_contact_stiffness: Optional[float] = None,
         hold: bool = True,
         activation_margin: Optional[float] = None,
         max_tool_step: Optional[float] = None,

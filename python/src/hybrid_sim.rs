@@ -19,8 +19,8 @@ use crate::material::PyMaterial;
 /// (15 mm presses, jumps, jabs, fast slides: tests/runtime_hand.rs, ``bench/hybrid_hand.py``);
 /// not yet at its speed target (BENCHMARKS.md).
 ///
-/// ``HybridSim(model, material, *, tool_radius=0.005, tool_stiffness=None, hold=True,
-/// activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None,
+/// ``HybridSim(model, material, *, tool_radius=0.005, tool_stiffness=None,
+/// core_contact_stiffness=None, hold=True, activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None,
 /// mass_scaling=None, shell_fallback=True, shell_pause=None)``
 ///
 /// Parameters
@@ -33,6 +33,11 @@ use crate::material::PyMaterial;
 /// tool_stiffness : float, optional
 ///     Penalty stiffness per skin vertex in contact [N/m] (default 60, see
 ///     ``palpate_core::runtime::tool``).
+/// core_contact_stiffness : float, optional
+///     Penalty stiffness of the tool against the core's surface [N/m] (default 2000: ten times
+///     the tissue's under a 5 mm sphere), met at the surface's point nearest the tool's centre,
+///     signed, inside the core's implicit step, so that a hard press cannot pass the tool through
+///     the organ (``palpate_core::runtime::core_contact``).
 /// hold : bool
 ///     Hold the core at its base (or, for a closed wall, its lower 30%).
 /// activation_margin : float, optional
@@ -76,7 +81,7 @@ pub struct PyHybridSim {
 #[pymethods]
 impl PyHybridSim {
     #[new]
-    #[pyo3(signature = (model, material, *, tool_radius = None, tool_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None))]
+    #[pyo3(signature = (model, material, *, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -84,6 +89,7 @@ impl PyHybridSim {
         #[pyo3(from_py_with = conv::arg)] material: PyRef<'_, PyMaterial>,
         #[pyo3(from_py_with = conv::arg)] tool_radius: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] tool_stiffness: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] core_contact_stiffness: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] hold: bool,
         #[pyo3(from_py_with = conv::arg)] activation_margin: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] max_tool_step: Option<f64>,
@@ -109,6 +115,12 @@ impl PyHybridSim {
             tool.stiffness = k;
         }
         let mut options = SimOptions { tool, hold, ..Default::default() };
+        if let Some(k) = core_contact_stiffness {
+            if !(k > 0.0 && k.is_finite()) {
+                return Err(crate::errors::param_error_from(format!("core_contact_stiffness = {k} N/m must be positive and finite")));
+            }
+            options.core_contact_stiffness = k;
+        }
         if let Some(m) = activation_margin {
             if !(m >= 0.0 && m.is_finite()) {
                 return Err(crate::errors::param_error_from(format!("activation_margin = {m} m must be non-negative and finite")));

@@ -90,6 +90,26 @@ def test_ticks_release_the_gil(ventricle, material):
     assert counter[0] > 1000 and time.perf_counter() > t0
 
 
+def test_core_contact_stiffness_and_the_shell_options_survive_a_pickle(ventricle, material):
+    """``core_contact_stiffness`` [N/m] sets the tool's wall against the core's surface; it, and
+    ``shell_fallback`` / ``shell_pause``, come back from a pickle (the pickle rebuilt the
+    simulation from the other options only, and a non-default fallback came back as the default);
+    a nonsense stiffness is refused by name."""
+    import pickle
+
+    sim = palpate.HybridSim(ventricle, material, core_contact_stiffness=500.0, shell_fallback=False)
+    assert sim.options["core_contact_stiffness"] == 500.0
+    assert palpate.HybridSim(ventricle, material).options["core_contact_stiffness"] == 2000.0
+    back = pickle.loads(pickle.dumps(sim))
+    for k in ("core_contact_stiffness", "shell_fallback", "shell_pause", "tool_stiffness"):
+        assert back.options[k] == sim.options[k], k
+    paused = pickle.loads(pickle.dumps(palpate.HybridSim(ventricle, material, shell_pause=7)))
+    assert paused.options["shell_fallback"] is True and paused.options["shell_pause"] == 7
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(palpate.ParameterError, match="core_contact_stiffness"):
+            palpate.HybridSim(ventricle, material, core_contact_stiffness=bad)
+
+
 def test_options_tool_position_and_reset(ventricle, material):
     sim = palpate.HybridSim(ventricle, material, tool_radius=0.004, activation_margin=5e-4, max_tool_step=2e-4,
                             linger_ticks=10, max_substeps=40)
