@@ -654,6 +654,7 @@ class HapticLoop:
         idle: bool = False,
         tool_radius: Optional[float] = None,
         tool_stiffness: Optional[float] = None,
+        core_contact_stiffness: Optional[float] = None,
         tool_area_stiffness: Optional[float] = None,
         hold: bool = True,
         coupling_stiffness: Optional[float] = None,

@@ -48,7 +48,7 @@ fn busy(what: &str) -> PyErr {
 ///
 /// ``HapticLoop(model, material, device, *, rate_hz=1000.0, times=None, knots=None,
 /// recording=None, port=None, host="127.0.0.1", kind=None, hand_start=None, idle=False,
-/// tool_radius=None, tool_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None,
+/// tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None,
 /// coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None,
 /// stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1)``
 ///
@@ -82,6 +82,9 @@ fn busy(what: &str) -> PyErr {
 ///     The tool sphere's radius [m] (default 0.005).
 /// tool_stiffness : float, optional
 ///     Hybrid models only: the penalty per contact point [N/m] (default 60).
+/// core_contact_stiffness : float, optional
+///     Hybrid models only: the tool's wall against the core's surface [N/m] (default 2000): see
+///     :class:`HybridSim`.
 /// tool_area_stiffness : float, optional
 ///     Full-FEM bodies only: the most penalty per unit of surface area [N/m^3] (default
 ///     ``12 E* / R``, ten times the tissue's Hertz stiffness per unit area under the sphere:
@@ -234,7 +237,7 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
 #[pymethods]
 impl PyHapticLoop {
     #[new]
-    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1)), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1)")]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1)), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -252,6 +255,7 @@ impl PyHapticLoop {
         #[pyo3(from_py_with = conv::arg)] idle: bool,
         #[pyo3(from_py_with = conv::arg)] tool_radius: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] tool_stiffness: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] core_contact_stiffness: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] tool_area_stiffness: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] hold: bool,
         #[pyo3(from_py_with = conv::arg)] coupling_stiffness: Option<f64>,
@@ -285,7 +289,7 @@ impl PyHapticLoop {
             None => None,
         };
         errors::guard("HapticLoop", || {
-            for (n, v) in [("tool_radius", tool_radius), ("tool_stiffness", tool_stiffness), ("tool_area_stiffness", tool_area_stiffness), ("coupling_stiffness", coupling_stiffness), ("proxy_mass", proxy_mass), ("max_force", max_force), ("max_rate", max_rate), ("stall_timeout", stall_timeout)] {
+            for (n, v) in [("tool_radius", tool_radius), ("tool_stiffness", tool_stiffness), ("core_contact_stiffness", core_contact_stiffness), ("tool_area_stiffness", tool_area_stiffness), ("coupling_stiffness", coupling_stiffness), ("proxy_mass", proxy_mass), ("max_force", max_force), ("max_rate", max_rate), ("stall_timeout", stall_timeout)] {
                 positive(n, v, false)?;
             }
             for (n, v) in [("coupling_damping", coupling_damping), ("ramp", ramp), ("spin", spin)] {
@@ -371,6 +375,9 @@ impl PyHapticLoop {
                     tool.stiffness = k;
                 }
                 options.tool = tool;
+                if let Some(k) = core_contact_stiffness {
+                    options.core_contact_stiffness = k;
+                }
                 let (hm, mat) = (hm.borrow().model.clone(), material.inner);
                 let physics = py.detach(|| HybridPhysics::new(hm, mat, options)).map_err(errors::model_error)?;
                 Box::new(physics.with_threads(threads, realtime).map_err(|e| haptics_error(format!("cannot start {} helper threads: {e}", threads - 1)))?)
@@ -380,6 +387,9 @@ impl PyHapticLoop {
                 }
                 if tool_stiffness.is_some() {
                     return Err(errors::param_error_from("tool_stiffness: for a hybrid model only (a full-FEM Body's contact stiffness is per unit of surface area: tool_area_stiffness [N/m^3])"));
+                }
+                if core_contact_stiffness.is_some() {
+                    return Err(errors::param_error_from("core_contact_stiffness: for a hybrid model only (a full-FEM Body has no core under a shell)"));
                 }
                 let mut options = FemOptions { area_stiffness: tool_area_stiffness, ..FemOptions::default() };
                 if let Some(r) = tool_radius {

@@ -656,3 +656,19 @@ def test_full_fem_body_contact_stiffness_is_per_unit_area(model):
     # A body's tick is not split over threads (the hybrid model's particle passes are).
     with pytest.raises(palpate.ParameterError, match="threads = 2: for a hybrid model only"):
         palpate.HapticLoop(m.body, m.material, "hand", hand_start=p, threads=2)
+    # Nor has it a core under a shell for the tool's wall.
+    with pytest.raises(palpate.ParameterError, match="core_contact_stiffness: for a hybrid model only"):
+        palpate.HapticLoop(m.body, m.material, "hand", hand_start=p, core_contact_stiffness=2000.0)
+
+
+def test_core_contact_stiffness_reaches_the_hybrid_loop(model):
+    """``core_contact_stiffness`` [N/m] sets the hybrid loop's wall against the core's surface:
+    it is part of the simulation's identity (a recording made with another wall is refused on
+    replay), and a nonsense value is refused by name."""
+    p = np.asarray(model.outer_points)[0] + 0.02
+    a = palpate.HapticLoop(model, haptics.material(), "hand", hand_start=p, max_ticks=1)
+    b = palpate.HapticLoop(model, haptics.material(), "hand", hand_start=p, max_ticks=1, core_contact_stiffness=500.0)
+    c = palpate.HapticLoop(model, haptics.material(), "hand", hand_start=p, max_ticks=1, core_contact_stiffness=2000.0)
+    assert a.identity != b.identity and a.identity == c.identity
+    with pytest.raises(palpate.ParameterError, match="core_contact_stiffness"):
+        palpate.HapticLoop(model, haptics.material(), "hand", hand_start=p, core_contact_stiffness=-1.0)
