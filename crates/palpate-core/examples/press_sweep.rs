@@ -42,6 +42,9 @@ struct Outcome {
     /// the tool: a tool that slips through the surface).
     f_end: f64,
     gave_way: f64,
+    /// The largest change of the force's magnitude in a tick until it first reaches 5 N (what a
+    /// device renders at most).
+    jump_to_5n: f64,
     error: Option<String>,
 }
 
@@ -64,7 +67,8 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
     let r = sim.options.tool.radius;
     let mut st = SimState::rest(sim);
     let mut ws = SimWorkspace::new(sim);
-    let mut o = Outcome { fmax: 0.0, most_substeps: 0, shed: vec![], off: 0, jump: 0.0, jump_off: 0.0, jump_shed: 0.0, f_end: 0.0, gave_way: 0.0, error: None };
+    let mut o = Outcome { fmax: 0.0, most_substeps: 0, shed: vec![], off: 0, jump: 0.0, jump_off: 0.0, jump_shed: 0.0, f_end: 0.0, gave_way: 0.0, jump_to_5n: 0.0, error: None };
+    let mut below_5n = true;
     let mut f_top = 0.0f64;
     // From 5 mm outside the probe vertex: a tool starting tangent to it is already up to 4 mm
     // into the skin beside it where the surface slants (the Rodero ventricle), a first-tick
@@ -128,6 +132,10 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
                     let near_shed = o.shed.last().is_some_and(|&(s, _)| k <= s + 10);
                     let j = if near_shed { &mut o.jump_shed } else if rep.shell_off { &mut o.jump_off } else { &mut o.jump };
                     *j = j.max((rep.force - f0).norm());
+                    below_5n &= f0.norm() < 5.0 && rep.force.norm() < 5.0;
+                    if below_5n {
+                        o.jump_to_5n = o.jump_to_5n.max((rep.force.norm() - f0.norm()).abs());
+                    }
                 }
                 last = Some(rep.force);
                 let along = -rep.force.dot(&n);
@@ -186,12 +194,13 @@ fn main() {
             failed += (!o.shed.is_empty() || o.error.is_some()) as usize;
             let shed: Vec<String> = o.shed.iter().map(|(k, d)| format!("{k} ({:.1} mm)", d * 1e3)).collect();
             println!(
-                "z {:5.1} mm, theta {:.2}: max force {:.3} N (at the end {:.3} N, gave way by {:.3} N), most sub-steps {:2}, shell shed at ticks [{}], {} ticks off, largest force change {:.3} N (at the shed: {:.3} N, shell off: {:.3} N){}",
+                "z {:5.1} mm, theta {:.2}: max force {:.3} N (at the end {:.3} N, gave way by {:.3} N; largest change a tick until 5 N {:.3} N), most sub-steps {:2}, shell shed at ticks [{}], {} ticks off, largest force change {:.3} N (at the shed: {:.3} N, shell off: {:.3} N){}",
                 z * 1e3,
                 theta,
                 o.fmax,
                 o.f_end,
                 o.gave_way,
+                o.jump_to_5n,
                 o.most_substeps,
                 shed.join(", "),
                 o.off,

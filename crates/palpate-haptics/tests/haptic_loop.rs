@@ -337,12 +337,11 @@ fn passivity_measure_detects_direct_rendering() {
     assert!(e > 0.0, "direct rendering of a stiff wall at 250 Hz must be active, got {e} J");
 }
 
-#[test]
-fn passivity_on_the_hybrid_model() {
-    let physics = hybrid();
-    let (p, n) = probe(&physics.sim().hybrid);
-    let r = physics.sim().options.tool.radius;
-    let (mut times, mut knots) = press_slide_release(p, n, r, 0.005, 0.0);
+/// A scripted press to `depth` \[m\] and release at `p` along `-n` (`press_slide_release`)
+/// through the 1 kHz loop with the default coupling and safety, for `ticks` ticks, offline:
+/// the recording (no tick faulted), the rendered forces and the device's positions.
+fn press_through_the_loop(physics: HybridPhysics, p: Vec3, n: Vec3, r: f64, depth: f64, ticks: u64) -> (Recording, Vec<Vec3>, Vec<Vec3>) {
+    let (mut times, mut knots) = press_slide_release(p, n, r, depth, 0.0);
     // Clear of the surface until the ramp is over: a ramp scales the force over time, so a press
     // during it is met by less force than its release (an active element by design).
     times.iter_mut().for_each(|t| *t += 0.6);
@@ -350,11 +349,20 @@ fn passivity_on_the_hybrid_model() {
     knots.insert(0, knots[0]);
     let mut dev = Scripted::new(times, knots).unwrap();
     let mut core = HapticCore::new(Box::new(physics), 1000.0, CouplingParams::default(), SafetyParams::default(), 250, 2000);
-    core.run_offline(&mut dev, 5000);
+    core.run_offline(&mut dev, ticks);
     let rec = core.take_recording().unwrap();
     assert_eq!(rec.faults, 0);
     let forces: Vec<Vec3> = rec.ticks.iter().map(|t| t.force).collect();
     let xs: Vec<Vec3> = rec.ticks.iter().map(|t| t.input.position).collect();
+    (rec, forces, xs)
+}
+
+#[test]
+fn passivity_on_the_hybrid_model() {
+    let physics = hybrid();
+    let (p, n) = probe(&physics.sim().hybrid);
+    let r = physics.sim().options.tool.radius;
+    let (rec, forces, xs) = press_through_the_loop(physics, p, n, r, 0.005, 5000);
     let e = energy_into_user(&forces, &xs);
     let work_in: f64 = forces.iter().zip(xs.windows(2)).map(|(f, w)| f.dot(&(w[1] - w[0])).min(0.0)).sum();
     let tools: Vec<Vec3> = rec.ticks.iter().map(|t| t.tool).collect();
@@ -383,18 +391,7 @@ fn passivity_against_the_core_wall_beside_the_held_base() {
     let p = *m.outer_points.iter().filter(|q| (q.z - z).abs() < 0.003).max_by(|a, b| a.x.total_cmp(&b.x)).unwrap();
     let n = Vec3::new(p.x, p.y, 0.0).normalize();
     let r = physics.sim().options.tool.radius;
-    let (mut times, mut knots) = press_slide_release(p, n, r, 0.016, 0.0);
-    // Clear of the surface until the ramp is over (see passivity_on_the_hybrid_model).
-    times.iter_mut().for_each(|t| *t += 0.6);
-    times.insert(0, 0.0);
-    knots.insert(0, knots[0]);
-    let mut dev = Scripted::new(times, knots).unwrap();
-    let mut core = HapticCore::new(Box::new(physics), 1000.0, CouplingParams::default(), SafetyParams::default(), 250, 2000);
-    core.run_offline(&mut dev, 2000);
-    let rec = core.take_recording().unwrap();
-    assert_eq!(rec.faults, 0);
-    let forces: Vec<Vec3> = rec.ticks.iter().map(|t| t.force).collect();
-    let xs: Vec<Vec3> = rec.ticks.iter().map(|t| t.input.position).collect();
+    let (rec, forces, xs) = press_through_the_loop(physics, p, n, r, 0.016, 2000);
     let e = energy_into_user(&forces, &xs);
     let fmax = forces.iter().map(|f| f.norm()).fold(0.0, f64::max);
     let hold = forces[1100].norm();

@@ -15,7 +15,7 @@ pub mod simplify;
 pub mod surface;
 
 pub use sample::{sample_between, sample_inside, ParticleSet};
-pub use surface::{ellipsoid_surface, SurfaceError, SurfaceWarning, TriSurface};
+pub use surface::{ellipsoid_surface, winding_number, SurfaceError, SurfaceWarning, TriSurface};
 
 /// Points given as arrays, as [`crate::Vec3`]s; `Err(i)` names the first with a non-finite
 /// coordinate.

@@ -226,17 +226,7 @@ impl TriSurface {
     /// surface; 1/2 on it): `sum_t Omega_t / (4 pi)` with the signed solid angle `Omega_t` of
     /// triangle `t` seen from `p` (Van Oosterom and Strackee 1983).
     pub fn winding_number(&self, p: &Vec3) -> f64 {
-        let mut total = 0.0;
-        for t in &self.triangles {
-            let a = self.points[t[0]] - p;
-            let b = self.points[t[1]] - p;
-            let c = self.points[t[2]] - p;
-            let (la, lb, lc) = (a.norm(), b.norm(), c.norm());
-            let num = a.dot(&b.cross(&c));
-            let den = la * lb * lc + a.dot(&b) * lc + a.dot(&c) * lb + b.dot(&c) * la;
-            total += 2.0 * num.atan2(den);
-        }
-        total / (4.0 * std::f64::consts::PI)
+        winding_number(&self.points, &self.triangles, p)
     }
 
     /// Is `p` inside? Generalised winding number above 1/2 (see the module docs).
@@ -465,3 +455,22 @@ pub fn ellipsoid_surface(semi_axes: [f64; 3], subdivisions: usize) -> TriSurface
 #[cfg(test)]
 #[path = "surface_tests.rs"]
 mod tests;
+
+/// Generalised winding number around `p` of the triangles `triangles` over `points` (1 inside,
+/// 0 outside a closed, outward-oriented surface; 1/2 on it; for an open one, its fraction):
+/// `sum_t Omega_t / (4 pi)` with the signed solid angle `Omega_t` of triangle `t` seen from `p`
+/// (Van Oosterom and Strackee 1983; Jacobson, Kavan and Sorkine-Hornung 2013). It changes only
+/// where `p` crosses a triangle, and a fold seen from both sides cancels in it.
+pub fn winding_number(points: &[Vec3], triangles: &[[usize; 3]], p: &Vec3) -> f64 {
+    let mut total = 0.0;
+    for t in triangles {
+        let a = points[t[0]] - p;
+        let b = points[t[1]] - p;
+        let c = points[t[2]] - p;
+        let (la, lb, lc) = (a.norm(), b.norm(), c.norm());
+        let num = a.dot(&b.cross(&c));
+        let den = la * lb * lc + a.dot(&b) * lc + a.dot(&c) * lb + b.dot(&c) * la;
+        total += 2.0 * num.atan2(den);
+    }
+    total / (4.0 * std::f64::consts::PI)
+}

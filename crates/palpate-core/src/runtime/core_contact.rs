@@ -65,6 +65,7 @@ use super::sim::Sim;
 use super::tool::PointContact;
 use crate::integrate::CorePotential;
 use crate::math::Vec3;
+use crate::mesh::winding_number;
 use crate::spatial::closest_on_triangle;
 
 /// Default tool stiffness against the core's surface \[N/m\] (see the module docs).
@@ -104,10 +105,8 @@ pub struct CoreContactSum {
 }
 
 impl CoreContact<'_> {
-    /// Whether `centre` \[m\] is beneath the core's surface at core positions `x`: the solid
-    /// angle all the core's faces subtend there (van Oosterom and Strackee 1983) past `2 pi`,
-    /// i.e. the surface's generalised winding number past 1/2 (Jacobson, Kavan and
-    /// Sorkine-Hornung 2013): it changes only where the centre crosses the surface, and a fold of
+    /// Whether `centre` \[m\] is beneath the core's surface at core positions `x`: the core's
+    /// faces' generalised winding number there ([`crate::mesh::winding_number`]) past 1/2: it changes only where the centre crosses the surface, and a fold of
     /// a crushed core, seen from both sides, cancels in it. Taken once a tick (300 faces on the
     /// Rodero ventricle's core, ~10 us) and fixed over the step, whose minimisation then sees a
     /// smooth energy: within a tick the tool moves less than a millimetre, and where it crosses
@@ -121,8 +120,7 @@ impl CoreContact<'_> {
     /// lost the side past an edge (18.6 N, then no contact); the solid angle of the faces within
     /// reach alone switched sides 2 mm beneath the surface (7.3 -> 13.0 N in a tick).
     pub fn centre_is_beneath(sim: &Sim, x: &[Vec3], centre: &Vec3) -> bool {
-        let omega: f64 = sim.hybrid.core_faces.iter().map(|&[a, b, c]| solid_angle(&(x[a] - centre), &(x[b] - centre), &(x[c] - centre))).sum();
-        omega > 2.0 * std::f64::consts::PI
+        winding_number(x, &sim.hybrid.core_faces, centre) > 0.5
     }
 
     /// Visit every skin vertex in contact at core positions `x`: `(vertex, contact)`, the
@@ -154,15 +152,15 @@ impl CoreContact<'_> {
             }
         }
         let (d2, t, p, w) = best?;
-        let outside = !self.beneath;
-        let d = d2.sqrt();
-        let depth = self.sim.options.tool.radius - if outside { d } else { -d };
+        // The signed distance: negative beneath the surface.
+        let s = if self.beneath { -d2.sqrt() } else { d2.sqrt() };
+        let depth = self.sim.options.tool.radius - s;
         if !(depth > 0.0 && depth.is_finite()) {
             return None;
         }
         // From the centre to the point (reversed beneath the surface); on it, into the face.
-        let dir = if d > 0.0 {
-            (p - self.centre) / if outside { d } else { -d }
+        let dir = if s != 0.0 {
+            (p - self.centre) / s
         } else {
             let [a, b, c] = faces[t];
             -(x[b] - x[a]).cross(&(x[c] - x[a])).try_normalize(0.0)?
@@ -203,14 +201,4 @@ impl CorePotential for CoreContact<'_> {
         }
         u
     }
-}
-
-/// The signed solid angle \[sr\] triangle `(a, b, c)` (vertices relative to the viewpoint)
-/// subtends: positive when the viewpoint is on the side opposite its normal `(b - a) x (c - a)`
-/// (van Oosterom and Strackee 1983).
-fn solid_angle(a: &Vec3, b: &Vec3, c: &Vec3) -> f64 {
-    let (la, lb, lc) = (a.norm(), b.norm(), c.norm());
-    let det = a.dot(&b.cross(c));
-    let div = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
-    2.0 * det.atan2(div)
 }
