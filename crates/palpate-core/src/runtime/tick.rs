@@ -131,6 +131,12 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
         lift.clear();
     }
 
+    // At rest the skin is placed and its references set (LiveSkin::at_rest): the first tick
+    // builds the list around its tool here, and looks at that list only, not at every vertex.
+    if !live.valid && live.placed() {
+        live.rebuild(skin, &tool, live_radius(o) + SKIN_LIVE_MARGIN + o.max_tool_step);
+    }
+
     // 1. Activation.
     if !report.shell_off {
         activation.touch_sphere_among(&tool, o.tool.radius, o.activation_margin, skin, live.iter());
@@ -616,7 +622,7 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
     live.sort();
     let r_live = live_radius(&sim.options);
     let r_list = r_live + SKIN_LIVE_MARGIN + sim.options.max_tool_step;
-    live.travel = if live.valid { skin_travel(sim, core_x, frames, &live.ref_x, &live.ref_frames) } else { f64::INFINITY };
+    live.travel = if live.placed() { skin_travel(sim, core_x, frames, &live.ref_x, &live.ref_frames) } else { f64::INFINITY };
     // A sweep's vertices were placed from the core at or after its start: within its reference's
     // travel plus what the skin travelled from it while the sweep went on.
     let sweep_travel = match live.sweep_next {
@@ -629,7 +635,8 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
     };
     let bound = (live.travel + live.slack).max(if live.sweep_next.is_some() { sweep_travel + live.sweep_slack } else { 0.0 });
     if !(2.0 * bound <= SKIN_LIVE_MARGIN) {
-        // The whole skin at once (a sweep could not keep up, or the first tick): every stored
+        // The whole skin at once (a sweep could not keep up, or a state's first tick with no
+        // references, restored without them): every stored
         // vertex back at its place.
         for v in 0..skin.len() {
             if over[v] != stamp {
