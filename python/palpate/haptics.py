@@ -168,14 +168,19 @@ def per_second(times_s, elapsed_s: float) -> list:
 
 
 #: The ``spin`` [s] of :class:`palpate.HapticLoop` that never sleeps: longer than any period
-#: (``spin`` takes 0 to 1 s). The servo then keeps a core busy, and its compute tail is shorter
-#: (the compute p99 4-20% lower on the Rodero palpation; BENCHMARKS.md).
+#: (``spin`` takes 0 to 1 s), its default without ``realtime``. The servo then keeps a core busy,
+#: its compute tail is shorter and it overruns less (on the Rodero palpation at 1 kHz, 2026-11-27:
+#: compute p99 ~720 us against ~900 us, 6-36 overruns a minute against 234; BENCHMARKS.md).
 BUSY_SPIN = 1.0
+
+#: The ``spin`` [s] of a servo that sleeps through each wait but its last 200 us (``palpate haptic
+#: --sleep``): the core is left to other work between ticks.
+SLEEP_SPIN = 200e-6
 
 
 def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle: bool = True,
           name: str = "", on_status: Optional[Callable[[str], None]] = None, realtime: bool = False,
-          threads: int = 1, busy_wait: bool = False) -> Dict[str, Any]:
+          threads: int = 1, busy_wait: Optional[bool] = None) -> Dict[str, Any]:
     """``palpate bench haptic``: the loop at ``rate_hz`` on ``model`` for ``seconds`` [s] with a
     repeated scripted palpation (:func:`palpation_cycle`), then (``idle``) the idle loop (no
     simulation, same device, same length) on the same clock. Returns the loop's report
@@ -186,11 +191,13 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
     ``realtime``: both loops' servo under ``SCHED_FIFO`` (see :class:`palpate.HapticLoop`; the
     report's ``realtime`` says whether it was granted); ``threads``: the loop's particle passes on
     that many threads (:class:`palpate.HapticLoop`; the idle loop has no physics to split);
-    ``busy_wait``: both loops' servo spins through each whole period instead of sleeping
-    (:data:`BUSY_SPIN`; the report's ``busy_wait``)."""
+    ``busy_wait``: both loops' servo spins through each whole period (:data:`BUSY_SPIN`) or, False,
+    sleeps through each wait but its last 200 us (:data:`SLEEP_SPIN`); None: :class:`palpate.HapticLoop`'s
+    default, busy unless ``realtime`` (the report's ``busy_wait`` says which ran)."""
     t, k = repeat(*palpation_cycle(model), seconds + 1.0)
     mat = material()
-    spin = BUSY_SPIN if busy_wait else None
+    spin = None if busy_wait is None else BUSY_SPIN if busy_wait else SLEEP_SPIN
+    busy_wait = (not realtime) if busy_wait is None else busy_wait
     loop = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz,
                          max_ticks=int(round(seconds * rate_hz)), realtime=realtime, threads=threads, spin=spin)
     steal0 = steal_seconds()

@@ -27,6 +27,10 @@ use crate::errors::{self, HapticsError};
 use crate::hybrid::PyHybridModel;
 use crate::material::PyMaterial;
 
+/// The default `spin` of a servo that is not real-time [s]: longer than any period (the servo
+/// never sleeps; see the class docs for why). `palpate.haptics.BUSY_SPIN` is the same value.
+const BUSY_SPIN: f64 = 1.0;
+
 enum Stage {
     Ready(HapticCore, Box<dyn Device>),
     Running(ServoHandle),
@@ -103,10 +107,12 @@ fn busy(what: &str) -> PyErr {
 ///     Stop after this many ticks (a scripted or replayed device also stops at its end).
 /// spin : float, optional
 ///     The last part of each wait that the servo spins rather than sleeps [s], 0 to 1 (default
-///     200 us; 0 with ``realtime``). A whole period or more (``1 / rate_hz``): the servo never
-///     sleeps and keeps a core busy, which shortens the tick's tail (the Rodero palpation at
-///     1 kHz: compute p99 4-20% lower; the overruns follow the machine's bursts either way;
-///     BENCHMARKS.md). ``palpate haptic --busy-wait`` sets it.
+///     1 s, longer than any period: the servo never sleeps and keeps its core busy; 0 with
+///     ``realtime``). A core that slept starts the next tick with cold caches and, on a virtual
+///     machine, may be taken away meanwhile: on the Rodero palpation at 1 kHz the busy servo had
+///     a compute p99 ~20% lower and 6-36 overruns a minute against 234 sleeping (BENCHMARKS.md,
+///     2026-11-27). ``200e-6`` (``palpate haptic --sleep``) sleeps through each wait but its
+///     last 200 us, leaving the core to other work.
 /// realtime : bool
 ///     Run the servo thread under ``SCHED_FIFO`` (priority 80; the watchdog 81) so that the
 ///     machine's other work cannot preempt a tick. Needs root, ``CAP_SYS_NICE`` or an
@@ -318,7 +324,7 @@ impl PyHapticLoop {
                 None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout) },
             };
             let defaults = ServoConfig::default();
-            let mut config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(if realtime { 0.0 } else { defaults.spin }), realtime, ..defaults };
+            let mut config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(if realtime { 0.0 } else { BUSY_SPIN }), realtime, ..defaults };
             config.check().map_err(errors::param_error_from)?;
 
             let mut hand = None;

@@ -532,6 +532,9 @@ def test_haptic_command_scripted_record_and_replay(tmp_path, capsys):
     assert "500 ticks" in capsys.readouterr().out
     assert main(["haptic", "ellipsoids", "--device", f"replay:{rec}", "--busy-wait", "--realtime"]) == 2     # usage
     assert "--busy-wait and --realtime" in capsys.readouterr().err
+    # --sleep: the servo sleeps through each wait (the busy wait is the default); the same ticks.
+    assert main(["haptic", "ellipsoids", "--device", f"replay:{rec}", "--sleep", "--quiet"]) in (0, 3)
+    assert "500 ticks" in capsys.readouterr().out
     assert main(["haptic", "ellipsoids", "--device", "joystick"]) == 2     # usage
     assert "unknown device" in capsys.readouterr().err
 
@@ -606,6 +609,14 @@ def test_soak_and_bench_haptic_commands(capsys):
     assert r["busy_wait"] is True and r["ticks"] == 300 and r["idle"]["ticks"] == 300
     assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--busy-wait", "--realtime"]) == 2
     assert "--busy-wait and --realtime" in capsys.readouterr().err
+    # The default is the busy wait (without --realtime); --sleep sleeps through each wait.
+    assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--json", "--no-idle"]) in (0, 3)
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["busy_wait"] is True
+    assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--json", "--no-idle", "--sleep"]) in (0, 3)
+    r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert r["busy_wait"] is False and r["ticks"] == 200
+    assert main(["bench", "haptic", "ellipsoids", "--busy-wait", "--sleep"]) == 2     # one or the other
+    assert "not allowed with argument" in capsys.readouterr().err
 
 
 def test_full_fem_body_hand_worst_stays_finite():

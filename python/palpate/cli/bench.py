@@ -195,8 +195,12 @@ def _add_haptic(bsub) -> None:
                         "whether it was granted)")
     k.add_argument("--threads", type=int, default=1, metavar="N",
                    help="threads a tick's particle passes run on, 1 to 8 (default 1; see palpate haptic --help)")
-    k.add_argument("--busy-wait", action="store_true",
-                   help="both runs' servo spins through each period instead of sleeping (see palpate haptic --help)")
+    w = k.add_mutually_exclusive_group()
+    w.add_argument("--busy-wait", action="store_true",
+                   help="both runs' servo spins through each period instead of sleeping (the default without "
+                        "--realtime; see palpate haptic --help)")
+    w.add_argument("--sleep", action="store_true",
+                   help="both runs' servo sleeps through each wait but its last 200 us (see palpate haptic --help)")
     k.add_argument("--json", action="store_true", help="one JSON object (keys: " + ", ".join(haptics.BENCH_KEYS) + ", ...)")
     k.set_defaults(func=cmd_bench_haptic)
 
@@ -216,7 +220,7 @@ def cmd_bench_haptic(a) -> int:
     name, model = load_hybrid_model(a.model, "bench haptic")
     try:
         r = haptics.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name, realtime=a.realtime, threads=a.threads,
-                          busy_wait=a.busy_wait)
+                          busy_wait=True if a.busy_wait else False if a.sleep else None)
     except palpate_errors() as e:
         raise Fail(f"palpate bench haptic: {type(e).__name__}: {e}", cause=e) from None
     if a.json:

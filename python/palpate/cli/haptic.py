@@ -48,9 +48,13 @@ def add_parser(sub) -> None:
                    help="threads a tick's particle passes run on, 1 to 8 (default 1): the servo's and N-1 helpers "
                         "that spin while the loop runs; the same forces bit for bit, sooner only where the helpers "
                         "have idle cores (on a 2-core machine they did not help: BENCHMARKS.md)")
-    h.add_argument("--busy-wait", action="store_true",
-                   help="the servo spins through each period instead of sleeping: a core kept busy, a shorter "
-                        "compute tail (BENCHMARKS.md); not with --realtime")
+    w = h.add_mutually_exclusive_group()
+    w.add_argument("--busy-wait", action="store_true",
+                   help="the servo spins through each period instead of sleeping (the default without --realtime): "
+                        "a core kept busy, a shorter compute tail and fewer overruns (BENCHMARKS.md); not with --realtime")
+    w.add_argument("--sleep", action="store_true",
+                   help="the servo sleeps through each wait but its last 200 us, leaving its core to other work "
+                        "(more overruns on a busy or virtual machine)")
     h.add_argument("--quiet", action="store_true", help="no status line")
     h.set_defaults(func=cmd_haptic)
 
@@ -85,6 +89,8 @@ def make_loop(a, model, record_ticks: int):
                   realtime=a.realtime, threads=a.threads)
     if a.busy_wait:
         common["spin"] = haptics.BUSY_SPIN
+    elif a.sleep:
+        common["spin"] = haptics.SLEEP_SPIN
     if a.kind is not None:
         common["kind"] = a.kind
     if a.seconds is not None and kind != "replay":
