@@ -72,11 +72,13 @@ pub struct Faulty<P: Physics> {
     pub since_restore: u64,
     pub stalled_at: Arc<Mutex<Option<Instant>>>,
     pub restores: Arc<AtomicU64>,
+    /// Called at each checkpoint, before the inner physics keeps its state.
+    pub on_checkpoint: Option<Box<dyn FnMut() + Send>>,
 }
 
 impl<P: Physics> Faulty<P> {
     pub fn new(inner: P, at: u64) -> Faulty<P> {
-        Faulty { inner, at, stall: None, burn: None, nan: false, corrupt: None, bad_state_from: None, ticks: 0, since_restore: 0, stalled_at: Arc::default(), restores: Arc::default() }
+        Faulty { inner, at, stall: None, burn: None, nan: false, corrupt: None, bad_state_from: None, ticks: 0, since_restore: 0, stalled_at: Arc::default(), restores: Arc::default(), on_checkpoint: None }
     }
 }
 
@@ -110,6 +112,9 @@ impl<P: Physics> Physics for Faulty<P> {
         self.inner.max_tool_step()
     }
     fn checkpoint(&mut self) {
+        if let Some(f) = &mut self.on_checkpoint {
+            f();
+        }
         self.inner.checkpoint()
     }
     fn restore(&mut self) {
