@@ -170,7 +170,7 @@ def per_second(times_s, elapsed_s: float) -> list:
 #: The ``spin`` [s] of :class:`palpate.HapticLoop` that never sleeps: longer than any period
 #: (``spin`` takes 0 to 1 s), its default without ``realtime``. The servo then keeps a core busy,
 #: its compute tail is shorter and it overruns less (on the Rodero palpation at 1 kHz, 2026-11-27:
-#: compute p99 ~720 us against ~900 us, 6-36 overruns a minute against 234; BENCHMARKS.md).
+#: compute p99 ~700-750 us against ~900 us, 5-50 overruns a minute against 38-234; BENCHMARKS.md).
 BUSY_SPIN = 1.0
 
 #: The ``spin`` [s] of a servo that sleeps through each wait but its last 200 us (``palpate haptic

@@ -110,7 +110,7 @@ fn busy(what: &str) -> PyErr {
 ///     1 s, longer than any period: the servo never sleeps and keeps its core busy; 0 with
 ///     ``realtime``). A core that slept starts the next tick with cold caches and, on a virtual
 ///     machine, may be taken away meanwhile: on the Rodero palpation at 1 kHz the busy servo had
-///     a compute p99 ~20% lower and 6-36 overruns a minute against 234 sleeping (BENCHMARKS.md,
+///     a compute p99 ~20% lower and 5-50 overruns a minute against 38-234 sleeping (BENCHMARKS.md,
 ///     2026-11-27). ``200e-6`` (``palpate haptic --sleep``) sleeps through each wait but its
 ///     last 200 us, leaving the core to other work.
 /// realtime : bool
