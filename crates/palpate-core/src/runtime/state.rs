@@ -230,25 +230,6 @@ impl Clone for LiveSkin {
 }
 
 impl LiveSkin {
-    pub(crate) fn new(n_outer: usize, n_core: usize, n_faces: usize) -> LiveSkin {
-        LiveSkin {
-            list: Vec::with_capacity(n_outer),
-            member: vec![false; n_outer],
-            carried: vec![false; n_outer],
-            valid: false,
-            unsorted: false,
-            ref_x: vec![Vec3::zeros(); n_core],
-            ref_frames: vec![None; n_faces],
-            ref_tool: Vec3::zeros(),
-            travel: f64::INFINITY,
-            slack: 0.0,
-            sweep_next: None,
-            sweep_ref_x: vec![Vec3::zeros(); n_core],
-            sweep_ref_frames: vec![None; n_faces],
-            sweep_slack: 0.0,
-        }
-    }
-
     /// At rest: every vertex at its place (the model's outer points, where its tie puts it at
     /// rest), the references the core's rest positions and face frames, the travel since 0. The
     /// first tick then only builds the list around its tool, at its start, instead of placing
@@ -256,18 +237,26 @@ impl LiveSkin {
     /// tick 1.4 ms (now 0.2 ms warm, 0.7 ms in a fresh process), an overrun at the start of
     /// every haptic run (2026-11-27).
     pub(crate) fn at_rest(sim: &super::Sim) -> LiveSkin {
-        let mut live = LiveSkin::new(sim.hybrid.outer_points.len(), sim.core.n_nodes(), sim.hybrid.core_faces.len());
+        let (n_outer, n_faces) = (sim.hybrid.outer_points.len(), sim.hybrid.core_faces.len());
         let rest = sim.core.mesh().points();
-        live.ref_x.copy_from_slice(rest);
-        super::embed::face_frames(rest, &sim.hybrid.core_faces, &mut live.ref_frames);
-        live.travel = 0.0;
-        live
-    }
-
-    /// Are the references those of a whole update (or of rest)? Before either, the travel is
-    /// unbounded and the first update places the whole skin.
-    pub(crate) fn placed(&self) -> bool {
-        self.valid || self.travel.is_finite()
+        let mut ref_frames = vec![None; n_faces];
+        super::embed::face_frames(rest, &sim.hybrid.core_faces, &mut ref_frames);
+        LiveSkin {
+            list: Vec::with_capacity(n_outer),
+            member: vec![false; n_outer],
+            carried: vec![false; n_outer],
+            valid: false,
+            unsorted: false,
+            ref_x: rest.to_vec(),
+            ref_frames,
+            ref_tool: Vec3::zeros(),
+            travel: 0.0,
+            slack: 0.0,
+            sweep_next: None,
+            sweep_ref_x: vec![Vec3::zeros(); rest.len()],
+            sweep_ref_frames: vec![None; n_faces],
+            sweep_slack: 0.0,
+        }
     }
 
     /// The vertices to look at, in index order.

@@ -133,8 +133,8 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
 
     // At rest the skin is placed and its references set (LiveSkin::at_rest): the first tick
     // builds the list around its tool here, and looks at that list only, not at every vertex.
-    if !live.valid && live.placed() {
-        live.rebuild(skin, &tool, live_radius(o) + SKIN_LIVE_MARGIN + o.max_tool_step);
+    if !live.valid {
+        live.rebuild(skin, &tool, list_radius(o));
     }
 
     // 1. Activation.
@@ -573,6 +573,12 @@ fn live_radius(o: &super::SimOptions) -> f64 {
     o.tool.radius + o.activation_margin + 2.0 * o.max_tool_step + SKIN_LIVE_MARGIN
 }
 
+/// The radius \[m\] of the list of skin vertices a tick looks at (see `LiveSkin`): the live
+/// radius, a margin (the list is rebuilt once the tool has travelled that far) and a tool's step.
+fn list_radius(o: &super::SimOptions) -> f64 {
+    live_radius(o) + SKIN_LIVE_MARGIN + o.max_tool_step
+}
+
 /// How far \[m\] the skin's ties may have moved since the core was at `ref_x` with face frames
 /// `ref_frames`: over the faces carrying skin, `sum |w| max |dx| + |dR|_F |o|` (infinite where a
 /// face's frame turned degenerate or back).
@@ -621,8 +627,8 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
     }
     live.sort();
     let r_live = live_radius(&sim.options);
-    let r_list = r_live + SKIN_LIVE_MARGIN + sim.options.max_tool_step;
-    live.travel = if live.placed() { skin_travel(sim, core_x, frames, &live.ref_x, &live.ref_frames) } else { f64::INFINITY };
+    let r_list = list_radius(&sim.options);
+    live.travel = skin_travel(sim, core_x, frames, &live.ref_x, &live.ref_frames);
     // A sweep's vertices were placed from the core at or after its start: within its reference's
     // travel plus what the skin travelled from it while the sweep went on.
     let sweep_travel = match live.sweep_next {
@@ -635,9 +641,8 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
     };
     let bound = (live.travel + live.slack).max(if live.sweep_next.is_some() { sweep_travel + live.sweep_slack } else { 0.0 });
     if !(2.0 * bound <= SKIN_LIVE_MARGIN) {
-        // The whole skin at once (a sweep could not keep up, or a state's first tick with no
-        // references, restored without them): every stored
-        // vertex back at its place.
+        // The whole skin at once (a sweep could not keep up): every stored vertex back at its
+        // place.
         for v in 0..skin.len() {
             if over[v] != stamp {
                 skin[v] = place(v, false);
