@@ -436,6 +436,8 @@ impl PyHybridSim {
             },
             skin_lift: Vec::new(),
             skin_lift_start: 0,
+            // `HybridSim.step` runs whole ticks: its states never owe the skin's update.
+            skin_owed: false,
         };
         // The skin's lift after a shed shell (absent from older states: none).
         let mut snap = snap;

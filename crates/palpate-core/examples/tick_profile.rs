@@ -2,13 +2,15 @@
 //! MODEL.palpate [radius_mm] [ticks]` (a 3 mm press, a 10 mm slide and a release at the outer
 //! vertex farthest along +x, the tool along the direction from the outer surface's centroid;
 //! damped as the bench; `DEPTH_MM` sets the press's depth, `TRACE=FILE` writes one CSV row a
-//! tick, the last column the force on the tool [N]). Prints the tick's mean and percentiles and the mean sub-step count; run
+//! tick; `SPLIT=1` times only the part of each tick its force depends on, as the haptic servo
+//! sends it, the skin's update after it untimed). Prints the tick's mean and percentiles and the mean sub-step count; run
 //! it under `perf record` for where the time goes.
 #[path = "support/mod.rs"]
 mod support;
 
 use palpate_core::hybrid::HybridModel;
-use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace};
+use palpate_core::parallel::Serial;
+use palpate_core::runtime::{finish_tick, tick, tick_force_with, Sim, SimOptions, SimState, SimWorkspace};
 use palpate_core::Vec3;
 use std::time::Instant;
 use support::{percentile, press_path, tissue};
@@ -51,16 +53,29 @@ fn main() {
     let mut last_force = 0.0;
     // DEPTH_MM: the press's depth (default 3 mm); TRACE=FILE: one CSV row a tick (k, ms, active,
     // entered, left, sub-steps, core iterations, force [N], skin vertices refreshed away from the
-    // tool) to tell what the slow ticks have in common.
+    // tool, core evaluations, particles the wall pushed) to tell what the slow ticks have in common.
     let depth = std::env::var("DEPTH_MM").ok().and_then(|s| s.parse::<f64>().ok()).unwrap_or(3.0) * 1e-3;
+    // SPLIT: time only the force's part of each tick (runtime::tick_force_with), the skin's
+    // update after it untimed, as the haptic servo sends the force before that update.
+    let split = std::env::var("SPLIT").is_ok();
     let mut trace = std::env::var("TRACE").ok().map(|f| std::io::BufWriter::new(std::fs::File::create(f).unwrap()));
     for k in 0..ticks {
         let (d, s) = press_path(k, [press, hold, slide, ticks - press - hold - slide], depth, 10e-3);
         let c = p + n_in * (d - radius) + tangent * s;
         let t0 = Instant::now();
-        let rep = tick(&sim, &mut st, &mut ws, c, 1e-3).unwrap();
-        let ms = t0.elapsed().as_secs_f64() * 1e3;
-        times.push(ms);
+        let rep = if split {
+            // The haptic servo's order: the force (timed), then the skin's update after the send.
+            let rep = tick_force_with(&sim, &mut st, &mut ws, c, 1e-3, &Serial).unwrap();
+            let ms = t0.elapsed();
+            finish_tick(&sim, &mut st, &mut ws);
+            times.push(ms.as_secs_f64() * 1e3);
+            rep
+        } else {
+            let rep = tick(&sim, &mut st, &mut ws, c, 1e-3).unwrap();
+            times.push(t0.elapsed().as_secs_f64() * 1e3);
+            rep
+        };
+        let ms = *times.last().unwrap();
         if std::env::var("WHY").is_ok() && k % 100 == 0 && rep.active > 0 {
             let held = sim.particles.fixed();
             let s2 = st.particles.active.iter().filter(|&&p| !held[p]).map(|&p| palpate_core::runtime::stability::stretch_bound(&sim.particles.deformation_gradient(p, &st.particles.x))).fold(1.0, f64::max);
@@ -73,7 +88,7 @@ fn main() {
         }
         if let Some(t) = trace.as_mut() {
             use std::io::Write;
-            writeln!(t, "{k},{ms:.4},{},{},{},{},{},{:.6e},{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.force.norm(), rep.skin_refreshed).unwrap();
+            writeln!(t, "{k},{ms:.4},{},{},{},{},{},{:.6e},{},{},{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.force.norm(), rep.skin_refreshed, rep.core.evaluations, rep.confined).unwrap();
         }
         subs += rep.substeps;
         if k == press + hold - 1 {

@@ -6,7 +6,7 @@
 use palpate_core::hybrid::{file, HybridModel};
 use palpate_core::math::is_finite3;
 use palpate_core::parallel::{Fork, Serial};
-use palpate_core::runtime::{tick_with, Sim, SimOptions, SimState, SimWorkspace, Tool};
+use palpate_core::runtime::{finish_tick, tick_force_with, Sim, SimOptions, SimState, SimWorkspace, Tool};
 use palpate_core::{step, Material, Model, ModelError, State, StepError, Vec3, Workspace};
 
 use crate::pool::SpinPool;
@@ -31,6 +31,11 @@ pub trait Physics: Send {
     /// returns the force on the tool \[N\] (the tissue's reaction, what a device renders). On
     /// error the simulation is as it was before the tick.
     fn tick(&mut self, tool: &Vec3, dt: f64) -> Result<Vec3, StepError>;
+    /// The part of the last tick that its force does not depend on, done once the force is sent
+    /// (the servo calls it after the send, before a checkpoint). A tick that finds it undone does
+    /// it first, so calling it or not changes no result, only when the work is done. Default:
+    /// nothing (the whole tick is in [`Physics::tick`]).
+    fn finish(&mut self) {}
     /// Where the simulated tool is \[m\] (`None` before the first tick).
     fn tool(&self) -> Option<Vec3>;
     /// The most the simulated tool moves in a tick \[m\] (the coupling's proxy is held to it, so
@@ -147,7 +152,14 @@ impl Physics for HybridPhysics {
             }
             None => &Serial,
         };
-        tick_with(&self.sim, &mut self.state, &mut self.ws, *tool, dt, fork).map(|r| r.force)
+        // The skin's update is left owed (runtime::tick_force_with): `finish` pays it after the
+        // send, out of the time to the deadline.
+        tick_force_with(&self.sim, &mut self.state, &mut self.ws, *tool, dt, fork).map(|r| r.force)
+    }
+    /// The skin's update of the last tick (`runtime::finish_tick`): 40-90 us on the Rodero
+    /// ventricle, and a slice of a sweep of the far skin when one runs.
+    fn finish(&mut self) {
+        finish_tick(&self.sim, &mut self.state, &mut self.ws);
     }
     fn tool(&self) -> Option<Vec3> {
         self.state.tool

@@ -10,9 +10,11 @@
 //! 5. A fault (the physics tick failed, or a force or the proxy is not finite) zeroes the
 //!    force *this* tick, restores the simulation's last good state, puts the proxy at its tool,
 //!    restarts the ramp, and is logged.
-//! 6. After the force is sent ([`HapticCore::after_send`]): every `checkpoint_every` ticks
-//!    without a fault (and with a finite state) the state becomes the last good one; a state
-//!    found non-finite there is a fault (the force zeroed at once, the state restored).
+//! 6. After the force is sent ([`HapticCore::after_send`]): the part of the tick its force does
+//!    not depend on ([`Physics::finish`]: the hybrid model's skin update, 40-90 us on the Rodero
+//!    ventricle, ~10% of a pressing tick); then every `checkpoint_every` ticks without a fault
+//!    (and with a finite state) the state becomes the last good one; a state found non-finite
+//!    there is a fault (the force zeroed at once, the state restored).
 //!
 //! The checkpoint comes after the send because it is the tick's largest fixed cost and its
 //! force does not depend on it: on the Rodero ventricle (28,039 particles, a 31,788-vertex skin)
@@ -307,12 +309,15 @@ impl HapticCore {
         out
     }
 
-    /// The rest of the tick, after its force was sent (step 6 of the module docs): the
-    /// checkpoint when due, on a tick without a fault. Returns `true` when it found the state
+    /// The rest of the tick, after its force was sent (step 6 of the module docs): the physics'
+    /// [`Physics::finish`], then the checkpoint when due, on a tick without a fault. Returns `true` when it found the state
     /// non-finite and took the fault path: `out` then says so (zero force), and the caller
     /// zeroes the device at once. Everything here depends on the tick count and the state only,
     /// so the real-time thread and [`HapticCore::run_offline`] stay the same.
     pub fn after_send(&mut self, out: &mut TickOut) -> bool {
+        // The tick's own rest (the skin's update of the hybrid model), before a checkpoint
+        // copies the state.
+        self.physics.finish();
         if out.fault || self.input.is_none() || !self.tick.is_multiple_of(self.checkpoint_every) {
             return false;
         }
@@ -643,8 +648,9 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
         }
         let t1 = Instant::now();
         let c1 = crate::realtime::thread_cpu_time();
-        // The checkpoint, in the tick's slack (the module docs say why): not part of the tick's
-        // compute, which ends with the send; a late one shows as the next tick's lateness.
+        // The tick's rest and the checkpoint, in the tick's slack (the module docs say why): not
+        // part of the tick's compute, which ends with the send; a late one shows as the next
+        // tick's lateness.
         if core.after_send(&mut out) {
             sink.zeroed();
         }

@@ -599,17 +599,25 @@ fn overruns_are_told_apart_by_the_servo_threads_cpu_time() {
 
 /// The checkpoint (the state copy and its finiteness scan: ~0.15-0.25 ms on the Rodero model)
 /// comes after the tick's force is sent, in both the real-time thread and the offline run, so
-/// that it never makes the force of its tick late (servo.rs says what it cost there). Fails when
-/// the checkpoint is taken inside the tick before the send: each checkpoint then sees one force
-/// fewer than its tick number.
+/// that it never makes the force of its tick late (servo.rs says what it cost there); so does
+/// the physics' `finish` (the hybrid model's skin update), once a tick and before the
+/// checkpoint, which must copy a finished state. Fails when the checkpoint or the finish is
+/// taken inside the tick before the send (each then sees one force fewer than its tick number),
+/// or when a checkpoint comes before its tick's finish.
 #[test]
 fn the_checkpoint_comes_after_its_ticks_force_is_sent() {
     for realtime_thread in [false, true] {
         let hand = Hand::new(HandParams::default(), Vec3::new(0.0, 0.0, 0.005));
         let seen = Arc::new(std::sync::Mutex::new(Vec::new()));
+        let finished = Arc::new(std::sync::Mutex::new(Vec::new()));
         let mut physics = Faulty::new(wall(), u64::MAX);
-        let (forces, log) = (hand.forces(), seen.clone());
-        physics.on_checkpoint = Some(Box::new(move || log.lock().unwrap().push(forces.sent())));
+        let (forces, log, fin) = (hand.forces(), seen.clone(), finished.clone());
+        physics.on_checkpoint = Some(Box::new(move || {
+            let done = fin.lock().unwrap().len() as u64;
+            log.lock().unwrap().push((forces.sent(), done))
+        }));
+        let (forces, fin) = (hand.forces(), finished.clone());
+        physics.on_finish = Some(Box::new(move || fin.lock().unwrap().push(forces.sent())));
         let cfg = ServoConfig { checkpoint_every: 10, max_ticks: Some(60), safety: Some(fast_ramp()), ..Default::default() };
         let mut core = HapticCore::with_config(Box::new(physics), &cfg, &hand).unwrap();
         if realtime_thread {
@@ -620,6 +628,9 @@ fn the_checkpoint_comes_after_its_ticks_force_is_sent() {
             assert_eq!(core.run_offline(dev.as_mut(), 60), 60);
         }
         let seen = seen.lock().unwrap().clone();
-        assert_eq!(seen, vec![10, 20, 30, 40, 50, 60], "sends seen by the checkpoints (thread: {realtime_thread})");
+        let want: Vec<(u64, u64)> = (1..=6).map(|k| (10 * k, 10 * k)).collect();
+        assert_eq!(seen, want, "sends and finished ticks seen by the checkpoints (thread: {realtime_thread})");
+        let finished = finished.lock().unwrap().clone();
+        assert_eq!(finished, (1..=60).collect::<Vec<u64>>(), "sends seen by the finishes (thread: {realtime_thread})");
     }
 }

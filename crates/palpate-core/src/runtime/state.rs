@@ -42,6 +42,9 @@ pub struct SimState {
     pub(crate) lift: SkinLift,
     /// The skin vertices the tick looks at between whole updates (see [`LiveSkin`]).
     pub(crate) live: LiveSkin,
+    /// The last tick's skin update is still to do ([`super::tick_force_with`] leaves it owed,
+    /// [`super::finish_tick`] or the next tick pays it).
+    pub(crate) skin_owed: bool,
 }
 
 /// Where a shed shell left the skin (see [`super::tick`], step 3): when the shell is shed, the
@@ -99,11 +102,12 @@ impl Clone for SimState {
             live: self.live.clone(),
             shell_off_until: self.shell_off_until,
             lift: self.lift.clone(),
+            skin_owed: self.skin_owed,
         }
     }
     fn clone_from(&mut self, s: &Self) {
         // Exhaustive: a new field is a compile error here until it is copied.
-        let SimState { core, particles, skin, tool, activation, ticks, is_active, live, shell_off_until, lift } = self;
+        let SimState { core, particles, skin, tool, activation, ticks, is_active, live, shell_off_until, lift, skin_owed } = self;
         core.clone_from(&s.core);
         particles.clone_from(&s.particles);
         skin.clone_from(&s.skin);
@@ -113,6 +117,7 @@ impl Clone for SimState {
         is_active.clone_from(&s.is_active);
         live.clone_from(&s.live);
         *shell_off_until = s.shell_off_until;
+        *skin_owed = s.skin_owed;
         lift.offset.clone_from(&s.lift.offset);
         lift.list.clone_from(&s.lift.list);
         (lift.start, lift.ticks) = (s.lift.start, s.lift.ticks);
@@ -316,6 +321,7 @@ impl SimState {
             shell_off_until: 0,
             lift: SkinLift::new(sim.hybrid.outer_points.len()),
             live: LiveSkin::at_rest(sim),
+            skin_owed: false,
         }
     }
 
@@ -349,6 +355,7 @@ impl SimState {
             shell_off_until: self.shell_off_until,
             skin_lift: self.lift.list.iter().map(|&v| (v, self.lift.offset[v as usize])).collect(),
             skin_lift_start: self.lift.start,
+            skin_owed: self.skin_owed,
         }
     }
 
@@ -414,6 +421,7 @@ impl SimState {
         state.tool = snap.tool;
         state.ticks = snap.ticks;
         state.shell_off_until = snap.shell_off_until;
+        state.skin_owed = snap.skin_owed && snap.tool.is_some();
         state.lift.start = snap.skin_lift_start;
         state.lift.ticks = shed_fade_ticks(&sim.options);
         for &(v, d) in &snap.skin_lift {
@@ -490,6 +498,9 @@ pub struct SimSnapshot {
     /// tick (see `SkinLift`; empty: none).
     pub skin_lift: Vec<(u32, Vec3)>,
     pub skin_lift_start: u64,
+    /// The last tick's skin update is still owed (a state taken between
+    /// [`super::tick_force_with`] and [`super::finish_tick`]; false after a whole tick).
+    pub skin_owed: bool,
 }
 
 /// The ticks a shed shell's skin takes back to its ties: [`SHED_FADE_TICKS`], or the shell's

@@ -31,6 +31,8 @@
 //!    of every reaction: the coupling springs', the ring's (the active particles' stresses on
 //!    their frozen neighbours, spread by the ties' weights), the skin's.
 //! 6. **The skin** follows its core faces, and over active triangles also the particles under it.
+//!    The force does not depend on it: [`tick_force_with`] stops before it and [`finish_tick`]
+//!    does it, so that a haptic servo sends the force first ([`tick`] does both).
 //!
 //! Every force between two bodies is one of an equal and opposite pair and every tie spreads
 //! a force into shares that sum to it, so with the tool away (and no confinement push) the total
@@ -106,13 +108,27 @@ pub fn tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, 
 /// [`crate::parallel`]): bitwise the same tick, sooner when the caller has a core to spare (the
 /// haptic servo's pool). Everything else runs on the calling thread.
 pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, dt: f64, fork: &dyn Fork) -> Result<TickReport, StepError> {
+    let mut report = tick_force_with(sim, state, ws, tool, dt, fork)?;
+    report.skin_refreshed = finish_tick(sim, state, ws);
+    Ok(report)
+}
+
+/// Steps 1-5 of [`tick_with`]: everything the tick's force depends on. The skin's update (step
+/// 6), which only the next tick's contact and the drawn surface read, is left owed: pay it with
+/// [`finish_tick`] once the force is on its way (a haptic servo sends the force first, so that
+/// the update's 40-90 us, and a sweep's slice of the far skin, come out of the tick's slack, not
+/// before its deadline). A tick that finds it still owed pays it first, so the trajectory is
+/// bitwise [`tick_with`]'s whether or not the caller finishes. [`TickReport::skin_refreshed`]
+/// is 0 here; [`finish_tick`] returns it.
+pub fn tick_force_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, dt: f64, fork: &dyn Fork) -> Result<TickReport, StepError> {
+    finish_tick(sim, state, ws);
     if !(dt > 0.0 && dt.is_finite()) {
         return Err(StepError::BadTimeStep(dt));
     }
     if !is_finite3(&tool) {
         return Err(StepError::NonFiniteTool);
     }
-    let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active, live, shell_off_until, lift } = state;
+    let SimState { core, particles, skin, tool: last_tool, activation, ticks, is_active, live, shell_off_until, lift, skin_owed } = state;
     // The shell's clock is the core's (it advances only while particles are active).
     particles.t = core.t;
     // The core's face frames and their rates, once: every tie on a face shares them.
@@ -429,12 +445,32 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
         *shell_off_until = (*shell_off_until).max(*ticks + 2);
     }
 
-    // 6. The skin.
-    // Near the tool every tick; everywhere every SKIN_REFRESH_TICKS ticks.
-    report.skin_refreshed = update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, stamp, tool, live, skin);
-    // A shed shell's skin, lifted off its ties as the next tick's contact will see it.
+    // 6. The skin: owed (see tick_force_with), paid by finish_tick.
+    *skin_owed = true;
+    report.force = tool_force;
+    *last_tool = Some(tool);
+    *ticks += 1;
+    Ok(report)
+}
+
+/// Step 6 of the tick that [`tick_force_with`] left owed, if any: the skin follows its core
+/// faces near the tool every tick, and over active triangles the particles under it; the far
+/// skin a slice of a sweep a tick (see `LiveSkin`); a shed shell's skin as lifted off its ties.
+/// Returns the skin vertices refreshed away from the tool ([`TickReport::skin_refreshed`]); 0
+/// when nothing was owed. Allocates nothing.
+pub fn finish_tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace) -> usize {
+    let SimState { core, particles, skin, tool, activation, ticks, live, lift, skin_owed, .. } = state;
+    let Some(tool) = *tool else { return 0 };
+    if !std::mem::replace(skin_owed, false) {
+        return 0;
+    }
+    // Marks of this update (the workspace's count, as the tick's own).
+    ws.epoch += 1;
+    let refreshed = update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, ws.epoch, tool, live, skin);
+    // A shed shell's skin, lifted off its ties as the next tick's contact will see it (the tick
+    // is already counted: its successor's scale).
     if !lift.list.is_empty() {
-        let scale = lift.scale(*ticks + 1);
+        let scale = lift.scale(*ticks);
         for &v in &lift.list {
             let v = v as usize;
             skin[v] = sim.skin.position_framed(v, &core.x, &ws.frames) + scale * lift.offset[v];
@@ -443,10 +479,7 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
             lift.clear();
         }
     }
-    report.force = tool_force;
-    *last_tool = Some(tool);
-    *ticks += 1;
-    Ok(report)
+    refreshed
 }
 
 /// The sub-steps this tick needs ([`super::stability`]): the active particles' largest stretch at

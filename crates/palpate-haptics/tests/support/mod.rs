@@ -74,11 +74,13 @@ pub struct Faulty<P: Physics> {
     pub restores: Arc<AtomicU64>,
     /// Called at each checkpoint, before the inner physics keeps its state.
     pub on_checkpoint: Option<Box<dyn FnMut() + Send>>,
+    /// Called at each finish (the tick's rest after its send), before the inner physics'.
+    pub on_finish: Option<Box<dyn FnMut() + Send>>,
 }
 
 impl<P: Physics> Faulty<P> {
     pub fn new(inner: P, at: u64) -> Faulty<P> {
-        Faulty { inner, at, stall: None, burn: None, nan: false, corrupt: None, bad_state_from: None, ticks: 0, since_restore: 0, stalled_at: Arc::default(), restores: Arc::default(), on_checkpoint: None }
+        Faulty { inner, at, stall: None, burn: None, nan: false, corrupt: None, bad_state_from: None, ticks: 0, since_restore: 0, stalled_at: Arc::default(), restores: Arc::default(), on_checkpoint: None, on_finish: None }
     }
 }
 
@@ -110,6 +112,12 @@ impl<P: Physics> Physics for Faulty<P> {
     }
     fn max_tool_step(&self) -> f64 {
         self.inner.max_tool_step()
+    }
+    fn finish(&mut self) {
+        if let Some(f) = &mut self.on_finish {
+            f();
+        }
+        self.inner.finish()
     }
     fn checkpoint(&mut self) {
         if let Some(f) = &mut self.on_checkpoint {
