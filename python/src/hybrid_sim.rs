@@ -436,8 +436,10 @@ impl PyHybridSim {
             },
             skin_lift: Vec::new(),
             skin_lift_start: 0,
-            // `HybridSim.step` runs whole ticks: its states never owe the skin's update.
+            // `HybridSim.step` runs whole ticks: its states never owe the skin's update or the
+            // core's step.
             skin_owed: false,
+            core_owed: None,
         };
         // The skin's lift after a shed shell (absent from older states: none).
         let mut snap = snap;

@@ -67,7 +67,7 @@ fn main() {
             // The haptic servo's order: the force (timed), then the skin's update after the send.
             let rep = tick_force_with(&sim, &mut st, &mut ws, c, 1e-3, &Serial).unwrap();
             let ms = t0.elapsed();
-            finish_tick(&sim, &mut st, &mut ws);
+            finish_tick(&sim, &mut st, &mut ws).unwrap();
             times.push(ms.as_secs_f64() * 1e3);
             rep
         } else {

@@ -33,9 +33,12 @@ pub trait Physics: Send {
     fn tick(&mut self, tool: &Vec3, dt: f64) -> Result<Vec3, StepError>;
     /// The part of the last tick that its force does not depend on, done once the force is sent
     /// (the servo calls it after the send, before a checkpoint). A tick that finds it undone does
-    /// it first, so calling it or not changes no result, only when the work is done. Default:
+    /// it first, so calling it or not changes no result, only when the work is done. On error
+    /// the caller restores the last good state (the tick's force was already given). Default:
     /// nothing (the whole tick is in [`Physics::tick`]).
-    fn finish(&mut self) {}
+    fn finish(&mut self) -> Result<(), StepError> {
+        Ok(())
+    }
     /// Where the simulated tool is \[m\] (`None` before the first tick).
     fn tool(&self) -> Option<Vec3>;
     /// The most the simulated tool moves in a tick \[m\] (the coupling's proxy is held to it, so
@@ -152,14 +155,16 @@ impl Physics for HybridPhysics {
             }
             None => &Serial,
         };
-        // The skin's update is left owed (runtime::tick_force_with): `finish` pays it after the
-        // send, out of the time to the deadline.
+        // The skin's update, and the core's step when the tool has nothing of the core within
+        // reach, are left owed (runtime::tick_force_with): `finish` pays them after the send, out
+        // of the time to the deadline.
         tick_force_with(&self.sim, &mut self.state, &mut self.ws, *tool, dt, fork).map(|r| r.force)
     }
-    /// The skin's update of the last tick (`runtime::finish_tick`): 40-90 us on the Rodero
-    /// ventricle, and a slice of a sweep of the far skin when one runs.
-    fn finish(&mut self) {
-        finish_tick(&self.sim, &mut self.state, &mut self.ws);
+    /// What the last tick owes (`runtime::finish_tick`): the skin's update (40-90 us on the
+    /// Rodero ventricle, and a slice of a sweep of the far skin when one runs), and the core's
+    /// step when the tool had nothing of the core within reach (~20% of a pressing tick).
+    fn finish(&mut self) -> Result<(), StepError> {
+        finish_tick(&self.sim, &mut self.state, &mut self.ws).map(|_| ())
     }
     fn tool(&self) -> Option<Vec3> {
         self.state.tool

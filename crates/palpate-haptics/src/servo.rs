@@ -12,7 +12,8 @@
 //!    restarts the ramp, and is logged.
 //! 6. After the force is sent ([`HapticCore::after_send`]): the part of the tick its force does
 //!    not depend on ([`Physics::finish`]: the hybrid model's skin update, 40-90 us on the Rodero
-//!    ventricle, ~10% of a pressing tick); then every `checkpoint_every` ticks without a fault
+//!    ventricle, ~10% of a pressing tick, and its core's step when the tool has nothing of the
+//!    core within reach, ~20%; a failure there is a fault as a failed tick's); then every `checkpoint_every` ticks without a fault
 //!    (and with a finite state) the state becomes the last good one; a state found non-finite
 //!    there is a fault (the force zeroed at once, the state restored).
 //!
@@ -315,9 +316,16 @@ impl HapticCore {
     /// zeroes the device at once. Everything here depends on the tick count and the state only,
     /// so the real-time thread and [`HapticCore::run_offline`] stay the same.
     pub fn after_send(&mut self, out: &mut TickOut) -> bool {
-        // The tick's own rest (the skin's update of the hybrid model), before a checkpoint
-        // copies the state.
-        self.physics.finish();
+        // The tick's own rest (the hybrid model's skin update, and its core's step when the
+        // tool had nothing of the core within reach), before a checkpoint copies the state. A
+        // failure there is a fault, as a failed tick's: zero now, the last good state back.
+        if let Err(e) = self.physics.finish() {
+            if !out.fault {
+                self.fault(Fault::Step(e), out);
+                self.retract(out);
+                return true;
+            }
+        }
         if out.fault || self.input.is_none() || !self.tick.is_multiple_of(self.checkpoint_every) {
             return false;
         }

@@ -229,6 +229,33 @@ fn nan_from_the_physics_never_reaches_the_device() {
     assert!(rec.ticks[299].force.norm() > 1.0, "pressing again after the ramp");
 }
 
+/// The work a tick leaves until after its send (`Physics::finish`: the hybrid model's skin, and
+/// its core's step when the tool had nothing of the core within reach) can fail after the force
+/// went out: the servo zeroes the device in that same tick, records the zero, restores the last
+/// good state and logs a failed step. Fails when the finish's error is dropped (no fault, the
+/// record keeps the force).
+#[test]
+fn a_failed_finish_is_a_fault_in_its_own_tick() {
+    let mut faulty = Faulty::new(wall(), u64::MAX);
+    faulty.finish_fails_at = Some(150);
+    let restores = faulty.restores.clone();
+    let sink: Arc<LogSink> = Arc::default();
+    let mut dev = Pressing { z: |_t: f64| -0.012, sink: sink.clone(), ticks: 300 };
+    let mut core = HapticCore::new(Box::new(faulty), 1000.0, CouplingParams::default(), fast_ramp(), 50, 300);
+    core.run_offline(&mut dev, 300);
+    let rec = core.take_recording().unwrap();
+    assert!(rec.ticks[149].force.norm() > 1.0);
+    assert_eq!(rec.ticks[150].force, Vec3::zeros(), "the tick whose finish failed is recorded as zero");
+    assert_eq!(restores.load(Ordering::Relaxed), 1);
+    assert_eq!(core.faults(), 1);
+    assert!(matches!(core.fault_log()[0], palpate_haptics::FaultRecord { tick: 150, fault: Fault::Step(_), .. }), "{:?}", core.fault_log());
+    // One send a tick, and one zero more after tick 150's.
+    let sent: Vec<Vec3> = sink.0.lock().unwrap().iter().map(|(_, f)| *f).collect();
+    assert_eq!(sent.len(), 301);
+    assert!(sent[150].norm() > 1.0 && sent[151] == Vec3::zeros(), "tick 150 sent {:?}, then {:?}", sent[150], sent[151]);
+    assert!(rec.ticks[299].force.norm() > 1.0, "pressing again after the ramp");
+}
+
 #[test]
 fn nan_in_the_hybrid_state_is_contained_and_restored() {
     let physics = hybrid();

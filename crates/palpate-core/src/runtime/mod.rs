@@ -58,5 +58,5 @@ pub use embed::Embedding;
 pub use sim::{Sim, SimOptions};
 pub use stability::Shell;
 pub use state::{SimSnapshot, SimState, SimWorkspace, SkinSweep, SHED_FADE_TICKS};
-pub use tick::{finish_tick, tick, tick_force_with, tick_with, TickReport};
+pub use tick::{finish_tick, tick, tick_force_with, tick_with, Finished, TickReport};
 pub use tool::{ContactSum, PointContact, Tool};

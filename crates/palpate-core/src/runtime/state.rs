@@ -45,6 +45,10 @@ pub struct SimState {
     /// The last tick's skin update is still to do ([`super::tick_force_with`] leaves it owed,
     /// [`super::finish_tick`] or the next tick pays it).
     pub(crate) skin_owed: bool,
+    /// The last tick's core step is still to do, with this `dt` \[s\] and the reactions already
+    /// in `core.f_ext` (owed when the tool had no contact with the core or its skin: the force
+    /// did not depend on the step).
+    pub(crate) core_owed: Option<f64>,
 }
 
 /// Where a shed shell left the skin (see [`super::tick`], step 3): when the shell is shed, the
@@ -103,11 +107,12 @@ impl Clone for SimState {
             shell_off_until: self.shell_off_until,
             lift: self.lift.clone(),
             skin_owed: self.skin_owed,
+            core_owed: self.core_owed,
         }
     }
     fn clone_from(&mut self, s: &Self) {
         // Exhaustive: a new field is a compile error here until it is copied.
-        let SimState { core, particles, skin, tool, activation, ticks, is_active, live, shell_off_until, lift, skin_owed } = self;
+        let SimState { core, particles, skin, tool, activation, ticks, is_active, live, shell_off_until, lift, skin_owed, core_owed } = self;
         core.clone_from(&s.core);
         particles.clone_from(&s.particles);
         skin.clone_from(&s.skin);
@@ -118,6 +123,7 @@ impl Clone for SimState {
         live.clone_from(&s.live);
         *shell_off_until = s.shell_off_until;
         *skin_owed = s.skin_owed;
+        *core_owed = s.core_owed;
         lift.offset.clone_from(&s.lift.offset);
         lift.list.clone_from(&s.lift.list);
         (lift.start, lift.ticks) = (s.lift.start, s.lift.ticks);
@@ -322,6 +328,7 @@ impl SimState {
             lift: SkinLift::new(sim.hybrid.outer_points.len()),
             live: LiveSkin::at_rest(sim),
             skin_owed: false,
+            core_owed: None,
         }
     }
 
@@ -356,6 +363,7 @@ impl SimState {
             skin_lift: self.lift.list.iter().map(|&v| (v, self.lift.offset[v as usize])).collect(),
             skin_lift_start: self.lift.start,
             skin_owed: self.skin_owed,
+            core_owed: self.core_owed.map(|dt| (dt, self.core.f_ext.clone())),
         }
     }
 
@@ -422,6 +430,13 @@ impl SimState {
         state.ticks = snap.ticks;
         state.shell_off_until = snap.shell_off_until;
         state.skin_owed = snap.skin_owed && snap.tool.is_some();
+        if let Some((dt, f)) = &snap.core_owed {
+            if !(*dt > 0.0 && dt.is_finite() && f.len() == n_core && f.iter().all(|x| x.iter().all(|c| c.is_finite())) && state.skin_owed) {
+                return Err(bad(format!("owed core step: dt {dt} s, {} forces of {n_core} (finite, with the skin owed too)", f.len())));
+            }
+            state.core.f_ext.clone_from(f);
+            state.core_owed = Some(*dt);
+        }
         state.lift.start = snap.skin_lift_start;
         state.lift.ticks = shed_fade_ticks(&sim.options);
         for &(v, d) in &snap.skin_lift {
@@ -501,6 +516,9 @@ pub struct SimSnapshot {
     /// The last tick's skin update is still owed (a state taken between
     /// [`super::tick_force_with`] and [`super::finish_tick`]; false after a whole tick).
     pub skin_owed: bool,
+    /// The last tick's core step too, when owed: its `dt` \[s\] and the core's external forces
+    /// \[N\] (`(n_core)`, world frame: the shell's reactions it steps under).
+    pub core_owed: Option<(f64, Vec<Vec3>)>,
 }
 
 /// The ticks a shed shell's skin takes back to its ties: [`SHED_FADE_TICKS`], or the shell's

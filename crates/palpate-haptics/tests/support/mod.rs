@@ -76,11 +76,13 @@ pub struct Faulty<P: Physics> {
     pub on_checkpoint: Option<Box<dyn FnMut() + Send>>,
     /// Called at each finish (the tick's rest after its send), before the inner physics'.
     pub on_finish: Option<Box<dyn FnMut() + Send>>,
+    /// The finish of this tick fails (as an owed core step of the hybrid model may).
+    pub finish_fails_at: Option<u64>,
 }
 
 impl<P: Physics> Faulty<P> {
     pub fn new(inner: P, at: u64) -> Faulty<P> {
-        Faulty { inner, at, stall: None, burn: None, nan: false, corrupt: None, bad_state_from: None, ticks: 0, since_restore: 0, stalled_at: Arc::default(), restores: Arc::default(), on_checkpoint: None, on_finish: None }
+        Faulty { inner, at, stall: None, burn: None, nan: false, corrupt: None, bad_state_from: None, ticks: 0, since_restore: 0, stalled_at: Arc::default(), restores: Arc::default(), on_checkpoint: None, on_finish: None, finish_fails_at: None }
     }
 }
 
@@ -113,9 +115,12 @@ impl<P: Physics> Physics for Faulty<P> {
     fn max_tool_step(&self) -> f64 {
         self.inner.max_tool_step()
     }
-    fn finish(&mut self) {
+    fn finish(&mut self) -> Result<(), StepError> {
         if let Some(f) = &mut self.on_finish {
             f();
+        }
+        if self.finish_fails_at.is_some_and(|k| k + 1 == self.ticks) {
+            return Err(StepError::NonFiniteTool);
         }
         self.inner.finish()
     }
