@@ -44,9 +44,14 @@ Small spheres: below about the skin's edge length (~1.7 mm on the synthetic vent
 sphere can slip between skin vertices and particles; the run then measures the tick's cost at
 that active count with little or no contact force (``max_force_n`` says so).
 
-Timing: ``time.perf_counter`` around each ``sim.step`` call only (the binding's conversion of
-the tool position and the force included: a few microseconds). ``stable``: every tick returned a
-finite force, raised no ``StepError``, and the skin is finite at the end.
+Timing: ``time.perf_counter`` around each tick's two calls only (the binding's conversion of
+the tool position and the force included: a few microseconds): ``sim.step(c, finish=False)``,
+which ends once the force is known, then ``sim.finish()``, the rest of the tick (the skin's
+update, and the core's step when the tool has nothing of the core within reach), as a haptic
+servo sends the force in between. ``tick_ms_*``: both calls, the whole tick (the issue's
+targets); ``force_ms_*``: the first alone, the time from a device's position to its force.
+``stable``: every tick returned a finite force, raised no ``StepError``, and the skin is finite
+at the end.
 """
 from __future__ import annotations
 
@@ -191,14 +196,17 @@ def machine() -> Dict[str, Any]:
             "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")}
 
 
-def _stats_ms(times: List[float]) -> Dict[str, Optional[float]]:
+def _stats_ms(times: List[float], what: str = "tick") -> Dict[str, Optional[float]]:
+    keys = [f"{what}_ms_{s}" for s in ("mean", "p50", "p99", "max")] + (["ticks_per_s"] if what == "tick" else [])
     if not times:
-        return {k: None for k in ("tick_ms_mean", "tick_ms_p50", "tick_ms_p99", "tick_ms_max", "ticks_per_s")}
+        return {k: None for k in keys}
     t = np.asarray(times) * 1e3
     mean = float(t.mean())
-    return {"tick_ms_mean": mean, "tick_ms_p50": float(np.percentile(t, 50)),
-            "tick_ms_p99": float(np.percentile(t, 99)), "tick_ms_max": float(t.max()),
-            "ticks_per_s": 1e3 / mean if mean > 0 else None}
+    out = {keys[0]: mean, keys[1]: float(np.percentile(t, 50)), keys[2]: float(np.percentile(t, 99)),
+           keys[3]: float(t.max())}
+    if what == "tick":
+        out["ticks_per_s"] = 1e3 / mean if mean > 0 else None
+    return out
 
 
 def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] = None,
@@ -236,6 +244,7 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
     sim = _p.HybridSim(model, mat, tool_radius=radius, mass_scaling=mass_scaling)
     setup_s = time.perf_counter() - t0
     times: List[float] = []
+    to_force: List[float] = []
     act: List[int] = []
     subs: List[int] = []
     fmax = 0.0
@@ -245,12 +254,15 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
         c = p + n_in * (depth[k] - radius) + tangent * slide[k]
         try:
             t1 = perf()
-            f = sim.step(c, DT)
+            f = sim.step(c, DT, finish=False)
             t2 = perf()
+            sim.finish()
+            t3 = perf()
         except _p.StepError as e:
             error, failed_tick = f"StepError: {e}", k
             break
-        times.append(t2 - t1)
+        times.append(t3 - t1)
+        to_force.append(t2 - t1)
         if not np.all(np.isfinite(f)):
             error, failed_tick = f"non-finite force {f.tolist()} N", k
             break
@@ -269,6 +281,7 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
         "ticks": len(times), "ticks_planned": ticks, "dt_s": DT,
     }
     r.update(_stats_ms(times))
+    r.update(_stats_ms(to_force, "force"))
     r.update({
         "stable": error is None, "error": error, "failed_tick": failed_tick,
         "failed_phase": None if failed_tick is None else PHASES[int(phase[failed_tick])][0],

@@ -2,7 +2,8 @@
 //! in, force out. Ticks release the GIL.
 
 use numpy::{PyArray1, PyArray2};
-use palpate_core::runtime::{tick, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, SkinSweep, TickReport, Tool};
+use palpate_core::parallel::Serial;
+use palpate_core::runtime::{finish_tick, tick, tick_force_with, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, SkinSweep, TickReport, Tool};
 use palpate_core::{StepMemory, Vec3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -165,18 +166,42 @@ impl PyHybridSim {
     /// malformed or non-finite position and ``StepError`` for a bad ``dt`` or a failed tick (the
     /// core and particles' motion are then left as they were; the activation keeps the tick's
     /// update).
-    #[pyo3(signature = (tool_centre, dt = 1e-3))]
+    ///
+    /// ``finish=False`` stops once the force is known and leaves the rest of the tick owed (the
+    /// skin's update, and the core's step when the tool has nothing of the core within reach):
+    /// a loop that renders the force sends it, then calls :meth:`finish` (as palpate's haptic
+    /// servo does). The next ``step`` pays what is owed first, so the ticks are the same bit for
+    /// bit either way. A state taken in between (:meth:`get_state`) carries what is owed.
+    #[pyo3(signature = (tool_centre, dt = 1e-3, *, finish = true))]
     fn step<'py>(
         &mut self,
         py: Python<'py>,
         tool_centre: &Bound<'py, PyAny>,
         #[pyo3(from_py_with = conv::arg)] dt: f64,
+        finish: bool,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let c = conv::vec3(tool_centre, "tool_centre")?;
         let (sim, state, ws) = (&self.sim, &mut self.state, &mut self.ws);
-        let r = errors::guard("HybridSim.step", || py.detach(|| tick(sim, state, ws, c, dt)).map_err(|e| errors::step_error(e, "in the hybrid tick")))?;
+        let r = errors::guard("HybridSim.step", || {
+            py.detach(|| if finish { tick(sim, state, ws, c, dt) } else { tick_force_with(sim, state, ws, c, dt, &Serial) })
+                .map_err(|e| errors::step_error(e, "in the hybrid tick"))
+        })?;
         self.last = r;
         Ok(conv::vec3_to_py(py, r.force))
+    }
+
+    /// The rest of a tick stepped with ``finish=False`` (nothing when nothing is owed): the
+    /// core's step when it was owed, then the skin's update. Raises ``StepError`` when the owed
+    /// core step fails: the core is then as it was, the particles where the tick left them, the
+    /// tick counted (its force was given): go back to a state you trust (:meth:`set_state`).
+    fn finish(&mut self, py: Python<'_>) -> PyResult<()> {
+        let (sim, state, ws) = (&self.sim, &mut self.state, &mut self.ws);
+        let done = errors::guard("HybridSim.finish", || py.detach(|| finish_tick(sim, state, ws)).map_err(|e| errors::step_error(e, "in the rest of the hybrid tick")))?;
+        if let Some(core) = done.core {
+            self.last.core = core;
+        }
+        self.last.skin_refreshed += done.skin_refreshed;
+        Ok(())
     }
 
     /// The last tick's statistics: ``force`` (3,) [N], ``particle_contacts`` (skin vertices in
@@ -337,7 +362,10 @@ impl PyHybridSim {
     /// ``skin_sweep_reference`` [m] (n_core, 3) or None, ``skin_sweep_slack`` [m], and
     /// ``shell_off_until`` (the tick the shell may return at after a failure, 0: on), and the
     /// skin a shed shell left lifted off its ties, fading back: ``skin_lift_vertices`` (k,),
-    /// ``skin_lift_offsets`` [m] (k, 3), ``skin_lift_start`` (the shed tick). Positions world frame. Plain Python and numpy values: it pickles.
+    /// ``skin_lift_offsets`` [m] (k, 3), ``skin_lift_start`` (the shed tick); what a tick stepped
+    /// with ``finish=False`` still owes: ``owed_skin`` (bool), ``owed_core_dt`` [s] (None: the
+    /// core's step is not owed) and ``owed_core_forces`` [N] (n_core, 3) or None (the forces it
+    /// steps under). Positions world frame. Plain Python and numpy values: it pickles.
     fn get_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let s = self.state.snapshot(&self.ws);
         let d = PyDict::new(py);
@@ -368,6 +396,9 @@ impl PyHybridSim {
         d.set_item("skin_lift_vertices", conv::u32s_to_py(py, &lv))?;
         d.set_item("skin_lift_offsets", conv::vec3s_to_py(py, &lo))?;
         d.set_item("skin_lift_start", s.skin_lift_start)?;
+        d.set_item("owed_skin", s.skin_owed)?;
+        d.set_item("owed_core_dt", s.core_owed.as_ref().map(|(dt, _)| *dt))?;
+        d.set_item("owed_core_forces", s.core_owed.as_ref().map(|(_, f)| conv::vec3s_to_py(py, f)))?;
         Ok(d)
     }
 
@@ -436,10 +467,19 @@ impl PyHybridSim {
             },
             skin_lift: Vec::new(),
             skin_lift_start: 0,
-            // `HybridSim.step` runs whole ticks: its states never owe the skin's update or the
-            // core's step.
-            skin_owed: false,
-            core_owed: None,
+            // What a tick stepped with `finish=False` still owes (absent from older states:
+            // nothing).
+            skin_owed: match opt("owed_skin")? {
+                None => false,
+                Some(b) => conv::arg(&b)?,
+            },
+            core_owed: match opt("owed_core_dt")? {
+                None => None,
+                Some(dt) => {
+                    let forces = opt("owed_core_forces")?.ok_or_else(|| errors::param_error_from("owed_core_forces: None beside an owed_core_dt"))?;
+                    Some((conv::arg(&dt)?, conv::vec3s(&forces, "owed_core_forces", n_core, true)?))
+                }
+            },
         };
         // The skin's lift after a shed shell (absent from older states: none).
         let mut snap = snap;

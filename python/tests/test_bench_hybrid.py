@@ -35,6 +35,7 @@ KEYS = {
     "tick_ms_p50": float, "tick_ms_p99": float, "tick_ms_max": float, "stable": bool, "max_force_n": float,
     "cpu_count": int, "python_version": str, "palpate_version": str, "date": str,
     "active_particles_calibrated": int, "ticks_per_s": float, "calibration": list,
+    "force_ms_mean": float, "force_ms_p50": float, "force_ms_p99": float, "force_ms_max": float,
 }
 
 
@@ -62,6 +63,9 @@ def test_report_keys_and_types(report):
     assert report["ticks"] == TICKS == report["ticks_planned"]
     assert 0 < report["tick_ms_p50"] <= report["tick_ms_p99"] <= report["tick_ms_max"]
     assert report["tick_ms_mean"] <= report["tick_ms_max"]
+    # The time to the force is a part of each tick's time.
+    assert 0 < report["force_ms_p50"] <= report["force_ms_p99"] <= report["force_ms_max"] <= report["tick_ms_max"]
+    assert report["force_ms_mean"] < report["tick_ms_mean"]
     assert report["active_particles_mean"] <= report["active_particles_max"] <= report["particles"]
 
 
@@ -100,11 +104,11 @@ def test_a_failed_tick_is_reported(ellipsoids, monkeypatch):
         def __init__(self, *a, **k):
             self.sim, self.n = real(*a, **k), 0
 
-        def step(self, c, dt):
+        def step(self, c, dt, **kw):
             self.n += 1
             if self.n == 50:
                 raise palpate.StepError("diverged (test)")
-            return self.sim.step(c, dt)
+            return self.sim.step(c, dt, **kw)
 
         def __getattr__(self, k):
             return getattr(self.sim, k)

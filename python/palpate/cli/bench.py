@@ -395,6 +395,8 @@ def cmd_bench_hybrid(a) -> int:
               f"{f(r['tick_ms_mean'], '.3f'):>9}{f(r['tick_ms_p50'], '.3f'):>8}{f(r['tick_ms_p99'], '.3f'):>8}"
               f"{f(r['tick_ms_max'], '.3f'):>8}{f(r['ticks_per_s'], '.0f'):>9}{str(r['stable']):>8}"
               f"{r['max_force_n']:>9.4f}", flush=True)
+        print(f"  time to the force (the tick's part before a servo sends it): mean {f(r['force_ms_mean'], '.3f')} ms, "
+              f"p50 {f(r['force_ms_p50'], '.3f')}, p99 {f(r['force_ms_p99'], '.3f')}, max {f(r['force_ms_max'], '.3f')}", flush=True)
     if not r["stable"]:
         print(f"palpate: error: palpate bench hybrid: tick {r['failed_tick']} ({r['failed_phase']}) failed: "
               f"{r['error']}", file=sys.stderr)
