@@ -178,7 +178,7 @@ impl PyHybridSim {
         py: Python<'py>,
         tool_centre: &Bound<'py, PyAny>,
         #[pyo3(from_py_with = conv::arg)] dt: f64,
-        finish: bool,
+        #[pyo3(from_py_with = conv::arg)] finish: bool,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let c = conv::vec3(tool_centre, "tool_centre")?;
         let (sim, state, ws) = (&self.sim, &mut self.state, &mut self.ws);

@@ -72,7 +72,7 @@ def world(tmp_path_factory):
         "stall_timeout": 0.1, "record_ticks": 0, "max_ticks": 1, "spin": 0.0, "realtime": False, "threads": 1, "timeout": 0.0,
         "p": np.array([0.0, 0.0, 0.1]), "size": (0.02, 0.01, 0.01), "cells": (2, 1, 1), "semi_axes": (0.02, 0.02, 0.03),
         "subdivisions": 1, "layers": 1, "circumferential": 8, "longitudinal": 4, "surface": surf, "spacing": 0.006,
-        "r": 0.001, "h": 0.01, "radius": 0.01, "enabled": True, "inner": inner, "outer": surf,
+        "r": 0.001, "h": 0.01, "radius": 0.01, "enabled": True, "inner": inner, "outer": surf, "finish": True,
     }
     return instances, valid
 
