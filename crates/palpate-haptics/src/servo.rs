@@ -13,9 +13,10 @@
 //! 6. After the force is sent ([`HapticCore::after_send`]): the part of the tick its force does
 //!    not depend on ([`Physics::finish`]: the hybrid model's skin update, 40-90 us on the Rodero
 //!    ventricle, ~10% of a pressing tick, and its core's step when the tool has nothing of the
-//!    core within reach, ~20%; a failure there is a fault as a failed tick's); then every `checkpoint_every` ticks without a fault
-//!    (and with a finite state) the state becomes the last good one; a state found non-finite
-//!    there is a fault (the force zeroed at once, the state restored).
+//!    core within reach, ~20%; a failure there is a fault as a failed tick's); then every
+//!    `checkpoint_every` ticks without a fault (and with a finite state) the state becomes the
+//!    last good one; a state found non-finite there is a fault (the force zeroed at once, the
+//!    state restored).
 //!
 //! The checkpoint comes after the send because it is the tick's largest fixed cost and its
 //! force does not depend on it: on the Rodero ventricle (28,039 particles, a 31,788-vertex skin)
@@ -311,9 +312,9 @@ impl HapticCore {
     }
 
     /// The rest of the tick, after its force was sent (step 6 of the module docs): the physics'
-    /// [`Physics::finish`], then the checkpoint when due, on a tick without a fault. Returns `true` when it found the state
-    /// non-finite and took the fault path: `out` then says so (zero force), and the caller
-    /// zeroes the device at once. Everything here depends on the tick count and the state only,
+    /// [`Physics::finish`], then the checkpoint when due, on a tick without a fault. Returns
+    /// `true` when the finish failed or the state was found non-finite, and the fault path was
+    /// taken: `out` then says so (zero force), and the caller zeroes the device at once. Everything here depends on the tick count and the state only,
     /// so the real-time thread and [`HapticCore::run_offline`] stay the same.
     pub fn after_send(&mut self, out: &mut TickOut) -> bool {
         // The tick's own rest (the hybrid model's skin update, and its core's step when the

@@ -209,21 +209,29 @@ fn ticks_past_the_recording_buffer_are_counted() {
     assert!(rec.ticks[99].force.norm() > 1.0, "the last recorded tick keeps its force: {:?}", rec.ticks[99].force);
 }
 
-#[test]
-fn nan_from_the_physics_never_reaches_the_device() {
-    let mut faulty = Faulty::new(wall(), 150);
-    faulty.nan = true;
+/// 300 ticks offline of the device pressing 12 mm into the wall through `faulty` (fast ramp,
+/// checkpoints every 50 ticks): the core, its recording, what the device was sent, and the
+/// restores counted.
+fn press_through(faulty: Faulty<Wall>) -> (HapticCore, Recording, Arc<LogSink>, u64) {
     let restores = faulty.restores.clone();
     let sink: Arc<LogSink> = Arc::default();
     let mut dev = Pressing { z: |_t: f64| -0.012, sink: sink.clone(), ticks: 300 };
     let mut core = HapticCore::new(Box::new(faulty), 1000.0, CouplingParams::default(), fast_ramp(), 50, 300);
     core.run_offline(&mut dev, 300);
     let rec = core.take_recording().unwrap();
+    (core, rec, sink, restores.load(Ordering::Relaxed))
+}
+
+#[test]
+fn nan_from_the_physics_never_reaches_the_device() {
+    let mut faulty = Faulty::new(wall(), 150);
+    faulty.nan = true;
+    let (core, rec, sink, restores) = press_through(faulty);
     assert!(rec.ticks[149].force.norm() > 1.0);
     assert_eq!(rec.ticks[150].force, Vec3::zeros(), "zero in the tick of the NaN");
     assert!(rec.ticks.iter().all(|t| t.force.iter().all(|c| c.is_finite()) && t.tool.iter().all(|c| c.is_finite())));
     assert!(sink.0.lock().unwrap().iter().all(|(_, f)| f.iter().all(|c| c.is_finite())));
-    assert_eq!(restores.load(Ordering::Relaxed), 1);
+    assert_eq!(restores, 1);
     assert_eq!(core.faults(), 1);
     assert!(matches!(core.fault_log()[0], palpate_haptics::FaultRecord { tick: 150, fault: Fault::NonFinite, .. }));
     assert!(rec.ticks[299].force.norm() > 1.0, "pressing again after the ramp");
@@ -238,15 +246,10 @@ fn nan_from_the_physics_never_reaches_the_device() {
 fn a_failed_finish_is_a_fault_in_its_own_tick() {
     let mut faulty = Faulty::new(wall(), u64::MAX);
     faulty.finish_fails_at = Some(150);
-    let restores = faulty.restores.clone();
-    let sink: Arc<LogSink> = Arc::default();
-    let mut dev = Pressing { z: |_t: f64| -0.012, sink: sink.clone(), ticks: 300 };
-    let mut core = HapticCore::new(Box::new(faulty), 1000.0, CouplingParams::default(), fast_ramp(), 50, 300);
-    core.run_offline(&mut dev, 300);
-    let rec = core.take_recording().unwrap();
+    let (core, rec, sink, restores) = press_through(faulty);
     assert!(rec.ticks[149].force.norm() > 1.0);
     assert_eq!(rec.ticks[150].force, Vec3::zeros(), "the tick whose finish failed is recorded as zero");
-    assert_eq!(restores.load(Ordering::Relaxed), 1);
+    assert_eq!(restores, 1);
     assert_eq!(core.faults(), 1);
     assert!(matches!(core.fault_log()[0], palpate_haptics::FaultRecord { tick: 150, fault: Fault::Step(_), .. }), "{:?}", core.fault_log());
     // One send a tick, and one zero more after tick 150's.

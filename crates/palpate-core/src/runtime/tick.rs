@@ -129,14 +129,20 @@ pub fn tick_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: V
         Err(e) => {
             // The owed core step failed: as a failed tick, the particles' motion back to the
             // tick's start (the workspace's save of this tick) and the tick not counted.
-            for (&p, &(x, v)) in state.particles.active.iter().zip(&ws.save) {
-                (state.particles.x[p], state.particles.v[p]) = (x, v);
-            }
-            state.particles.t -= dt;
+            undo_particles(&mut state.particles, &ws.save, dt);
             (state.tool, state.ticks) = (tool0, ticks0);
             Err(e)
         }
     }
+}
+
+/// The active particles' positions and velocities back to the tick's start (`save`, in the active
+/// set's order) and the shell's clock back by `dt`: what a tick whose core step failed leaves.
+fn undo_particles(particles: &mut meshfree::ParticleState, save: &[(Vec3, Vec3)], dt: f64) {
+    for (&p, &(x, v)) in particles.active.iter().zip(save) {
+        (particles.x[p], particles.v[p]) = (x, v);
+    }
+    particles.t -= dt;
 }
 
 /// What [`finish_tick`] did: the skin vertices refreshed away from the tool
@@ -459,29 +465,15 @@ pub fn tick_force_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, t
     }
     let contact = CoreContact { sim, centre: tool, skin: &ws.reach, core: &ws.core_reach, lift: &lift.offset, lift_scale: lift.scale(*ticks), beneath };
     let touched = !ws.reach.is_empty() || !ws.core_reach.is_empty();
-    if !touched {
-        // Nothing of the core within the tool's reach: the force is the particles' alone, and
-        // the core's step (under the reactions in `f_ext`) is owed to finish_tick, after the
-        // force is sent. (No contacts, so the rest of this step has nothing to do either.)
-        *core_owed = Some(dt);
-        *skin_owed = true;
-        report.force = tool_force;
-        *last_tool = Some(tool);
-        *ticks += 1;
-        return Ok(report);
-    }
-    let momentum_before = if touched && sim.core.is_free_body() { Some(sim.core.momentum(&core.v)) } else { None };
-    report.core = match step_with_potential(&sim.core, core, &mut ws.core, dt, &contact) {
-        Ok(r) => r,
-        Err(e) => {
-            for (&p, &(x, v)) in particles.active.iter().zip(&ws.save) {
-                (particles.x[p], particles.v[p]) = (x, v);
+    if touched {
+        let momentum_before = if sim.core.is_free_body() { Some(sim.core.momentum(&core.v)) } else { None };
+        report.core = match step_with_potential(&sim.core, core, &mut ws.core, dt, &contact) {
+            Ok(r) => r,
+            Err(e) => {
+                undo_particles(particles, &ws.save, dt);
+                return Err(e);
             }
-            particles.t -= dt;
-            return Err(e);
-        }
-    };
-    {
+        };
         let c = contact.sum(&core.x);
         // On a body with no fixed node, what the step gave the core (its momentum's change less
         // the other applied forces' impulse): the contact's forces at the end of the step and
@@ -498,6 +490,11 @@ pub fn tick_force_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, t
         };
         (report.skin_contacts, report.core_contacts) = (c.skin_contacts, c.core_contacts);
         report.max_depth = report.max_depth.max(c.max_depth);
+    } else {
+        // Nothing of the core within the tool's reach: the force is the particles' alone, and
+        // the core's step (under the reactions in `f_ext`) is owed to finish_tick, after the
+        // force is sent.
+        *core_owed = Some(dt);
     }
 
     // A shell off after a failure waits for the tool to let go of the organ as well as for its
