@@ -72,6 +72,17 @@
 //! 0.03-0.15 N a tick at the switch and 0.01-0.11 N while the shell is off, against 0.65-3.2 N
 //! and up to 1.5 N before (`examples/press_sweep.rs`, 18 shed points of the synthetic ventricle).
 //!
+//! **Measured (2026-11-27, twelfth session): what a shed is preceded by, and a per-particle
+//! remedy that fails.** At the press beside the held base (`press_sweep ventricle damped`, 33.6 mm
+//! high, 5.54 rad; shed at 6.9 mm of travel) the count sits at the 64 cap for ~17 ticks before
+//! the shed, set by 2-5 poorly supported particles (9-12 neighbours) stretched to `s^2` 8-23,
+//! which alone ask 100-250 sub-steps; 24-79 others ask more than 32; the ring beside them reaches
+//! `s^2` 40-300. Demoting the particles that ask more than a limit to the ring for the tick
+//! (placed at their ties, frozen, so their stiffness leaves the step; a trial, not kept) moved the
+//! shed from 6.9 to 7.9 mm with the limit at 64, and made it worse below: with 32 and 20 the
+//! snaps to the ties cascaded (100-3,000 particles demoted a tick) and the force jumped by
+//! 0.25-1.8 N a tick, against 0.07 N at the shed without it.
+//!
 //! **Adopted since: selective mass scaling** (`crate::meshfree` `mass_scaling.rs`, on by default
 //! through [`super::SimOptions::mass_scaling`]): the few poorly supported particles below get the
 //! mass that brings their Gershgorin rate to the 95th percentile's, which lowers `omega_max^2`
