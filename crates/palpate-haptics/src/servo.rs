@@ -314,8 +314,9 @@ impl HapticCore {
     /// The rest of the tick, after its force was sent (step 6 of the module docs): the physics'
     /// [`Physics::finish`], then the checkpoint when due, on a tick without a fault. Returns
     /// `true` when the finish failed or the state was found non-finite, and the fault path was
-    /// taken: `out` then says so (zero force), and the caller zeroes the device at once. Everything here depends on the tick count and the state only,
-    /// so the real-time thread and [`HapticCore::run_offline`] stay the same.
+    /// taken: `out` then says so (zero force), and the caller zeroes the device at once.
+    /// Everything here depends on the tick count and the state only, so the real-time thread and
+    /// [`HapticCore::run_offline`] stay the same.
     pub fn after_send(&mut self, out: &mut TickOut) -> bool {
         // The tick's own rest (the hybrid model's skin update, and its core's step when the
         // tool had nothing of the core within reach), before a checkpoint copies the state. A
