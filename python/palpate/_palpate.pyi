@@ -233,6 +233,18 @@ class HybridSimState(TypedDict):
     owed_core_forces: Optional[_FloatArray]
 
 @final
+class IndentResult(TypedDict):
+    travel: _FloatArray
+    force: _FloatArray
+    force_along: _FloatArray
+    penetration: _FloatArray
+    indentation: _FloatArray
+    contact_samples: _FloatArray
+    contact_area: _FloatArray
+    iterations: _FloatArray
+    factorisations: _FloatArray
+    positions: _FloatArray
+
 class Body:
     def __new__(
         cls,
@@ -290,6 +302,18 @@ class Body:
         tolerance: Optional[float] = None,
         load_steps: Optional[int] = None,
     ) -> _FloatArray: ...
+    def indent(
+        self,
+        start: _Vec3,
+        direction: _Vec3,
+        radius: float,
+        travels: npt.ArrayLike,
+        *,
+        stiffness: Optional[float] = None,
+        max_increment: Optional[float] = None,
+        sample_spacing: Optional[float] = None,
+        tolerance: Optional[float] = None,
+    ) -> IndentResult: ...
     def run_probe(
         self,
         nodes: _Indices,

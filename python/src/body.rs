@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use numpy::{PyArray1, PyArray2};
-use palpate_core::integrate::{static_solve, StaticOptions};
+use palpate_core::integrate::{indent, static_solve, IndentOptions, Indenter, StaticOptions};
 use palpate_core::probe::{self, ProbeLoad, ProbeOptions, Ramp, StepClock, StepTotals};
 use palpate_core::{step, Model, ModelBuilder, State, StepMemory, Vec3, Workspace};
 use pyo3::prelude::*;
@@ -361,6 +361,81 @@ impl PyBody {
         let model = &self.model;
         let sol = errors::guard("Body.static_solve", || py.detach(|| static_solve(model, &f, &opts)).map_err(errors::solve_error))?;
         Ok(conv::vec3s_to_py(py, &sol.x))
+    }
+
+    /// Static sphere indentation (GIL released): the reference of ``palpate validate
+    /// indentation`` (``palpate_core::integrate::indent``).
+    ///
+    /// A rigid frictionless sphere of ``radius`` [m] moves from ``start`` [m] (outside the body)
+    /// along the unit ``direction`` (into the body); at each of ``travels`` [m] beyond its first
+    /// contact (increasing) the body is brought to static equilibrium (Newton on the full
+    /// nonlinear forces, the body's fixed nodes, no gravity or external force) under a penalty
+    /// per unit area ``stiffness`` [N/m^3] (default ``1000 E / radius``) integrated over sample
+    /// points of the boundary triangles ``sample_spacing`` [m] apart (default ``radius / 12``), so
+    /// the sphere meets the surface over its whole footprint. ``max_increment`` [m] (default
+    /// ``radius / 20``) bounds the travel between equilibria; ``tolerance`` is on the residual
+    /// relative to the largest nodal contact force. The body's state is not changed.
+    ///
+    /// Returns a dict of arrays over the travels: ``travel`` [m]; ``force`` (k, 3) [N] on the
+    /// sphere, world frame; ``force_along`` [N], its component along ``-direction`` (the push
+    /// back, positive); ``penetration`` [m], the deepest sample; ``indentation`` [m], travel
+    /// minus penetration (how far the surface was pushed in); ``contact_samples``,
+    /// ``contact_area`` [m^2], ``iterations``, ``factorisations``; ``positions`` (k, n, 3) [m].
+    /// Raises ``SolveError`` if an equilibrium is not reached, ``ParameterError`` on bad input.
+    #[pyo3(signature = (start, direction, radius, travels, *, stiffness = None, max_increment = None, sample_spacing = None, tolerance = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn indent<'py>(
+        &self,
+        py: Python<'py>,
+        start: &Bound<'py, PyAny>,
+        direction: &Bound<'py, PyAny>,
+        #[pyo3(from_py_with = conv::arg)] radius: f64,
+        travels: &Bound<'py, PyAny>,
+        #[pyo3(from_py_with = conv::arg)] stiffness: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] max_increment: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] sample_spacing: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] tolerance: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+        let start = conv::vec3(start, "start")?;
+        let direction = conv::vec3(direction, "direction")?;
+        let norm = direction.norm();
+        if norm == 0.0 {
+            return Err(crate::errors::param_error_from("direction must not be zero"));
+        }
+        let (travels, _) = conv::reals_nd(travels, "travels")?;
+        let d = IndentOptions::default();
+        let positive = |v: Option<f64>, name: &str, default: f64| -> PyResult<f64> {
+            match v {
+                None => Ok(default),
+                Some(x) if x > 0.0 && x.is_finite() => Ok(x),
+                Some(x) => Err(crate::errors::param_error_from(format!("{name} = {x} must be positive and finite"))),
+            }
+        };
+        let opts = IndentOptions {
+            stiffness: positive(stiffness, "stiffness", d.stiffness)?,
+            max_increment: positive(max_increment, "max_increment", d.max_increment)?,
+            sample_spacing: positive(sample_spacing, "sample_spacing", d.sample_spacing)?,
+            tolerance: positive(tolerance, "tolerance", d.tolerance)?,
+            ..d
+        };
+        let ind = Indenter { start, direction: direction / norm, radius };
+        let model = &self.model;
+        let pts = errors::guard("Body.indent", || py.detach(|| indent(model, &ind, &travels, &opts)).map_err(errors::solve_error))?;
+        let out = PyDict::new(py);
+        let col = |f: &dyn Fn(&palpate_core::integrate::IndentPoint) -> f64| -> Vec<f64> { pts.iter().map(f).collect() };
+        out.set_item("travel", conv::f64s_to_py(py, &col(&|p| p.travel)))?;
+        let forces: Vec<Vec3> = pts.iter().map(|p| p.force).collect();
+        out.set_item("force", conv::vec3s_to_py(py, &forces))?;
+        out.set_item("force_along", conv::f64s_to_py(py, &col(&|p| -p.force.dot(&ind.direction))))?;
+        out.set_item("penetration", conv::f64s_to_py(py, &col(&|p| p.penetration)))?;
+        out.set_item("indentation", conv::f64s_to_py(py, &col(&|p| p.indentation)))?;
+        out.set_item("contact_samples", conv::f64s_to_py(py, &col(&|p| p.contact_samples as f64)))?;
+        out.set_item("contact_area", conv::f64s_to_py(py, &col(&|p| p.contact_area)))?;
+        out.set_item("iterations", conv::f64s_to_py(py, &col(&|p| p.iterations as f64)))?;
+        out.set_item("factorisations", conv::f64s_to_py(py, &col(&|p| p.factorisations as f64)))?;
+        let n = model.n_nodes();
+        let flat: Vec<f64> = pts.iter().flat_map(|p| p.x.iter().flat_map(|v| [v.x, v.y, v.z])).collect();
+        out.set_item("positions", conv::f64s_nd_to_py(py, flat, &[pts.len(), n, 3]))?;
+        Ok(out)
     }
 
     /// The benchmark's probe run, timed in Rust (GIL released).

@@ -15,6 +15,7 @@
 
 mod backward_euler;
 pub(crate) mod factor;
+mod indent;
 mod newton;
 mod potential;
 mod quasi_newton;
@@ -29,6 +30,7 @@ pub use factor::DT_CACHE_SIZE;
 pub(crate) use quasi_newton::Lbfgs;
 pub(crate) use semi_implicit::stable_filter_factor;
 pub use statics::{static_solve, StaticOptions, StaticSolution};
+pub use indent::{indent, IndentOptions, IndentPoint, Indenter};
 
 use crate::error::StepError;
 use crate::fem::{Model, State, Workspace};
