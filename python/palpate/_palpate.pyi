@@ -244,6 +244,7 @@ class IndentResult(TypedDict):
     iterations: _FloatArray
     factorisations: _FloatArray
     positions: _FloatArray
+    contact_forces: _FloatArray
 
 class Body:
     def __new__(

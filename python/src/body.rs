@@ -380,7 +380,8 @@ impl PyBody {
     /// sphere, world frame; ``force_along`` [N], its component along ``-direction`` (the push
     /// back, positive); ``penetration`` [m], the deepest sample; ``indentation`` [m], travel
     /// minus penetration (how far the surface was pushed in); ``contact_samples``,
-    /// ``contact_area`` [m^2], ``iterations``, ``factorisations``; ``positions`` (k, n, 3) [m].
+    /// ``contact_area`` [m^2], ``iterations``, ``factorisations``; ``positions`` (k, n, 3) [m];
+    /// ``contact_forces`` (k, n, 3) [N], the contact's nodal forces on the body.
     /// Raises ``SolveError`` if an equilibrium is not reached, ``ParameterError`` on bad input.
     #[pyo3(signature = (start, direction, radius, travels, *, stiffness = None, max_increment = None, sample_spacing = None, tolerance = None))]
     #[allow(clippy::too_many_arguments)]
@@ -435,6 +436,8 @@ impl PyBody {
         let n = model.n_nodes();
         let flat: Vec<f64> = pts.iter().flat_map(|p| p.x.iter().flat_map(|v| [v.x, v.y, v.z])).collect();
         out.set_item("positions", conv::f64s_nd_to_py(py, flat, &[pts.len(), n, 3]))?;
+        let flat: Vec<f64> = pts.iter().flat_map(|p| p.contact_forces.iter().flat_map(|v| [v.x, v.y, v.z])).collect();
+        out.set_item("contact_forces", conv::f64s_nd_to_py(py, flat, &[pts.len(), n, 3]))?;
         Ok(out)
     }
 

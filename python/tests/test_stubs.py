@@ -6,7 +6,7 @@ import palpate
 import palpate._palpate as ext
 
 STUB = Path(palpate.__file__).with_name("_palpate.pyi")
-TYPED_DICTS = {"StepStats", "ProbeRun", "ParticleStepStats", "TimedRun", "RegionField", "HybridInfo", "BodyState",
+TYPED_DICTS = {"IndentResult", "StepStats", "ProbeRun", "ParticleStepStats", "TimedRun", "RegionField", "HybridInfo", "BodyState",
                "ParticleState", "HybridSimState"}
 
 

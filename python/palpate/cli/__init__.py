@@ -1,5 +1,5 @@
 """The ``palpate`` command line (also ``python -m palpate``): one module per command (``run``,
-``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``, ``view``, ``sweep``, ``fit``), shared helpers in ``_common``.
+``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``, ``view``, ``sweep``, ``fit``, ``validate``), shared helpers in ``_common``.
 
     palpate run SCENE.toml [--out DIR] [--steps N] [--quiet]
     palpate bench protocol MESH [--force F] [--steps N] [--json] [--integrator NAME] [--newton auto|on|off]
@@ -35,6 +35,9 @@
         (a batch study on Dask: results.parquet, a row per scenario; palpate/sweep/)
     palpate fit SPEC.toml --measured CURVE.csv [--params young,poisson,phi,psi] [--plot PNG] [--workers N]
         (the material that reproduces a measured force-depth curve)
+    palpate validate indentation ellipsoids [--model FILE] [--tool-radius M] [--depths M ...] [--levels S:L ...]
+                     [--coarse S:L] [--young E] [--poisson NU] [--law neo-hookean|svk] [--out DIR] [--quiet]
+        (the hybrid's force and dent against the converged FEM of its wall; palpate/validate.py)
 
 Long work (a model build, a scene run, a touch, a benchmark sweep) shows a progress display on
 stderr when it is a terminal, nothing otherwise; ``--quiet`` (run, build, touch, bench protocol,
@@ -52,11 +55,11 @@ import sys
 from typing import List, Optional
 
 from .. import __version__
-from . import bench, build, device, fit, haptic, info, run, soak, sweep, touch, view
+from . import bench, build, device, fit, haptic, info, run, soak, sweep, touch, validate, view
 from ._common import EXIT_CODES_HELP, Fail, Parser, interrupted, quiet_pipe, run_guarded
 
 #: The commands, in the order of ``palpate --help``: each module adds its parser and handler.
-COMMANDS = (run, bench, build, info, touch, haptic, soak, device, view, sweep, fit)
+COMMANDS = (run, bench, build, info, touch, haptic, soak, device, view, sweep, fit, validate)
 
 
 def build_parser() -> argparse.ArgumentParser:

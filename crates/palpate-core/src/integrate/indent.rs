@@ -63,7 +63,7 @@ pub struct IndentOptions {
 
 impl Default for IndentOptions {
     fn default() -> Self {
-        IndentOptions { stiffness: 0.0, max_increment: 0.0, sample_spacing: 0.0, tolerance: 1e-6, max_iterations: 80 }
+        IndentOptions { stiffness: 0.0, max_increment: 0.0, sample_spacing: 0.0, tolerance: 1e-5, max_iterations: 150 }
     }
 }
 
@@ -87,6 +87,8 @@ pub struct IndentPoint {
     pub factorisations: usize,
     /// Equilibrium positions \[m\] `(n_nodes)`.
     pub x: Vec<Vec3>,
+    /// The contact's nodal forces on the body \[N\] `(n_nodes)` (they sum to `-force`).
+    pub contact_forces: Vec<Vec3>,
 }
 
 /// A sample point of a boundary triangle.
@@ -388,6 +390,7 @@ pub fn indent(model: &Model, ind: &Indenter, travels: &[f64], opts: &IndentOptio
             iterations,
             factorisations: iterations_factored,
             x: x.clone(),
+            contact_forces: fc.clone(),
         });
         iterations = 0;
         iterations_factored = 0;

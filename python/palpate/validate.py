@@ -1,0 +1,466 @@
+"""Sphere indentation of the hybrid model against references palpate computes itself (issue 33).
+
+What the hand feels is the product, so the hybrid's force and dent are measured against:
+
+- **the converged FEM of the same wall**: palpate's full-FEM body (:class:`palpate.Body`), the
+  same law and constants, the same held region, pressed by the same rigid frictionless sphere
+  to static equilibrium (:meth:`palpate.Body.indent`: Newton on the full Green-strain forces, a
+  stiff penalty integrated over the surface), on meshes refined until the force changes by under
+  3% over the last refinement (or extrapolated, with the evidence printed);
+- **the coarse FEM** of about the hybrid core's size (the paper's alternative);
+- **Hertz** on a thick slab (``python/tests/test_validate.py``, ``tests/indentation.rs``).
+
+Every curve is reported against the **indentation**: the tool's travel beyond first contact minus
+the deepest penetration of its contact law (how far the surface was pushed in), so that no
+penalty enters a comparison. The dent is the outer surface's displacement along the press at
+distances from the tool's axis.
+
+The reference walls are the shipped shapes' exact walls: for ``"ellipsoids"`` the region between
+the paper's two ellipsoids, meshed as a geodesic sphere extruded in layers
+(:func:`palpate.ellipsoid_wall`) and graded toward the tool by a conformal map of the sphere
+(:func:`graded_ellipsoid_wall`), so that the contact is resolved without a uniform mesh of
+millions of tets. Walls given only as surfaces (Rodero) need a tet mesher of the wall, which
+palpate does not have yet.
+
+All lengths in metres, forces in newtons, world frame.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from . import _palpate
+from .hybrid import ELLIPSOIDS_INNER, ELLIPSOIDS_OUTER
+
+__all__ = [
+    "IndentCase",
+    "graded_ellipsoid_wall",
+    "reference_curve",
+    "hybrid_curve",
+    "dent_profile",
+    "hertz_force",
+    "run_indentation",
+    "REFERENCE_LEVELS",
+]
+
+#: Mesh levels of the ellipsoid wall's reference: (subdivisions of the geodesic sphere, tet layers
+#: across the wall); each level halves the element size. With :data:`GRADING` the elements under
+#: the tool are 4x smaller than a uniform mesh's of the same level.
+REFERENCE_LEVELS: Tuple[Tuple[int, int], ...] = ((3, 2), (4, 4), (5, 8))
+
+#: Grading of the reference wall: element size under the tool over the uniform mesh's.
+GRADING = 4.0
+
+#: The reference counts as converged when its force changes by less than this over the last
+#: refinement (issue 33).
+CONVERGED = 0.03
+
+#: Distances of the dent profile from the tool's axis [m].
+DENT_DISTANCES = (0.005, 0.010, 0.020)
+
+
+def hertz_force(young: float, poisson: float, radius: float, depth: np.ndarray) -> np.ndarray:
+    """Hertz's force [N] of a rigid sphere of ``radius`` [m] pressed ``depth`` [m] into an elastic
+    half-space: ``4/3 E/(1 - nu^2) sqrt(R) d^(3/2)``."""
+    d = np.asarray(depth, dtype=float)
+    return 4.0 / 3.0 * young / (1.0 - poisson**2) * math.sqrt(radius) * np.clip(d, 0.0, None) ** 1.5
+
+
+def _mobius(dirs: np.ndarray, focus: np.ndarray, k: float) -> np.ndarray:
+    """Unit vectors ``dirs`` (m, 3) moved toward the unit ``focus`` by the conformal map of the
+    sphere that scales the stereographic plane (projected from ``-focus``) by ``1/k``: spacing
+    near ``focus`` shrinks ``k`` times, near ``-focus`` grows ``k`` times, angles are kept."""
+    f = focus / np.linalg.norm(focus)
+    # Frame (e1, e2, f); stereographic projection from -f onto the plane through the origin.
+    a = np.array([1.0, 0.0, 0.0]) if abs(f[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = np.cross(f, a)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(f, e1)
+    z = dirs @ f
+    x, y = dirs @ e1, dirs @ e2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u, v = x / (1.0 + z), y / (1.0 + z)
+    u, v = u / k, v / k
+    r2 = u * u + v * v
+    out = (np.outer(2 * u / (1 + r2), e1) + np.outer(2 * v / (1 + r2), e2) + np.outer((1 - r2) / (1 + r2), f))
+    far = ~np.isfinite(out).all(axis=1)
+    out[far] = -f
+    return out
+
+
+def graded_ellipsoid_wall(inner: Sequence[float] = ELLIPSOIDS_INNER, outer: Sequence[float] = ELLIPSOIDS_OUTER,
+                          subdivisions: int = 4, layers: int = 4, focus: Sequence[float] = (1.0, 0.0, 0.0),
+                          grading: float = GRADING) -> _palpate.TetMesh:
+    """The wall between two concentric ellipsoids (semi-axes [m]) as :func:`palpate.ellipsoid_wall`
+    meshes it, with its directions moved toward ``focus`` by a conformal map of the sphere
+    (:func:`_mobius`): elements ``grading`` times smaller around ``focus``, as many times larger
+    opposite it, the same topology and no sliver (the map keeps angles)."""
+    base = _palpate.ellipsoid_wall(tuple(inner), tuple(outer), subdivisions=subdivisions, layers=layers)
+    pts = base.points
+    nv = 4 * 4**subdivisions + 2
+    dirs = pts[:nv] / np.linalg.norm(pts[:nv], axis=1)[:, None]
+    if grading != 1.0:
+        dirs = _mobius(dirs, np.asarray(focus, dtype=float), grading)
+
+    def onto(axes):
+        a = np.asarray(axes, dtype=float)
+        s = np.sqrt(((dirs / a) ** 2).sum(axis=1))
+        return dirs / s[:, None]
+
+    p_in, p_out = onto(inner), onto(outer)
+    new = np.concatenate([p_in + (p_out - p_in) * (l / layers) for l in range(layers + 1)])
+    return _palpate.TetMesh(new, base.tets)
+
+
+@dataclass
+class IndentCase:
+    """One indentation: the wall, where and how it is held, the tool and the press.
+
+    ``point`` [m] is on the outer surface, ``direction`` the unit press direction (into the
+    wall). Nodes below ``hold_z`` [m] are held (the hybrid runtime's rule for a closed wall: its
+    core nodes within 30% of the core's height from its lowest point; the reference holds every
+    node of the wall there).
+    """
+
+    shape: str = "ellipsoids"
+    young: float = 30e3
+    poisson: float = 0.4
+    density: float = 1060.0
+    tool_radius: float = 0.005
+    point: Tuple[float, float, float] = (ELLIPSOIDS_OUTER[0], 0.0, 0.0)
+    direction: Tuple[float, float, float] = (-1.0, 0.0, 0.0)
+    depths: Tuple[float, ...] = (0.002, 0.004, 0.006)
+    hold_z: Optional[float] = None
+    #: The reference's law: "neo-hookean" (default) or "svk". At small strain both are linear
+    #: elasticity with the same Lame constants; under a sphere pressed several millimetres into
+    #: a 6 mm wall St. Venant-Kirchhoff softens in compression until the wall under the sphere
+    #: collapses (the paper's ellipsoids, 5 mm sphere, 5.5 mm of travel: at a fixed sphere the
+    #: force falls from 0.12 N to 0.007 N as the elements under it invert), which no tissue does.
+    reference_law: str = "neo-hookean"
+
+    def material(self, law: str = "svk") -> _palpate.Material:
+        lw = {"svk": _palpate.Law.ST_VENANT_KIRCHHOFF, "neo-hookean": _palpate.Law.NEO_HOOKEAN}[law]
+        return _palpate.Material(young=self.young, poisson=self.poisson, density=self.density, law=lw)
+
+    def start(self) -> np.ndarray:
+        """The tool's centre 1 mm outside the surface along the axis."""
+        return np.asarray(self.point) - (self.tool_radius + 1e-3) * np.asarray(self.direction)
+
+
+def dent_probes(case: "IndentCase", distances: Sequence[float] = DENT_DISTANCES, azimuths: int = 4) -> np.ndarray:
+    """Rest points of the outer surface (the case's outer ellipsoid) at each of ``distances``
+    [m] from the press axis, in ``azimuths`` directions around it: (len(distances), azimuths, 3)."""
+    p, n = np.asarray(case.point, dtype=float), np.asarray(case.direction, dtype=float)
+    a = np.array([0.0, 0.0, 1.0]) if abs(n[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    e1 = np.cross(n, a)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    axes = np.asarray(ELLIPSOIDS_OUTER)
+    out = np.zeros((len(distances), azimuths, 3))
+    for i, r in enumerate(distances):
+        for j in range(azimuths):
+            ang = 2 * math.pi * j / azimuths
+            q = p + r * (math.cos(ang) * e1 + math.sin(ang) * e2)
+            # q + t n on the ellipsoid: the root nearest q (the pressed side).
+            qa, qb = ((n / axes) ** 2).sum(), 2 * ((q * n) / axes**2).sum()
+            qc = ((q / axes) ** 2).sum() - 1
+            root = math.sqrt(max(qb * qb - 4 * qa * qc, 0.0))
+            t = min(((-qb + root) / (2 * qa), (-qb - root) / (2 * qa)), key=abs)
+            out[i, j] = q + t * n
+    return out
+
+
+def surface_weights(points: np.ndarray, tris: np.ndarray, probes: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """For each probe point (..., 3), the triangle of ``tris`` nearest to it at rest and the
+    barycentric weights of the probe's projection onto it (clamped to the triangle)."""
+    a, b, c = points[tris[:, 0]], points[tris[:, 1]], points[tris[:, 2]]
+    cen = (a + b + c) / 3
+    idx, w = [], []
+    for q in probes.reshape(-1, 3):
+        best: Optional[Tuple[float, int, np.ndarray]] = None
+        for t in np.argsort(((cen - q) ** 2).sum(axis=1))[:8]:
+            e0, e1 = b[t] - a[t], c[t] - a[t]
+            m = np.array([[e0 @ e0, e0 @ e1], [e0 @ e1, e1 @ e1]])
+            uv = np.linalg.solve(m, [e0 @ (q - a[t]), e1 @ (q - a[t])])
+            bw = np.clip(np.array([1 - uv.sum(), uv[0], uv[1]]), 0, None)
+            bw /= bw.sum()
+            d = float(np.linalg.norm(bw @ np.array([a[t], b[t], c[t]]) - q))
+            if best is None or d < best[0]:
+                best = (d, int(t), bw)
+        assert best is not None
+        idx.append(best[1])
+        w.append(best[2])
+    return np.array(idx), np.array(w)
+
+
+def dent_profile(rest: np.ndarray, moved: np.ndarray, tris: np.ndarray, where: Tuple[np.ndarray, np.ndarray],
+                 direction: Sequence[float], shape: Tuple[int, ...]) -> np.ndarray:
+    """The surface's displacement along ``direction`` [m] (into the wall: positive) at the probe
+    points ``where`` (:func:`surface_weights`), averaged over the azimuths of each distance."""
+    idx, w = where
+    u = ((moved - rest)[tris[idx]] * w[:, :, None]).sum(axis=1) @ np.asarray(direction, dtype=float)
+    return u.reshape(shape).mean(axis=1)
+
+
+def _on_outer(points: np.ndarray, case: IndentCase) -> np.ndarray:
+    """Mask of boundary ``points`` on the outer surface of the case's wall (nearer the outer
+    ellipsoid than the inner one)."""
+    lv = lambda a: np.sqrt(((points / np.asarray(a)) ** 2).sum(axis=1))  # noqa: E731
+    return np.abs(lv(ELLIPSOIDS_OUTER) - 1) < np.abs(lv(ELLIPSOIDS_INNER) - 1)
+
+
+def held_below(points: np.ndarray, z: float) -> np.ndarray:
+    return np.nonzero(points[:, 2] <= z)[0]
+
+
+def reference_curve(mesh: _palpate.TetMesh, case: IndentCase, *, max_increment: Optional[float] = None,
+                    verbose: bool = False) -> Dict[str, Any]:
+    """The static indentation of the full-FEM wall ``mesh`` (:meth:`palpate.Body.indent`) at the
+    case's depths of *travel* (the indentation, travel minus the penalty's penetration, is
+    reported beside it): force along the press [N] and the dent profile."""
+    if case.hold_z is None:
+        raise ValueError("the case needs hold_z (from the hybrid model's core: see hybrid_hold_z)")
+    body = _palpate.Body(mesh, case.material(case.reference_law), fixed=held_below(mesh.points, case.hold_z))
+    t = time.perf_counter()
+    r = body.indent(case.start(), case.direction, case.tool_radius, _travels(case.depths, 0.2),
+                    max_increment=max_increment or case.tool_radius / 10)
+    wall = time.perf_counter() - t
+    faces = mesh.boundary_faces()
+    faces = faces[_on_outer(mesh.points[faces].mean(axis=1), case)]
+    probes = dent_probes(case)
+    where = surface_weights(mesh.points, faces, probes)
+    dents = np.array([dent_profile(mesh.points, x, faces, where, case.direction, probes.shape[:2])
+                      for x in r["positions"]])
+    out = dict(tets=mesh.n_tets, nodes=mesh.n_nodes, travel=r["travel"], force=r["force_along"],
+               indentation=r["indentation"], penetration=r["penetration"], dent=dents,
+               iterations=r["iterations"], factorisations=r["factorisations"], wall_s=wall)
+    if verbose:
+        print(f"  FEM {mesh.n_tets} tets: " + ", ".join(f"{f:.4f} N" for f in out["force"]) + f" ({wall:.1f} s)",
+              flush=True)
+    return out
+
+
+def _travels(depths: Sequence[float], extra: float) -> np.ndarray:
+    """The travels of a press whose indentations should span ``depths``: the depths and one more
+    ``extra`` of the deepest beyond (the contact's penetration is not indentation)."""
+    d = np.asarray(depths, dtype=float)
+    return np.r_[d, d[-1] * (1 + extra)]
+
+
+def hybrid_hold_z(sim: _palpate.HybridSim) -> float:
+    """The height below which a closed wall's hybrid runtime holds its core nodes (30% of the
+    core's height above its lowest point, ``runtime::Sim::new``)."""
+    z = sim.core_positions[:, 2]
+    return float(z.min() + 0.3 * (z.max() - z.min()))
+
+
+def hybrid_curve(model: _palpate.HybridModel, case: IndentCase, *, ramp_s: float = 0.5, hold_s: float = 0.5,
+                 dt: float = 1e-3, verbose: bool = False) -> Dict[str, Any]:
+    """The hybrid model pressed quasi-statically to the case's travels: per depth a ramp of
+    ``ramp_s`` then a hold of ``hold_s`` at ``1/dt`` Hz, force and penetration averaged over the
+    hold's second half (settled: its standard deviation is reported)."""
+    sim = _palpate.HybridSim(model, case.material(), tool_radius=case.tool_radius)
+    p, n = np.asarray(case.point, dtype=float), np.asarray(case.direction, dtype=float)
+    s0 = sim.surface.copy()
+    # First contact with the skin at rest: the travel at which the sphere meets a skin vertex.
+    start = case.start()
+    q = s0 - start
+    b = q @ n
+    disc = b * b - ((q * q).sum(axis=1) - case.tool_radius**2)
+    ok = disc >= 0
+    t0 = float((b[ok] - np.sqrt(disc[ok])).min())
+    probes = dent_probes(case)
+    tris = sim.surface_triangles
+    where = surface_weights(s0, tris, probes)
+    rows: List[Dict[str, Any]] = []
+    prev = 0.0
+    # Approach from 1 mm outside.
+    for j in range(200):
+        sim.step(start + n * (t0 - 1e-3 + 1e-3 * (j + 1) / 200), dt)
+    t_start = time.perf_counter()
+    for d in _travels(case.depths, 0.3):
+        n_ramp, n_hold = int(round(ramp_s / dt)), int(round(hold_s / dt))
+        acc = []
+        for j in range(n_ramp + n_hold):
+            depth = prev + (d - prev) * min(1.0, (j + 1) / n_ramp)
+            f = sim.step(start + n * (t0 + depth), dt)
+            if j >= n_ramp + n_hold // 2:
+                pen = sim.last["max_depth_m"]
+                acc.append((float(f @ (-n)), pen))
+        a = np.array(acc)
+        rows.append(dict(travel=d, force=a[:, 0].mean(), force_sd=a[:, 0].std(), penetration=a[:, 1].mean(),
+                         indentation=d - a[:, 1].mean(), active=sim.last["active"],
+                         dent=dent_profile(s0, sim.surface, tris, where, n, probes.shape[:2])))
+        prev = d
+    out = {k: np.array([r[k] for r in rows]) for k in rows[0]}
+    out["wall_s"] = time.perf_counter() - t_start
+    out["hold_z"] = hybrid_hold_z(sim)
+    out["core_tets"] = len(sim.core_tets)
+    if verbose:
+        print("  hybrid: " + ", ".join(f"{f:.4f} N" for f in out["force"]) + f" ({out['wall_s']:.1f} s)", flush=True)
+    return out
+
+
+def _interp(curve: Dict[str, Any], at: np.ndarray, key: str = "force") -> np.ndarray:
+    """``curve[key]`` at indentations ``at`` (linear through the origin and the curve's points,
+    per column for a 2-d value; nan beyond its deepest)."""
+    x = np.concatenate([[0.0], curve["indentation"]])
+    y = np.asarray(curve[key], dtype=float)
+    if y.ndim == 2:
+        return np.stack([_interp(dict(indentation=curve["indentation"], v=y[:, j]), at, "v")
+                         for j in range(y.shape[1])], axis=1)
+    y = np.concatenate([[0.0], y])
+    v = np.interp(at, x, y)
+    v[at > x[-1] * (1 + 1e-9)] = np.nan
+    return v
+
+
+def _richardson(h: np.ndarray, f: np.ndarray) -> Tuple[float, float]:
+    """The h -> 0 limit of three values ``f`` at sizes ``h`` (each half the last), and its order
+    (nan if the differences do not shrink)."""
+    d1, d2 = f[1] - f[0], f[2] - f[1]
+    if d1 == 0 or d2 / d1 <= 0 or abs(d2) >= abs(d1):
+        return float("nan"), float("nan")
+    p = math.log(abs(d1 / d2)) / math.log(h[0] / h[1])
+    return float(f[2] + d2 / ((h[1] / h[2]) ** p - 1)), p
+
+
+def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
+                    depths: Sequence[float] = (0.002, 0.004, 0.006), levels: Sequence[Tuple[int, int]] = REFERENCE_LEVELS,
+                    coarse: Tuple[int, int] = (2, 2), young: float = 30e3, poisson: float = 0.4,
+                    law: str = "neo-hookean", out_dir: Optional[str] = None, model: Optional[_palpate.HybridModel] = None,
+                    verbose: bool = True) -> Dict[str, Any]:
+    """The hybrid's force and dent against the converged FEM of its wall, and the coarse FEM.
+
+    ``levels``: the reference meshes (see :data:`REFERENCE_LEVELS`); ``coarse``: the
+    (subdivisions, layers) of the ungraded full FEM of about the hybrid core's size. Writes
+    ``indentation.json`` and ``indentation.png`` into ``out_dir`` when given. Returns the curves,
+    the table rows and the convergence evidence.
+    """
+    if shape != "ellipsoids":
+        raise ValueError(f"the converged reference needs a tet mesh of the wall: palpate meshes the "
+                         f"'ellipsoids' wall; {shape!r} is not supported yet")
+    from .hybrid import build_shape
+
+    if law not in ("neo-hookean", "svk"):
+        raise ValueError(f"law must be 'neo-hookean' or 'svk', got {law!r}")
+    case = IndentCase(shape=shape, young=young, poisson=poisson, tool_radius=tool_radius, depths=tuple(depths),
+                      reference_law=law)
+    if model is None:
+        if verbose:
+            print(f"building the hybrid model of {shape!r} ...", flush=True)
+        model = build_shape(shape)
+    hyb = hybrid_curve(model, case, verbose=verbose)
+    case.hold_z = hyb["hold_z"]
+    refs = []
+    for s, layers in levels:
+        mesh = graded_ellipsoid_wall(subdivisions=s, layers=layers, focus=-np.asarray(case.direction))
+        refs.append(reference_curve(mesh, case, verbose=verbose))
+        refs[-1]["level"] = (s, layers)
+    cmesh = _palpate.ellipsoid_wall(ELLIPSOIDS_INNER, ELLIPSOIDS_OUTER, subdivisions=coarse[0], layers=coarse[1])
+    coarse_curve = reference_curve(cmesh, case, verbose=verbose)
+
+    at = np.asarray(depths, dtype=float)
+    ref_f = np.array([_interp(r, at) for r in refs])
+    h = np.array([2.0**-i for i in range(len(refs))])
+    conv = []
+    for j, d in enumerate(at):
+        change = abs(ref_f[-1, j] - ref_f[-2, j]) / abs(ref_f[-1, j]) if len(refs) > 1 else float("nan")
+        lim, order = _richardson(h[-3:], ref_f[-3:, j]) if len(refs) >= 3 else (float("nan"), float("nan"))
+        conv.append(dict(indentation=d, last_change=change, extrapolated=lim, order=order))
+    reference = ref_f[-1]
+    hyb_f, coarse_f = _interp(hyb, at), _interp(coarse_curve, at)
+    dents = {k: _interp(c, at, "dent") for k, c in (("reference", refs[-1]), ("hybrid", hyb), ("coarse", coarse_curve))}
+    rows = []
+    for j, d in enumerate(at):
+        rows.append(dict(indentation=d, reference=reference[j], hybrid=hyb_f[j], coarse=coarse_f[j],
+                         hybrid_error=hyb_f[j] / reference[j] - 1, coarse_error=coarse_f[j] / reference[j] - 1,
+                         dent_reference=dents["reference"][j], dent_hybrid=dents["hybrid"][j],
+                         dent_coarse=dents["coarse"][j]))
+    result = dict(case=asdict(case), hybrid=hyb, references=refs, coarse=coarse_curve, rows=rows, convergence=conv)
+    if verbose:
+        print(format_table(result))
+    if out_dir:
+        os.makedirs(out_dir, exist_ok=True)
+        with open(os.path.join(out_dir, "indentation.json"), "w") as fh:
+            json.dump(_jsonable(result), fh, indent=1)
+        plot(result, os.path.join(out_dir, "indentation.png"))
+    return result
+
+
+def format_table(result: Dict[str, Any]) -> str:
+    c = result["case"]
+    lines = [f"sphere R = {c['tool_radius'] * 1e3:g} mm into {c['shape']}, E = {c['young'] / 1e3:g} kPa, "
+             f"nu = {c['poisson']:g}",
+             "indentation | finest FEM | hybrid | coarse FEM",
+             "---|---|---|---"]
+    for r in result["rows"]:
+        lines.append(f"{r['indentation'] * 1e3:.1f} mm | {r['reference']:.4f} N | {r['hybrid']:.4f} N "
+                     f"({100 * r['hybrid_error']:+.0f}%) | {r['coarse']:.4f} N ({100 * r['coarse_error']:+.0f}%)")
+    lines.append("reference convergence (force at indentation over the levels; last change; extrapolation):")
+    for j, cv in enumerate(result["convergence"]):
+        fs = ", ".join(f"{_interp(r, np.array([cv['indentation']]))[0]:.4f}" for r in result["references"])
+        verdict = "converged" if cv["last_change"] < CONVERGED else "NOT converged"
+        lines.append(f"  {cv['indentation'] * 1e3:.1f} mm: {fs} N; last change {100 * cv['last_change']:.1f}% "
+                     f"({verdict}); extrapolated {cv['extrapolated']:.4f} N (order {cv['order']:.2f})")
+    lines.append("dent: outer surface displacement along the press at "
+                 + ", ".join(f"{d * 1e3:g}" for d in DENT_DISTANCES) + " mm from the axis [mm]")
+    for r in result["rows"]:
+        fmt = lambda v: " ".join(f"{x * 1e3:.2f}" for x in v)  # noqa: E731
+        lines.append(f"  indentation {r['indentation'] * 1e3:.1f} mm: FEM {fmt(r['dent_reference'])} | hybrid "
+                     f"{fmt(r['dent_hybrid'])} | coarse {fmt(r['dent_coarse'])}")
+    return "\n".join(lines)
+
+
+def plot(result: Dict[str, Any], path: str) -> None:
+    """Force against indentation (hybrid, coarse, each reference level) and the dent profiles."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for r in result["references"]:
+        a.plot(np.r_[0, r["indentation"]] * 1e3, np.r_[0, r["force"]], "o-", lw=1,
+               label=f"FEM {r['tets']} tets (graded)")
+    for key, style, name in (("coarse", "s--", "coarse FEM"), ("hybrid", "^-", "hybrid")):
+        r = result[key]
+        label = f"{name} ({r['tets']} tets)" if key == "coarse" else f"hybrid ({r['core_tets']}-tet core)"
+        a.plot(np.r_[0, r["indentation"]] * 1e3, np.r_[0, r["force"]], style, lw=1.5, label=label)
+    c = result["case"]
+    a.set_xlabel("indentation [mm]")
+    a.set_ylabel("force [N]")
+    a.set_title(f"sphere R = {c['tool_radius'] * 1e3:g} mm, {c['shape']}")
+    a.legend(fontsize=8)
+    dist = np.array(DENT_DISTANCES) * 1e3
+    for k, r in enumerate(result["rows"]):
+        col = f"C{k}"
+        b.plot(dist, r["dent_reference"] * 1e3, "o-", color=col, label=f"FEM, indentation {r['indentation'] * 1e3:g} mm")
+        b.plot(dist, r["dent_hybrid"] * 1e3, "^--", color=col, label="hybrid")
+        b.plot(dist, r["dent_coarse"] * 1e3, "s:", color=col, label="coarse FEM")
+    b.set_xlabel("distance from the tool's axis [mm]")
+    b.set_ylabel("surface displacement along the press [mm]")
+    b.set_title("dent profile")
+    b.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _jsonable(o: Any) -> Any:
+    if isinstance(o, dict):
+        return {k: _jsonable(v) for k, v in o.items() if k != "positions"}
+    if isinstance(o, (list, tuple)):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    return o

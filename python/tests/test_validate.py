@@ -1,0 +1,124 @@
+"""The indentation reference (``Body.indent``, ``palpate.validate``, issue 33).
+
+- against an independent code: at a small press the reference's equilibrium under its own
+  contact forces is scikit-fem's P1 linear elasticity under the same nodal forces (a wrong
+  internal force, a contact force not in equilibrium with the body, or a wrong held set fail);
+- the contact's bookkeeping: the nodal contact forces sum to minus the force on the sphere, and
+  push along the sphere's normals (outward from its centre);
+- the graded wall: same topology and volume as the ungraded one, elements smaller toward the
+  tool, none inverted;
+- the pipeline (``palpate validate indentation`` on tiny meshes): the table's rows, the
+  convergence evidence, the files written.
+"""
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import palpate
+from palpate import validate
+
+skfem = pytest.importorskip("skfem")
+from skfem.models.elasticity import linear_elasticity  # noqa: E402
+
+E, NU = 3.0e4, 0.4
+MU, LAM = E / (2 * (1 + NU)), E * NU / ((1 + NU) * (1 - 2 * NU))
+
+
+def skfem_static(points, tets, fixed, forces):
+    mesh = skfem.MeshTet(points.T.copy(), tets.T.copy())
+    basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP1()))
+    K = skfem.asm(linear_elasticity(LAM, MU), basis)
+    f = np.zeros(basis.N)
+    dofs = basis.nodal_dofs
+    for c in range(3):
+        f[dofs[c]] = forces[:, c]
+    u = skfem.solve(*skfem.condense(K, f, D=dofs[:, fixed].ravel()))
+    return u[dofs].T
+
+
+@pytest.fixture(scope="module")
+def small_press():
+    mesh = validate.graded_ellipsoid_wall(subdivisions=3, layers=2)
+    case = validate.IndentCase(hold_z=-0.015)
+    fixed = validate.held_below(mesh.points, case.hold_z)
+    body = palpate.Body(mesh, palpate.Material(young=E, poisson=NU, density=1000.0), fixed=fixed)
+    r = body.indent(case.start(), case.direction, case.tool_radius, [2e-5, 2e-4])
+    return mesh, fixed, case, r
+
+
+def test_the_reference_matches_scikit_fem_under_its_own_contact_forces(small_press):
+    mesh, fixed, case, r = small_press
+    errors = []
+    for k in range(2):
+        u = r["positions"][k] - mesh.points
+        u_ref = skfem_static(mesh.points, mesh.tets, fixed, r["contact_forces"][k])
+        errors.append(np.linalg.norm(u - u_ref) / np.linalg.norm(u_ref))
+    # First-order agreement (Green strain vs linear), shrinking with the press.
+    assert errors[0] < 2e-3, errors
+    assert errors[1] < 2e-2, errors
+    assert errors[0] < errors[1] / 4, errors
+
+
+def test_contact_forces_balance_the_sphere_and_push_outward(small_press):
+    mesh, fixed, case, r = small_press
+    for k in range(2):
+        fc = r["contact_forces"][k]
+        np.testing.assert_allclose(fc.sum(axis=0), -r["force"][k], atol=1e-12 * np.abs(fc).sum())
+        # The body is pushed along the press (into the wall), the sphere back against it.
+        assert r["force_along"][k] > 0
+        loaded = np.linalg.norm(fc, axis=1) > 1e-6 * np.abs(fc).max()
+        centre = case.start() + (r["travel"][k]) * np.asarray(case.direction)
+        assert loaded.sum() >= 3
+        # Every loaded node is within reach of the sphere.
+        assert (np.linalg.norm(r["positions"][k][loaded] - centre, axis=1) < case.tool_radius + 0.01).all()
+    assert r["force_along"][1] > r["force_along"][0]
+    assert (r["indentation"] <= r["travel"]).all() and (r["penetration"] >= 0).all()
+
+
+def test_the_graded_wall_is_the_same_wall_finer_under_the_tool():
+    plain = palpate.ellipsoid_wall(validate.ELLIPSOIDS_INNER, validate.ELLIPSOIDS_OUTER, subdivisions=4, layers=2)
+    graded = validate.graded_ellipsoid_wall(subdivisions=4, layers=2, focus=(1, 0, 0), grading=4.0)
+    assert graded.n_tets == plain.n_tets and (graded.tets == plain.tets).all()
+    # The same region: the exact shell's volume less the facets' chords (larger where the graded
+    # mesh is coarser, opposite the focus).
+    exact = 4 / 3 * np.pi * (np.prod(validate.ELLIPSOIDS_OUTER) - np.prod(validate.ELLIPSOIDS_INNER))
+    assert 0.95 * exact < graded.volume < plain.volume < exact
+    assert graded.min_dihedral_deg > 5.0
+    # Elements near the focus are several times smaller than opposite it.
+    c = graded.points[graded.tets].mean(axis=1)
+    edge = np.linalg.norm(graded.points[graded.tets[:, 0]] - graded.points[graded.tets[:, 1]], axis=1)
+    near, far = c[:, 0] > 0.02, c[:, 0] < -0.02
+    assert edge[near].mean() * 3 < edge[far].mean()
+
+
+def test_hertz_force():
+    assert validate.hertz_force(1.0, 0.0, 1.0, np.array([1.0]))[0] == pytest.approx(4.0 / 3.0)
+    assert validate.hertz_force(E, NU, 0.005, np.array([-1.0]))[0] == 0.0
+
+
+def test_validate_indentation_cli_writes_the_table_and_files(tmp_path):
+    out = tmp_path / "v"
+    p = subprocess.run([sys.executable, "-m", "palpate", "validate", "indentation", "ellipsoids", "--levels", "1:1",
+                        "2:1", "2:2", "--coarse", "1:1", "--depths", "0.001", "0.002", "--out", str(out), "--quiet"],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    assert "finest FEM | hybrid | coarse FEM" in p.stdout and "last change" in p.stdout
+    data = json.loads((out / "indentation.json").read_text())
+    assert len(data["rows"]) == 2 and len(data["references"]) == 3
+    for row in data["rows"]:
+        assert row["reference"] > 0 and row["hybrid"] > 0 and row["coarse"] > 0
+        assert len(row["dent_hybrid"]) == len(validate.DENT_DISTANCES)
+    assert (out / "indentation.png").stat().st_size > 10_000
+
+
+def test_validate_indentation_refuses_walls_it_cannot_mesh():
+    p = subprocess.run([sys.executable, "-m", "palpate", "validate", "indentation", "rodero"], capture_output=True,
+                       text=True, timeout=120)
+    assert p.returncode == 1 and "tet mesh of the wall" in p.stderr
+    p = subprocess.run([sys.executable, "-m", "palpate", "validate", "indentation", "ellipsoids", "--levels", "4"],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and "SUBDIVISIONS:LAYERS" in p.stderr
