@@ -19,8 +19,11 @@ The reference walls are the shipped shapes' exact walls: for ``"ellipsoids"`` th
 the paper's two ellipsoids, meshed as a geodesic sphere extruded in layers
 (:func:`palpate.ellipsoid_wall`) and graded toward the tool by a conformal map of the sphere
 (:func:`graded_ellipsoid_wall`), so that the contact is resolved without a uniform mesh of
-millions of tets. Walls given only as surfaces (Rodero) need a tet mesher of the wall, which
-palpate does not have yet.
+millions of tets. Other walls (the synthetic
+ventricle, Rodero's) are meshed by the hybrid build itself with its core taken across the whole
+wall (:func:`wall_mesh`): the inner surface simplified, prism layers along the transmural field to
+the outer surface; that mesh is uniform, so its contact converges only as the whole mesh is
+refined.
 
 All lengths in metres, forces in newtons, world frame.
 """
@@ -48,12 +51,21 @@ __all__ = [
     "hertz_force",
     "run_indentation",
     "REFERENCE_LEVELS",
+    "BUILT_LEVELS",
+    "wall_mesh",
 ]
 
 #: Mesh levels of the ellipsoid wall's reference: (subdivisions of the geodesic sphere, tet layers
 #: across the wall); each level halves the element size. With :data:`GRADING` the elements under
 #: the tool are 4x smaller than a uniform mesh's of the same level.
 REFERENCE_LEVELS: Tuple[Tuple[int, int], ...] = ((3, 2), (4, 4), (5, 8))
+
+#: Mesh levels of a wall palpate meshes through the hybrid build (every shipped wall but the
+#: ellipsoids): (triangles of the simplified inner surface, prism layers to the outer surface).
+BUILT_LEVELS: Tuple[Tuple[int, int], ...] = ((1000, 2), (4000, 4), (16000, 8))
+
+#: The core fraction that makes the hybrid build's core span the wall (a full-FEM mesh of it).
+WALL_FRACTION = 0.999
 
 #: Grading of the reference wall: element size under the tool over the uniform mesh's.
 GRADING = 4.0
@@ -154,26 +166,41 @@ class IndentCase:
         return np.asarray(self.point) - (self.tool_radius + 1e-3) * np.asarray(self.direction)
 
 
-def dent_probes(case: "IndentCase", distances: Sequence[float] = DENT_DISTANCES, azimuths: int = 4) -> np.ndarray:
-    """Rest points of the outer surface (the case's outer ellipsoid) at each of ``distances``
-    [m] from the press axis, in ``azimuths`` directions around it: (len(distances), azimuths, 3)."""
+def dent_probes(case: "IndentCase", surface: Tuple[np.ndarray, np.ndarray],
+                distances: Sequence[float] = DENT_DISTANCES, azimuths: int = 4) -> np.ndarray:
+    """Rest points of the outer ``surface`` (points [m], triangles) at each of ``distances`` [m]
+    from the press axis, in ``azimuths`` directions around it: where the line through the offset
+    point along the press meets the surface nearest the pressed side. (len(distances),
+    azimuths, 3)."""
     p, n = np.asarray(case.point, dtype=float), np.asarray(case.direction, dtype=float)
     a = np.array([0.0, 0.0, 1.0]) if abs(n[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
     e1 = np.cross(n, a)
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(n, e1)
-    axes = np.asarray(ELLIPSOIDS_OUTER)
+    pts, tris = surface
+    v0, v1, v2 = pts[tris[:, 0]], pts[tris[:, 1]], pts[tris[:, 2]]
     out = np.zeros((len(distances), azimuths, 3))
     for i, r in enumerate(distances):
         for j in range(azimuths):
             ang = 2 * math.pi * j / azimuths
             q = p + r * (math.cos(ang) * e1 + math.sin(ang) * e2)
-            # q + t n on the ellipsoid: the root nearest q (the pressed side).
-            qa, qb = ((n / axes) ** 2).sum(), 2 * ((q * n) / axes**2).sum()
-            qc = ((q / axes) ** 2).sum() - 1
-            root = math.sqrt(max(qb * qb - 4 * qa * qc, 0.0))
-            t = min(((-qb + root) / (2 * qa), (-qb - root) / (2 * qa)), key=abs)
-            out[i, j] = q + t * n
+            # Moller-Trumbore against every triangle: the hit with the smallest |t|.
+            ea, eb = v1 - v0, v2 - v0
+            h = np.cross(n, eb)
+            det = (ea * h).sum(axis=1)
+            ok = np.abs(det) > 1e-300
+            inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+            sv = q - v0
+            u = (sv * h).sum(axis=1) * inv
+            qv = np.cross(sv, ea)
+            w = (qv @ n) * inv
+            t = (qv * eb).sum(axis=1) * inv
+            hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1)
+            if not hit.any():
+                out[i, j] = np.nan  # the surface ends before (a base, a valve ring)
+                continue
+            k = np.flatnonzero(hit)[np.argmin(np.abs(t[hit]))]
+            out[i, j] = q + t[k] * n
     return out
 
 
@@ -184,6 +211,10 @@ def surface_weights(points: np.ndarray, tris: np.ndarray, probes: np.ndarray) ->
     cen = (a + b + c) / 3
     idx, w = [], []
     for q in probes.reshape(-1, 3):
+        if not np.isfinite(q).all():
+            idx.append(0)
+            w.append(np.full(3, np.nan))
+            continue
         best: Optional[Tuple[float, int, np.ndarray]] = None
         for t in np.argsort(((cen - q) ** 2).sum(axis=1))[:8]:
             e0, e1 = b[t] - a[t], c[t] - a[t]
@@ -206,35 +237,54 @@ def dent_profile(rest: np.ndarray, moved: np.ndarray, tris: np.ndarray, where: T
     points ``where`` (:func:`surface_weights`), averaged over the azimuths of each distance."""
     idx, w = where
     u = ((moved - rest)[tris[idx]] * w[:, :, None]).sum(axis=1) @ np.asarray(direction, dtype=float)
-    return u.reshape(shape).mean(axis=1)
-
-
-def _on_outer(points: np.ndarray, case: IndentCase) -> np.ndarray:
-    """Mask of boundary ``points`` on the outer surface of the case's wall (nearer the outer
-    ellipsoid than the inner one)."""
-    lv = lambda a: np.sqrt(((points / np.asarray(a)) ** 2).sum(axis=1))  # noqa: E731
-    return np.abs(lv(ELLIPSOIDS_OUTER) - 1) < np.abs(lv(ELLIPSOIDS_INNER) - 1)
+    u = u.reshape(shape)
+    ok = np.isfinite(u)
+    return np.where(ok.any(axis=1), np.where(ok, u, 0.0).sum(axis=1) / np.maximum(ok.sum(axis=1), 1), np.nan)
 
 
 def held_below(points: np.ndarray, z: float) -> np.ndarray:
     return np.nonzero(points[:, 2] <= z)[0]
 
 
-def reference_curve(mesh: _palpate.TetMesh, case: IndentCase, *, max_increment: Optional[float] = None,
+def wall_mesh(shape: str, a: int, b: int, case: IndentCase, graded: bool = True
+              ) -> Tuple[_palpate.TetMesh, Optional[np.ndarray]]:
+    """A full-FEM mesh of the shipped wall ``shape`` and its held nodes (None: below the case's
+    ``hold_z``).
+
+    ``"ellipsoids"``: ``a`` subdivisions of the geodesic sphere, ``b`` layers, graded toward the
+    tool (:func:`graded_ellipsoid_wall`) unless ``graded`` is false. Other walls: the hybrid
+    build's own core, taken across the whole wall (core fraction :data:`WALL_FRACTION`): the inner
+    surface simplified to ``a`` triangles, ``b`` prism layers along the transmural field to the
+    outer surface, held at its base nodes (a closed wall: below ``hold_z``).
+    """
+    if shape == "ellipsoids":
+        if graded:
+            return graded_ellipsoid_wall(subdivisions=a, layers=b, focus=-np.asarray(case.direction)), None
+        return _palpate.ellipsoid_wall(ELLIPSOIDS_INNER, ELLIPSOIDS_OUTER, subdivisions=a, layers=b), None
+    from .hybrid import build_shape
+
+    m = build_shape(shape, core_fraction=WALL_FRACTION, core_triangles=a, core_layers=b, particles=2000)
+    base = np.asarray(m.core_base_nodes)
+    return _palpate.TetMesh(m.core_points, m.core_tets), (base if len(base) else None)
+
+
+def reference_curve(mesh: _palpate.TetMesh, case: IndentCase, probes: np.ndarray, *,
+                    fixed: Optional[np.ndarray] = None, max_increment: Optional[float] = None,
                     verbose: bool = False) -> Dict[str, Any]:
     """The static indentation of the full-FEM wall ``mesh`` (:meth:`palpate.Body.indent`) at the
     case's depths of *travel* (the indentation, travel minus the penalty's penetration, is
     reported beside it): force along the press [N] and the dent profile."""
-    if case.hold_z is None:
-        raise ValueError("the case needs hold_z (from the hybrid model's core: see hybrid_hold_z)")
-    body = _palpate.Body(mesh, case.material(case.reference_law), fixed=held_below(mesh.points, case.hold_z))
+    if fixed is None:
+        if case.hold_z is None:
+            raise ValueError("the case needs hold_z (from the hybrid model's core: see hybrid_hold_z) or fixed nodes")
+        fixed = held_below(mesh.points, case.hold_z)
+    body = _palpate.Body(mesh, case.material(case.reference_law), fixed=fixed)
     t = time.perf_counter()
     r = body.indent(case.start(), case.direction, case.tool_radius, _travels(case.depths, 0.2),
                     max_increment=max_increment or case.tool_radius / 10)
     wall = time.perf_counter() - t
     faces = mesh.boundary_faces()
-    faces = faces[_on_outer(mesh.points[faces].mean(axis=1), case)]
-    probes = dent_probes(case)
+    # The probes lie on the outer surface: their nearest boundary triangles are outer ones.
     where = surface_weights(mesh.points, faces, probes)
     dents = np.array([dent_profile(mesh.points, x, faces, where, case.direction, probes.shape[:2])
                       for x in r["positions"]])
@@ -276,8 +326,8 @@ def hybrid_curve(model: _palpate.HybridModel, case: IndentCase, *, ramp_s: float
     disc = b * b - ((q * q).sum(axis=1) - case.tool_radius**2)
     ok = disc >= 0
     t0 = float((b[ok] - np.sqrt(disc[ok])).min())
-    probes = dent_probes(case)
     tris = sim.surface_triangles
+    probes = dent_probes(case, (s0, tris))
     where = surface_weights(s0, tris, probes)
     rows: List[Dict[str, Any]] = []
     prev = 0.0
@@ -303,6 +353,7 @@ def hybrid_curve(model: _palpate.HybridModel, case: IndentCase, *, ramp_s: float
     out["wall_s"] = time.perf_counter() - t_start
     out["hold_z"] = hybrid_hold_z(sim)
     out["core_tets"] = len(sim.core_tets)
+    out["probes"] = probes
     if verbose:
         print("  hybrid: " + ", ".join(f"{f:.4f} N" for f in out["force"]) + f" ({out['wall_s']:.1f} s)", flush=True)
     return out
@@ -344,11 +395,10 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
     ``indentation.json`` and ``indentation.png`` into ``out_dir`` when given. Returns the curves,
     the table rows and the convergence evidence.
     """
-    if shape != "ellipsoids":
-        raise ValueError(f"the converged reference needs a tet mesh of the wall: palpate meshes the "
-                         f"'ellipsoids' wall; {shape!r} is not supported yet")
-    from .hybrid import build_shape
+    from .hybrid import SHAPES, build_shape
 
+    if shape not in SHAPES:
+        raise ValueError(f"shape must be one of {SHAPES}, got {shape!r}")
     if law not in ("neo-hookean", "svk"):
         raise ValueError(f"law must be 'neo-hookean' or 'svk', got {law!r}")
     case = IndentCase(shape=shape, young=young, poisson=poisson, tool_radius=tool_radius, depths=tuple(depths),
@@ -357,15 +407,20 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
         if verbose:
             print(f"building the hybrid model of {shape!r} ...", flush=True)
         model = build_shape(shape)
+    if shape != "ellipsoids":
+        from .bench_hybrid import probe
+
+        _, point, inward, _ = probe(model, shape)
+        case.point, case.direction = tuple(float(v) for v in point), tuple(float(v) for v in inward)
     hyb = hybrid_curve(model, case, verbose=verbose)
     case.hold_z = hyb["hold_z"]
     refs = []
-    for s, layers in levels:
-        mesh = graded_ellipsoid_wall(subdivisions=s, layers=layers, focus=-np.asarray(case.direction))
-        refs.append(reference_curve(mesh, case, verbose=verbose))
-        refs[-1]["level"] = (s, layers)
-    cmesh = _palpate.ellipsoid_wall(ELLIPSOIDS_INNER, ELLIPSOIDS_OUTER, subdivisions=coarse[0], layers=coarse[1])
-    coarse_curve = reference_curve(cmesh, case, verbose=verbose)
+    for a, b in levels:
+        mesh, fixed = wall_mesh(shape, a, b, case)
+        refs.append(reference_curve(mesh, case, hyb["probes"], fixed=fixed, verbose=verbose))
+        refs[-1]["level"] = (a, b)
+    cmesh, cfixed = wall_mesh(shape, coarse[0], coarse[1], case, graded=False)
+    coarse_curve = reference_curve(cmesh, case, hyb["probes"], fixed=cfixed, verbose=verbose)
 
     at = np.asarray(depths, dtype=float)
     ref_f = np.array([_interp(r, at) for r in refs])

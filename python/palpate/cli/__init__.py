@@ -35,7 +35,7 @@
         (a batch study on Dask: results.parquet, a row per scenario; palpate/sweep/)
     palpate fit SPEC.toml --measured CURVE.csv [--params young,poisson,phi,psi] [--plot PNG] [--workers N]
         (the material that reproduces a measured force-depth curve)
-    palpate validate indentation ellipsoids [--model FILE] [--tool-radius M] [--depths M ...] [--levels S:L ...]
+    palpate validate indentation ellipsoids|ventricle|rodero [--model FILE] [--tool-radius M] [--depths M ...] [--levels S:L ...]
                      [--coarse S:L] [--young E] [--poisson NU] [--law neo-hookean|svk] [--out DIR] [--quiet]
         (the hybrid's force and dent against the converged FEM of its wall; palpate/validate.py)
 

@@ -7,18 +7,20 @@ from typing import List, Tuple
 from ._common import Fail, RunFailed, Usage
 
 
-def _level(text: str) -> Tuple[int, int]:
+def _level(text: str, shape: str) -> Tuple[int, int]:
     try:
-        s, l = (int(v) for v in text.split(":"))
+        a, b = (int(v) for v in text.split(":"))
     except ValueError:
-        raise Usage(f"palpate validate: a mesh level is SUBDIVISIONS:LAYERS (e.g. 4:4), got {text!r}") from None
-    if not (0 <= s <= 7 and 1 <= l <= 32):
-        raise Usage(f"palpate validate: level {text}: subdivisions must be 0 to 7 and layers 1 to 32")
-    return s, l
+        raise Usage(f"palpate validate: a mesh level is A:LAYERS (e.g. 4:4), got {text!r}") from None
+    if shape == "ellipsoids" and not (0 <= a <= 7 and 1 <= b <= 32):
+        raise Usage(f"palpate validate: level {text}: the ellipsoids' subdivisions must be 0 to 7 and layers 1 to 32")
+    if shape != "ellipsoids" and not (4 <= a <= 200_000 and 1 <= b <= 16):
+        raise Usage(f"palpate validate: level {text}: a built wall's triangles must be 4 to 200000 and layers 1 to 16")
+    return a, b
 
 
 def add_parser(sub) -> None:
-    from ..validate import REFERENCE_LEVELS
+    from ..validate import BUILT_LEVELS, REFERENCE_LEVELS
 
     v = sub.add_parser("validate", help="the hybrid model against references palpate computes itself",
                        description="Validation against references palpate computes itself.")
@@ -29,19 +31,20 @@ def add_parser(sub) -> None:
                       description="Press a rigid sphere into the hybrid model of SHAPE (quasi-statically) and into "
                                   "full-FEM meshes of the same wall refined toward the tool (static equilibrium, "
                                   "Newton), print force and dent against indentation with the reference's mesh "
-                                  "convergence, and write indentation.json and indentation.png. Only the "
-                                  "'ellipsoids' wall can be meshed for the reference today.")
+                                  "convergence, and write indentation.json and indentation.png.")
     i.add_argument("shape", choices=["ellipsoids", "ventricle", "rodero"], help="the wall")
     i.add_argument("--model", metavar="FILE", help="a hybrid model of that wall (palpate build --shape SHAPE ...), "
                    "instead of building one with the default options")
     i.add_argument("--tool-radius", type=float, default=0.005, metavar="M", help="sphere radius [m] (default 0.005)")
     i.add_argument("--depths", type=float, nargs="+", default=[0.002, 0.004, 0.006], metavar="M",
                    help="indentations of the table [m] (default 0.002 0.004 0.006)")
-    i.add_argument("--levels", nargs="+", default=[f"{s}:{l}" for s, l in REFERENCE_LEVELS], metavar="S:L",
-                   help="reference meshes, SUBDIVISIONS:LAYERS each, coarse to fine, each halving the last's "
-                        "element size (default " + " ".join(f"{s}:{l}" for s, l in REFERENCE_LEVELS) + ")")
-    i.add_argument("--coarse", default="2:2", metavar="S:L", help="the coarse full FEM, ungraded (default 2:2: "
-                   "768 tets)")
+    i.add_argument("--levels", nargs="+", metavar="A:L",
+                   help="reference meshes, coarse to fine, each halving the last's element size: for the ellipsoids "
+                        "SUBDIVISIONS:LAYERS of the graded wall (default " + " ".join(f"{s}:{l}" for s, l in REFERENCE_LEVELS)
+                        + "), for the other walls TRIANGLES:LAYERS of the build's wall mesh (default "
+                        + " ".join(f"{s}:{l}" for s, l in BUILT_LEVELS) + ")")
+    i.add_argument("--coarse", metavar="A:L", help="the coarse full FEM, ungraded (default 2:2 for the ellipsoids: "
+                   "768 tets; 300:1 for the other walls: 900 tets)")
     i.add_argument("--young", type=float, default=30e3, metavar="E", help="Young's modulus [Pa] (default 30e3)")
     i.add_argument("--poisson", type=float, default=0.4, metavar="NU", help="Poisson's ratio (default 0.4)")
     i.add_argument("--law", choices=["neo-hookean", "svk"], default="neo-hookean",
@@ -56,15 +59,14 @@ def cmd_indentation(a) -> int:
     from .. import _palpate as _p
     from .. import validate
 
-    if a.shape != "ellipsoids":
-        raise Fail(f"palpate validate indentation: {a.shape}: the converged reference needs a tet mesh of the wall, "
-                   "and palpate meshes only the 'ellipsoids' wall today (a wall mesher for surfaces such as "
-                   "Rodero's is the next step of issue 33)")
+    from ..validate import BUILT_LEVELS, REFERENCE_LEVELS
+
     if not (a.tool_radius > 0 and all(d > 0 for d in a.depths)):
         raise Usage("palpate validate indentation: --tool-radius and --depths must be positive [m]")
     depths: List[float] = sorted(a.depths)
-    levels = [_level(t) for t in a.levels]
-    coarse = _level(a.coarse)
+    default = REFERENCE_LEVELS if a.shape == "ellipsoids" else BUILT_LEVELS
+    levels = [_level(t, a.shape) for t in a.levels] if a.levels else list(default)
+    coarse = _level(a.coarse, a.shape) if a.coarse else ((2, 2) if a.shape == "ellipsoids" else (300, 1))
     model = None
     if a.model:
         try:
