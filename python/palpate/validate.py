@@ -374,13 +374,32 @@ def _interp(curve: Dict[str, Any], at: np.ndarray, key: str = "force") -> np.nda
 
 
 def _richardson(h: np.ndarray, f: np.ndarray) -> Tuple[float, float]:
-    """The h -> 0 limit of three values ``f`` at sizes ``h`` (each half the last), and its order
-    (nan if the differences do not shrink)."""
+    """The h -> 0 limit of ``f = f0 + C h^p`` through three values ``f`` at element sizes ``h``
+    (decreasing), and the order ``p`` (nan, nan if the differences do not shrink monotonically)."""
     d1, d2 = f[1] - f[0], f[2] - f[1]
     if d1 == 0 or d2 / d1 <= 0 or abs(d2) >= abs(d1):
         return float("nan"), float("nan")
-    p = math.log(abs(d1 / d2)) / math.log(h[0] / h[1])
-    return float(f[2] + d2 / ((h[1] / h[2]) ** p - 1)), p
+    target = d2 / d1  # = (h2^p - h1^p) / (h1^p - h0^p), falls from ~1 toward 0 as p grows
+
+    def ratio(p: float) -> float:
+        return (h[2] ** p - h[1] ** p) / (h[1] ** p - h[0] ** p)
+
+    lo, hi = 1e-3, 20.0
+    if not (ratio(hi) < target < ratio(lo)):
+        return float("nan"), float("nan")
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if ratio(mid) > target else (lo, mid)
+    p = 0.5 * (lo + hi)
+    c = d2 / (h[2] ** p - h[1] ** p)
+    return float(f[2] - c * h[2] ** p), p
+
+
+def level_size(shape: str, level: Tuple[int, int]) -> float:
+    """A mesh level's element size, relative: the ellipsoids' halves with each subdivision (the
+    layers double with it); a built wall's goes as one over the square root of its triangles."""
+    a, _ = level
+    return 2.0 ** -a if shape == "ellipsoids" else a ** -0.5
 
 
 def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
@@ -424,7 +443,7 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
 
     at = np.asarray(depths, dtype=float)
     ref_f = np.array([_interp(r, at) for r in refs])
-    h = np.array([2.0**-i for i in range(len(refs))])
+    h = np.array([level_size(shape, lv) for lv in levels])
     conv = []
     for j, d in enumerate(at):
         change = abs(ref_f[-1, j] - ref_f[-2, j]) / abs(ref_f[-1, j]) if len(refs) > 1 else float("nan")

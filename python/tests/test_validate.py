@@ -129,3 +129,12 @@ def test_validate_indentation_meshes_a_built_wall_and_checks_its_levels(tmp_path
     p = subprocess.run([sys.executable, "-m", "palpate", "validate", "indentation", "ellipsoids", "--levels", "4"],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "A:LAYERS" in p.stderr
+
+
+def test_richardson_recovers_a_known_limit_and_order():
+    for h, p in (([1.0, 0.5, 0.25], 1.5), ([1.0, 0.6, 0.3], 2.0)):
+        h = np.array(h)
+        lim, order = validate._richardson(h, 0.3 + 2.0 * h**p)
+        assert lim == pytest.approx(0.3, rel=1e-9) and order == pytest.approx(p, rel=1e-9)
+    # Differences that do not shrink give no extrapolation.
+    assert np.isnan(validate._richardson(np.array([1.0, 0.5, 0.25]), np.array([1.0, 1.1, 1.3]))[0])
