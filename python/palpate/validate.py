@@ -450,12 +450,14 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
         lim, order = _richardson(h[-3:], ref_f[-3:, j]) if len(refs) >= 3 else (float("nan"), float("nan"))
         conv.append(dict(indentation=d, last_change=change, extrapolated=lim, order=order))
     reference = ref_f[-1]
+    extrapolated = np.array([cv["extrapolated"] for cv in conv])
     hyb_f, coarse_f = _interp(hyb, at), _interp(coarse_curve, at)
     dents = {k: _interp(c, at, "dent") for k, c in (("reference", refs[-1]), ("hybrid", hyb), ("coarse", coarse_curve))}
     rows = []
     for j, d in enumerate(at):
         rows.append(dict(indentation=d, reference=reference[j], hybrid=hyb_f[j], coarse=coarse_f[j],
                          hybrid_error=hyb_f[j] / reference[j] - 1, coarse_error=coarse_f[j] / reference[j] - 1,
+                         extrapolated=extrapolated[j], hybrid_error_extrapolated=hyb_f[j] / extrapolated[j] - 1,
                          dent_reference=dents["reference"][j], dent_hybrid=dents["hybrid"][j],
                          dent_coarse=dents["coarse"][j]))
     result = dict(case=asdict(case), hybrid=hyb, references=refs, coarse=coarse_curve, rows=rows, convergence=conv)
@@ -473,11 +475,14 @@ def format_table(result: Dict[str, Any]) -> str:
     c = result["case"]
     lines = [f"sphere R = {c['tool_radius'] * 1e3:g} mm into {c['shape']}, E = {c['young'] / 1e3:g} kPa, "
              f"nu = {c['poisson']:g}",
-             "indentation | finest FEM | hybrid | coarse FEM",
-             "---|---|---|---"]
+             "indentation | finest FEM | FEM extrapolated | hybrid (vs finest, vs extrapolated) | coarse FEM (vs finest)",
+             "---|---|---|---|---"]
     for r in result["rows"]:
-        lines.append(f"{r['indentation'] * 1e3:.1f} mm | {r['reference']:.4f} N | {r['hybrid']:.4f} N "
-                     f"({100 * r['hybrid_error']:+.0f}%) | {r['coarse']:.4f} N ({100 * r['coarse_error']:+.0f}%)")
+        ex = r.get("extrapolated", float("nan"))
+        hx = r.get("hybrid_error_extrapolated", float("nan"))
+        lines.append(f"{r['indentation'] * 1e3:.1f} mm | {r['reference']:.4f} N | {ex:.4f} N | {r['hybrid']:.4f} N "
+                     f"({100 * r['hybrid_error']:+.0f}%, {100 * hx:+.0f}%) | {r['coarse']:.4f} N "
+                     f"({100 * r['coarse_error']:+.0f}%)")
     lines.append("reference convergence (force at indentation over the levels; last change; extrapolation):")
     for j, cv in enumerate(result["convergence"]):
         fs = ", ".join(f"{_interp(r, np.array([cv['indentation']]))[0]:.4f}" for r in result["references"])
@@ -502,12 +507,16 @@ def plot(result: Dict[str, Any], path: str) -> None:
 
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
     for r in result["references"]:
-        a.plot(np.r_[0, r["indentation"]] * 1e3, np.r_[0, r["force"]], "o-", lw=1,
-               label=f"FEM {r['tets']} tets (graded)")
+        graded = " (graded)" if result["case"]["shape"] == "ellipsoids" else ""
+        a.plot(np.r_[0, r["indentation"]] * 1e3, np.r_[0, r["force"]], "o-", lw=1, label=f"FEM {r['tets']} tets{graded}")
     for key, style, name in (("coarse", "s--", "coarse FEM"), ("hybrid", "^-", "hybrid")):
         r = result[key]
         label = f"{name} ({r['tets']} tets)" if key == "coarse" else f"hybrid ({r['core_tets']}-tet core)"
         a.plot(np.r_[0, r["indentation"]] * 1e3, np.r_[0, r["force"]], style, lw=1.5, label=label)
+    conv = result.get("convergence", [])
+    ex = [(cv["indentation"], cv["extrapolated"]) for cv in conv if np.isfinite(cv["extrapolated"])]
+    if ex:
+        a.plot([e[0] * 1e3 for e in ex], [e[1] for e in ex], "kx", ms=8, label="FEM extrapolated to h -> 0")
     c = result["case"]
     a.set_xlabel("indentation [mm]")
     a.set_ylabel("force [N]")
@@ -516,9 +525,10 @@ def plot(result: Dict[str, Any], path: str) -> None:
     dist = np.array(DENT_DISTANCES) * 1e3
     for k, r in enumerate(result["rows"]):
         col = f"C{k}"
-        b.plot(dist, r["dent_reference"] * 1e3, "o-", color=col, label=f"FEM, indentation {r['indentation'] * 1e3:g} mm")
-        b.plot(dist, r["dent_hybrid"] * 1e3, "^--", color=col, label="hybrid")
-        b.plot(dist, r["dent_coarse"] * 1e3, "s:", color=col, label="coarse FEM")
+        b.plot(dist, np.asarray(r["dent_reference"]) * 1e3, "o-", color=col,
+               label=f"FEM, indentation {r['indentation'] * 1e3:g} mm")
+        b.plot(dist, np.asarray(r["dent_hybrid"]) * 1e3, "^--", color=col, label="hybrid")
+        b.plot(dist, np.asarray(r["dent_coarse"]) * 1e3, "s:", color=col, label="coarse FEM")
     b.set_xlabel("distance from the tool's axis [mm]")
     b.set_ylabel("surface displacement along the press [mm]")
     b.set_title("dent profile")

@@ -106,7 +106,7 @@ def test_validate_indentation_cli_writes_the_table_and_files(tmp_path):
                         "2:1", "2:2", "--coarse", "1:1", "--depths", "0.001", "0.002", "--out", str(out), "--quiet"],
                        capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr
-    assert "finest FEM | hybrid | coarse FEM" in p.stdout and "last change" in p.stdout
+    assert "finest FEM | FEM extrapolated | hybrid" in p.stdout and "last change" in p.stdout
     data = json.loads((out / "indentation.json").read_text())
     assert len(data["rows"]) == 2 and len(data["references"]) == 3
     for row in data["rows"]:

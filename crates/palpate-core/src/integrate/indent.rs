@@ -312,7 +312,7 @@ pub fn indent(model: &Model, ind: &Indenter, travels: &[f64], opts: &IndentOptio
                     return Err(SolveError::NonFinite { what: "residual", node: 0 });
                 }
                 if trace() {
-                    eprintln!("indent: travel {travel:.4e} m, iteration {it}: potential {phi:.6e} J, residual {rnorm:.3e} N (contact {scale:.3e} N), {} samples in contact", con.2);
+                    eprintln!("indent: travel {travel:.4e} m, iteration {it}: potential {phi:.6e} J, residual {rnorm:.3e} N (contact {scale:.3e} N), {} samples in contact, {iterations_factored} factorisations", con.2);
                 }
                 if rnorm <= (opts.tolerance * scale).max(floor) || (con.2 == 0 && rnorm <= floor) {
                     break;
