@@ -82,3 +82,24 @@ fn a_sphere_on_a_thick_slab_follows_hertz() {
     println!("exponent {p:.3}");
     assert!((p - 1.5).abs() < 0.1, "exponent {p}");
 }
+
+#[test]
+fn bad_indenters_are_refused_with_a_reason() {
+    let model = graded_slab(0.01, 0.01, [4, 4, 3], 0.0);
+    let ok = Indenter { start: Vec3::new(0.0, 0.0, 0.01), direction: Vec3::new(0.0, 0.0, -1.0), radius: 0.005 };
+    let opts = IndentOptions::default();
+    let msg = |ind: Indenter, travels: &[f64]| match indent(&model, &ind, travels, &opts) {
+        Err(palpate_core::SolveError::Invalid(m)) => m,
+        other => panic!("expected Invalid, got {other:?}"),
+    };
+    assert!(msg(Indenter { radius: -1.0, ..ok }, &[1e-4]).contains("radius"));
+    assert!(msg(Indenter { radius: f64::NAN, ..ok }, &[1e-4]).contains("radius"));
+    assert!(msg(Indenter { direction: Vec3::new(0.0, 0.0, -2.0), ..ok }, &[1e-4]).contains("unit vector"));
+    assert!(msg(Indenter { start: Vec3::new(f64::INFINITY, 0.0, 0.0), ..ok }, &[1e-4]).contains("finite"));
+    assert!(msg(ok, &[2e-4, 1e-4]).contains("increasing"));
+    assert!(msg(ok, &[f64::NAN]).contains("increasing"));
+    // A path beside the body meets nothing.
+    assert!(msg(Indenter { start: Vec3::new(0.5, 0.0, 0.01), ..ok }, &[1e-4]).contains("meets no boundary"));
+    // No travel: nothing to do, no error.
+    assert!(indent(&model, &ok, &[], &opts).expect("empty").is_empty());
+}

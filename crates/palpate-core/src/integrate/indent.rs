@@ -309,7 +309,8 @@ pub fn indent(model: &Model, ind: &Indenter, travels: &[f64], opts: &IndentOptio
                 let scale = model.free_nodes.iter().map(|&i| fc[i].norm()).fold(0.0, f64::max);
                 let floor = round_off(model, &x);
                 if !rnorm.is_finite() {
-                    return Err(SolveError::NonFinite { what: "residual", node: 0 });
+                    let node = (0..n).find(|&i| !is_finite3(&f[i]) || !is_finite3(&x[i])).unwrap_or(0);
+                    return Err(SolveError::NonFinite { what: "indentation residual", node });
                 }
                 if trace() {
                     eprintln!("indent: travel {travel:.4e} m, iteration {it}: potential {phi:.6e} J, residual {rnorm:.3e} N (contact {scale:.3e} N), {} samples in contact, {iterations_factored} factorisations", con.2);
