@@ -232,7 +232,6 @@ class HybridSimState(TypedDict):
     owed_core_dt: Optional[float]
     owed_core_forces: Optional[_FloatArray]
 
-@final
 class IndentResult(TypedDict):
     travel: _FloatArray
     force: _FloatArray
@@ -246,6 +245,7 @@ class IndentResult(TypedDict):
     positions: _FloatArray
     contact_forces: _FloatArray
 
+@final
 class Body:
     def __new__(
         cls,
