@@ -21,23 +21,8 @@ import pytest
 import palpate
 from palpate import validate
 
-skfem = pytest.importorskip("skfem")
-from skfem.models.elasticity import linear_elasticity  # noqa: E402
-
-E, NU = 3.0e4, 0.4
-MU, LAM = E / (2 * (1 + NU)), E * NU / ((1 + NU) * (1 - 2 * NU))
-
-
-def skfem_static(points, tets, fixed, forces):
-    mesh = skfem.MeshTet(points.T.copy(), tets.T.copy())
-    basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP1()))
-    K = skfem.asm(linear_elasticity(LAM, MU), basis)
-    f = np.zeros(basis.N)
-    dofs = basis.nodal_dofs
-    for c in range(3):
-        f[dofs[c]] = forces[:, c]
-    u = skfem.solve(*skfem.condense(K, f, D=dofs[:, fixed].ravel()))
-    return u[dofs].T
+pytest.importorskip("skfem")
+from test_reference_skfem import E, NU, skfem_static  # noqa: E402  (one scikit-fem solve for both tests)
 
 
 @pytest.fixture(scope="module")
