@@ -18,6 +18,8 @@ Keyword options (``**opts``) are those of :meth:`palpate.HybridModel.build_neste
 >>> import palpate
 >>> m = palpate.build_shape("ellipsoids", particles=2000)
 >>> m.info()["core_tets"]
+900
+>>> palpate.build_shape("ellipsoids", particles=2000, core_triangles=64).info()["core_tets"]  # the paper's
 192
 """
 from __future__ import annotations

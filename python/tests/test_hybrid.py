@@ -52,7 +52,7 @@ def _check_model(m, particles=28000, tol=0.05):
 def test_ellipsoids_model(ellipsoids):
     m = ellipsoids
     i = _check_model(m)
-    assert 150 <= len(m.core_tets) <= 250
+    assert 800 <= len(m.core_tets) <= 1400                                   # the automatic core: 300 triangles
     assert len(m.outer_points) == 4098 and len(m.outer_triangles) == 8192   # ellipsoid_surface(..., 5)
     assert len(m.core_base_nodes) == 0                                      # a closed wall
     assert i["region_particles_min"] >= 50
@@ -248,12 +248,14 @@ def test_cli_build_and_info(tmp_path):
     r = palpate_cli("build", "--shape", "ellipsoids", "-o", out)
     assert r.returncode == 0, r.stderr
     assert out.exists() and out.read_bytes()[:16] == MAGIC
-    assert "192 tets" in r.stdout and "particles" in r.stdout and "mL" in r.stdout and "build time" in r.stdout
+    m = palpate.HybridModel.load(out)
+    tets = f"{len(m.core_tets)} tets"
+    assert 800 <= len(m.core_tets) <= 1400                    # the automatic core of a closed wall
+    assert tets in r.stdout and "particles" in r.stdout and "mL" in r.stdout and "build time" in r.stdout
     r = palpate_cli("info", out)
     assert r.returncode == 0, r.stderr
-    m = palpate.HybridModel.load(out)
     assert str(out) in r.stdout and "palpate hybrid model" in r.stdout
-    assert f"{len(m.particles)} particles" in r.stdout and "192 tets" in r.stdout
+    assert f"{len(m.particles)} particles" in r.stdout and tets in r.stdout
     assert f"wall {m.wall_volume * 1e6:.3f} mL" in r.stdout
     assert "MB" in r.stdout and "build time" in r.stdout
 
