@@ -415,13 +415,18 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
                     depths: Sequence[float] = (0.002, 0.004, 0.006), levels: Sequence[Tuple[int, int]] = REFERENCE_LEVELS,
                     coarse: Tuple[int, int] = (2, 2), young: float = 30e3, poisson: float = 0.4,
                     law: str = "neo-hookean", out_dir: Optional[str] = None, model: Optional[_palpate.HybridModel] = None,
-                    verbose: bool = True) -> Dict[str, Any]:
+                    reference: Optional[str] = None, verbose: bool = True) -> Dict[str, Any]:
     """The hybrid's force and dent against the converged FEM of its wall, and the coarse FEM.
 
     ``levels``: the reference meshes (see :data:`REFERENCE_LEVELS`); ``coarse``: the
     (subdivisions, layers) of the ungraded full FEM of about the hybrid core's size. Writes
     ``indentation.json`` and ``indentation.png`` into ``out_dir`` when given. Returns the curves,
     the table rows and the convergence evidence.
+
+    ``reference``: an ``indentation.json`` of an earlier run whose reference and coarse curves
+    are reused instead of computed (they take most of the run's time; the hybrid is what one
+    iterates on): its wall, material, law, tool, press and held height must be this run's
+    (:func:`load_reference`), and ``levels`` and ``coarse`` are then its own.
     """
     from .hybrid import SHAPES, build_shape
 
@@ -440,15 +445,23 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
 
         _, point, inward, _ = probe(model, shape)
         case.point, case.direction = tuple(float(v) for v in point), tuple(float(v) for v in inward)
+    if reference is not None:
+        load_reference(reference, case)  # refuse a misfit before the hybrid's minute
     hyb = hybrid_curve(model, case, verbose=verbose)
     case.hold_z = hyb["hold_z"]
-    refs = []
-    for a, b in levels:
-        mesh, fixed = wall_mesh(shape, a, b, case)
-        refs.append(reference_curve(mesh, case, hyb["probes"], fixed=fixed, verbose=verbose))
-        refs[-1]["level"] = (a, b)
-    cmesh, cfixed = wall_mesh(shape, coarse[0], coarse[1], case, graded=False)
-    coarse_curve = reference_curve(cmesh, case, hyb["probes"], fixed=cfixed, verbose=verbose)
+    if reference is not None:
+        refs, coarse_curve = load_reference(reference, case, hyb["probes"])
+        levels = [tuple(r["level"]) for r in refs]
+        if verbose:
+            print(f"  reference and coarse curves from {reference}", flush=True)
+    else:
+        refs = []
+        for a, b in levels:
+            mesh, fixed = wall_mesh(shape, a, b, case)
+            refs.append(reference_curve(mesh, case, hyb["probes"], fixed=fixed, verbose=verbose))
+            refs[-1]["level"] = (a, b)
+        cmesh, cfixed = wall_mesh(shape, coarse[0], coarse[1], case, graded=False)
+        coarse_curve = reference_curve(cmesh, case, hyb["probes"], fixed=cfixed, verbose=verbose)
 
     at = np.asarray(depths, dtype=float)
     ref_f = np.array([_interp(r, at) for r in refs])
@@ -478,6 +491,49 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
             json.dump(_jsonable(result), fh, indent=1)
         plot(result, os.path.join(out_dir, "indentation.png"))
     return result
+
+
+class ReferenceMismatch(ValueError):
+    """An earlier run's reference that does not fit this run (:func:`load_reference`)."""
+
+
+#: How far a reused reference's held height and dent probes may lie from this run's [m]: holding
+#: the wall 0.9 mm higher changed the reference's force by 3% (VALIDATION.md).
+REUSE_TOLERANCE = 1e-4
+
+
+def load_reference(path: str, case: IndentCase, probes: Optional[np.ndarray] = None
+                   ) -> Tuple[List[Dict[str, Any]], Dict[str, Any]]:
+    """The reference curves (finest last) and the coarse curve of an earlier run's
+    ``indentation.json``, refused with the reason unless it pressed the same wall with the same
+    material, law, sphere and direction, held below the same height (when ``case.hold_z`` is
+    set) and probed the dent at the same ``probes`` (when given), within :data:`REUSE_TOLERANCE`."""
+    try:
+        with open(path) as fh:
+            data = json.load(fh)
+        old, refs, coarse = data["case"], data["references"], data["coarse"]
+        old_probes = np.asarray(data["hybrid"]["probes"], dtype=float)
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ReferenceMismatch(f"{path}: not an indentation.json of palpate validate ({e})") from None
+    new = asdict(case)
+    for key in ("shape", "reference_law"):
+        if old.get(key) != new[key]:
+            raise ReferenceMismatch(f"{path}: its reference has {key} {old.get(key)!r}, this run {new[key]!r}")
+    for key in ("young", "poisson", "tool_radius", "point", "direction", "hold_z"):
+        if new[key] is None:
+            continue
+        a, b = np.asarray(old.get(key, np.nan), dtype=float), np.asarray(new[key], dtype=float)
+        tol = REUSE_TOLERANCE if key in ("point", "hold_z") else 1e-9 * max(1.0, float(np.abs(b).max()))
+        if a.shape != b.shape or not np.all(np.abs(a - b) <= tol):
+            raise ReferenceMismatch(f"{path}: its reference has {key} {old.get(key)}, this run {new[key]}: compute "
+                                    f"the reference anew (without --reference)")
+    if probes is not None and (old_probes.shape != probes.shape or np.abs(old_probes - probes).max() > REUSE_TOLERANCE):
+        raise ReferenceMismatch(f"{path}: its dent probes are not this run's (another skin): compute the reference anew")
+
+    def arrays(c: Dict[str, Any]) -> Dict[str, Any]:
+        return {k: (np.asarray(v) if isinstance(v, list) and k != "level" else v) for k, v in c.items()}
+
+    return [arrays(r) for r in refs], arrays(coarse)
 
 
 def format_table(result: Dict[str, Any]) -> str:

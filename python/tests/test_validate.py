@@ -98,6 +98,19 @@ def test_validate_indentation_cli_writes_the_table_and_files(tmp_path):
         assert row["reference"] > 0 and row["hybrid"] > 0 and row["coarse"] > 0
         assert len(row["dent_hybrid"]) == len(validate.DENT_DISTANCES)
     assert (out / "indentation.png").stat().st_size > 10_000
+    # The hybrid again against the same reference, reused: the same reference rows, no solve.
+    again = subprocess.run([sys.executable, "-m", "palpate", "validate", "indentation", "ellipsoids", "--depths", "0.001",
+                            "0.002", "--reference", str(out / "indentation.json"), "--out", str(tmp_path / "w"),
+                            "--quiet"], capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    reused = json.loads((tmp_path / "w" / "indentation.json").read_text())
+    assert [r["reference"] for r in reused["rows"]] == [r["reference"] for r in data["rows"]]
+    assert [r["tets"] for r in reused["references"]] == [r["tets"] for r in data["references"]]
+    # ... and refused for another tool (its reference would be another press).
+    other = subprocess.run([sys.executable, "-m", "palpate", "validate", "indentation", "ellipsoids", "--tool-radius",
+                            "0.006", "--reference", str(out / "indentation.json"), "--out", str(tmp_path / "x")],
+                           capture_output=True, text=True, timeout=600)
+    assert other.returncode == 1 and "tool_radius" in other.stderr and "anew" in other.stderr
 
 
 def test_validate_indentation_meshes_a_built_wall_and_checks_its_levels(tmp_path):

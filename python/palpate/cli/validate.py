@@ -50,6 +50,9 @@ def add_parser(sub) -> None:
     i.add_argument("--law", choices=["neo-hookean", "svk"], default="neo-hookean",
                    help="the references' law (default neo-hookean; St. Venant-Kirchhoff collapses under a deep "
                         "press, see palpate.validate.IndentCase)")
+    i.add_argument("--reference", metavar="JSON", help="reuse the reference and coarse curves of an earlier run's "
+                   "indentation.json (the same wall, material, law, tool and held height; --levels and --coarse are "
+                   "then its own): minutes instead of half an hour when only the hybrid changed")
     i.add_argument("--out", default="out/validate", metavar="DIR", help="output folder (default out/validate)")
     i.add_argument("--quiet", action="store_true", help="print the table only")
     i.set_defaults(func=cmd_indentation)
@@ -76,7 +79,9 @@ def cmd_indentation(a) -> int:
     try:
         result = validate.run_indentation(a.shape, tool_radius=a.tool_radius, depths=depths, levels=levels,
                                           coarse=coarse, young=a.young, poisson=a.poisson, law=a.law,
-                                          out_dir=a.out, model=model, verbose=not a.quiet)
+                                          out_dir=a.out, model=model, reference=a.reference, verbose=not a.quiet)
+    except validate.ReferenceMismatch as e:
+        raise Fail(f"palpate validate indentation: --reference {e}") from None
     except _p.SolveError as e:
         raise RunFailed(f"palpate validate indentation: the reference did not reach equilibrium: {e}") from None
     except _p.MaterialError as e:
