@@ -73,13 +73,19 @@ impl TriangleGrid {
                 (a.inf(&b).inf(&c), a.sup(&b).sup(&c))
             })
             .collect();
+        TriangleGrid::from_boxes(boxes, cell)
+    }
+
+    /// Bucket items by their bounding boxes `(min, max)` \[m\] with cells of about `cell` \[m\]
+    /// (the grid of [`super::TetGrid`], whose items are tetrahedra).
+    pub(super) fn from_boxes(boxes: Vec<(Vec3, Vec3)>, cell: f64) -> TriangleGrid {
         let mut lo = Vec3::repeat(f64::INFINITY);
         let mut hi = Vec3::repeat(f64::NEG_INFINITY);
         for (a, b) in &boxes {
             lo = lo.inf(a);
             hi = hi.sup(b);
         }
-        if tris.is_empty() {
+        if boxes.is_empty() {
             lo = Vec3::zeros();
             hi = Vec3::zeros();
         }
@@ -91,7 +97,7 @@ impl TriangleGrid {
         }
         let grid = Grid3 { origin: lo, h, dims: [(ext.x / h) as usize + 1, (ext.y / h) as usize + 1, (ext.z / h) as usize + 1] };
         let ranges: Vec<([usize; 3], [usize; 3])> = boxes.iter().map(|(a, b)| (grid.cell_clamped(a), grid.cell_clamped(b))).collect();
-        let cells = Buckets::build(grid.len(), tris.len(), |t| grid.cells_in(ranges[t].0, ranges[t].1));
+        let cells = Buckets::build(grid.len(), boxes.len(), |t| grid.cells_in(ranges[t].0, ranges[t].1));
         TriangleGrid { grid, cells, boxes }
     }
 
