@@ -175,6 +175,11 @@ def test_snapshot_from_another_thread_while_stop_or_run_releases_the_gil():
         for _ in range(20):
             loop = _p.HapticLoop(model, haptics.material(), "hand", hand_start=k[0], idle=True)
             loop.start()
+            # The first tick (its snapshot), not a time: on a busy machine the loop's thread may not have run
+            # within a few milliseconds of start(), and a stop before it has nothing to report.
+            t0 = time.monotonic()
+            while loop.snapshot() is None and time.monotonic() - t0 < 10:
+                time.sleep(0.001)
             r = with_hammer(loop, loop.stop)
             assert r["ticks"] > 0, r
         for _ in range(5):
