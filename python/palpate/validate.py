@@ -315,7 +315,8 @@ def _travels(depths: Sequence[float], extra: float) -> np.ndarray:
 
 def hybrid_hold_z(sim: _palpate.HybridSim) -> float:
     """The height below which a closed wall's hybrid runtime holds its core nodes (30% of the
-    core's height above its lowest point, ``runtime::Sim::new``)."""
+    core's height above its lowest point, ``runtime::Sim::new``), from the core's positions now:
+    call it on a fresh sim (at rest)."""
     z = sim.core_positions[:, 2]
     return float(z.min() + 0.3 * (z.max() - z.min()))
 
@@ -326,6 +327,7 @@ def hybrid_curve(model: _palpate.HybridModel, case: IndentCase, *, ramp_s: float
     ``ramp_s`` then a hold of ``hold_s`` at ``1/dt`` Hz, force and penetration averaged over the
     hold's second half (settled: its standard deviation is reported)."""
     sim = _palpate.HybridSim(model, case.material(), tool_radius=case.tool_radius)
+    hold_z = hybrid_hold_z(sim)  # at rest, where the runtime chose its held nodes
     p, n = np.asarray(case.point, dtype=float), np.asarray(case.direction, dtype=float)
     s0 = sim.surface.copy()
     # First contact with the skin at rest: the travel at which the sphere meets a skin vertex.
@@ -360,7 +362,7 @@ def hybrid_curve(model: _palpate.HybridModel, case: IndentCase, *, ramp_s: float
         prev = d
     out = {k: np.array([r[k] for r in rows]) for k in rows[0]}
     out["wall_s"] = time.perf_counter() - t_start
-    out["hold_z"] = hybrid_hold_z(sim)
+    out["hold_z"] = hold_z
     out["core_tets"] = len(sim.core_tets)
     out["probes"] = probes
     if verbose:
