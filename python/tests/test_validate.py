@@ -136,3 +136,25 @@ def test_richardson_recovers_a_known_limit_and_order():
         assert lim == pytest.approx(0.3, rel=1e-9) and order == pytest.approx(p, rel=1e-9)
     # Differences that do not shrink give no extrapolation.
     assert np.isnan(validate._richardson(np.array([1.0, 0.5, 0.25]), np.array([1.0, 1.1, 1.3]))[0])
+
+
+def test_the_default_core_carries_the_wall_the_papers_core_did_not():
+    # Issue 33, item 1's direction: a 15 mm sphere 2 mm into the ellipsoids. The reference here
+    # is the coarsest graded level (3,072 tets, ~45% stiffer than the converged wall: linear tets
+    # lock), so the thresholds are loose; what is checked is that the default core (900 tets)
+    # carries the wall where the paper's (192 tets, 11% of the wall) rendered a fifth of it.
+    case = validate.IndentCase(tool_radius=0.015, depths=(0.002,))
+    ratios = {}
+    for name, triangles in (("default", 0), ("paper", 64)):
+        model = palpate.build_shape("ellipsoids", core_triangles=triangles)
+        hyb = validate.hybrid_curve(model, case, ramp_s=0.3, hold_s=0.3)
+        if name == "default":
+            case.hold_z = hyb["hold_z"]
+            mesh, _ = validate.wall_mesh("ellipsoids", 3, 2, case)
+            ref = validate.reference_curve(mesh, case, hyb["probes"])
+        at = np.array(case.depths)
+        ratios[name] = float(validate._interp(hyb, at)[0] / validate._interp(ref, at)[0])
+    # Measured 2026-12-06: default 0.53, paper's 0.22 (against the extrapolated wall: 0.77, 0.33).
+    print(ratios)
+    assert 0.4 < ratios["default"] < 0.8, ratios
+    assert ratios["paper"] < 0.3, ratios
