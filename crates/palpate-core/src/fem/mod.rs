@@ -6,6 +6,7 @@
 
 pub(crate) mod lanes;
 pub(crate) mod model;
+pub mod small_strain;
 mod state;
 pub mod tangent;
 pub mod tet4;
