@@ -543,6 +543,7 @@ class _HybridOptions(TypedDict, total=False):
     density: float
     min_region_particles: int
     field_voxels: int
+    homogenise: bool
 
 @final
 class HybridSim:
@@ -563,6 +564,7 @@ class HybridSim:
         mass_scaling: Optional[float] = None,
         shell_fallback: bool = True,
         shell_pause: Optional[int] = None,
+        homogenise: bool = True,
     ) -> HybridSim: ...
     def step(self, tool_centre: _Vec3, dt: float = 1e-3, *, finish: bool = True) -> _FloatArray: ...
     def finish(self) -> None: ...
@@ -624,6 +626,8 @@ class HybridModel:
     def core_faces(self) -> _IntArray: ...
     @property
     def core_base_nodes(self) -> _IntArray: ...
+    @property
+    def homogenisation(self) -> Dict[str, Any]: ...
     @property
     def particles(self) -> _FloatArray: ...
     @property

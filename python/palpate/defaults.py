@@ -40,6 +40,7 @@ class HybridDefaults:
     density: float                 # [kg/m^3]
     min_region_particles: int
     field_voxels: int
+    homogenise: bool               # compute the core's homogenised stiffness (HybridModel.homogenisation)
     auto_core_triangles_closed: int  # core_triangles = 0 on a closed wall
     auto_core_triangles_base: int    # ... and on a wall with a base
 

@@ -109,6 +109,7 @@ fn options(kw: Option<&Bound<'_, PyDict>>) -> PyResult<HybridOptions> {
             "density" => o.density = v.extract().map_err(arg)?,
             "min_region_particles" => o.min_region_particles = errors::count(v.extract().map_err(arg)?, "min_region_particles")?,
             "field_voxels" => o.field_voxels = errors::count(v.extract().map_err(arg)?, "field_voxels")?,
+            "homogenise" => o.homogenise = v.extract().map_err(arg)?,
             _ => return Err(errors::type_error(format!("unexpected keyword argument '{key}' (the build options are {})", OPTION_NAMES.join(", ")))),
         }
     }
@@ -121,7 +122,7 @@ fn options(kw: Option<&Bound<'_, PyDict>>) -> PyResult<HybridOptions> {
 }
 
 /// The keyword arguments of the builders, in the order of the docs.
-const OPTION_NAMES: [&str; 9] = ["projection", "core_fraction", "core_triangles", "core_layers", "spacing", "particles", "density", "min_region_particles", "field_voxels"];
+const OPTION_NAMES: [&str; 10] = ["projection", "core_fraction", "core_triangles", "core_layers", "spacing", "particles", "density", "min_region_particles", "field_voxels", "homogenise"];
 
 /// `HybridOptions::default()` as a dict keyed as the builders' keyword arguments (`spacing` None
 /// with a particle count, `particles` None with a spacing).
@@ -141,6 +142,7 @@ pub fn default_options(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("density", o.density)?;
     d.set_item("min_region_particles", o.min_region_particles)?;
     d.set_item("field_voxels", o.field_voxels)?;
+    d.set_item("homogenise", o.homogenise)?;
     debug_assert_eq!(d.len(), OPTION_NAMES.len());
     Ok(d)
 }
@@ -163,7 +165,9 @@ impl PyHybridModel {
     /// ``core_layers``: prism layers of the core; ``spacing`` [m] or, if None, about
     /// ``particles`` particles in the shell; ``density`` [kg/m^3]; ``min_region_particles``:
     /// activation regions grow by rings of outer triangles until they hold this many;
-    /// ``field_voxels``: wall voxels of the transmural solve. An unknown option is a TypeError.
+    /// ``field_voxels``: wall voxels of the transmural solve; ``homogenise``: compute the core's
+    /// homogenised stiffness (default True, see ``HybridModel.homogenisation``). An unknown
+    /// option is a TypeError.
     #[staticmethod]
     #[pyo3(signature = (inner, outer, **options))]
     fn build_nested(
@@ -252,6 +256,29 @@ impl PyHybridModel {
     /// Core nodes on a base (held fixed), int64 (k,); empty for a closed wall.
     #[getter]
     fn core_base_nodes<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { conv::usizes_to_py(py, &self.model.core_base_nodes) }
+    /// The core's homogenised stiffness (``palpate_core::hybrid::homogenise``), as a dict:
+    /// ``poisson`` (k,) and ``factor`` (k,) [-] (the factor by which ``HybridSim`` multiplies the
+    /// core's Lame constants and viscosities, interpolated at the material's Poisson's ratio),
+    /// ``spread`` (k, 2) (the smallest and largest factor over the probe loads), ``probes``,
+    /// ``reference_tets`` (quadratic tets of the whole-wall reference), ``refinement`` (its triangles
+    /// over the core's), ``load_radius`` [m],
+    /// ``seconds`` (build time). Empty arrays: built with ``homogenise=False`` or by a palpate
+    /// before it (model format 1).
+    #[getter]
+    fn homogenisation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let h = &self.model.homogenisation;
+        let d = PyDict::new(py);
+        d.set_item("poisson", PyArray1::from_slice(py, &h.poisson))?;
+        d.set_item("factor", PyArray1::from_slice(py, &h.factor))?;
+        let spread: Vec<f64> = h.spread.iter().flatten().copied().collect();
+        d.set_item("spread", PyArray1::from_vec(py, spread).reshape([h.spread.len(), 2])?)?;
+        d.set_item("probes", h.probes)?;
+        d.set_item("reference_tets", h.reference_tets)?;
+        d.set_item("refinement", h.refinement)?;
+        d.set_item("load_radius", h.load_radius)?;
+        d.set_item("seconds", h.seconds)?;
+        Ok(d)
+    }
     /// Particle rest positions [m], (p, 3), sorted by the outer triangle above them.
     #[getter]
     fn particles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> { conv::vec3s_to_py(py, &self.model.particles) }
@@ -350,6 +377,14 @@ impl PyHybridModel {
         d.set_item("core_base_nodes", m.core_base_nodes.len())?;
         d.set_item("core_min_dihedral_deg", m.core_quality.min_dihedral_deg)?;
         d.set_item("core_volume_ratio", m.core_quality.min_volume / m.core_quality.max_volume)?;
+        // The homogenisation at the default tissue's Poisson's ratio (0.4).
+        let h = &m.homogenisation;
+        d.set_item("homogenised", !h.is_empty())?;
+        d.set_item("core_stiffening", h.factor(0.4))?;
+        d.set_item("core_stiffening_min", if h.is_empty() { 1.0 } else { h.spread.iter().zip(&h.poisson).find(|(_, &nu)| nu == 0.4).map_or(1.0, |(s, _)| s[0]) })?;
+        d.set_item("core_stiffening_max", if h.is_empty() { 1.0 } else { h.spread.iter().zip(&h.poisson).find(|(_, &nu)| nu == 0.4).map_or(1.0, |(s, _)| s[1]) })?;
+        d.set_item("homogenise_reference_tets", h.reference_tets)?;
+        d.set_item("build_homogenise_s", h.seconds)?;
         d.set_item("particles", m.particles.len())?;
         d.set_item("spacing_m", m.spacing)?;
         d.set_item("wall_volume_m3", m.wall_volume)?;

@@ -65,6 +65,10 @@ use crate::material::PyMaterial;
 ///     ``StepError`` with the state as it was.
 /// shell_pause : int, optional
 ///     Ticks the shell stays off at least after a failure (default 100: 0.1 s at 1 kHz).
+/// homogenise : bool, optional
+///     Stiffen the core by the model's homogenisation factor at the material's Poisson's ratio
+///     (default True; ``HybridModel.homogenisation``), so that where no particle is active the
+///     core bends as the whole wall does. False: the paper's core, stiff as the tissue.
 ///
 /// ``get_state()`` / ``set_state(s)`` save and restore everything a tick carries to the next (the
 /// ticks after a restore repeat the original's bit for bit); a ``HybridSim`` pickles (its model,
@@ -82,7 +86,7 @@ pub struct PyHybridSim {
 #[pymethods]
 impl PyHybridSim {
     #[new]
-    #[pyo3(signature = (model, material, *, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None))]
+    #[pyo3(signature = (model, material, *, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None, homogenise = true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -99,6 +103,7 @@ impl PyHybridSim {
         #[pyo3(from_py_with = conv::arg)] mass_scaling: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] shell_fallback: bool,
         shell_pause: Option<errors::Int>,
+        #[pyo3(from_py_with = conv::arg)] homogenise: bool,
     ) -> PyResult<Self> {
         let (linger_ticks, max_substeps) = (errors::count_opt(linger_ticks, "linger_ticks")?, errors::count_opt(max_substeps, "max_substeps")?);
         let shell_pause = errors::count_opt(shell_pause, "shell_pause")?;
@@ -115,7 +120,7 @@ impl PyHybridSim {
             }
             tool.stiffness = k;
         }
-        let mut options = SimOptions { tool, hold, ..Default::default() };
+        let mut options = SimOptions { tool, hold, homogenise, ..Default::default() };
         if let Some(k) = core_contact_stiffness {
             if !(k > 0.0 && k.is_finite()) {
                 return Err(crate::errors::param_error_from(format!("core_contact_stiffness = {k} N/m must be positive and finite")));
@@ -319,6 +324,8 @@ impl PyHybridSim {
         d.set_item("linger_ticks", o.linger_ticks)?;
         d.set_item("max_substeps", o.max_substeps)?;
         d.set_item("hold", o.hold)?;
+        d.set_item("homogenise", o.homogenise)?;
+        d.set_item("core_stiffening", self.sim.core_stiffening())?;
         d.set_item("shell_fallback", o.shell_fallback.is_some())?;
         d.set_item("shell_pause", o.shell_fallback)?;
         d.set_item("coupling_stiffness", self.sim.coupling.stiffness)?;
@@ -342,7 +349,7 @@ impl PyHybridSim {
     /// The material of the core and the shell.
     #[getter]
     fn material(&self) -> PyMaterial {
-        PyMaterial { inner: *self.sim.core.material() }
+        PyMaterial { inner: *self.sim.material() }
     }
 
     /// The state as a dict of copies, everything a tick carries to the next: ``time`` [s],
@@ -520,7 +527,7 @@ impl PyHybridSim {
     }
 
     fn __repr__(&self) -> String {
-        let m = self.sim.core.material();
+        let m = self.sim.material();
         format!(
             "<palpate.HybridSim: {} core tets, {} particles ({} active), {} regions; E = {} Pa, nu = {}, {} kg/m^3; tool radius {} m; t = {} s, {} ticks>",
             self.sim.core.n_tets(),

@@ -84,7 +84,7 @@ def test_defaults_are_the_cores():
     nt = palpate.BackwardEuler(palpate.Solver.NEWTON)
     assert (nt.max_iterations, nt.tolerance) == (d.newton.max_iterations, d.newton.tolerance)
     assert set(d.hybrid.options()) == {"projection", "core_fraction", "core_triangles", "core_layers", "spacing",
-                                       "particles", "density", "min_region_particles", "field_voxels"}
+                                       "particles", "density", "min_region_particles", "field_voxels", "homogenise"}
 
 
 def test_hybrid_builders_refuse_an_unknown_option():

@@ -186,7 +186,7 @@ pub enum ModelFileError {
     Io { path: String, reason: String },
     #[error("{path}: not a palpate model file (its first bytes are not the palpate magic number)")]
     NotAModel { path: String },
-    #[error("{path}: model file format version {found}, this palpate reads version {supported}; rebuild the model with `palpate build`")]
+    #[error("{path}: model file format version {found}, this palpate reads versions 1 to {supported}; rebuild the model with `palpate build`")]
     Version { path: String, found: u32, supported: u32 },
     #[error("{path}: truncated: {field} needs {need} bytes at offset {offset}, the file has {have}")]
     Truncated { path: String, field: &'static str, offset: usize, need: usize, have: usize },

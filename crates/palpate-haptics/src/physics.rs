@@ -98,6 +98,7 @@ impl HybridPhysics {
         let mut digest = {
             let mut m = model.clone();
             m.stats = Default::default();
+            m.homogenisation.seconds = 0.0;
             file::checksum(&file::to_bytes(&m))
         };
         let extra = format!("{material:?} {options:?}");

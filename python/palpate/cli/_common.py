@@ -248,8 +248,15 @@ def model_lines(info: dict) -> List[str]:
         f"shell {ml(i['shell_volume_m3'])} (core + shell = {100 * closure:.2f} % of the wall)",
         f"  transmural field: {i['voxels']} voxels of {i['voxel_m'] * 1e3:.3f} mm, {i['field_cg_iterations']} CG iterations",
         f"  build time: {i['build_s']:.3f} s (field {i['build_field_s']:.3f}, core {i['build_core_s']:.3f}, "
-        f"particles {i['build_particles_s']:.3f}, regions {i['build_regions_s']:.3f})",
+        f"particles {i['build_particles_s']:.3f}, regions {i['build_regions_s']:.3f}, "
+        f"homogenisation {i.get('build_homogenise_s', 0.0):.3f})",
     ]
+    if i.get("homogenised"):
+        lines.insert(1, f"  core stiffness: {i['core_stiffening']:.2f}x the tissue's away from the active shell (at nu = "
+                        f"0.4; per probe {i['core_stiffening_min']:.2f}-{i['core_stiffening_max']:.2f}), homogenised "
+                        f"against the whole wall in {i['homogenise_reference_tets']} quadratic tets")
+    else:
+        lines.insert(1, "  core stiffness: the tissue's (not homogenised: the paper's core)")
     fb = {k: i[k] for k in ("fallback_particle_outer", "fallback_particle_core", "fallback_skin") if i.get(k)}
     if fb:
         lines.append("  fallbacks: " + ", ".join(f"{k[len('fallback_'):]} {v}" for k, v in fb.items()))

@@ -60,6 +60,9 @@ def add_parser(sub) -> None:
                    help=f"particles an activation region grows to at least (default {d.min_region_particles})")
     h.add_argument("--field-voxels", type=int, default=d.field_voxels, metavar="N",
                    help=f"wall voxels of the transmural field solve (default {d.field_voxels})")
+    h.add_argument("--no-homogenise", dest="homogenise", action="store_false",
+                   help="keep the core as stiff as the tissue (the paper's core; by default the build computes "
+                        "how much stiffer the core must be to bend as the whole wall does, VALIDATION.md)")
     h.set_defaults(func=cmd_build)
 
 
@@ -98,7 +101,8 @@ def cmd_build(a) -> int:
     opts = {"projection": _PROJECTIONS[a.projection][0],
             "core_fraction": a.core_fraction, "core_triangles": a.core_triangles, "core_layers": a.core_layers,
             "spacing": a.spacing, "particles": a.particles, "density": a.density,
-            "min_region_particles": a.min_region_particles, "field_voxels": a.field_voxels}
+            "min_region_particles": a.min_region_particles, "field_voxels": a.field_voxels,
+            "homogenise": a.homogenise}
     opts = {k: v for k, v in opts.items() if v is not None}   # None: the core's default
     for flag, v in (("--core-triangles", a.core_triangles), ("--core-layers", a.core_layers),
                     ("--particles", a.particles), ("--min-region-particles", a.min_region_particles),

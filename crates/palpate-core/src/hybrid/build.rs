@@ -20,7 +20,7 @@ use super::file::{Reader, Res, Writer};
 use super::model::HybridModel;
 use super::shell::Projector;
 use super::transmural;
-use super::{core, options, order, outer, region_field, regions, shell, skin};
+use super::{core, homogenise, options, order, outer, region_field, regions, shell, skin};
 use crate::error::HybridError;
 use crate::spatial::{TetGrid, TriangleGrid};
 use std::time::Instant;
@@ -107,6 +107,11 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     regions::build(&mut m);
     order::apply(&mut m);
     stats.regions_s = t0.elapsed().as_secs_f64();
+
+    // --- the core's homogenised stiffness ---
+    if o.homogenise {
+        m.homogenisation = homogenise::compute(&m, wall, &field, &wall_grid)?;
+    }
     stats.total_s = t_start.elapsed().as_secs_f64();
     m.stats = stats;
     Ok(m)

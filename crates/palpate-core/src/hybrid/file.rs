@@ -7,7 +7,7 @@
 //!
 //! ```text
 //! 0   16 bytes  magic "PALPATE\0HYBRID\0\0"
-//! 16  u32       format version (FORMAT_VERSION)
+//! 16  u32       format version (FORMAT_VERSION; OLDEST_FORMAT_VERSION and later are read)
 //! 20  u32       reserved (0)
 //! 24  u64       payload length in bytes
 //! 32  u64       FNV-1a 64 checksum of the payload
@@ -24,14 +24,17 @@
 #![deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]
 
 use super::model::{self, HybridModel};
-use super::{build, core, options, outer, region_field, regions, shell, skin};
+use super::{build, core, homogenise, options, outer, region_field, regions, shell, skin};
 use crate::error::ModelFileError;
 use crate::math::Vec3;
 
 /// The first 16 bytes of a palpate model file.
 pub const MAGIC: &[u8; 16] = b"PALPATE\0HYBRID\0\0";
 /// The format version this palpate writes and reads.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
+
+/// The oldest format this palpate reads.
+pub const OLDEST_FORMAT_VERSION: u32 = 1;
 const HEADER: usize = 40;
 
 /// A section of the payload: its part's writer, reader (into a model being assembled) and
@@ -49,7 +52,7 @@ const fn section(write: fn(&HybridModel, &mut Writer), read: fn(&mut Reader, &mu
 fn unchecked(_: &HybridModel) -> Result<(), String> { Ok(()) }
 
 /// The sections of the payload, in file order.
-const SECTIONS: [Section; 9] = [
+const SECTIONS: [Section; 10] = [
     section(options::write, options::read, unchecked),
     section(model::write_wall, model::read_wall, unchecked),
     section(core::write, core::read, core::check),
@@ -59,7 +62,14 @@ const SECTIONS: [Section; 9] = [
     section(skin::write, skin::read, skin::check),
     section(region_field::write, region_field::read, region_field::check),
     section(build::write_stats, build::read_stats, unchecked),
+    section(homogenise::write, homogenise::read, homogenise::check),
 ];
+
+/// Sections a file of each format has: format 1 (palpate before the homogenised core) stops
+/// before the homogenisation, which then loads empty (the core stiff as the tissue).
+fn sections_of(version: u32) -> usize {
+    if version == 1 { SECTIONS.len() - 1 } else { SECTIONS.len() }
+}
 
 /// FNV-1a, 64 bit.
 pub fn checksum(bytes: &[u8]) -> u64 {
@@ -207,7 +217,7 @@ pub fn from_bytes(bytes: &[u8], path: &str) -> Result<HybridModel, ModelFileErro
     };
     let head = word(16)?;
     let version = (head & 0xffff_ffff) as u32;
-    if version != FORMAT_VERSION {
+    if !(OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&version) {
         return Err(ModelFileError::Version { path: path.into(), found: version, supported: FORMAT_VERSION });
     }
     let len = word(24)?;
@@ -226,7 +236,7 @@ pub fn from_bytes(bytes: &[u8], path: &str) -> Result<HybridModel, ModelFileErro
     }
     let mut r = Reader { b: payload, off: 0, path };
     let mut m = HybridModel::default();
-    for s in &SECTIONS {
+    for s in SECTIONS.iter().take(sections_of(version)) {
         (s.read)(&mut r, &mut m)?;
     }
     if r.off != payload.len() {

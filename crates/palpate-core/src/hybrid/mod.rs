@@ -12,6 +12,7 @@
 pub mod build;
 mod core;
 pub mod file;
+pub mod homogenise;
 mod model;
 pub mod options;
 mod order;
@@ -26,6 +27,7 @@ mod wall;
 
 pub use build::{build, BuildStats};
 pub use self::core::CoreQuality;
+pub use homogenise::Homogenisation;
 pub use model::HybridModel;
 pub use options::{HybridOptions, Spacing};
 pub use region_field::{RegionField, VoxelLabel, VOXEL_CORE, VOXEL_OUTSIDE};

@@ -6,6 +6,7 @@
 use super::build::BuildStats;
 use super::core::CoreQuality;
 use super::file::{Reader, Res, Writer};
+use super::homogenise::Homogenisation;
 use super::options::HybridOptions;
 use super::transmural::VoxelGrid;
 use crate::math::Vec3;
@@ -62,6 +63,8 @@ pub struct HybridModel {
     /// [`super::VOXEL_CORE`].
     pub voxel_owner: Vec<u32>,
     pub stats: BuildStats,
+    /// The core's homogenised stiffness (empty: not computed; see [`super::homogenise`]).
+    pub homogenisation: Homogenisation,
 }
 
 impl HybridModel {

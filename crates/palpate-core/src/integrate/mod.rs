@@ -180,6 +180,10 @@ pub struct StepReport {
 pub trait CorePotential {
     /// The energy \[J\] at node positions `x` `(n_nodes)`; adds the forces `-dU/dx` \[N\] to `f`.
     fn energy_forces(&self, x: &[Vec3], f: &mut [Vec3]) -> f64;
+    /// True when the energy does not change under a rigid translation of every node (its forces
+    /// sum to zero): the step then keeps a free body's linear momentum exact, as without it.
+    /// Default false (a tool's contact pushes the body).
+    fn translation_invariant(&self) -> bool { false }
 }
 
 /// Advance `state` by `dt` \[s\] with the model's integrator.

@@ -119,7 +119,7 @@ pub(super) fn iterate(p: &StepProblem, x: &mut [Vec3], x_trial: &mut [Vec3], ws:
         let eta = pr.relative_gradient(0.25);
         let g = std::mem::take(&mut ws.potential.g);
         pr.solves += newton_direction(model, ws, &mut cg, &g, eta, h);
-        if free_body && p.external.is_none() {
+        if free_body && p.external.is_none_or(|e| e.translation_invariant()) {
             potential::exact_translation(model, &g, &mut cg.d, h);
         }
         let gd = dot(&g, &cg.d);

@@ -164,7 +164,7 @@ pub(super) fn iterate(p: &StepProblem, x: &mut [Vec3], x_trial: &mut [Vec3], ws:
             pr.solves += 1;
             gd = dot(&g, &lb.d);
         }
-        if free_body && p.external.is_none() {
+        if free_body && p.external.is_none_or(|e| e.translation_invariant()) {
             // Keep the momentum exact (see the module docs).
             potential::exact_translation(model, &g, &mut lb.d, h);
         }

@@ -155,6 +155,16 @@ impl Material {
         self
     }
 
+    /// The same material with its Lame constants and viscosities times `factor` (density and law
+    /// unchanged): a homogenised stiffness (`crate::hybrid::homogenise`). Errors: a factor that is
+    /// not positive and finite.
+    pub fn stiffened(self, factor: f64) -> Result<Material, MaterialError> {
+        if !(factor > 0.0 && factor.is_finite()) {
+            return Err(MaterialError::NotPositive { name: "stiffness factor", value: factor, unit: "-" });
+        }
+        Ok(Material { lambda: factor * self.lambda, mu: factor * self.mu, damping: Damping { phi: factor * self.damping.phi, psi: factor * self.damping.psi }, ..self })
+    }
+
     /// Myocardium-like soft tissue in SI: E = 30 kPa, nu = 0.4, rho = 1060 kg/m^3, no damping.
     pub fn myocardium() -> Material {
         Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1060.0, Damping::NONE)

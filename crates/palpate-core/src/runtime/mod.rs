@@ -46,6 +46,7 @@ pub mod confinement;
 pub mod core_contact;
 pub mod coupling;
 pub mod embed;
+pub(crate) mod homogenised_core;
 pub mod sim;
 pub mod stability;
 pub mod state;

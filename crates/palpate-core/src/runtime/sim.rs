@@ -83,6 +83,12 @@ pub struct SimOptions {
     /// Hold the core (default true: at its base, or, for a closed wall, at its lowest nodes);
     /// false leaves the organ free (momentum studies).
     pub hold: bool,
+    /// Stiffen the core by the model's homogenisation factor at the material's Poisson's ratio
+    /// (default true; [`crate::hybrid::homogenise`]): the core's Lame constants and viscosities
+    /// times [`HybridModel::homogenisation`]'s factor, the shell's the tissue's. False (or a model
+    /// built without it): the paper's core, stiff as the tissue, which renders the wall 23-28% too
+    /// soft under a large tool on the paper's ellipsoids (VALIDATION.md).
+    pub homogenise: bool,
 }
 
 impl Default for SimOptions {
@@ -102,6 +108,7 @@ impl Default for SimOptions {
             shell_fallback: Some(100),
             core_contact_stiffness: super::core_contact::CORE_CONTACT_STIFFNESS,
             hold: true,
+            homogenise: true,
         }
     }
 }
@@ -140,6 +147,12 @@ pub struct Sim {
     /// whose particles carry it over an active zone ([`SkinCarriers`]).
     pub skin_carriers: SkinCarriers,
     pub options: SimOptions,
+    /// The factor the core's material is stiffened by (1: not homogenised; see
+    /// [`SimOptions::homogenise`] and `runtime/homogenised_core.rs`).
+    pub stiffening: f64,
+    /// Per core node, its tets (where the core is brought back to the tissue's stiffness under
+    /// the active shell).
+    pub node_tets: Buckets,
 }
 
 /// Which particles carry each skin vertex over an active zone (§6.1: "in the active zone it
@@ -230,7 +243,7 @@ impl Sim {
         let (mesh, _) = TetMesh::from_arrays(&pts, &tets)?;
         let fixed = if !options.hold {
             vec![]
-        } else if hybrid.core_base_nodes.is_empty() { lowest_nodes(&hybrid.core_points, 0.3) } else { hybrid.core_base_nodes.clone() };
+        } else if hybrid.core_base_nodes.is_empty() { lowest_nodes(&hybrid.core_points, crate::hybrid::homogenise::CLOSED_HOLD_FRACTION) } else { hybrid.core_base_nodes.clone() };
         let h = hybrid.spacing;
         let particle_tie = Embedding::project(&hybrid.core_points, &hybrid.core_faces, &hybrid.particle_core_face, &hybrid.particles);
         // The shell rides on the core where it is not simulated: its mass belongs to the core's
@@ -241,7 +254,11 @@ impl Sim {
         for (p, &m) in hybrid.particle_mass.iter().enumerate() {
             particle_tie.spread_scalar(p, m, &mut attached);
         }
-        let core = ModelBuilder::new(mesh, material).fixed_nodes(fixed).integrator(options.integrator).attached_masses(attached.clone()).build()?;
+        // The core stands for the whole wall where no particle is active: its material is the
+        // tissue's, stiffened by the build's homogenisation (`crate::hybrid::homogenise`).
+        let stiffening = if options.homogenise { hybrid.homogenisation.factor(material.poisson()) } else { 1.0 };
+        let core_material = material.stiffened(stiffening)?;
+        let core = ModelBuilder::new(mesh, core_material).fixed_nodes(fixed).integrator(options.integrator).attached_masses(attached.clone()).build()?;
         // A lattice leaves a few lone particles in thin parts of a shell (a base's rim); they are held
         // (and, active, carried to the core by the ring) rather than refusing the model.
         let mut builder = ParticleModelBuilder::new(hybrid.particles.clone(), hybrid.particle_mass.clone(), material, options.support_spacings * h).fix_unsupported(true);
@@ -275,8 +292,17 @@ impl Sim {
         core_surface.dedup();
         let skin_face_reach = skin.face_reach(hybrid.core_faces.len());
         let skin_carriers = SkinCarriers::new(&hybrid);
-        Ok(Sim { hybrid, core, particles, particle_tie, skin, skin_face_reach, coupled, coupling, confinement, shell, core_surface, shell_mass: attached, skin_carriers, options })
+        let node_tets = Buckets::build(core.n_nodes(), core.n_tets(), |t| core.mesh().tets()[t]);
+        Ok(Sim { hybrid, core, particles, particle_tie, skin, skin_face_reach, coupled, coupling, confinement, shell, core_surface, shell_mass: attached, skin_carriers, options, stiffening, node_tets })
     }
+
+    /// The factor the core's material was stiffened by (1: not homogenised; see
+    /// [`SimOptions::homogenise`]).
+    pub fn core_stiffening(&self) -> f64 { self.stiffening }
+
+    /// The tissue's material, as given to [`Sim::new`] (the shell's; the core's is it stiffened
+    /// by [`Sim::core_stiffening`]).
+    pub fn material(&self) -> &Material { self.particles.material() }
 
     /// Number of shell particles.
     pub fn n_particles(&self) -> usize {
@@ -305,8 +331,6 @@ impl Sim {
 
 /// Nodes within `fraction` of the height above the lowest point.
 fn lowest_nodes(points: &[Vec3], fraction: f64) -> Vec<usize> {
-    let lo = points.iter().map(|p| p.z).fold(f64::INFINITY, f64::min);
-    let hi = points.iter().map(|p| p.z).fold(f64::NEG_INFINITY, f64::max);
-    let cut = lo + fraction * (hi - lo);
+    let cut = crate::hybrid::homogenise::held_cut(points, fraction);
     (0..points.len()).filter(|&i| points[i].z <= cut).collect()
 }

@@ -593,6 +593,11 @@ pub struct SimWorkspace {
     /// Per outer vertex, the stamp of the last tick it was over an active triangle.
     pub(crate) over: Vec<u64>,
     pub(crate) skin_to_core: Vec<Vec3>,
+    /// The core tets brought back to the tissue's stiffness this tick (`homogenised_core.rs`),
+    /// and the tick's marks on core nodes and tets.
+    pub(crate) soft_tets: Vec<(usize, f64)>,
+    pub(crate) node_marks: Vec<u64>,
+    pub(crate) tet_marks: Vec<u64>,
 }
 
 impl SimWorkspace {
@@ -632,6 +637,9 @@ impl SimWorkspace {
             rates: vec![crate::math::Mat3::zeros(); sim.hybrid.core_faces.len()],
             over: vec![0; sim.hybrid.outer_points.len()],
             skin_to_core: vec![Vec3::zeros(); sim.hybrid.outer_points.len()],
+            soft_tets: Vec::with_capacity(sim.core.n_tets()),
+            node_marks: vec![0; sim.core.n_nodes()],
+            tet_marks: vec![0; sim.core.n_tets()],
         }
     }
 }

@@ -52,7 +52,8 @@ use super::embed;
 use super::sim::Sim;
 use super::state::{LiveSkin, SimState, SimWorkspace};
 use crate::error::StepError;
-use crate::integrate::{step, step_with_potential, StepReport};
+use crate::integrate::{step, step_with_potential, CorePotential, StepReport};
+use super::homogenised_core::{self, Softening, Sum};
 use super::core_contact::CoreContact;
 use crate::math::{is_finite3, Mat3, Vec3};
 use crate::meshfree;
@@ -219,6 +220,9 @@ pub fn tick_force_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, t
     (report.active, report.entered, report.left) = (sets.active.len(), sets.entered.len(), sets.left.len());
     particles.active.clear();
     particles.active.extend_from_slice(sets.active);
+    // The core under the active shell back to the tissue's stiffness (homogenised_core.rs).
+    ws.epoch += 1;
+    homogenised_core::softened_tets(sim, &particles.active, &mut ws.node_marks, &mut ws.tet_marks, ws.epoch, &mut ws.soft_tets);
 
     // 2. The ring follows the core, and so do the held active particles (lone lattice particles,
     // see Sim::new: the step does not move them); the active particles' anchors for confinement.
@@ -467,7 +471,10 @@ pub fn tick_force_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, t
     let touched = !ws.reach.is_empty() || !ws.core_reach.is_empty();
     if touched {
         let momentum_before = if sim.core.is_free_body() { Some(sim.core.momentum(&core.v)) } else { None };
-        report.core = match step_with_potential(&sim.core, core, &mut ws.core, dt, &contact) {
+        let softening = Softening { sim, tets: &ws.soft_tets };
+        let both = Sum(&contact, &softening);
+        let potential: &dyn CorePotential = if ws.soft_tets.is_empty() { &contact } else { &both };
+        report.core = match step_with_potential(&sim.core, core, &mut ws.core, dt, potential) {
             Ok(r) => r,
             Err(e) => {
                 undo_particles(particles, &ws.save, dt);
@@ -526,7 +533,16 @@ pub fn tick_force_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, t
 pub fn finish_tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace) -> Result<Finished, StepError> {
     let mut done = Finished::default();
     if let Some(dt) = state.core_owed.take() {
-        match step(&sim.core, &mut state.core, &mut ws.core, dt) {
+        // The softened tets of the active set the tick left (recomputed: a state restored
+        // between the tick and this step brings its own).
+        ws.epoch += 1;
+        homogenised_core::softened_tets(sim, &state.particles.active, &mut ws.node_marks, &mut ws.tet_marks, ws.epoch, &mut ws.soft_tets);
+        let stepped = if ws.soft_tets.is_empty() {
+            step(&sim.core, &mut state.core, &mut ws.core, dt)
+        } else {
+            step_with_potential(&sim.core, &mut state.core, &mut ws.core, dt, &Softening { sim, tets: &ws.soft_tets })
+        };
+        match stepped {
             Ok(r) => done.core = Some(r),
             Err(e) => {
                 state.skin_owed = false;
