@@ -381,8 +381,9 @@ impl PyHybridModel {
         let h = &m.homogenisation;
         d.set_item("homogenised", !h.is_empty())?;
         d.set_item("core_stiffening", h.factor(0.4))?;
-        d.set_item("core_stiffening_min", if h.is_empty() { 1.0 } else { h.spread.iter().zip(&h.poisson).find(|(_, &nu)| nu == 0.4).map_or(1.0, |(s, _)| s[0]) })?;
-        d.set_item("core_stiffening_max", if h.is_empty() { 1.0 } else { h.spread.iter().zip(&h.poisson).find(|(_, &nu)| nu == 0.4).map_or(1.0, |(s, _)| s[1]) })?;
+        let [lo, hi] = h.poisson.iter().position(|&nu| nu == 0.4).map_or([1.0, 1.0], |k| h.spread[k]);
+        d.set_item("core_stiffening_min", lo)?;
+        d.set_item("core_stiffening_max", hi)?;
         d.set_item("homogenise_reference_tets", h.reference_tets)?;
         d.set_item("build_homogenise_s", h.seconds)?;
         d.set_item("particles", m.particles.len())?;

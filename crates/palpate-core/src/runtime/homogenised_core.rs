@@ -44,41 +44,29 @@ pub(crate) fn softened_tets(sim: &Sim, active: &[usize], marks: &mut [u64], tet_
     if sim.stiffening == 1.0 {
         return;
     }
-    let faces = &sim.hybrid.core_faces;
+    // Node `a` marked, and its tets not yet marked added with `weight`.
+    let mut add_tets_of = |a: usize, weight: f64, soft: &mut Vec<(usize, f64)>| {
+        if marks[a] == stamp {
+            return;
+        }
+        marks[a] = stamp;
+        for &t in sim.node_tets.get(a) {
+            let t = t as usize;
+            if tet_marks[t] != stamp {
+                tet_marks[t] = stamp;
+                soft.push((t, weight));
+            }
+        }
+    };
     for &p in active {
-        let face = sim.hybrid.particle_core_face[p] as usize;
-        for &a in &faces[face] {
-            if marks[a] == stamp {
-                continue;
-            }
-            marks[a] = stamp;
-            for &t in sim.node_tets.get(a) {
-                let t = t as usize;
-                if tet_marks[t] != stamp {
-                    tet_marks[t] = stamp;
-                    soft.push((t, 1.0));
-                }
-            }
+        for &a in &sim.hybrid.core_faces[sim.hybrid.particle_core_face[p] as usize] {
+            add_tets_of(a, 1.0, soft);
         }
     }
     // The border: the tets sharing a node with those, softened by BORDER_WEIGHT.
-    {
-        let first = soft.len();
-        for k in 0..first {
-            let t = soft[k].0;
-            for &a in &sim.core.mesh().tets()[t] {
-                if marks[a] == stamp {
-                    continue;
-                }
-                marks[a] = stamp;
-                for &u in sim.node_tets.get(a) {
-                    let u = u as usize;
-                    if tet_marks[u] != stamp {
-                        tet_marks[u] = stamp;
-                        soft.push((u, BORDER_WEIGHT));
-                    }
-                }
-            }
+    for k in 0..soft.len() {
+        for &a in &sim.core.mesh().tets()[soft[k].0] {
+            add_tets_of(a, BORDER_WEIGHT, soft);
         }
     }
 }
@@ -91,7 +79,7 @@ pub(crate) struct Softening<'a> {
 
 impl CorePotential for Softening<'_> {
     fn energy_forces(&self, x: &[Vec3], f: &mut [Vec3]) -> f64 {
-        let (model, tissue) = (&self.sim.core, self.sim.particles.material());
+        let (model, tissue) = (&self.sim.core, self.sim.material());
         let c = self.sim.stiffening - 1.0;
         let mut u = 0.0;
         for &(t, weight) in self.tets {
