@@ -180,7 +180,7 @@ SLEEP_SPIN = 200e-6
 
 def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle: bool = True,
           name: str = "", on_status: Optional[Callable[[str], None]] = None, realtime: bool = False,
-          threads: int = 1, busy_wait: Optional[bool] = None) -> Dict[str, Any]:
+          threads: int = 1, busy_wait: Optional[bool] = None, physics_rate: Optional[float] = None) -> Dict[str, Any]:
     """``palpate bench haptic``: the loop at ``rate_hz`` on ``model`` for ``seconds`` [s] with a
     repeated scripted palpation (:func:`palpation_cycle`), then (``idle``) the idle loop (no
     simulation, same device, same length) on the same clock. Returns the loop's report
@@ -193,13 +193,18 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
     that many threads (:class:`palpate.HapticLoop`; the idle loop has no physics to split);
     ``busy_wait``: both loops' servo spins through each whole period (:data:`BUSY_SPIN`) or, False,
     sleeps through each wait but its last 200 us (:data:`SLEEP_SPIN`); None: :class:`palpate.HapticLoop`'s
-    default, busy unless ``realtime`` (the report's ``busy_wait`` says which ran)."""
+    default, busy unless ``realtime`` (the report's ``busy_wait`` says which ran); ``physics_rate``
+    [Hz]: the multirate loop (:class:`palpate.HapticLoop`; the report's ``physics`` holds the
+    physics thread's figures). ``max_force_step_n``: the largest change of the sent force in one
+    servo period [N], from the run's recording, and ``max_force_step_contact_n`` the same over the
+    periods in contact (the tissue's force nonzero at either end)."""
     t, k = repeat(*palpation_cycle(model), seconds + 1.0)
     mat = material()
     spin = None if busy_wait is None else BUSY_SPIN if busy_wait else SLEEP_SPIN
     busy_wait = (not realtime) if busy_wait is None else busy_wait
-    loop = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz,
-                         max_ticks=int(round(seconds * rate_hz)), realtime=realtime, threads=threads, spin=spin)
+    ticks = int(round(seconds * rate_hz))
+    loop = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz, max_ticks=ticks,
+                         realtime=realtime, threads=threads, spin=spin, physics_rate=physics_rate, record_ticks=ticks)
     steal0 = steal_seconds()
     r = run_live(loop, None, on_status)
     steal1 = steal_seconds()
@@ -208,6 +213,14 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
     r["steal_s"] = None if steal0 is None or steal1 is None else steal1 - steal0
     r["threads"] = threads
     r["busy_wait"] = busy_wait
+    rec = loop.recorded()
+    step = np.linalg.norm(np.diff(rec["force"], axis=0), axis=1)
+    touching = np.linalg.norm(rec["tissue"], axis=1) > 0
+    r["max_force_step_n"] = float(step.max()) if len(step) else 0.0
+    # In contact (the tissue pushing the tool at either end of the period): the hand's palpation,
+    # without the free-space coupling damper's steps at the script's corners.
+    both = touching[1:] | touching[:-1]
+    r["max_force_step_contact_n"] = float(step[both].max()) if both.any() else 0.0
     r["model"] = name
     r["seconds"] = seconds
     r["overruns_per_s"] = per_second(r.pop("overrun_times_s"), r["elapsed_s"])

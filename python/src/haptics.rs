@@ -31,10 +31,12 @@ use crate::material::PyMaterial;
 /// never sleeps; see the class docs for why). `palpate.haptics.BUSY_SPIN` is the same value.
 const BUSY_SPIN: f64 = 1.0;
 
+// One per loop, moved rarely: the variants' sizes do not matter.
+#[allow(clippy::large_enum_variant)]
 enum Stage {
     Ready(HapticCore, Box<dyn Device>),
     Running(ServoHandle),
-    Done(ServoReport),
+    Done(Box<ServoReport>),
     /// Taken out of the mutex by a call that releases the GIL (`stop`, `run`): what it is doing.
     Busy(&'static str),
     /// Consumed: stopped and reported, or a panic left the core unusable.
@@ -54,7 +56,8 @@ fn busy(what: &str) -> PyErr {
 /// recording=None, port=None, host="127.0.0.1", kind=None, hand_start=None, idle=False,
 /// tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None,
 /// coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None,
-/// stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1)``
+/// stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1,
+/// physics_rate=None)``
 ///
 /// Parameters
 /// ----------
@@ -96,9 +99,20 @@ fn busy(what: &str) -> PyErr {
 ///     the contact stable (at 1 kHz on the protocol meshes about 1.5e6 to 2.5e6: that bound sets it).
 /// coupling_stiffness, coupling_damping, proxy_mass : float, optional
 ///     The virtual coupling [N/m], [N s/m], [kg] (defaults: the device kind's).
-/// max_force, max_rate, ramp, stall_timeout : float, optional
+/// max_force, max_rate, ramp, stall_timeout, silence : float, optional
 ///     Safety: force limit [N] (default 3), force-rate limit [N/s] (1000), ramp-up [s] (0.5),
-///     watchdog timeout [s] (0.03).
+///     watchdog timeout [s] (0.03; with ``physics_rate``, a physics this late has faded to zero
+///     force), device silence [s] (0.05: no new device sample for this long fades the force to
+///     zero over 30 ms, logged; the device's return ramps it in again).
+/// physics_rate : float, optional
+///     The multirate loop: the physics runs on its own thread at this rate [Hz] (100 to
+///     ``rate_hz``) and publishes after each tick a local model (the force at the tool and its
+///     stiffness, 3x3 [N/m]) that the servo renders every period without ever waiting for the
+///     physics (``palpate_haptics::multirate``). ``stop()``'s report then has ``physics``
+///     (``rate_hz``, ``achieved_hz``, ``ticks``, ``compute_us_p50`` / ``_p99`` / ``_max``,
+///     ``lag_us_p99`` / ``_max``, ``late``, ``skipped``); :meth:`run` runs it without a clock, a
+///     multirate recording replaying bit for bit from its recorded schedule. None (default): one
+///     physics tick inside every servo period.
 /// record_ticks : int
 ///     Ticks to record for :meth:`save_recording` (0: none). The buffer is allocated at start
 ///     (144 bytes a tick; a replay's or a script's is at most its length); ticks past it are
@@ -136,6 +150,8 @@ pub struct PyHapticLoop {
     hand: Option<Arc<Vec3Cell>>,
     bridge: Option<(String, Arc<BridgeStats>)>,
     identity: (u64, String),
+    /// A multirate recording to replay (`run`: bit for bit, from its recorded schedule).
+    replay: Option<Recording>,
 }
 
 fn kind_of(name: &str) -> PyResult<DeviceKind> {
@@ -183,6 +199,7 @@ fn snapshot_dict<'py>(py: Python<'py>, s: &Snapshot) -> PyResult<Bound<'py, PyDi
     d.set_item("compute_us", s.compute * 1e6)?;
     d.set_item("overruns", s.overruns)?;
     d.set_item("faults", s.faults)?;
+    d.set_item("physics_ticks", s.physics_ticks)?;
     d.set_item("buttons", s.buttons)?;
     Ok(d)
 }
@@ -192,6 +209,8 @@ fn core_dict<'py>(py: Python<'py>, core: &HapticCore, d: &Bound<'py, PyDict>) ->
     d.set_item("max_force_n", core.max_force())?;
     d.set_item("energy_into_user_j", core.energy_into_user())?;
     d.set_item("bad_inputs", core.bad_inputs())?;
+    d.set_item("device_silences", core.silences())?;
+    d.set_item("model_stalls", core.stalls())?;
     d.set_item("recording_dropped_ticks", core.recording_dropped())?;
     let faults = PyList::empty(py);
     for f in core.fault_log() {
@@ -232,6 +251,24 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
     stats_dict(&d, &r.stats)?;
     core_dict(py, &r.core, &d)?;
     d.set_item("watchdog_trips", r.watchdog_trips)?;
+    match &r.physics {
+        Some(p) => {
+            let q = PyDict::new(py);
+            q.set_item("rate_hz", p.rate_hz)?;
+            q.set_item("achieved_hz", p.achieved_hz)?;
+            q.set_item("ticks", p.ticks)?;
+            q.set_item("elapsed_s", p.elapsed)?;
+            q.set_item("compute_us_p50", p.compute_p50 * 1e6)?;
+            q.set_item("compute_us_p99", p.compute_p99 * 1e6)?;
+            q.set_item("compute_us_max", p.compute_max * 1e6)?;
+            q.set_item("lag_us_p99", p.lag_p99 * 1e6)?;
+            q.set_item("lag_us_max", p.lag_max * 1e6)?;
+            q.set_item("late", p.late)?;
+            q.set_item("skipped", p.skipped)?;
+            d.set_item("physics", q)?;
+        }
+        None => d.set_item("physics", py.None())?,
+    }
     d.set_item("realtime", match &r.realtime {
         Realtime::Off => "off".to_string(),
         Realtime::Granted(p) => format!("SCHED_FIFO priority {p}"),
@@ -243,7 +280,7 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
 #[pymethods]
 impl PyHapticLoop {
     #[new]
-    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1)), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1)")]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, silence = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1), physics_rate = None), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1, physics_rate=None)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -271,11 +308,13 @@ impl PyHapticLoop {
         #[pyo3(from_py_with = conv::arg)] max_rate: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] ramp: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] stall_timeout: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] silence: Option<f64>,
         record_ticks: errors::Int,
         max_ticks: Option<errors::Int>,
         #[pyo3(from_py_with = conv::arg)] spin: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] realtime: bool,
         threads: errors::Int,
+        #[pyo3(from_py_with = conv::arg)] physics_rate: Option<f64>,
     ) -> PyResult<Self> {
         // Counts as errors::Int: a negative one, or one beyond 64 bits, is a ParameterError
         // (pyo3's usize / u16 conversions raised OverflowError). The rest runs under the panic guard: a panic while opening a recording,
@@ -295,7 +334,7 @@ impl PyHapticLoop {
             None => None,
         };
         errors::guard("HapticLoop", || {
-            for (n, v) in [("tool_radius", tool_radius), ("tool_stiffness", tool_stiffness), ("core_contact_stiffness", core_contact_stiffness), ("tool_area_stiffness", tool_area_stiffness), ("coupling_stiffness", coupling_stiffness), ("proxy_mass", proxy_mass), ("max_force", max_force), ("max_rate", max_rate), ("stall_timeout", stall_timeout)] {
+            for (n, v) in [("tool_radius", tool_radius), ("tool_stiffness", tool_stiffness), ("core_contact_stiffness", core_contact_stiffness), ("tool_area_stiffness", tool_area_stiffness), ("coupling_stiffness", coupling_stiffness), ("proxy_mass", proxy_mass), ("max_force", max_force), ("max_rate", max_rate), ("stall_timeout", stall_timeout), ("silence", silence), ("physics_rate", physics_rate)] {
                 positive(n, v, false)?;
             }
             for (n, v) in [("coupling_damping", coupling_damping), ("ramp", ramp), ("spin", spin)] {
@@ -303,10 +342,12 @@ impl PyHapticLoop {
             }
             let mut replay: Option<Recording> = None;
             let mut rate_hz = rate_hz;
+            let mut physics_rate = physics_rate;
             if device == "replay" {
                 let path = recording.as_ref().ok_or_else(|| errors::param_error_from("device 'replay' needs recording=PATH"))?;
                 let r = Recording::load(path).map_err(record_error)?;
                 rate_hz = r.rate_hz;
+                physics_rate = r.physics_rate_hz;
                 replay = Some(r);
             }
             let kind = match kind {
@@ -321,10 +362,10 @@ impl PyHapticLoop {
             };
             let safety = match &replay {
                 Some(r) => r.safety,
-                None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout) },
+                None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout), silence: silence.unwrap_or(ds.silence) },
             };
             let defaults = ServoConfig::default();
-            let mut config = ServoConfig { rate_hz, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(if realtime { 0.0 } else { BUSY_SPIN }), realtime, ..defaults };
+            let mut config = ServoConfig { rate_hz, physics_rate_hz: physics_rate, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(if realtime { 0.0 } else { BUSY_SPIN }), realtime, ..defaults };
             config.check().map_err(errors::param_error_from)?;
 
             let mut hand = None;
@@ -427,7 +468,9 @@ impl PyHapticLoop {
             let record_ticks = device_ticks.map_or(record_ticks, |n| record_ticks.min(n));
             config.record_ticks = record_ticks;
             let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
-            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description) })
+            // A multirate recording replays from its own schedule (`run`), not the device's samples.
+            let replay = replay.filter(|r| r.physics_rate_hz.is_some());
+            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description), replay })
         })
     }
 
@@ -453,6 +496,7 @@ impl PyHapticLoop {
 
     /// The latest snapshot (dict: ``tick``, ``time`` [s], ``device``, ``tool`` (3,) [m],
     /// ``force``, ``raw_force``, ``tissue_force`` (3,) [N], ``period_us``, ``compute_us``,
+    /// ``physics_ticks`` (the multirate loop's physics ticks so far; else the ticks),
     /// ``overruns``, ``faults``, ``buttons``), or None before the first tick. Never blocks the
     /// loop.
     fn snapshot<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
@@ -535,7 +579,7 @@ impl PyHapticLoop {
         let taken = std::mem::replace(&mut *self.stage.lock().unwrap(), Stage::Busy("stopping"));
         let report = match taken {
             Stage::Running(h) => py.detach(|| h.stop()),
-            Stage::Done(r) => r,
+            Stage::Done(r) => *r,
             other => {
                 let err = match &other {
                     Stage::Busy(what) => busy(what),
@@ -546,7 +590,7 @@ impl PyHapticLoop {
             }
         };
         let d = report_dict(py, &report);
-        *self.stage.lock().unwrap() = Stage::Done(report);
+        *self.stage.lock().unwrap() = Stage::Done(Box::new(report));
         d
     }
 
@@ -572,7 +616,15 @@ impl PyHapticLoop {
             }
         };
         let n = max_ticks.or(self.config.max_ticks).unwrap_or(u64::MAX);
-        if let Err(e) = errors::guard("HapticLoop.run", || Ok(py.detach(|| core.run_offline(dev.as_mut(), n)))) {
+        let (replay, physics_rate) = (self.replay.as_ref(), self.config.physics_rate_hz);
+        let ran = errors::guard("HapticLoop.run", || {
+            py.detach(|| match (replay, physics_rate) {
+                (Some(r), _) => core.replay_multirate(r).map_err(haptics_error),
+                (None, Some(hz)) => Ok(core.run_offline_multirate(dev.as_mut(), n, hz)),
+                (None, None) => Ok(core.run_offline(dev.as_mut(), n)),
+            })
+        });
+        if let Err(e) = ran {
             // A panic mid-run leaves the core in an unknown state: the loop is not usable again.
             *self.stage.lock().unwrap() = Stage::Taken;
             return Err(e);
@@ -600,7 +652,8 @@ impl PyHapticLoop {
     }
 
     /// The recorded forces (n, 3) [N] and tool positions (n, 3) [m] and device positions
-    /// (n, 3) [m], as a dict of arrays (``force``, ``tool``, ``device``).
+    /// (n, 3) [m], and the tissue's force on the tool (n, 3) [N], as a dict of arrays (``force``,
+    /// ``tool``, ``device``, ``tissue``).
     fn recorded<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         // The columns are copied out under the mutex, the arrays made after (see `snapshot`).
         let cols = {
@@ -612,7 +665,7 @@ impl PyHapticLoop {
             };
             let rec = rec.ok_or_else(|| haptics_error("nothing recorded (record_ticks = 0, or the loop is running)"))?;
             let col = |f: &dyn Fn(&palpate_haptics::TickRecord) -> Vec3| rec.ticks.iter().map(f).collect::<Vec<Vec3>>();
-            [("force", col(&|t| t.force)), ("tool", col(&|t| t.tool)), ("device", col(&|t| t.input.position))]
+            [("force", col(&|t| t.force)), ("tool", col(&|t| t.tool)), ("device", col(&|t| t.input.position)), ("tissue", col(&|t| t.tissue))]
         };
         let d = PyDict::new(py);
         for (k, v) in cols {
@@ -664,6 +717,12 @@ impl PyHapticLoop {
     #[getter]
     fn rate_hz(&self) -> f64 {
         self.config.rate_hz
+    }
+
+    /// The physics thread's rate [Hz] of a multirate loop, or None (single-rate).
+    #[getter]
+    fn physics_rate_hz(&self) -> Option<f64> {
+        self.config.physics_rate_hz
     }
 
     fn __repr__(&self) -> String {

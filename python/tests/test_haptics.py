@@ -86,8 +86,8 @@ def test_a_recording_of_another_model_is_refused(model, tmp_path):
     stiff = _p.Material(young=9.0e4, poisson=0.4, density=1000.0, phi=1.0, psi=1.0)
     with pytest.raises(_p.HapticsError, match="another simulation"):
         _p.HapticLoop(model, stiff, "replay", recording=path)
-    (tmp_path / "bad.palprec").write_bytes(b"PALPREC\0" + b"\x02\x00\x00\x00" + b"\0" * 40)
-    with pytest.raises(_p.HapticsError, match="version 2"):
+    (tmp_path / "bad.palprec").write_bytes(b"PALPREC\0" + b"\x03\x00\x00\x00" + b"\0" * 40)
+    with pytest.raises(_p.HapticsError, match="version 3"):
         _p.HapticLoop(model, haptics.material(), "replay", recording=str(tmp_path / "bad.palprec"))
 
 
@@ -123,6 +123,49 @@ def test_bad_parameters_raise_value_errors(model):
     for bad in (-1e-3, 1.5, float("nan")):
         with pytest.raises(ValueError, match="spin"):
             _p.HapticLoop(model, m, "scripted", times=t, knots=k, spin=bad)
+
+
+def test_multirate_loop_replays_bit_identically_offline_and_from_live(model, tmp_path):
+    # The multirate loop (physics_rate): offline, and live on two threads whose interleaving the
+    # clock decides; each recording replays bit for bit from its recorded schedule (run()).
+    t, k = cycle(model)
+    m = haptics.material()
+    off = _p.HapticLoop(model, m, "scripted", times=t, knots=k, record_ticks=3000, physics_rate=250.0)
+    assert off.physics_rate_hz == 250.0
+    r = off.run()
+    assert r["ticks"] == 2000 and r["n_faults"] == 0 and r["max_force_n"] > 0.02
+    assert r["device_silences"] == 0 and r["model_stalls"] == 0
+    single = _p.HapticLoop(model, m, "scripted", times=t, knots=k, record_ticks=3000)
+    single.run()
+    f_off, f_single = off.recorded()["force"], single.recorded()["force"]
+    rel = np.sqrt(np.mean(np.sum((f_off - f_single) ** 2, axis=1)) / np.mean(np.sum(f_single ** 2, axis=1)))
+    assert rel < 0.05, f"multirate at 250 Hz vs single-rate: {rel:.1%} RMS"
+    for loop, name in ((off, "offline"), (None, "live")):
+        if loop is None:
+            loop = _p.HapticLoop(model, m, "scripted", times=t, knots=k, record_ticks=3000, physics_rate=500.0,
+                                 rate_hz=1000.0)
+            loop.start()
+            assert loop.wait(60)
+            rep = loop.stop()
+            p = rep["physics"]
+            assert p["rate_hz"] == 500.0 and p["ticks"] > 0 and p["compute_us_p50"] > 0, p
+            assert {"achieved_hz", "lag_us_p99", "lag_us_max", "late", "skipped", "compute_us_p99"} <= set(p)
+        path = str(tmp_path / f"{name}.palprec")
+        loop.save_recording(path)
+        again = _p.HapticLoop(model, m, "replay", recording=path, record_ticks=3000)
+        assert again.physics_rate_hz == loop.physics_rate_hz
+        again.run()
+        a, b = loop.recorded(), again.recorded()
+        for key in ("force", "tool", "device"):
+            assert np.array_equal(a[key], b[key]), (name, key)
+    # Single-rate loops report no physics thread.
+    assert single.physics_rate_hz is None
+    with pytest.raises(ValueError, match="physics rate"):
+        _p.HapticLoop(model, m, "scripted", times=t, knots=k, physics_rate=50.0)
+    with pytest.raises(ValueError, match="physics rate"):
+        _p.HapticLoop(model, m, "scripted", times=t, knots=k, rate_hz=1000.0, physics_rate=2000.0)
+    with pytest.raises(ValueError, match="silence"):
+        _p.HapticLoop(model, m, "scripted", times=t, knots=k, silence=-1.0)
 
 
 def test_loop_runs_while_python_sleeps_and_the_hand_follows(model):
@@ -542,6 +585,16 @@ def test_haptic_command_scripted_record_and_replay(tmp_path, capsys):
     assert "500 ticks" in capsys.readouterr().out
     assert main(["haptic", "ellipsoids", "--device", "joystick"]) == 2     # usage
     assert "unknown device" in capsys.readouterr().err
+    # The multirate loop: recorded live, replayed offline from its schedule.
+    mrec = tmp_path / "multirate.palprec"
+    assert main(["haptic", "ellipsoids", "--device", f"scripted:{script}", "--physics-rate", "500", "--record",
+                 str(mrec), "--quiet"]) in (0, 3)
+    out = capsys.readouterr().out
+    assert "physics 500 Hz (multirate)" in out and "physics:" in out and "recorded 500 ticks" in out, out
+    assert main(["haptic", "ellipsoids", "--device", f"replay:{mrec}"]) == 0
+    assert "replayed 500 servo ticks offline" in capsys.readouterr().out
+    assert main(["haptic", "ellipsoids", "--device", f"scripted:{script}", "--physics-rate", "2000"]) == 2   # usage
+    assert "--physics-rate must be within" in capsys.readouterr().err
 
 
 def test_haptic_command_warns_of_a_recording_cut_short(tmp_path, capsys, monkeypatch):

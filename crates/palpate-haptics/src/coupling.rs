@@ -125,6 +125,41 @@ impl VirtualCoupling {
     }
 }
 
+impl VirtualCoupling {
+    /// Advances the proxy by `dt` \[s\] against a local model of the tissue (the multirate loop,
+    /// [`crate::multirate`]): the force `weight (F0 - K (x - x0))` of `model` at the proxy's
+    /// *new* position, taken implicitly with the coupling, so that the step is stable for any
+    /// positive semi-definite `K` at any rate:
+    /// ```text
+    /// ((m/dt + b + k dt) I + w K dt) v' = (m/dt) v + w (F0 - K (x - x0)) + k (x_d - x) + b v_d
+    /// ```
+    /// The proxy's speed is capped at `max_speed` \[m/s\] (the simulated tool's step per physics
+    /// tick times the physics' rate). Returns the force to render (as [`VirtualCoupling::step`]).
+    pub fn step_local(&mut self, device: &Vec3, model: &crate::multirate::LocalModel, weight: f64, dt: f64, max_speed: f64) -> CouplingOut {
+        let CouplingParams { stiffness: k, damping: b, proxy_mass: m } = self.params;
+        let device_v = self.device.map_or(Vec3::zeros(), |p| (device - p) / dt);
+        self.device = Some(*device);
+        let kt = model.stiffness * weight;
+        let tissue = (model.force - model.stiffness * (self.proxy - model.tool)) * weight;
+        let rhs = self.proxy_v * (m / dt) + tissue + (device - self.proxy) * k + device_v * b;
+        let a = palpate_core::Mat3::identity() * (m / dt + b + k * dt) + kt * dt;
+        // `a` is symmetric positive definite (K is projected to PSD where it is made): Cholesky
+        // cannot fail for finite input; a non-finite model leaves the proxy's velocity as the
+        // coupling alone would set it.
+        let mut v = match a.cholesky() {
+            Some(c) => c.solve(&rhs),
+            None => (rhs - tissue) / (m / dt + b + k * dt),
+        };
+        if v.norm() > max_speed {
+            v *= max_speed / v.norm();
+        }
+        self.proxy_v = v;
+        self.proxy += v * dt;
+        let force = (self.proxy - device) * k + (self.proxy_v - device_v) * b;
+        CouplingOut { force, device_v }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

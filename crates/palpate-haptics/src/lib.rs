@@ -3,6 +3,8 @@
 //!
 //! - [`servo`]: [`HapticCore`] (one deterministic tick: device sample in, force out) and
 //!   [`Servo`] (the native thread at 250 Hz-4 kHz, absolute-deadline pacing, a watchdog);
+//! - [`multirate`]: the servo and the physics on two threads, the servo rendering from a local
+//!   model (force and stiffness at the tool) the physics publishes, never waiting for it;
 //! - [`physics`]: what the servo steps ([`Physics`]): [`HybridPhysics`] (the hybrid runtime),
 //!   [`FemPhysics`] (a full-FEM body), [`Wall`], [`Idle`];
 //! - [`surface_contact`]: the sphere against a tet mesh's boundary triangles (a penalty per unit
@@ -20,6 +22,7 @@
 
 pub mod bridge;
 pub mod coupling;
+pub mod multirate;
 pub mod device;
 pub mod devices;
 pub mod physics;

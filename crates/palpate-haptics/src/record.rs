@@ -7,21 +7,30 @@
 //! physics stall, which depends on the machine's timing) breaks this, and is in the file's fault
 //! count.
 //!
-//! # File format, version 1 (little-endian)
+//! A multirate recording ([`crate::multirate`]) also holds what the physics thread consumed (the
+//! proxy positions it ticked with, in order) and which physics tick's model each servo tick
+//! rendered from: the physics replays from the first, the servo from the second, each bit for
+//! bit, whatever the machine's timing was.
+//!
+//! # File format, version 2 (little-endian; version 1, without the fields marked v2, loads)
 //! ```text
 //! magic     8 bytes  "PALPREC\0"
-//! version   u32      1
-//! rate_hz   f64      the loop's rate
+//! version   u32      2
+//! rate_hz   f64      the loop's (servo's) rate
 //! digest    u64      the simulation's Identity::digest
 //! desc_len  u32, desc  UTF-8, the Identity's description
 //! coupling  3 x f64  stiffness [N/m], damping [N s/m], proxy mass [kg]
 //! safety    4 x f64  max force [N], max rate [N/s], ramp [s], stall timeout [s]
+//! silence   f64      (v2) the safety's device silence [s]
+//! physics   f64      (v2) the physics thread's rate [Hz]; 0: the single-rate loop
 //! faults    u64      faults during the recording
 //! n         u64      ticks
 //! n records, 144 bytes each:
 //!   position 3 x f64 [m], orientation 4 x f64 (w, x, y, z), buttons u32, pad u32,
 //!   has_input u8 + 7 pad bytes (0: the device gave no sample that tick; the servo held the last),
 //!   force 3 x f64 [N] (sent), tool 3 x f64 [m] (the proxy), tissue 3 x f64 [N]
+//! (v2) m    u64      model ticks (n for a multirate recording, else 0), then m x u64
+//! (v2) p    u64      physics targets, then p x 3 x f64 [m]
 //! ```
 
 use std::io::{Read, Write};
@@ -34,8 +43,8 @@ use crate::physics::Identity;
 use crate::safety::SafetyParams;
 
 const MAGIC: &[u8; 8] = b"PALPREC\0";
-/// The format's version.
-pub const VERSION: u32 = 1;
+/// The format's version (the previous one still loads).
+pub const VERSION: u32 = 2;
 const RECORD_BYTES: usize = 144;
 
 /// One recorded tick.
@@ -58,6 +67,12 @@ pub struct Recording {
     pub safety: SafetyParams,
     pub faults: u64,
     pub ticks: Vec<TickRecord>,
+    /// The physics thread's rate \[Hz\] of a multirate loop (`None`: single-rate).
+    pub physics_rate_hz: Option<f64>,
+    /// Multirate: the physics tick whose model each servo tick rendered from (0: none yet).
+    pub model_ticks: Vec<u64>,
+    /// Multirate: the tool targets the physics ticked with, in order \[m\].
+    pub targets: Vec<Vec3>,
 }
 
 /// A file that is not a recording of this version (or is damaged).
@@ -83,7 +98,7 @@ impl Recording {
         b.extend_from_slice(self.identity.description.as_bytes());
         let c = &self.coupling;
         let s = &self.safety;
-        for v in [c.stiffness, c.damping, c.proxy_mass, s.max_force, s.max_rate, s.ramp, s.stall_timeout] {
+        for v in [c.stiffness, c.damping, c.proxy_mass, s.max_force, s.max_rate, s.ramp, s.stall_timeout, s.silence, self.physics_rate_hz.unwrap_or(0.0)] {
             b.extend_from_slice(&v.to_le_bytes());
         }
         b.extend_from_slice(&self.faults.to_le_bytes());
@@ -100,6 +115,10 @@ impl Recording {
                 v.iter().for_each(|&x| f(&mut b, x));
             }
         }
+        b.extend_from_slice(&(self.model_ticks.len() as u64).to_le_bytes());
+        self.model_ticks.iter().for_each(|t| b.extend_from_slice(&t.to_le_bytes()));
+        b.extend_from_slice(&(self.targets.len() as u64).to_le_bytes());
+        self.targets.iter().flat_map(|t| t.iter()).for_each(|v| b.extend_from_slice(&v.to_le_bytes()));
         b
     }
 
@@ -111,21 +130,26 @@ impl Recording {
         }
         let short = || bad("truncated header".into());
         let version = r.u32().ok_or_else(short)?;
-        if version != VERSION {
-            return Err(bad(format!("recording version {version}, this build reads version {VERSION}")));
+        if !(1..=VERSION).contains(&version) {
+            return Err(bad(format!("recording version {version}, this build reads versions 1 to {VERSION}")));
         }
         let rate_hz = r.f64().ok_or_else(short)?;
         let digest = r.u64().ok_or_else(short)?;
         let n = r.u32().ok_or_else(short)? as usize;
         let description = String::from_utf8(r.take(n).ok_or_else(short)?.to_vec()).map_err(|_| bad("description is not UTF-8".into()))?;
-        let mut v = [0.0; 7];
-        for x in &mut v {
+        let mut v = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, SafetyParams::default().silence, 0.0];
+        for x in &mut v[..if version == 1 { 7 } else { 9 }] {
             *x = r.f64().ok_or_else(short)?;
         }
         let faults = r.u64().ok_or_else(short)?;
         let n = r.u64().ok_or_else(short)?;
         let rest = bytes.len() - r.at;
-        if n.checked_mul(RECORD_BYTES as u64) != Some(rest as u64) {
+        let fits = match n.checked_mul(RECORD_BYTES as u64) {
+            Some(need) if version == 1 => need == rest as u64,
+            Some(need) => need <= rest as u64,
+            None => false,
+        };
+        if !fits {
             return Err(bad(format!("{n} ticks need {} bytes after the header, the file has {rest}", n.saturating_mul(RECORD_BYTES as u64))));
         }
         let mut ticks = Vec::with_capacity(n as usize);
@@ -142,14 +166,27 @@ impl Recording {
             let tissue = Vec3::new(f(), f(), f());
             ticks.push(TickRecord { input: DeviceInput { position, orientation, buttons }, has_input, force, tool, tissue });
         }
-        Ok(Recording {
-            rate_hz,
-            identity: Identity { digest, description },
-            coupling: CouplingParams::new(v[0], v[1], v[2]),
-            safety: SafetyParams { max_force: v[3], max_rate: v[4], ramp: v[5], stall_timeout: v[6] },
-            faults,
-            ticks,
-        })
+        let (mut model_ticks, mut targets) = (Vec::new(), Vec::new());
+        if version >= 2 {
+            let short = || bad("truncated multirate section".into());
+            let m = r.u64().ok_or_else(short)?;
+            if m != 0 && m != n {
+                return Err(bad(format!("{m} model ticks for {n} ticks")));
+            }
+            let need = m.checked_mul(8).ok_or_else(short)?;
+            if need > (bytes.len() - r.at) as u64 {
+                return Err(short());
+            }
+            model_ticks = (0..m).map(|_| r.u64().unwrap()).collect();
+            let p = r.u64().ok_or_else(short)?;
+            if p.checked_mul(24) != Some((bytes.len() - r.at) as u64) {
+                return Err(bad(format!("{p} physics targets need {} bytes, the file has {}", p.saturating_mul(24), bytes.len() - r.at)));
+            }
+            targets = (0..p).map(|_| Vec3::new(r.f64().unwrap(), r.f64().unwrap(), r.f64().unwrap())).collect();
+        }
+        let safety = SafetyParams { max_force: v[3], max_rate: v[4], ramp: v[5], stall_timeout: v[6], silence: v[7] };
+        let physics_rate_hz = (v[8] > 0.0).then_some(v[8]);
+        Ok(Recording { rate_hz, identity: Identity { digest, description }, coupling: CouplingParams::new(v[0], v[1], v[2]), safety, faults, ticks, physics_rate_hz, model_ticks, targets })
     }
 
     pub fn save(&self, path: &std::path::Path) -> Result<(), RecordError> {

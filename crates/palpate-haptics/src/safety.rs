@@ -23,11 +23,15 @@ pub struct SafetyParams {
     pub ramp: f64,
     /// Physics that misses ticks for this long \[s\] trips the watchdog (default 30 ms).
     pub stall_timeout: f64,
+    /// No new device sample for this long \[s\] fades the force to zero over the next
+    /// [`crate::multirate::SILENCE_FADE`] (30 ms), logged; the device's return ramps the force
+    /// up again (default 50 ms).
+    pub silence: f64,
 }
 
 impl Default for SafetyParams {
     fn default() -> Self {
-        SafetyParams { max_force: 3.0, max_rate: 1000.0, ramp: 0.5, stall_timeout: 0.030 }
+        SafetyParams { max_force: 3.0, max_rate: 1000.0, ramp: 0.5, stall_timeout: 0.030, silence: 0.050 }
     }
 }
 
@@ -45,6 +49,9 @@ impl SafetyParams {
         }
         if !pos(self.stall_timeout) {
             return Err(format!("stall_timeout = {} s must be positive and finite", self.stall_timeout));
+        }
+        if !pos(self.silence) {
+            return Err(format!("silence = {} s must be positive and finite", self.silence));
         }
         Ok(())
     }
@@ -97,7 +104,7 @@ mod tests {
 
     #[test]
     fn limit_rate_and_ramp_hold() {
-        let p = SafetyParams { max_force: 3.0, max_rate: 1000.0, ramp: 0.1, stall_timeout: 0.03 };
+        let p = SafetyParams { max_force: 3.0, max_rate: 1000.0, ramp: 0.1, stall_timeout: 0.03, silence: 0.05 };
         let mut s = Safety::new(p);
         let dt = 1e-3;
         let big = Vec3::new(10.0, -20.0, 5.0);

@@ -39,6 +39,20 @@
 //! sample each). The thread never waits on Python, the disk, the network or a reader: readers
 //! take [`Snapshot`]s through a seqlock, recording and statistics go to buffers sized at start.
 //!
+//! # Two rates ([`ServoConfig::physics_rate_hz`], [`crate::multirate`])
+//! With a physics rate set, the physics leaves the servo thread: [`Servo::start`] runs a physics
+//! thread that ticks on its own clock and publishes a local model after each tick, and the
+//! servo renders every period from it ([`HapticCore::render`]: the proxy against the model's
+//! force and stiffness, then the safety layer), with no physics in its period at all. A physics
+//! that stalls fades out within the stall timeout instead of holding the servo; the watchdog
+//! then guards the servo thread alone. Measured on the Rodero palpation (BENCHMARKS.md), a
+//! physics tick slower than the period no longer costs the hand a period.
+//!
+//! # Device silence
+//! A device that sends no new sample for the safety's `silence` (50 ms) has its force faded to
+//! zero over 30 ms, in both loops (logged as [`Fault::DeviceSilent`], not a fault path); its
+//! return ramps the force in again.
+//!
 //! # The watchdog
 //! A second thread checks the servo's heartbeat (the end time of its last tick) every
 //! millisecond. When the physics has not completed a tick for `stall_timeout` (30 ms), it zeroes
@@ -55,11 +69,13 @@ use palpate_core::{StepError, Vec3};
 
 use crate::coupling::{CouplingParams, VirtualCoupling};
 use crate::device::{Device, DeviceInput, ForceSink};
+use crate::multirate::{LocalModel, PhysicsLoop};
 use crate::physics::Physics;
 use crate::realtime::Realtime;
 use crate::record::{Recording, TickRecord};
 use crate::safety::{Safety, SafetyParams};
-use crate::snapshot::{Mailbox, Snapshot, SnapshotCell};
+use crate::multirate::{ModelCell, PhysicsStats};
+use crate::snapshot::{Mailbox, Snapshot, SnapshotCell, Vec3Cell};
 use crate::stats::{Stats, TickTimes};
 
 /// Rates the servo accepts \[Hz\].
@@ -73,8 +89,12 @@ pub enum Fault {
     Step(StepError),
     /// The tissue's force, the proxy or the rendered force was not finite.
     NonFinite,
-    /// The simulation did not complete a tick for this long \[s\] (the watchdog).
+    /// The simulation did not complete a tick for this long \[s\] (the watchdog; in the
+    /// multirate loop, the local model's age when its fade began: logged, not a fault path).
     Stall(f64),
+    /// No new device sample for this long \[s\]: the force fades to zero (logged when the fade
+    /// begins; not a fault path).
+    DeviceSilent(f64),
 }
 
 impl std::fmt::Display for Fault {
@@ -83,6 +103,7 @@ impl std::fmt::Display for Fault {
             Fault::Step(e) => write!(f, "the simulation's tick failed: {e}"),
             Fault::NonFinite => write!(f, "non-finite force, tool position or state"),
             Fault::Stall(s) => write!(f, "the simulation missed ticks for {:.1} ms", s * 1e3),
+            Fault::DeviceSilent(s) => write!(f, "the device sent no sample for {:.1} ms: force faded to zero", s * 1e3),
         }
     }
 }
@@ -101,8 +122,13 @@ pub const FAULT_LOG: usize = 256;
 /// The servo's configuration (SI units).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ServoConfig {
-    /// Tick rate \[Hz\], 250 to 4000 (default 1000).
+    /// Tick rate \[Hz\], 250 to 4000 (default 1000): the servo's (the device's) rate.
     pub rate_hz: f64,
+    /// The physics thread's rate \[Hz\] (100 to `rate_hz`): `Some` runs the multirate loop
+    /// ([`crate::multirate`]: the servo renders from a local model the physics publishes and
+    /// never waits for it); `None` (the default) the single-rate loop, a physics tick inside
+    /// every servo period.
+    pub physics_rate_hz: Option<f64>,
     /// The coupling; `None`: the device's defaults ([`crate::DeviceKind::defaults`]).
     pub coupling: Option<CouplingParams>,
     /// The safety layer; `None`: the device's defaults.
@@ -145,7 +171,7 @@ pub const IDLE_SNAPSHOT_TICKS: u64 = 512;
 
 impl Default for ServoConfig {
     fn default() -> Self {
-        ServoConfig { rate_hz: 1000.0, coupling: None, safety: None, checkpoint_every: 250, record_ticks: 0, stats_ticks: 600_000, max_ticks: None, spin: 200e-6, surface_every: 32, realtime: false }
+        ServoConfig { rate_hz: 1000.0, physics_rate_hz: None, coupling: None, safety: None, checkpoint_every: 250, record_ticks: 0, stats_ticks: 600_000, max_ticks: None, spin: 200e-6, surface_every: 32, realtime: false }
     }
 }
 
@@ -153,6 +179,12 @@ impl ServoConfig {
     pub fn check(&self) -> Result<(), String> {
         if !(self.rate_hz >= MIN_RATE_HZ && self.rate_hz <= MAX_RATE_HZ) {
             return Err(format!("rate = {} Hz must be within {MIN_RATE_HZ} to {MAX_RATE_HZ} Hz", self.rate_hz));
+        }
+        if let Some(p) = self.physics_rate_hz {
+            let lo = crate::multirate::MIN_PHYSICS_RATE_HZ;
+            if !(p >= lo && p <= self.rate_hz) {
+                return Err(format!("physics rate = {p} Hz must be within {lo} Hz and the servo's rate ({} Hz)", self.rate_hz));
+            }
         }
         if let Some(c) = &self.coupling {
             c.check()?;
@@ -214,13 +246,26 @@ pub struct HapticCore {
     max_force: f64,
     energy: f64,
     last_sent: Option<(Vec3, Vec3)>,
+    /// Ticks since the device's last new (finite) sample, and whether its silence's fade was
+    /// logged; fades logged (device silences, stale local models).
+    since_sample: u64,
+    silent: bool,
+    silences: u64,
+    /// Multirate ([`HapticCore::render`]): the local model rendered from, the ticks since it
+    /// arrived, whether its staleness was logged, the proxy's speed limit \[m/s\].
+    model: LocalModel,
+    model_age: u64,
+    stale: bool,
+    stalls: u64,
+    tool_speed: f64,
+    physics_dt: f64,
 }
 
 impl HapticCore {
     /// A loop over `physics` at `rate_hz` with these coupling and safety parameters, recording
     /// up to `record_ticks` ticks.
     pub fn new(physics: Box<dyn Physics>, rate_hz: f64, coupling: CouplingParams, safety: SafetyParams, checkpoint_every: u64, record_ticks: usize) -> HapticCore {
-        let recording = (record_ticks > 0).then(|| Recording { rate_hz, identity: physics.identity(), coupling, safety, faults: 0, ticks: Vec::with_capacity(record_ticks) });
+        let recording = (record_ticks > 0).then(|| Recording { rate_hz, identity: physics.identity(), coupling, safety, faults: 0, ticks: Vec::with_capacity(record_ticks), physics_rate_hz: None, model_ticks: Vec::new(), targets: Vec::new() });
         HapticCore {
             physics,
             coupling: VirtualCoupling::new(coupling, Vec3::zeros()),
@@ -238,6 +283,15 @@ impl HapticCore {
             max_force: 0.0,
             energy: 0.0,
             last_sent: None,
+            since_sample: 0,
+            silent: false,
+            silences: 0,
+            model: LocalModel::default(),
+            model_age: 0,
+            stale: false,
+            stalls: 0,
+            tool_speed: f64::INFINITY,
+            physics_dt: 0.0,
         }
     }
 
@@ -259,17 +313,7 @@ impl HapticCore {
     /// The part of a tick the force depends on (steps 1-5 of the module docs), recorded: send
     /// its force, then call [`HapticCore::after_send`].
     pub fn tick_force(&mut self, sample: Option<DeviceInput>) -> TickOut {
-        match sample {
-            Some(s) if s.is_finite() => {
-                if self.input.is_none() {
-                    // First sample: the proxy starts at the device, at rest.
-                    self.coupling.reset(s.position);
-                }
-                self.input = Some(s);
-            }
-            Some(_) => self.bad_inputs += 1,
-            None => {}
-        }
+        self.take_sample(sample);
         self.tick += 1;
         let Some(input) = self.input else {
             // No sample yet: nothing to simulate against.
@@ -285,7 +329,8 @@ impl HapticCore {
                 let c = self.coupling.step(&input.position, &f, self.dt, self.physics.max_tool_step());
                 if c.force.iter().all(|x| x.is_finite()) && self.coupling.proxy.iter().all(|x| x.is_finite()) {
                     out.raw_force = c.force;
-                    out.force = self.safety.apply(&c.force, self.dt);
+                    let w = self.silence_weight();
+                    out.force = self.safe(&c.force, w);
                     None
                 } else {
                     Some(Fault::NonFinite)
@@ -298,17 +343,253 @@ impl HapticCore {
         out.tissue = self.tissue;
         out.tool = self.coupling.proxy;
         self.account(&out);
+        self.record(input, sample.is_some(), &out);
+        out
+    }
+
+    /// A device sample in: a new finite one is taken (the first puts the proxy at the device, at
+    /// rest), a non-finite one counted; either way the silence's count.
+    fn take_sample(&mut self, sample: Option<DeviceInput>) {
+        match sample {
+            Some(s) if s.is_finite() => {
+                if self.input.is_none() {
+                    // First sample: the proxy starts at the device, at rest.
+                    self.coupling.reset(s.position);
+                }
+                self.input = Some(s);
+                self.since_sample = 0;
+            }
+            Some(_) => {
+                self.bad_inputs += 1;
+                self.since_sample += 1;
+            }
+            None => self.since_sample += 1,
+        }
+    }
+
+    /// The device's silence as a weight on the force (1: a fresh sample; 0: silent for the
+    /// safety's `silence` plus [`crate::multirate::SILENCE_FADE`]); the fade's start is logged.
+    fn silence_weight(&mut self) -> f64 {
+        let t = self.since_sample as f64 * self.dt;
+        let start = self.safety.params.silence;
+        let w = crate::multirate::fade(t, start, start + crate::multirate::SILENCE_FADE);
+        if w < 1.0 && !self.silent {
+            self.silent = true;
+            self.silences += 1;
+            self.log(Fault::DeviceSilent(t));
+        } else if w == 1.0 {
+            self.silent = false;
+        }
+        w
+    }
+
+    /// The safety layer on `force` faded by `weight`: at zero weight the force is zero and the
+    /// ramp starts again (so a device or a physics that comes back is ramped in).
+    fn safe(&mut self, force: &Vec3, weight: f64) -> Vec3 {
+        if weight > 0.0 {
+            // Capped first, so that the fade is the felt force's, not a request's far past the
+            // limit (24 N asked, 3 N felt, stayed 3 N until the weight fell under 1/8).
+            let capped = force.cap_magnitude(self.safety.params.max_force);
+            self.safety.apply(&(capped * weight), self.dt)
+        } else {
+            self.safety.zero()
+        }
+    }
+
+    pub(crate) fn log(&mut self, fault: Fault) {
+        if self.fault_log.len() < FAULT_LOG {
+            self.fault_log.push(FaultRecord { tick: self.tick.saturating_sub(1), time: self.tick.saturating_sub(1) as f64 * self.dt, fault });
+        }
+    }
+
+    /// One servo tick of the multirate loop ([`crate::multirate`]): the device's sample in,
+    /// `fresh` the physics' newest model if one arrived since the last tick, the force out. The
+    /// proxy moves against the local model through the coupling; a model older than a third of
+    /// the stall timeout fades to zero at the stall timeout; a model whose fault count changed
+    /// takes the fault path (zero now, the proxy at the restored tool, the ramp again). Allocates
+    /// nothing; depends on its inputs and the tick count only.
+    pub fn render(&mut self, sample: Option<DeviceInput>, fresh: Option<LocalModel>) -> TickOut {
+        self.take_sample(sample);
+        self.tick += 1;
+        let mut fault = false;
+        if let Some(m) = fresh {
+            if m.faults != self.model.faults {
+                fault = true;
+            }
+            if self.stale && m.tick != self.model.tick {
+                self.stale = false;
+            }
+            self.model = m;
+            self.model_age = 0;
+        } else {
+            self.model_age += 1;
+        }
+        let z = Vec3::zeros();
+        let Some(input) = self.input else {
+            return TickOut { force: self.safety.zero(), raw_force: z, tissue: z, tool: z, device: z, buttons: 0, fault: false };
+        };
+        let mut out = TickOut { force: z, raw_force: z, tissue: z, tool: self.coupling.proxy, device: input.position, buttons: input.buttons, fault };
+        if self.model.tick == 0 {
+            // No model yet: the proxy waits at the device for the physics' first tick.
+            self.coupling.reset(input.position);
+            out.force = self.safety.zero();
+        } else if fault {
+            out.force = self.safety.zero();
+            self.coupling.reset(self.model.tool);
+            self.faults += 1;
+            if let Some(r) = &mut self.recording {
+                r.faults += 1;
+            }
+        } else {
+            let age = self.model_age as f64 * self.dt;
+            let stall = self.safety.params.stall_timeout;
+            // Full force for half the stall timeout, or two physics periods at a slow physics
+            // rate (a model is that old between ticks in the normal course). A third (10 ms)
+            // faded the force 7 times a minute beside a 250 Hz physics whose ticks took up to
+            // 12 ms on a busy machine (2026-12-06).
+            let hold = (0.5 * stall).max(2.0 * self.physics_dt).min(0.9 * stall);
+            let w_model = crate::multirate::fade(age, hold, stall);
+            if w_model < 1.0 && !self.stale {
+                self.stale = true;
+                self.stalls += 1;
+                self.log(Fault::Stall(age));
+            }
+            let c = self.coupling.step_local(&input.position, &self.model, w_model, self.dt, self.tool_speed);
+            if c.force.iter().all(|x| x.is_finite()) && self.coupling.proxy.iter().all(|x| x.is_finite()) {
+                let w = w_model.min(self.silence_weight());
+                out.raw_force = c.force;
+                out.force = self.safe(&c.force, w);
+                self.tissue = self.model.force_at(&self.coupling.proxy) * w_model;
+            } else {
+                // A non-finite model: zero, the proxy back at the model's tool.
+                out.force = self.safety.zero();
+                self.coupling.reset(self.model.tool);
+                self.tissue = z;
+                out.fault = true;
+                self.faults += 1;
+                self.log(Fault::NonFinite);
+            }
+        }
+        out.tissue = self.tissue;
+        out.tool = self.coupling.proxy;
+        self.account(&out);
+        self.record(input, sample.is_some(), &out);
+        if let Some(r) = &mut self.recording {
+            if r.model_ticks.len() < r.model_ticks.capacity() {
+                r.model_ticks.push(self.model.tick);
+            }
+        }
+        out
+    }
+
+    /// Runs the multirate loop without a clock until the device is finished or `max_ticks`
+    /// servo ticks: the physics ticks `physics_rate_hz` times a second of servo ticks (every
+    /// `rate / physics_rate` servo ticks when that is whole), with the proxy as that servo tick
+    /// left it, and its model is rendered from the next servo tick on. The physics' faults join
+    /// the core's log. Tests and replays; the real-time loop is [`Servo::start`] with
+    /// [`ServoConfig::physics_rate_hz`].
+    pub fn run_offline_multirate(&mut self, device: &mut dyn Device, max_ticks: u64, physics_rate_hz: f64) -> u64 {
+        let mut physics = self.begin_multirate(physics_rate_hz);
+        let sink = device.sink();
+        let ratio = physics_rate_hz * self.dt;
+        let (mut n, mut pending) = (0, None);
+        while n < max_ticks && !device.finished(self.tick, self.dt) {
+            let s = device.read(self.tick, self.dt);
+            let out = self.render(s, pending.take());
+            if out.fault {
+                sink.zeroed();
+            } else {
+                sink.send(&out.force);
+            }
+            n += 1;
+            // Physics ticks due by the end of this servo tick.
+            if self.input.is_some() && ((self.tick as f64 * ratio + 1e-9).floor() as u64) > physics.ticks() {
+                let mut m = physics.tick(&self.coupling.proxy);
+                if let Some(f) = physics.finish() {
+                    m = f;
+                }
+                pending = Some(m);
+            }
+        }
+        self.end_multirate(physics);
+        n
+    }
+
+    /// Replays a multirate recording ([`crate::Recording::physics_rate_hz`]) bit for bit,
+    /// whatever the timing of the run that made it: the physics ticks with the recorded targets,
+    /// and each servo tick renders the recorded device sample from the model of the physics tick
+    /// it rendered from then (a model replaced by a fault in its tick's finish is replayed as the
+    /// replacement). Returns the servo ticks replayed; compare this core's recording with `rec`
+    /// ([`crate::record::compare`]).
+    pub fn replay_multirate(&mut self, rec: &Recording) -> Result<u64, String> {
+        let rate = rec.physics_rate_hz.ok_or("not a multirate recording (no physics rate)")?;
+        if rec.model_ticks.len() != rec.ticks.len() {
+            return Err(format!("the recording has {} model ticks for {} servo ticks", rec.model_ticks.len(), rec.ticks.len()));
+        }
+        let mut pl = self.begin_multirate(rate);
+        let (mut seen, mut model, mut n) = (0u64, LocalModel::default(), 0u64);
+        for (t, &want) in rec.ticks.iter().zip(&rec.model_ticks) {
+            while pl.ticks() < want {
+                let Some(target) = rec.targets.get(pl.ticks() as usize) else {
+                    let at = pl.ticks();
+                    self.end_multirate(pl);
+                    return Err(format!("the recording's physics targets end at physics tick {at}, its servo ticks need {want}"));
+                };
+                model = pl.tick(target);
+                if let Some(f) = pl.finish() {
+                    model = f;
+                }
+            }
+            let fresh = (want != seen).then_some(model);
+            seen = want;
+            self.render(t.has_input.then_some(t.input), fresh);
+            n += 1;
+        }
+        self.end_multirate(pl);
+        Ok(n)
+    }
+
+    /// The physics taken out of the core into a [`PhysicsLoop`] at `physics_rate_hz` (the
+    /// recording set up for multirate).
+    pub(crate) fn begin_multirate(&mut self, physics_rate_hz: f64) -> PhysicsLoop {
+        let physics = std::mem::replace(&mut self.physics, Box::new(crate::physics::Idle::default()));
+        let cap = self.recording.as_ref().map_or(0, |r| r.ticks.capacity());
+        let p = PhysicsLoop::new(physics, physics_rate_hz, self.checkpoint_every, (cap as f64 * physics_rate_hz * self.dt).ceil() as usize + 1);
+        self.tool_speed = p.tool_speed();
+        self.physics_dt = p.dt();
+        if let Some(r) = &mut self.recording {
+            r.physics_rate_hz = Some(physics_rate_hz);
+            r.model_ticks = Vec::with_capacity(cap);
+        }
+        p
+    }
+
+    /// The physics back in the core after a multirate run: its faults logged (at their physics
+    /// ticks' times) and its targets in the recording.
+    pub(crate) fn end_multirate(&mut self, mut p: PhysicsLoop) {
+        for f in p.fault_log() {
+            if self.fault_log.len() < FAULT_LOG {
+                self.fault_log.push(f.clone());
+            }
+        }
+        if let Some(r) = &mut self.recording {
+            r.targets = std::mem::take(&mut p.targets);
+        }
+        self.physics = p.physics;
+        self.tool_speed = f64::INFINITY;
+    }
+
+    fn record(&mut self, input: DeviceInput, has_input: bool, out: &TickOut) {
         if let Some(r) = &mut self.recording {
             // Within the buffer sized at start only (a push past it would allocate in the servo
             // thread); what does not fit is counted, so that a truncated recording is reported
             // rather than passed off as the whole run.
             if r.ticks.len() < r.ticks.capacity() {
-                r.ticks.push(TickRecord { input, has_input: sample.is_some(), force: out.force, tool: out.tool, tissue: out.tissue });
+                r.ticks.push(TickRecord { input, has_input, force: out.force, tool: out.tool, tissue: out.tissue });
             } else {
                 self.recording_dropped += 1;
             }
         }
-        out
     }
 
     /// The rest of the tick, after its force was sent (step 6 of the module docs): the physics'
@@ -435,6 +716,14 @@ impl HapticCore {
     pub fn bad_inputs(&self) -> u64 {
         self.bad_inputs
     }
+    /// Device silences whose fade began (the force faded to zero unless the device came back
+    /// within the fade), and multirate local models whose staleness fade began.
+    pub fn silences(&self) -> u64 {
+        self.silences
+    }
+    pub fn stalls(&self) -> u64 {
+        self.stalls
+    }
     pub fn coupling(&self) -> &VirtualCoupling {
         &self.coupling
     }
@@ -477,6 +766,12 @@ struct Shared {
     surface: Mailbox,
     interior: Mailbox,
     epoch: Instant,
+    /// Multirate: the physics' latest local model, the servo's proxy for the physics' next tick
+    /// and the servo tick that set it (0: none yet), the physics' ticks so far.
+    model: ModelCell,
+    target: Vec3Cell,
+    target_tick: AtomicU64,
+    physics_ticks: AtomicU64,
 }
 
 impl Shared {
@@ -497,6 +792,8 @@ pub struct ServoReport {
     pub watchdog_trips: u64,
     /// The servo thread's scheduling: [`Realtime::Off`] unless [`ServoConfig::realtime`].
     pub realtime: Realtime,
+    /// The multirate loop's physics thread (`None`: single-rate).
+    pub physics: Option<PhysicsStats>,
 }
 
 /// The running servo: snapshots, stop.
@@ -504,12 +801,16 @@ pub struct ServoHandle {
     shared: Arc<Shared>,
     servo: Option<JoinHandle<ServoReport>>,
     watchdog: Option<JoinHandle<()>>,
+    physics: Option<JoinHandle<(PhysicsLoop, PhysicsStats)>>,
 }
 
 impl Servo {
     /// Starts the servo thread (and its watchdog) on `core` with `device`.
-    pub fn start(core: HapticCore, device: Box<dyn Device>, config: &ServoConfig) -> Result<ServoHandle, String> {
+    pub fn start(mut core: HapticCore, device: Box<dyn Device>, config: &ServoConfig) -> Result<ServoHandle, String> {
         config.check()?;
+        let physics_loop = config.physics_rate_hz.map(|hz| core.begin_multirate(hz));
+        let surface_len = physics_loop.as_ref().map_or_else(|| core.physics.surface_len(), |p| p.physics().surface_len());
+        let interior_cap = physics_loop.as_ref().map_or_else(|| core.physics.interior_capacity(), |p| p.physics().interior_capacity());
         let stall = core.safety.params.stall_timeout;
         let shared = Arc::new(Shared {
             stop: AtomicBool::new(false),
@@ -520,17 +821,34 @@ impl Servo {
             stall_ns: AtomicU64::new(0),
             trips: AtomicU64::new(0),
             snapshot: SnapshotCell::default(),
-            surface: Mailbox::new(if config.surface_every > 0 { core.physics.surface_len() } else { 0 }),
-            interior: Mailbox::up_to(if config.surface_every > 0 { core.physics.interior_capacity() } else { 0 }),
+            surface: Mailbox::new(if config.surface_every > 0 { surface_len } else { 0 }),
+            interior: Mailbox::up_to(if config.surface_every > 0 { interior_cap } else { 0 }),
             epoch: Instant::now(),
+            model: ModelCell::default(),
+            target: Vec3Cell::default(),
+            target_tick: AtomicU64::new(0),
+            physics_ticks: AtomicU64::new(0),
         });
         let sink = device.sink();
         let cfg = *config;
         let s = shared.clone();
+        let multirate = physics_loop.is_some();
         let servo = std::thread::Builder::new()
             .name("palpate-servo".into())
-            .spawn(move || run(core, device, cfg, s))
+            .spawn(move || if multirate { run_render(core, device, cfg, s) } else { run(core, device, cfg, s) })
             .map_err(|e| format!("cannot start the servo thread: {e}"))?;
+        let physics = match physics_loop {
+            Some(pl) => {
+                let s = shared.clone();
+                Some(
+                    std::thread::Builder::new()
+                        .name("palpate-physics".into())
+                        .spawn(move || run_physics(pl, cfg, s))
+                        .map_err(|e| format!("cannot start the physics thread: {e}"))?,
+                )
+            }
+            None => None,
+        };
         let s = shared.clone();
         let watchdog = std::thread::Builder::new()
             .name("palpate-watchdog".into())
@@ -539,10 +857,15 @@ impl Servo {
                     // Above the servo, so that a stuck servo cannot starve its own watchdog.
                     let _ = crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY + 1);
                 }
-                watch(s, sink, stall)
+                // Every 0.5 ms for a servo that computes the physics in its period; every 2 ms
+                // beside a physics thread, which then keeps the other core busy: each wake of the
+                // watchdog takes a core from one of the two (at 4 kHz, 310 late periods a minute
+                // against 8 in the idle loop, 2026-12-06), and 2 ms is still well inside the
+                // 30 ms it guards.
+                watch(s, sink, stall, if multirate { Duration::from_millis(2) } else { Duration::from_micros(500) })
             })
             .map_err(|e| format!("cannot start the watchdog thread: {e}"))?;
-        Ok(ServoHandle { shared, servo: Some(servo), watchdog: Some(watchdog) })
+        Ok(ServoHandle { shared, servo: Some(servo), watchdog: Some(watchdog), physics })
     }
 }
 
@@ -585,10 +908,20 @@ impl ServoHandle {
         if let Some(w) = self.watchdog.take() {
             let _ = w.join();
         }
-        match r {
+        let physics = self.physics.take().map(|p| p.join());
+        let mut r = match r {
             Ok(r) => r,
             Err(p) => std::panic::resume_unwind(p),
+        };
+        match physics {
+            Some(Ok((pl, stats))) => {
+                r.core.end_multirate(pl);
+                r.physics = Some(stats);
+            }
+            Some(Err(p)) => std::panic::resume_unwind(p),
+            None => {}
         }
+        r
     }
 }
 
@@ -601,10 +934,10 @@ impl Drop for ServoHandle {
     }
 }
 
-fn watch(shared: Arc<Shared>, sink: Arc<dyn ForceSink>, stall: f64) {
+fn watch(shared: Arc<Shared>, sink: Arc<dyn ForceSink>, stall: f64, poll: Duration) {
     let limit = (stall * 1e9) as u64;
     while !shared.done.load(Ordering::Acquire) {
-        std::thread::sleep(Duration::from_micros(500));
+        std::thread::sleep(poll);
         let beat = shared.heartbeat.load(Ordering::Acquire);
         if beat == 0 || shared.tripped.load(Ordering::Acquire) {
             continue; // not started, or already tripped and not yet taken by the servo
@@ -690,6 +1023,7 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
             overruns: times.overruns(),
             faults: core.faults,
             buttons: out.buttons,
+            physics_ticks: core.tick,
         };
         shared.snapshot.publish(&snap);
         if cfg.surface_every > 0 && core.tick.is_multiple_of(cfg.surface_every) {
@@ -725,10 +1059,213 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
         }
     }
     sink.send(&Vec3::zeros());
-    let stats = times.finish((Instant::now() - start).as_secs_f64());
+    // Done before the statistics: sorting a long run's times (240,000 ticks at 4 kHz for a
+    // minute) takes tens of milliseconds, which the watchdog took for a stalled servo.
+    let elapsed = (Instant::now() - start).as_secs_f64();
     shared.done.store(true, Ordering::Release);
+    let stats = times.finish(elapsed);
     let trips = shared.trips.load(Ordering::Relaxed);
-    ServoReport { core, device, stats, watchdog_trips: trips, realtime }
+    ServoReport { core, device, stats, watchdog_trips: trips, realtime, physics: None }
+}
+
+/// The multirate loop's servo thread: every period, the device's sample and the physics' newest
+/// model in, the rendered force out ([`HapticCore::render`]), the proxy published for the
+/// physics. It never waits for the physics (a seqlock read of the model, a seqlock write of the
+/// proxy).
+fn run_render(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shared: Arc<Shared>) -> ServoReport {
+    let sink = device.sink();
+    let period = Duration::from_secs_f64(cfg.dt());
+    let spin = Duration::from_secs_f64(cfg.spin);
+    let mut times = TickTimes::new(cfg.stats_ticks, cfg.rate_hz);
+    let start = Instant::now();
+    let mut deadline = start;
+    let mut last_start: Option<Instant> = None;
+    let mut seen = (0u64, 0u64);
+    shared.heartbeat.store(shared.now_ns().max(1), Ordering::Release);
+    let mut n: u64 = 0;
+    let min_rest = period.mul_f64(0.06);
+    let realtime = if cfg.realtime { crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY) } else { Realtime::Off };
+    loop {
+        if shared.stop.load(Ordering::Acquire) || cfg.max_ticks.is_some_and(|m| n >= m) || device.finished(core.tick, core.dt) {
+            break;
+        }
+        let t0 = Instant::now();
+        let c0 = crate::realtime::thread_cpu_time();
+        let sample = device.read(core.tick, core.dt);
+        let m = shared.model.latest();
+        // A new tick's model, or the same tick's replaced by a fault in its finish.
+        let fresh = ((m.tick, m.faults) != seen).then_some(m);
+        seen = (m.tick, m.faults);
+        let mut out = core.render(sample, fresh);
+        shared.heartbeat.store(shared.now_ns().max(1), Ordering::Release);
+        if shared.tripped.swap(false, Ordering::AcqRel) {
+            // The servo thread itself was kept off the CPU past the stall timeout (the watchdog
+            // zeroed the device): zero this tick too, and ramp in again.
+            let stalled = shared.stall_ns.load(Ordering::Relaxed) as f64 * 1e-9;
+            out.force = core.safety.zero();
+            out.fault = true;
+            core.log(Fault::Stall(stalled));
+        }
+        if out.fault {
+            sink.zeroed();
+        } else {
+            sink.send(&out.force);
+        }
+        if core.input.is_some() {
+            shared.target.set(&core.coupling.proxy);
+            shared.target_tick.store(core.tick, Ordering::Release);
+        }
+        let t1 = Instant::now();
+        let c1 = crate::realtime::thread_cpu_time();
+        n += 1;
+        let p = last_start.map_or(cfg.dt(), |s| (t0 - s).as_secs_f64());
+        last_start = Some(t0);
+        let compute = (t1 - t0).as_secs_f64();
+        let cpu = match (c0, c1) {
+            (Some(a), Some(b)) => (b - a).clamp(0.0, compute),
+            _ => compute,
+        };
+        deadline += period;
+        let late = t1.saturating_duration_since(deadline);
+        let overrun = t1 > deadline;
+        times.push(p, compute, cpu, overrun, (t1 - start).as_secs_f64(), core.tick);
+        let snap = Snapshot {
+            tick: core.tick,
+            time: core.tick as f64 * core.dt,
+            device: out.device,
+            tool: out.tool,
+            force: out.force,
+            raw_force: out.raw_force,
+            tissue_force: out.tissue,
+            period: p,
+            compute,
+            overruns: times.overruns(),
+            faults: core.faults,
+            buttons: out.buttons,
+            physics_ticks: shared.physics_ticks.load(Ordering::Relaxed),
+        };
+        shared.snapshot.publish(&snap);
+        if late > period {
+            deadline = t1;
+        }
+        wait_until(deadline, spin);
+        if realtime.granted() {
+            let rested = Instant::now().saturating_duration_since(t1);
+            if rested < min_rest {
+                std::thread::sleep(min_rest - rested);
+            }
+        }
+    }
+    sink.send(&Vec3::zeros());
+    // Done before the statistics: sorting a long run's times (240,000 ticks at 4 kHz for a
+    // minute) takes tens of milliseconds, which the watchdog took for a stalled servo.
+    let elapsed = (Instant::now() - start).as_secs_f64();
+    shared.done.store(true, Ordering::Release);
+    let stats = times.finish(elapsed);
+    let trips = shared.trips.load(Ordering::Relaxed);
+    ServoReport { core, device, stats, watchdog_trips: trips, realtime, physics: None }
+}
+
+/// The physics thread's nice value beside an ordinary (not real-time) servo.
+pub const PHYSICS_NICE: i32 = 5;
+
+/// The multirate loop's physics thread: on its own clock (absolute deadlines at the physics
+/// rate; a tick that starts late runs at once, a whole period behind the schedule restarts from
+/// now, counted as skipped), a tick with the servo's latest proxy, the model published, then the
+/// tick's rest and the checkpoint, and the viewer's snapshots. It sleeps rather than spins (the
+/// servo spins; two spinning threads would take both cores of a laptop).
+fn run_physics(mut pl: PhysicsLoop, cfg: ServoConfig, shared: Arc<Shared>) -> (PhysicsLoop, PhysicsStats) {
+    let rate = cfg.physics_rate_hz.unwrap_or(cfg.rate_hz);
+    let period = Duration::from_secs_f64(1.0 / rate);
+    if cfg.realtime {
+        let _ = crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY - 1);
+    } else {
+        // Below the servo: when a third thread wants a core, the scheduler takes it from the
+        // physics (whose model the servo extrapolates) rather than from the servo's period.
+        crate::realtime::lower_current_thread_priority(PHYSICS_NICE);
+    }
+    let cap = cfg.stats_ticks.max(1);
+    let (mut compute, mut lag) = (Vec::<f32>::with_capacity(cap), Vec::<f32>::with_capacity(cap));
+    let (mut compute_max, mut lag_max, mut late, mut skipped) = (0.0f64, 0.0f64, 0u64, 0u64);
+    let (mut read_tick, mut reads, mut published) = (0u64, 0u64, None::<u64>);
+    let mut started: Option<Instant> = None;
+    let mut deadline = Instant::now();
+    while !shared.done.load(Ordering::Acquire) {
+        if shared.target_tick.load(Ordering::Acquire) == 0 {
+            // No device sample yet: nothing to tick against.
+            std::thread::sleep(period.min(Duration::from_millis(1)));
+            deadline = Instant::now();
+            continue;
+        }
+        let t0 = Instant::now();
+        let start = *started.get_or_insert(t0);
+        let behind = t0.saturating_duration_since(deadline).as_secs_f64();
+        let target = shared.target.get();
+        let m = pl.tick(&target);
+        shared.model.publish(&m);
+        if let Some(f) = pl.finish() {
+            shared.model.publish(&f);
+        }
+        shared.physics_ticks.store(pl.ticks(), Ordering::Relaxed);
+        let tick = pl.ticks();
+        if cfg.surface_every > 0 {
+            // The viewer's snapshots every `surface_every` servo ticks' worth of time.
+            let every = ((cfg.surface_every as f64 * rate / cfg.rate_hz).round() as u64).max(1);
+            if tick.is_multiple_of(every) {
+                let r = shared.surface.reads() + shared.interior.reads();
+                if r != reads {
+                    (reads, read_tick) = (r, tick);
+                }
+                let idle = ((IDLE_SNAPSHOT_TICKS as f64 * rate / cfg.rate_hz).round() as u64).max(1);
+                let watched = tick.saturating_sub(read_tick) <= idle;
+                if watched || published.is_none_or(|t| tick - t >= idle) {
+                    published = Some(tick);
+                    let physics = pl.physics();
+                    shared.surface.publish_with(tick, |out| {
+                        physics.surface(out);
+                        out.len()
+                    });
+                    shared.interior.publish_with(tick, |out| physics.interior(out));
+                }
+            }
+        }
+        let t1 = Instant::now();
+        let c = (t1 - t0).as_secs_f64();
+        compute_max = compute_max.max(c);
+        lag_max = lag_max.max(behind);
+        if compute.len() < cap {
+            compute.push(c as f32);
+            lag.push(behind as f32);
+        }
+        if behind > 0.1 * period.as_secs_f64() {
+            late += 1;
+        }
+        deadline += period;
+        if t1 > deadline + period {
+            // A whole period or more behind: restart the schedule from now (the rate lowered
+            // for this while) rather than a burst of ticks with one proxy each.
+            skipped += ((t1 - deadline).as_secs_f64() / period.as_secs_f64()) as u64;
+            deadline = t1;
+        }
+        let _ = start;
+        wait_until(deadline, Duration::ZERO);
+    }
+    let elapsed = started.map_or(0.0, |s| s.elapsed().as_secs_f64());
+    let ticks = pl.ticks();
+    let stats = PhysicsStats {
+        rate_hz: rate,
+        achieved_hz: if elapsed > 0.0 { ticks as f64 / elapsed } else { 0.0 },
+        ticks,
+        elapsed,
+        compute_p50: crate::multirate::percentile(&mut compute, 0.5),
+        compute_p99: crate::multirate::percentile(&mut compute, 0.99),
+        compute_max,
+        late,
+        skipped,
+        lag_p99: crate::multirate::percentile(&mut lag, 0.99),
+        lag_max,
+    };
+    (pl, stats)
 }
 
 /// Sleeps until `spin` before `deadline`, then spins to it.

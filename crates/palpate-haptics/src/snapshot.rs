@@ -122,6 +122,9 @@ pub struct Snapshot {
     pub faults: u64,
     /// The device's buttons (bit mask).
     pub buttons: u32,
+    /// The multirate loop's physics ticks so far (its rate: their change over the wall time);
+    /// the single-rate loop's are its ticks.
+    pub physics_ticks: u64,
 }
 
 /// Words in a [`Snapshot`].
@@ -142,6 +145,7 @@ impl Snapshot {
         w[19] = self.overruns;
         w[20] = self.faults;
         w[21] = self.buttons as u64;
+        w[22] = self.physics_ticks;
         w
     }
 
@@ -160,6 +164,7 @@ impl Snapshot {
             overruns: w[19],
             faults: w[20],
             buttons: w[21] as u32,
+            physics_ticks: w[22],
         }
     }
 }
@@ -330,7 +335,7 @@ mod tests {
 
     #[test]
     fn snapshot_round_trips() {
-        let s = Snapshot { tick: 7, time: 0.007, device: Vec3::new(1.0, 2.0, 3.0), tool: Vec3::new(-1.0, 0.5, 1e-9), force: Vec3::new(0.1, 0.2, 0.3), raw_force: Vec3::new(4.0, 5.0, 6.0), tissue_force: Vec3::new(7.0, 8.0, 9.0), period: 1e-3, compute: 2e-4, overruns: 3, faults: 1, buttons: 5 };
+        let s = Snapshot { tick: 7, time: 0.007, device: Vec3::new(1.0, 2.0, 3.0), tool: Vec3::new(-1.0, 0.5, 1e-9), force: Vec3::new(0.1, 0.2, 0.3), raw_force: Vec3::new(4.0, 5.0, 6.0), tissue_force: Vec3::new(7.0, 8.0, 9.0), period: 1e-3, compute: 2e-4, overruns: 3, faults: 1, buttons: 5, physics_ticks: 11 };
         assert_eq!(Snapshot::from_words(&s.to_words()), s);
     }
 }

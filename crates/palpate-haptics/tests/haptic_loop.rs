@@ -349,7 +349,7 @@ fn press_cycle_energy(mut core: HapticCore) -> f64 {
 
 #[test]
 fn passivity_the_coupling_puts_no_energy_into_the_user() {
-    let nolimit = SafetyParams { max_force: 100.0, max_rate: 1e6, ramp: 0.0, stall_timeout: 0.03 };
+    let nolimit = SafetyParams { max_force: 100.0, max_rate: 1e6, ramp: 0.0, stall_timeout: 0.03, silence: 0.05 };
     for rate in [250.0, 1000.0, 4000.0] {
         // An undamped stiff wall (10,000 N/m): the contact alone is lossless, so any energy the
         // loop adds shows.
@@ -366,7 +366,7 @@ fn passivity_the_coupling_puts_no_energy_into_the_user() {
 fn passivity_measure_detects_direct_rendering() {
     // The proxy made massless and rigidly tied to the device (a huge coupling stiffness): the
     // rendered force is the wall's at the device's last sampled position.
-    let nolimit = SafetyParams { max_force: 1e6, max_rate: 1e9, ramp: 0.0, stall_timeout: 0.03 };
+    let nolimit = SafetyParams { max_force: 1e6, max_rate: 1e9, ramp: 0.0, stall_timeout: 0.03, silence: 0.05 };
     let stiff = Wall::new(Vec3::zeros(), Vec3::z(), 1e4, 0.0);
     let core = HapticCore::new(Box::new(stiff), 250.0, CouplingParams::new(1e9, 0.0, 1e-9), nolimit, 250, 10_000);
     let e = press_cycle_energy(core);

@@ -189,6 +189,8 @@ def _add_haptic(bsub) -> None:
     k.add_argument("model", metavar="MODEL")
     k.add_argument("--seconds", type=float, default=10.0, metavar="S", help="length of each run [s] (default 10)")
     k.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000)")
+    k.add_argument("--physics-rate", type=float, default=None, metavar="HZ",
+                   help="the multirate loop, the physics on its own thread at HZ (see palpate haptic --help)")
     k.add_argument("--no-idle", action="store_true", help="skip the idle-loop run")
     k.add_argument("--realtime", action="store_true",
                    help="run the servo under SCHED_FIFO (needs root, CAP_SYS_NICE or an rtprio limit; the report says "
@@ -214,13 +216,15 @@ def cmd_bench_haptic(a) -> int:
         raise Usage(f"palpate bench haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")
     if not 1 <= a.threads <= 8:
         raise Usage(f"palpate bench haptic: --threads must be 1 to 8, got {a.threads}")
+    if a.physics_rate is not None and not 100 <= a.physics_rate <= a.rate:
+        raise Usage(f"palpate bench haptic: --physics-rate must be within 100 Hz and --rate ({a.rate:g} Hz), got {a.physics_rate}")
     if a.busy_wait and a.realtime:
         raise Usage("palpate bench haptic: --busy-wait and --realtime together: a real-time thread that never sleeps "
                     "meets the kernel's real-time throttling")
     name, model = load_hybrid_model(a.model, "bench haptic")
     try:
         r = haptics.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name, realtime=a.realtime, threads=a.threads,
-                          busy_wait=True if a.busy_wait else False if a.sleep else None)
+                          busy_wait=True if a.busy_wait else False if a.sleep else None, physics_rate=a.physics_rate)
     except palpate_errors() as e:
         raise Fail(f"palpate bench haptic: {type(e).__name__}: {e}", cause=e) from None
     if a.json:
@@ -237,7 +241,14 @@ def cmd_bench_haptic(a) -> int:
         row("haptic", r)
         if "idle" in r:
             row("idle", r["idle"])
-        print(f"  max force {r['max_force_n']:.3f} N, faults {r['n_faults']}")
+        p = r.get("physics")
+        if p:
+            print(f"  physics {p['ticks']:>7} ticks  {p['achieved_hz']:8.1f} Hz (of {p['rate_hz']:g})  compute p50 "
+                  f"{p['compute_us_p50']:7.1f} p99 {p['compute_us_p99']:8.1f} us  lag p99 {p['lag_us_p99']:8.1f} max "
+                  f"{p['lag_us_max']:8.1f} us  late {p['late']}  skipped {p['skipped']}  stale models {r['model_stalls']}")
+        print(f"  max force {r['max_force_n']:.3f} N, largest force change in a servo period {r['max_force_step_n']:.4f} N "
+              f"(in contact {r['max_force_step_contact_n']:.4f} N), "
+              f"watchdog trips {r['watchdog_trips']}, faults {r['n_faults']}")
     return FAILED if r["n_faults"] else 0
 
 

@@ -31,6 +31,10 @@ def add_parser(sub) -> None:
     h.add_argument("model", metavar="MODEL")
     h.add_argument("--device", required=True, metavar="DEVICE", help=DEVICES)
     h.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000; 250 to 4000)")
+    h.add_argument("--physics-rate", type=float, default=None, metavar="HZ",
+                   help="the multirate loop: the physics on its own thread at HZ (100 to --rate), the servo rendering "
+                        "every period from the local model (force and stiffness) it publishes, never waiting for it "
+                        "(default: single-rate, a physics tick inside every servo period)")
     h.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: the device's end; "
                    "for bridge and hand, Ctrl-C)")
     h.add_argument("--record", default=None, metavar="FILE",
@@ -86,7 +90,7 @@ def make_loop(a, model, record_ticks: int):
 
     kind, _, arg = a.device.partition(":")
     common = dict(rate_hz=a.rate, record_ticks=record_ticks, max_force=a.max_force, tool_radius=a.tool_radius,
-                  realtime=a.realtime, threads=a.threads)
+                  realtime=a.realtime, threads=a.threads, physics_rate=a.physics_rate)
     if a.busy_wait:
         common["spin"] = haptics.BUSY_SPIN
     elif a.sleep:
@@ -109,6 +113,7 @@ def make_loop(a, model, record_ticks: int):
             return _p.HapticLoop(model, mat, "scripted", times=t, knots=k, **common)
         if kind == "replay":
             common.pop("rate_hz")
+            common.pop("physics_rate")
             return _p.HapticLoop(model, mat, "replay", recording=arg, **common)
         if kind == "bridge":
             try:
@@ -141,13 +146,22 @@ def cmd_haptic(a) -> int:
     _positive("haptic", "--tool-radius", a.tool_radius)
     if not 1 <= a.threads <= 8:
         raise Usage(f"palpate haptic: --threads must be 1 to 8, got {a.threads}")
+    if a.physics_rate is not None and not 100 <= a.physics_rate <= a.rate:
+        raise Usage(f"palpate haptic: --physics-rate must be within 100 Hz and --rate ({a.rate:g} Hz), got {a.physics_rate}")
     if a.busy_wait and a.realtime:
         raise Usage("palpate haptic: --busy-wait and --realtime together: a real-time thread that never sleeps "
                     "meets the kernel's real-time throttling (50 ms without the CPU every second)")
     name, model = load_hybrid_model(a.model, "haptic")
     loop = make_loop(a, model, record_ticks(a))
     where = f" on {loop.bridge_address}" if loop.bridge_address else ""
-    print(f"palpate haptic: {name}, device {a.device}{where}, {loop.rate_hz:g} Hz", flush=True)
+    phys = f", physics {loop.physics_rate_hz:g} Hz (multirate)" if loop.physics_rate_hz else ""
+    print(f"palpate haptic: {name}, device {a.device}{where}, {loop.rate_hz:g} Hz{phys}", flush=True)
+    if a.device.startswith("replay:") and loop.physics_rate_hz:
+        # A multirate recording replays from its recorded schedule, bit for bit, without a clock.
+        r = loop.run()
+        print(f"  replayed {r['ticks']} servo ticks offline (multirate: the physics from its recorded inputs); "
+              f"max force {r['max_force_n']:.3f} N; faults {r['n_faults']}")
+        return FAILED if r["n_faults"] else 0
     tty = sys.stdout.isatty()
 
     def show(line: str) -> None:
@@ -160,6 +174,11 @@ def cmd_haptic(a) -> int:
     print(f"  {r['ticks']} ticks in {r['elapsed_s']:.2f} s ({r['achieved_hz']:.1f} Hz): period p50 {r['period_us_p50']:.0f} us, "
           f"p99 {r['period_us_p99']:.0f} us, max {r['period_us_max']:.0f} us; compute p99 {r['compute_us_p99']:.0f} us; "
           f"overruns {r['overruns']} (own {r['overruns_own']}, the machine's {r['overruns_machine']}); max force {r['max_force_n']:.3f} N; faults {r['n_faults']}")
+    p = r.get("physics")
+    if p:
+        print(f"  physics: {p['ticks']} ticks ({p['achieved_hz']:.1f} of {p['rate_hz']:g} Hz): compute p50 {p['compute_us_p50']:.0f} us, "
+              f"p99 {p['compute_us_p99']:.0f} us; lag p99 {p['lag_us_p99']:.0f} us, max {p['lag_us_max']:.0f} us; "
+              f"late {p['late']}, skipped {p['skipped']}; device silences {r['device_silences']}, stale models {r['model_stalls']}")
     for f in r["faults"][:10]:
         print(f"  fault at tick {f['tick']} (t = {f['time']:.3f} s): {f['reason']}")
     if a.realtime:

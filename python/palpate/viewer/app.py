@@ -96,7 +96,8 @@ class Viewer:
                  device: str = "hand", bridge_host: str = "127.0.0.1", bridge_port: int = 0,
                  preset: Optional[str] = None, tool_radius: float = 0.005, press_depth: float = 0.003,
                  rate_hz: float = 1000.0, fps: float = 30.0, max_force: Optional[float] = None,
-                 show_core: bool = False, show_particles: bool = False, realtime: bool = False):
+                 show_core: bool = False, show_particles: bool = False, realtime: bool = False,
+                 physics_rate: Optional[float] = None):
         self.fem = isinstance(model, FemModel)
         presets = dict(_presets())
         if self.fem and model.material is not None:
@@ -143,7 +144,8 @@ class Viewer:
         self.settings: Dict[str, Any] = {"device": device, "preset": preset, "tool_radius": float(tool_radius),
                                          "press_depth": float(press_depth), "bridge_host": bridge_host,
                                          "bridge_port": int(bridge_port), "rate_hz": float(rate_hz),
-                                         "max_force": max_force, "realtime": bool(realtime)}
+                                         "max_force": max_force, "realtime": bool(realtime),
+                                         "physics_rate": None if physics_rate is None else float(physics_rate)}
         self.fps = float(fps)
         self._show_initial = (bool(show_core), bool(show_particles))
         self.paused = False
@@ -154,9 +156,10 @@ class Viewer:
         self.history: Deque[Tuple[float, float, float]] = deque(maxlen=int(PLOT_SECONDS * fps) + 1)
         self.stats: Dict[str, Any] = {"frames": 0, "surface_updates": 0, "fps": 0.0, "max_force_n": 0.0,
                                       "force_n": 0.0, "max_surface_mm": 0.0, "surface_mm": 0.0, "drags": 0,
-                                      "gizmo_moves": 0, "restarts": 0, "loop_ticks": 0, "loop_overruns": 0, "active_particles": None,
+                                      "gizmo_moves": 0, "restarts": 0, "loop_ticks": 0, "loop_overruns": 0, "physics_hz": None, "active_particles": None,
                                       "frame_ms_max": 0.0}
         self._last_surface_tick = -1
+        self._physics: Deque[Tuple[float, int]] = deque(maxlen=max(2, int(0.5 * fps)))
         self._sent = self.rest.copy()
         self._bands: Dict[int, Any] = {}
         self._scale_mm = max(1.0, round(0.05 * self.size * MM))  # colour scale [mm]
@@ -256,7 +259,8 @@ class Viewer:
     def _make_loop(self) -> "_p.HapticLoop":
         s = self.settings
         mat = self.presets[s["preset"]]()
-        common: Dict[str, Any] = dict(rate_hz=s["rate_hz"], tool_radius=s["tool_radius"], realtime=s["realtime"])
+        common: Dict[str, Any] = dict(rate_hz=s["rate_hz"], tool_radius=s["tool_radius"], realtime=s["realtime"],
+                                      physics_rate=s["physics_rate"])
         if s["max_force"] is not None:
             common["max_force"] = s["max_force"]
         if s["device"] == "bridge":
@@ -556,6 +560,12 @@ class Viewer:
             self.stats["max_force_n"] = max(self.stats["max_force_n"], fmag)
             self.stats["loop_ticks"] = int(snap["tick"])
             self.stats["loop_overruns"] = int(snap["overruns"])
+            if self.settings["physics_rate"] is not None:
+                # The physics thread's rate over the last half second of frames.
+                self._physics.append((time.monotonic(), int(snap["physics_ticks"])))
+                (t0, n0), (t1, n1) = self._physics[0], self._physics[-1]
+                if t1 > t0:
+                    self.stats["physics_hz"] = (n1 - n0) / (t1 - t0)
         with self.server.atomic():
             if got is not None and got[0] != self._last_surface_tick:
                 self._push_surface(np.asarray(got[1], dtype=np.float64))
@@ -612,7 +622,8 @@ class Viewer:
         s = self.status()
         lines = [f"force **{s['force_n']:.3f} N** (max {s['max_force_n']:.3f}) | surface {s['surface_mm']:.2f} mm "
                  f"(max {s['max_surface_mm']:.2f})",
-                 f"viewer {s['fps']:.1f} frames/s | loop tick {s['loop_ticks']:,}, overruns {s['loop_overruns']}"]
+                 f"viewer {s['fps']:.1f} frames/s | loop tick {s['loop_ticks']:,}, overruns {s['loop_overruns']}"
+                 + (f" | physics {s['physics_hz']:.0f} Hz" if s.get("physics_hz") is not None else "")]
         if self.paused:
             lines.append("**paused**")
         try:
