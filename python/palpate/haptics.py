@@ -201,7 +201,9 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
     t, k = repeat(*palpation_cycle(model), seconds + 1.0)
     mat = material()
     spin = None if busy_wait is None else BUSY_SPIN if busy_wait else SLEEP_SPIN
-    busy_wait = (not realtime) if busy_wait is None else busy_wait
+    # HapticLoop's default: busy unless real-time or multirate (whose servo sleeps: the physics
+    # thread needs the core).
+    busy_wait = (not realtime and physics_rate is None) if busy_wait is None else busy_wait
     ticks = int(round(seconds * rate_hz))
     loop = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz, max_ticks=ticks,
                          realtime=realtime, threads=threads, spin=spin, physics_rate=physics_rate, record_ticks=ticks)

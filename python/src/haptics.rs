@@ -31,6 +31,11 @@ use crate::material::PyMaterial;
 /// never sleeps; see the class docs for why). `palpate.haptics.BUSY_SPIN` is the same value.
 const BUSY_SPIN: f64 = 1.0;
 
+/// The default `spin` of the multirate loop's servo [s] (`physics_rate` set): it sleeps through
+/// each wait but its last 200 us, leaving the cores to the physics thread (see the class docs).
+/// `palpate.haptics.SLEEP_SPIN` is the same value.
+const MULTIRATE_SPIN: f64 = 200e-6;
+
 // One per loop, moved rarely: the variants' sizes do not matter.
 #[allow(clippy::large_enum_variant)]
 enum Stage {
@@ -127,6 +132,10 @@ fn busy(what: &str) -> PyErr {
 ///     a compute p99 ~20% lower and 5-50 overruns a minute against 38-234 sleeping (BENCHMARKS.md,
 ///     2026-11-27). ``200e-6`` (``palpate haptic --sleep``) sleeps through each wait but its
 ///     last 200 us, leaving the core to other work.
+///     With ``physics_rate`` the default is ``200e-6``: the servo's work is then ~10-20 us a
+///     period, and a spinning servo takes the core the physics thread needs (Rodero at 1 kHz
+///     with a CPU-bound program beside it: 3,346 late periods in 30 s spinning, 707 sleeping, the
+///     physics 564 against 737 ticks a second; quiet at 4 kHz, 252 a minute against 23 in 30 s).
 /// realtime : bool
 ///     Run the servo thread under ``SCHED_FIFO`` (priority 80; the watchdog 81) so that the
 ///     machine's other work cannot preempt a tick. Needs root, ``CAP_SYS_NICE`` or an
@@ -365,7 +374,7 @@ impl PyHapticLoop {
                 None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout), silence: silence.unwrap_or(ds.silence) },
             };
             let defaults = ServoConfig::default();
-            let mut config = ServoConfig { rate_hz, physics_rate_hz: physics_rate, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(if realtime { 0.0 } else { BUSY_SPIN }), realtime, ..defaults };
+            let mut config = ServoConfig { rate_hz, physics_rate_hz: physics_rate, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(if realtime { 0.0 } else if physics_rate.is_some() { MULTIRATE_SPIN } else { BUSY_SPIN }), realtime, ..defaults };
             config.check().map_err(errors::param_error_from)?;
 
             let mut hand = None;

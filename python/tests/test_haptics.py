@@ -563,9 +563,11 @@ def test_haptic_command_scripted_record_and_replay(tmp_path, capsys):
                       '[[segment]]\nkind = "release"\nduration = 0.2\n')
     rec = tmp_path / "press.palprec"
     # Exit code 3 only for a fault (on this shared machine, a watchdog trip), which is printed.
-    assert main(["haptic", "ellipsoids", "--device", f"scripted:{script}", "--record", str(rec), "--quiet"]) in (0, 3)
+    # The single-rate loop (--single-rate; the default is the multirate loop, below).
+    assert main(["haptic", "ellipsoids", "--device", f"scripted:{script}", "--record", str(rec), "--quiet",
+                 "--single-rate"]) in (0, 3)
     out = capsys.readouterr().out
-    assert "500 ticks" in out and "recorded 500 ticks" in out, out
+    assert "500 ticks" in out and "recorded 500 ticks" in out and "multirate" not in out, out
     assert main(["haptic", "ellipsoids", "--device", f"replay:{rec}"]) in (0, 3)
     out = capsys.readouterr().out
     assert "500 ticks" in out and "Hz" in out and "overruns" in out
@@ -595,6 +597,10 @@ def test_haptic_command_scripted_record_and_replay(tmp_path, capsys):
     assert "replayed 500 servo ticks offline" in capsys.readouterr().out
     assert main(["haptic", "ellipsoids", "--device", f"scripted:{script}", "--physics-rate", "2000"]) == 2   # usage
     assert "--physics-rate must be within" in capsys.readouterr().err
+    assert main(["haptic", "ellipsoids", "--device", f"scripted:{script}", "--quiet"]) in (0, 3)
+    assert "physics 1000 Hz (multirate)" in capsys.readouterr().out, "the multirate loop by default"
+    assert main(["haptic", "ellipsoids", "--device", "hand", "--rate", "500", "--seconds", "0.1", "--quiet"]) in (0, 3)
+    assert "physics 500 Hz (multirate)" in capsys.readouterr().out, "no faster than the servo by default"
 
 
 def test_haptic_command_warns_of_a_recording_cut_short(tmp_path, capsys, monkeypatch):
@@ -646,6 +652,9 @@ def test_soak_and_bench_haptic_commands(capsys):
         assert key in r, key
     assert r["ticks"] == 1000 and r["rate_hz"] == 2000.0
     assert r["idle"]["ticks"] == 1000
+    # The multirate loop by default: the physics thread's figures, the force's largest steps.
+    assert r["physics"]["rate_hz"] == 1000.0 and r["physics"]["ticks"] > 0, r["physics"]
+    assert 0 <= r["max_force_step_contact_n"] <= r["max_force_step_n"]
     assert r["realtime"] == "off" and r["idle"]["realtime"] == "off"
     # Overruns split into the physics' own (CPU time past the period) and the machine's.
     for x in (r, r["idle"]):
@@ -667,14 +676,20 @@ def test_soak_and_bench_haptic_commands(capsys):
     assert r["busy_wait"] is True and r["ticks"] == 300 and r["idle"]["ticks"] == 300
     assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--busy-wait", "--realtime"]) == 2
     assert "--busy-wait and --realtime" in capsys.readouterr().err
-    # The default is the busy wait (without --realtime); --sleep sleeps through each wait.
-    assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--json", "--no-idle"]) in (0, 3)
+    # The single-rate loop's default is the busy wait (without --realtime); the multirate loop's
+    # servo sleeps (the physics thread needs the core); --sleep sleeps through each wait.
+    assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--json", "--no-idle", "--single-rate"]) in (0, 3)
     assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["busy_wait"] is True
+    assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--json", "--no-idle"]) in (0, 3)
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["busy_wait"] is False
     assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--json", "--no-idle", "--sleep"]) in (0, 3)
     r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert r["busy_wait"] is False and r["ticks"] == 200
     assert main(["bench", "haptic", "ellipsoids", "--busy-wait", "--sleep"]) == 2     # one or the other
     assert "not allowed with argument" in capsys.readouterr().err
+    assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.2", "--json", "--no-idle", "--single-rate"]) in (0, 3)
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1])["physics"] is None
+    assert main(["bench", "haptic", "ellipsoids", "--single-rate", "--physics-rate", "500"]) == 2
 
 
 def test_full_fem_body_hand_worst_stays_finite():

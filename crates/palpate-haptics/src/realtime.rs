@@ -56,23 +56,6 @@ pub fn make_current_thread_realtime(priority: i32) -> Realtime {
 }
 
 /// Not on this platform: refused.
-/// Lowers the calling thread's scheduling priority to nice `nice` (a background thread beside the
-/// servo: [`crate::servo`]'s multirate physics); `false` where refused or not Linux.
-#[cfg(target_os = "linux")]
-pub fn lower_current_thread_priority(nice: i32) -> bool {
-    // SAFETY: `gettid` has no preconditions; `setpriority` on the calling thread's id changes
-    // only that thread's nice value (Linux's per-thread semantics of PRIO_PROCESS).
-    unsafe {
-        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
-        libc::setpriority(libc::PRIO_PROCESS, tid, nice) == 0
-    }
-}
-
-#[cfg(not(target_os = "linux"))]
-pub fn lower_current_thread_priority(_nice: i32) -> bool {
-    false
-}
-
 #[cfg(not(target_os = "linux"))]
 pub fn make_current_thread_realtime(priority: i32) -> Realtime {
     Realtime::Refused(format!("SCHED_FIFO priority {priority}: real-time scheduling is implemented for Linux only"))

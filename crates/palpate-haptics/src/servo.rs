@@ -259,6 +259,11 @@ pub struct HapticCore {
     stalls: u64,
     tool_speed: f64,
     physics_dt: f64,
+    /// The weight the model's and the device's fades left on the force (it falls with a fade
+    /// at once and recovers at the fade's own slope: a model that arrives after a partial fade
+    /// brings the force back over milliseconds, not in a step).
+    weight: f64,
+    silence_w: f64,
 }
 
 impl HapticCore {
@@ -292,6 +297,8 @@ impl HapticCore {
             stalls: 0,
             tool_speed: f64::INFINITY,
             physics_dt: 0.0,
+            weight: 1.0,
+            silence_w: 1.0,
         }
     }
 
@@ -372,14 +379,18 @@ impl HapticCore {
     fn silence_weight(&mut self) -> f64 {
         let t = self.since_sample as f64 * self.dt;
         let start = self.safety.params.silence;
-        let w = crate::multirate::fade(t, start, start + crate::multirate::SILENCE_FADE);
-        if w < 1.0 && !self.silent {
+        let w_now = crate::multirate::fade(t, start, start + crate::multirate::SILENCE_FADE);
+        if w_now < 1.0 && !self.silent {
             self.silent = true;
             self.silences += 1;
             self.log(Fault::DeviceSilent(t));
-        } else if w == 1.0 {
+        } else if w_now == 1.0 {
             self.silent = false;
         }
+        // Down at once, back up no faster than the fade came down (a device back after a
+        // partial fade would otherwise step the force).
+        let w = if w_now < self.silence_w { w_now } else { w_now.min(self.silence_w + self.dt / crate::multirate::SILENCE_FADE) };
+        self.silence_w = w;
         w
     }
 
@@ -448,8 +459,13 @@ impl HapticCore {
             // faded the force 7 times a minute beside a 250 Hz physics whose ticks took up to
             // 12 ms on a busy machine (2026-12-06).
             let hold = (0.5 * stall).max(2.0 * self.physics_dt).min(0.9 * stall);
-            let w_model = crate::multirate::fade(age, hold, stall);
-            if w_model < 1.0 && !self.stale {
+            let w_now = crate::multirate::fade(age, hold, stall);
+            // Down with the fade at once; back up no faster than it came down (a fresh model
+            // after a partial fade otherwise stepped the force: 0.44-0.49 N in a period with a
+            // CPU-bound program beside the loop, 2026-12-06).
+            let w_model = if w_now < self.weight { w_now } else { w_now.min(self.weight + self.dt / (stall - hold)) };
+            self.weight = w_model;
+            if w_now < 1.0 && !self.stale {
                 self.stale = true;
                 self.stalls += 1;
                 self.log(Fault::Stall(age));
@@ -1166,9 +1182,6 @@ fn run_render(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfi
     ServoReport { core, device, stats, watchdog_trips: trips, realtime, physics: None }
 }
 
-/// The physics thread's nice value beside an ordinary (not real-time) servo.
-pub const PHYSICS_NICE: i32 = 5;
-
 /// The multirate loop's physics thread: on its own clock (absolute deadlines at the physics
 /// rate; a tick that starts late runs at once, a whole period behind the schedule restarts from
 /// now, counted as skipped), a tick with the servo's latest proxy, the model published, then the
@@ -1177,13 +1190,11 @@ pub const PHYSICS_NICE: i32 = 5;
 fn run_physics(mut pl: PhysicsLoop, cfg: ServoConfig, shared: Arc<Shared>) -> (PhysicsLoop, PhysicsStats) {
     let rate = cfg.physics_rate_hz.unwrap_or(cfg.rate_hz);
     let period = Duration::from_secs_f64(1.0 / rate);
-    if cfg.realtime {
-        let _ = crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY - 1);
-    } else {
-        // Below the servo: when a third thread wants a core, the scheduler takes it from the
-        // physics (whose model the servo extrapolates) rather than from the servo's period.
-        crate::realtime::lower_current_thread_priority(PHYSICS_NICE);
-    }
+    // An ordinary thread, at the servo's nice value, even beside a real-time servo: a physics
+    // slower than real time never sleeps, and under SCHED_FIFO it would hold its core against
+    // everything else on it. Lowered (nice 5, measured 2026-12-06 on Rodero at 1 kHz with a
+    // CPU-bound program beside it), it got a quarter of a core, 155 ticks a second, and the servo
+    // gained nothing.
     let cap = cfg.stats_ticks.max(1);
     let (mut compute, mut lag) = (Vec::<f32>::with_capacity(cap), Vec::<f32>::with_capacity(cap));
     let (mut compute_max, mut lag_max, mut late, mut skipped) = (0.0f64, 0.0f64, 0u64, 0u64);

@@ -165,6 +165,36 @@ def quiet_pipe() -> int:
     return CLOSED_PIPE
 
 
+#: The physics thread's rate [Hz] of the commands' haptic loops (``palpate haptic``, ``view``,
+#: ``soak``, ``bench haptic``): the multirate loop, whose servo never waits for the physics. On the
+#: Rodero palpation on the project's 2-core VM (BENCHMARKS.md, 2026-12-06) the single-rate loop
+#: missed 27,203 of 60,000 periods a minute at 1 kHz, the multirate loop 10 (the idle loop 12).
+DEFAULT_PHYSICS_RATE_HZ = 1000.0
+
+
+def add_physics_rate(parser) -> None:
+    """``--physics-rate HZ`` and ``--single-rate`` (see :func:`physics_rate`)."""
+    g = parser.add_mutually_exclusive_group()
+    g.add_argument("--physics-rate", type=float, default=None, metavar="HZ",
+                   help=f"the physics thread's rate (default {DEFAULT_PHYSICS_RATE_HZ:g} Hz, or --rate if lower; 100 to "
+                        "--rate): the servo renders every period from the local model (force and stiffness at the "
+                        "tool) the physics publishes after each tick, and never waits for it")
+    g.add_argument("--single-rate", action="store_true",
+                   help="one physics tick inside every servo period instead (a slow tick is a missed period; for "
+                        "comparison)")
+
+
+def physics_rate(a, cmd: str) -> Optional[float]:
+    """The :class:`palpate.HapticLoop` ``physics_rate`` of parsed arguments ``a`` (with ``rate``,
+    ``physics_rate``, ``single_rate``): None for ``--single-rate``."""
+    if a.single_rate:
+        return None
+    hz = a.physics_rate if a.physics_rate is not None else min(DEFAULT_PHYSICS_RATE_HZ, a.rate)
+    if not (math.isfinite(hz) and 100 <= hz <= a.rate):
+        raise Usage(f"palpate {cmd}: --physics-rate must be within 100 Hz and --rate ({a.rate:g} Hz), got {hz}")
+    return hz
+
+
 def add_quiet(parser) -> None:
     """``--quiet``: no progress display (the display is drawn only on a terminal anyway)."""
     parser.add_argument("--quiet", action="store_true", help="no progress display (shown on a terminal only)")

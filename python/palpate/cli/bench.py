@@ -15,7 +15,7 @@ from .. import _progress
 from .. import bench
 from .. import bench_hybrid as bh
 from .. import bench_particles as bp
-from ._common import FAILED, Fail, RunFailed, Usage, add_quiet, fmt_mm, load_hybrid_model, load_view_model, num, palpate_errors
+from ._common import FAILED, Fail, RunFailed, Usage, add_physics_rate, add_quiet, fmt_mm, load_hybrid_model, load_view_model, num, palpate_errors, physics_rate
 
 
 def add_parser(sub) -> None:
@@ -189,8 +189,7 @@ def _add_haptic(bsub) -> None:
     k.add_argument("model", metavar="MODEL")
     k.add_argument("--seconds", type=float, default=10.0, metavar="S", help="length of each run [s] (default 10)")
     k.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000)")
-    k.add_argument("--physics-rate", type=float, default=None, metavar="HZ",
-                   help="the multirate loop, the physics on its own thread at HZ (see palpate haptic --help)")
+    add_physics_rate(k)
     k.add_argument("--no-idle", action="store_true", help="skip the idle-loop run")
     k.add_argument("--realtime", action="store_true",
                    help="run the servo under SCHED_FIFO (needs root, CAP_SYS_NICE or an rtprio limit; the report says "
@@ -216,15 +215,14 @@ def cmd_bench_haptic(a) -> int:
         raise Usage(f"palpate bench haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")
     if not 1 <= a.threads <= 8:
         raise Usage(f"palpate bench haptic: --threads must be 1 to 8, got {a.threads}")
-    if a.physics_rate is not None and not 100 <= a.physics_rate <= a.rate:
-        raise Usage(f"palpate bench haptic: --physics-rate must be within 100 Hz and --rate ({a.rate:g} Hz), got {a.physics_rate}")
+    hz = physics_rate(a, "bench haptic")
     if a.busy_wait and a.realtime:
         raise Usage("palpate bench haptic: --busy-wait and --realtime together: a real-time thread that never sleeps "
                     "meets the kernel's real-time throttling")
     name, model = load_hybrid_model(a.model, "bench haptic")
     try:
         r = haptics.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name, realtime=a.realtime, threads=a.threads,
-                          busy_wait=True if a.busy_wait else False if a.sleep else None, physics_rate=a.physics_rate)
+                          busy_wait=True if a.busy_wait else False if a.sleep else None, physics_rate=hz)
     except palpate_errors() as e:
         raise Fail(f"palpate bench haptic: {type(e).__name__}: {e}", cause=e) from None
     if a.json:

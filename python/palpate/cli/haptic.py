@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import sys
 
-from ._common import FAILED, Fail, RunFailed, Usage, load_hybrid_model, palpate_errors
+from ._common import FAILED, Fail, RunFailed, Usage, add_physics_rate, load_hybrid_model, palpate_errors, physics_rate
 
 DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand"
 KINDS = ("simulated", "bridge", "touch", "forcedimension", "haply", "hapticmaster")
@@ -31,10 +31,7 @@ def add_parser(sub) -> None:
     h.add_argument("model", metavar="MODEL")
     h.add_argument("--device", required=True, metavar="DEVICE", help=DEVICES)
     h.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000; 250 to 4000)")
-    h.add_argument("--physics-rate", type=float, default=None, metavar="HZ",
-                   help="the multirate loop: the physics on its own thread at HZ (100 to --rate), the servo rendering "
-                        "every period from the local model (force and stiffness) it publishes, never waiting for it "
-                        "(default: single-rate, a physics tick inside every servo period)")
+    add_physics_rate(h)
     h.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: the device's end; "
                    "for bridge and hand, Ctrl-C)")
     h.add_argument("--record", default=None, metavar="FILE",
@@ -90,7 +87,7 @@ def make_loop(a, model, record_ticks: int):
 
     kind, _, arg = a.device.partition(":")
     common = dict(rate_hz=a.rate, record_ticks=record_ticks, max_force=a.max_force, tool_radius=a.tool_radius,
-                  realtime=a.realtime, threads=a.threads, physics_rate=a.physics_rate)
+                  realtime=a.realtime, threads=a.threads, physics_rate=a.physics_hz)
     if a.busy_wait:
         common["spin"] = haptics.BUSY_SPIN
     elif a.sleep:
@@ -146,8 +143,7 @@ def cmd_haptic(a) -> int:
     _positive("haptic", "--tool-radius", a.tool_radius)
     if not 1 <= a.threads <= 8:
         raise Usage(f"palpate haptic: --threads must be 1 to 8, got {a.threads}")
-    if a.physics_rate is not None and not 100 <= a.physics_rate <= a.rate:
-        raise Usage(f"palpate haptic: --physics-rate must be within 100 Hz and --rate ({a.rate:g} Hz), got {a.physics_rate}")
+    a.physics_hz = physics_rate(a, "haptic")
     if a.busy_wait and a.realtime:
         raise Usage("palpate haptic: --busy-wait and --realtime together: a real-time thread that never sleeps "
                     "meets the kernel's real-time throttling (50 ms without the CPU every second)")

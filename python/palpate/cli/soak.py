@@ -8,7 +8,7 @@ import json
 import math
 import sys
 
-from ._common import FAILED, Fail, Usage, load_hybrid_model, palpate_errors
+from ._common import FAILED, Fail, Usage, add_physics_rate, load_hybrid_model, palpate_errors, physics_rate
 
 
 def add_parser(sub) -> None:
@@ -20,6 +20,7 @@ def add_parser(sub) -> None:
     s.add_argument("--seed", type=int, default=0, help="random seed of the palpation (default 0)")
     s.add_argument("--json", action="store_true", help="the report as one JSON object")
     s.add_argument("--realtime", action="store_true", help="run the servo under SCHED_FIFO (see palpate haptic --help)")
+    add_physics_rate(s)
     s.set_defaults(func=cmd_soak)
 
 
@@ -31,12 +32,13 @@ def cmd_soak(a) -> int:
         raise Usage(f"palpate soak: --minutes must be positive, got {a.minutes}")
     if not 250 <= a.rate <= 4000:
         raise Usage(f"palpate soak: --rate must be within 250 to 4000 Hz, got {a.rate}")
+    hz = physics_rate(a, "soak")
     name, model = load_hybrid_model(a.model, "soak")
     seconds = 60.0 * a.minutes
     t, k = haptics.random_palpation(model, seconds + 1.0, seed=a.seed)
     try:
         loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, rate_hz=a.rate,
-                             max_ticks=int(round(seconds * a.rate)), realtime=a.realtime)
+                             max_ticks=int(round(seconds * a.rate)), realtime=a.realtime, physics_rate=hz)
     except palpate_errors() as e:
         raise Fail(f"palpate soak: {type(e).__name__}: {e}", cause=e) from None
     show = None if a.json else (lambda line: print(line, flush=True))

@@ -16,7 +16,7 @@ import math
 import sys
 import time
 
-from ._common import Fail, RunFailed, Usage, load_view_model, num
+from ._common import Fail, RunFailed, Usage, add_physics_rate, load_view_model, num, physics_rate
 
 #: Status lines on stdout every this many seconds (unless --quiet).
 STATUS_EVERY_S = 1.0
@@ -50,8 +50,7 @@ def add_parser(sub) -> None:
     v.add_argument("--press-depth", type=float, default=0.003, metavar="M",
                    help=f"how deep a drag on the surface presses [m] (default 0.003; up to {num(PRESS_RANGE[1])})")
     v.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="servo rate [Hz] (default 1000; 250 to 4000)")
-    v.add_argument("--physics-rate", type=float, default=None, metavar="HZ",
-                   help="the multirate loop: the physics on its own thread at HZ (100 to --rate; see palpate haptic --help)")
+    add_physics_rate(v)
     v.add_argument("--fps", type=float, default=30.0, metavar="HZ", help="viewer update rate [Hz] (default 30; 1 to 120)")
     v.add_argument("--max-force", type=float, default=None, metavar="N", help="force limit [N] (default 3)")
     v.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: Ctrl-C)")
@@ -132,7 +131,7 @@ def cmd_view(a) -> int:
                         bridge_host=a.host if a.device == "bridge" else "127.0.0.1", preset=a.preset,
                         tool_radius=a.tool_radius, press_depth=a.press_depth, rate_hz=a.rate, fps=a.fps,
                         max_force=a.max_force, show_core=a.show_core, show_particles=a.show_particles,
-                        realtime=a.realtime, physics_rate=a.physics_rate)
+                        realtime=a.realtime, physics_rate=physics_rate(a, "view"))
     except _p.ParameterError as e:
         raise Fail(f"palpate view: {e}") from None
     except OSError as e:
