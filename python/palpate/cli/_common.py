@@ -168,7 +168,7 @@ def quiet_pipe() -> int:
 #: The physics thread's rate [Hz] of the commands' haptic loops (``palpate haptic``, ``view``,
 #: ``soak``, ``bench haptic``): the multirate loop, whose servo never waits for the physics. On the
 #: Rodero palpation on the project's 2-core VM (BENCHMARKS.md, 2026-12-06) the single-rate loop
-#: missed 27,203 of 60,000 periods a minute at 1 kHz, the multirate loop 10 (the idle loop 12).
+#: missed 32,832 of 60,000 periods a minute at 1 kHz, the multirate loop 15 (the idle loop 1).
 DEFAULT_PHYSICS_RATE_HZ = 1000.0
 
 
