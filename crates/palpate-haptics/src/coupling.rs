@@ -27,7 +27,7 @@
 //! `max_tool_step`), so proxy and simulated tool are one point; a device faster than that feels
 //! the coupling stretch (a drag) rather than the simulation jump.
 
-use palpate_core::Vec3;
+use palpate_core::{Mat3, Vec3};
 
 /// Coupling parameters (SI units).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -108,24 +108,36 @@ impl VirtualCoupling {
     /// current position) and the coupling to the device at `device` \[m\]; the proxy's speed is
     /// capped at `max_step / dt`. Returns the force to render.
     pub fn step(&mut self, device: &Vec3, tissue: &Vec3, dt: f64, max_step: f64) -> CouplingOut {
+        self.advance(device, tissue, None, dt, max_step / dt)
+    }
+
+    /// The proxy's implicit step (both loops): the tissue's force `tissue` at the proxy's
+    /// current position, with `stiffness` (`K` times its weight) taken at its new one when
+    /// there is one, the coupling's spring and damper at the new velocity:
+    /// `(m/dt + b + k dt) v' + K dt v' = (m/dt) v + F_t + k (x_d - x) + b v_d`.
+    fn advance(&mut self, device: &Vec3, tissue: &Vec3, stiffness: Option<Mat3>, dt: f64, max_speed: f64) -> CouplingOut {
         let CouplingParams { stiffness: k, damping: b, proxy_mass: m } = self.params;
         let device_v = self.device.map_or(Vec3::zeros(), |p| (device - p) / dt);
         self.device = Some(*device);
-        // m (v' - v) / dt = F_t + k (x_d - x - dt v') + b (v_d - v')
         let rhs = self.proxy_v * (m / dt) + tissue + (device - self.proxy) * k + device_v * b;
-        let mut v = rhs / (m / dt + k * dt + b);
-        let vmax = max_step / dt;
-        if v.norm() > vmax {
-            v *= vmax / v.norm();
+        let diagonal = m / dt + k * dt + b;
+        // With a stiffness the matrix is symmetric positive definite (K is projected to PSD
+        // where it is made): Cholesky cannot fail for finite input; a non-finite model leaves
+        // the proxy's velocity as the coupling alone would set it.
+        let mut v = match stiffness.and_then(|kt| (Mat3::identity() * diagonal + kt * dt).cholesky()) {
+            Some(c) => c.solve(&rhs),
+            None if stiffness.is_some() => (rhs - tissue) / diagonal,
+            None => rhs / diagonal,
+        };
+        if v.norm() > max_speed {
+            v *= max_speed / v.norm();
         }
         self.proxy_v = v;
         self.proxy += v * dt;
         let force = (self.proxy - device) * k + (self.proxy_v - device_v) * b;
         CouplingOut { force, device_v }
     }
-}
 
-impl VirtualCoupling {
     /// Advances the proxy by `dt` \[s\] against a local model of the tissue (the multirate loop,
     /// [`crate::multirate`]): the force `weight (F0 - K (x - x0))` of `model` at the proxy's
     /// *new* position, taken implicitly with the coupling, so that the step is stable for any
@@ -136,27 +148,8 @@ impl VirtualCoupling {
     /// The proxy's speed is capped at `max_speed` \[m/s\] (the simulated tool's step per physics
     /// tick times the physics' rate). Returns the force to render (as [`VirtualCoupling::step`]).
     pub fn step_local(&mut self, device: &Vec3, model: &crate::multirate::LocalModel, weight: f64, dt: f64, max_speed: f64) -> CouplingOut {
-        let CouplingParams { stiffness: k, damping: b, proxy_mass: m } = self.params;
-        let device_v = self.device.map_or(Vec3::zeros(), |p| (device - p) / dt);
-        self.device = Some(*device);
-        let kt = model.stiffness * weight;
         let tissue = (model.force - model.stiffness * (self.proxy - model.tool)) * weight;
-        let rhs = self.proxy_v * (m / dt) + tissue + (device - self.proxy) * k + device_v * b;
-        let a = palpate_core::Mat3::identity() * (m / dt + b + k * dt) + kt * dt;
-        // `a` is symmetric positive definite (K is projected to PSD where it is made): Cholesky
-        // cannot fail for finite input; a non-finite model leaves the proxy's velocity as the
-        // coupling alone would set it.
-        let mut v = match a.cholesky() {
-            Some(c) => c.solve(&rhs),
-            None => (rhs - tissue) / (m / dt + b + k * dt),
-        };
-        if v.norm() > max_speed {
-            v *= max_speed / v.norm();
-        }
-        self.proxy_v = v;
-        self.proxy += v * dt;
-        let force = (self.proxy - device) * k + (self.proxy_v - device_v) * b;
-        CouplingOut { force, device_v }
+        self.advance(device, &tissue, Some(model.stiffness * weight), dt, max_speed)
     }
 }
 

@@ -125,6 +125,30 @@ pub fn fade(t: f64, start: f64, end: f64) -> f64 {
     }
 }
 
+/// A weight that follows a [`fade`] down at once and back up no faster than the fade's own
+/// slope: a model or a device back after a partial fade brings the force back over
+/// milliseconds, not in a step (0.44-0.49 N in a period before, 2026-12-06).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Recovering {
+    weight: f64,
+}
+
+impl Default for Recovering {
+    fn default() -> Self {
+        Recovering { weight: 1.0 }
+    }
+}
+
+impl Recovering {
+    /// The weight after a period of `dt` \[s\] whose fade value is `target` (0..1), for a fade
+    /// that takes `duration` \[s\] from 1 to 0.
+    pub fn follow(&mut self, target: f64, dt: f64, duration: f64) -> f64 {
+        let w = if target < self.weight { target } else { target.min(self.weight + dt / duration) };
+        self.weight = w;
+        w
+    }
+}
+
 /// The local stiffness from the physics' own answers (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StiffnessEstimate {
@@ -321,16 +345,6 @@ pub struct PhysicsStats {
     /// How far behind its schedule a tick started \[s\]: p99 and largest.
     pub lag_p99: f64,
     pub lag_max: f64,
-}
-
-/// Percentile `q` of `v` (sorted in place); 0 when empty.
-pub(crate) fn percentile(v: &mut [f32], q: f64) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(f32::total_cmp);
-    let i = ((v.len() - 1) as f64 * q).round() as usize;
-    v[i] as f64
 }
 
 #[cfg(test)]

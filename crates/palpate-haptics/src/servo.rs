@@ -69,12 +69,11 @@ use palpate_core::{StepError, Vec3};
 
 use crate::coupling::{CouplingParams, VirtualCoupling};
 use crate::device::{Device, DeviceInput, ForceSink};
-use crate::multirate::{LocalModel, PhysicsLoop};
+use crate::multirate::{LocalModel, ModelCell, PhysicsLoop, PhysicsStats, Recovering};
 use crate::physics::Physics;
 use crate::realtime::Realtime;
 use crate::record::{Recording, TickRecord};
 use crate::safety::{Safety, SafetyParams};
-use crate::multirate::{ModelCell, PhysicsStats};
 use crate::snapshot::{Mailbox, Snapshot, SnapshotCell, Vec3Cell};
 use crate::stats::{Stats, TickTimes};
 
@@ -262,8 +261,8 @@ pub struct HapticCore {
     /// The weight the model's and the device's fades left on the force (it falls with a fade
     /// at once and recovers at the fade's own slope: a model that arrives after a partial fade
     /// brings the force back over milliseconds, not in a step).
-    weight: f64,
-    silence_w: f64,
+    weight: Recovering,
+    silence_w: Recovering,
 }
 
 impl HapticCore {
@@ -297,8 +296,8 @@ impl HapticCore {
             stalls: 0,
             tool_speed: f64::INFINITY,
             physics_dt: 0.0,
-            weight: 1.0,
-            silence_w: 1.0,
+            weight: Recovering::default(),
+            silence_w: Recovering::default(),
         }
     }
 
@@ -387,11 +386,7 @@ impl HapticCore {
         } else if w_now == 1.0 {
             self.silent = false;
         }
-        // Down at once, back up no faster than the fade came down (a device back after a
-        // partial fade would otherwise step the force).
-        let w = if w_now < self.silence_w { w_now } else { w_now.min(self.silence_w + self.dt / crate::multirate::SILENCE_FADE) };
-        self.silence_w = w;
-        w
+        self.silence_w.follow(w_now, self.dt, crate::multirate::SILENCE_FADE)
     }
 
     /// The safety layer on `force` faded by `weight`: at zero weight the force is zero and the
@@ -460,11 +455,7 @@ impl HapticCore {
             // 12 ms on a busy machine (2026-12-06).
             let hold = (0.5 * stall).max(2.0 * self.physics_dt).min(0.9 * stall);
             let w_now = crate::multirate::fade(age, hold, stall);
-            // Down with the fade at once; back up no faster than it came down (a fresh model
-            // after a partial fade otherwise stepped the force: 0.44-0.49 N in a period with a
-            // CPU-bound program beside the loop, 2026-12-06).
-            let w_model = if w_now < self.weight { w_now } else { w_now.min(self.weight + self.dt / (stall - hold)) };
-            self.weight = w_model;
+            let w_model = self.weight.follow(w_now, self.dt, stall - hold);
             if w_now < 1.0 && !self.stale {
                 self.stale = true;
                 self.stalls += 1;
@@ -969,27 +960,168 @@ fn watch(shared: Arc<Shared>, sink: Arc<dyn ForceSink>, stall: f64, poll: Durati
     }
 }
 
+/// A servo thread's clock: absolute deadlines one period apart, each tick's period and compute
+/// measured (wall and CPU time, so that an overrun is told apart: the physics' own or the
+/// machine's), a tick more than a whole period late restarts the schedule from now (no burst of
+/// catch-up ticks), and a real-time thread's least rest (below).
+struct Pacer {
+    period: Duration,
+    spin: Duration,
+    /// The least a real-time servo rests each tick: 6% of the period. A real-time servo that
+    /// computes through its whole period (the physics slower than real time) would use the whole
+    /// core, and the kernel's RT throttle would then take it off the CPU for ~50 ms (a watchdog
+    /// trip, a zeroed force): it rests a little every tick instead, so that it stays under the
+    /// throttle's 95% (crate::realtime).
+    min_rest: Duration,
+    realtime: Realtime,
+    times: TickTimes,
+    start: Instant,
+    deadline: Instant,
+    last_start: Option<Instant>,
+    /// The current tick's start (wall, thread CPU).
+    t0: Instant,
+    c0: Option<f64>,
+}
+
+impl Pacer {
+    /// On the calling thread (made real-time if the configuration asks).
+    fn new(cfg: &ServoConfig) -> Pacer {
+        let period = Duration::from_secs_f64(cfg.dt());
+        let realtime = if cfg.realtime { crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY) } else { Realtime::Off };
+        let start = Instant::now();
+        Pacer {
+            period,
+            spin: Duration::from_secs_f64(cfg.spin),
+            min_rest: period.mul_f64(0.06),
+            realtime,
+            times: TickTimes::new(cfg.stats_ticks, cfg.rate_hz),
+            start,
+            deadline: start,
+            last_start: None,
+            t0: start,
+            c0: None,
+        }
+    }
+
+    /// A tick starts.
+    fn begin(&mut self) {
+        self.t0 = Instant::now();
+        self.c0 = crate::realtime::thread_cpu_time();
+    }
+
+    /// The tick's compute ends (with its send): its period and compute \[s\] are counted for
+    /// the servo tick `tick`; returns them and the end.
+    fn end(&mut self, tick: u64) -> (f64, f64, Instant) {
+        let t1 = Instant::now();
+        let c1 = crate::realtime::thread_cpu_time();
+        let p = self.last_start.map_or(self.period.as_secs_f64(), |s| (self.t0 - s).as_secs_f64());
+        self.last_start = Some(self.t0);
+        let compute = (t1 - self.t0).as_secs_f64();
+        let cpu = match (self.c0, c1) {
+            (Some(a), Some(b)) => (b - a).clamp(0.0, compute),
+            _ => compute,
+        };
+        self.deadline += self.period;
+        let late = t1.saturating_duration_since(self.deadline);
+        self.times.push(p, compute, cpu, t1 > self.deadline, (t1 - self.start).as_secs_f64(), tick);
+        if late > self.period {
+            self.deadline = t1;
+        }
+        (p, compute, t1)
+    }
+
+    fn overruns(&self) -> u64 {
+        self.times.overruns()
+    }
+
+    /// Waits for the next tick's deadline (a tick that ended at `t1`).
+    fn wait(&self, t1: Instant) {
+        wait_until(self.deadline, self.spin);
+        if self.realtime.granted() {
+            let rested = Instant::now().saturating_duration_since(t1);
+            if rested < self.min_rest {
+                std::thread::sleep(self.min_rest - rested);
+            }
+        }
+    }
+
+    /// The run's statistics, `done` set first: sorting a long run's times (240,000 ticks at
+    /// 4 kHz for a minute) takes tens of milliseconds, which the watchdog took for a stalled
+    /// servo.
+    fn finish(self, shared: &Shared) -> (Stats, Realtime) {
+        let elapsed = (Instant::now() - self.start).as_secs_f64();
+        shared.done.store(true, Ordering::Release);
+        (self.times.finish(elapsed), self.realtime)
+    }
+}
+
+/// The viewer's surface and interior snapshots, published every `every` ticks (0: never) while
+/// someone reads them (a read in the last `idle` ticks), every `idle` ticks otherwise.
+struct SurfacePublisher {
+    every: u64,
+    idle: u64,
+    read_tick: u64,
+    reads: u64,
+    published: Option<u64>,
+}
+
+impl SurfacePublisher {
+    fn new(every: u64, idle: u64) -> SurfacePublisher {
+        SurfacePublisher { every, idle: idle.max(1), read_tick: 0, reads: 0, published: None }
+    }
+
+    fn tick(&mut self, tick: u64, physics: &dyn Physics, shared: &Shared) {
+        if self.every == 0 || !tick.is_multiple_of(self.every) {
+            return;
+        }
+        let r = shared.surface.reads() + shared.interior.reads();
+        if r != self.reads {
+            (self.reads, self.read_tick) = (r, tick);
+        }
+        let watched = tick.saturating_sub(self.read_tick) <= self.idle;
+        if watched || self.published.is_none_or(|t| tick - t >= self.idle) {
+            self.published = Some(tick);
+            shared.surface.publish_with(tick, |out| {
+                physics.surface(out);
+                out.len()
+            });
+            shared.interior.publish_with(tick, |out| physics.interior(out));
+        }
+    }
+}
+
+/// The viewer's snapshot of a servo tick.
+fn snapshot(core: &HapticCore, out: &TickOut, period: f64, compute: f64, overruns: u64, physics_ticks: u64) -> Snapshot {
+    Snapshot {
+        tick: core.tick,
+        time: core.tick as f64 * core.dt,
+        device: out.device,
+        tool: out.tool,
+        force: out.force,
+        raw_force: out.raw_force,
+        tissue_force: out.tissue,
+        period,
+        compute,
+        overruns,
+        faults: core.faults,
+        buttons: out.buttons,
+        physics_ticks,
+    }
+}
+
+/// The single-rate servo thread: every period, the device's sample in, a physics tick, the
+/// force out; the tick's rest and the checkpoint after the send.
 fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shared: Arc<Shared>) -> ServoReport {
     let sink = device.sink();
-    let period = Duration::from_secs_f64(cfg.dt());
-    let spin = Duration::from_secs_f64(cfg.spin);
-    let mut times = TickTimes::new(cfg.stats_ticks, cfg.rate_hz);
-    // Snapshots for readers: the tick of the last read seen and the reads counted then.
-    let (mut read_tick, mut reads, mut published) = (0u64, 0u64, None::<u64>);
-    let start = Instant::now();
-    let mut deadline = start;
-    let mut last_start: Option<Instant> = None;
+    let mut surfaces = SurfacePublisher::new(cfg.surface_every, IDLE_SNAPSHOT_TICKS);
+    let mut pacer = Pacer::new(&cfg);
     shared.heartbeat.store(shared.now_ns().max(1), Ordering::Release);
     let mut n: u64 = 0;
-    // The least a real-time servo rests each tick: 6% of the period (see below).
-    let min_rest = period.mul_f64(0.06);
-    let realtime = if cfg.realtime { crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY) } else { Realtime::Off };
     loop {
         if shared.stop.load(Ordering::Acquire) || cfg.max_ticks.is_some_and(|m| n >= m) || device.finished(core.tick, core.dt) {
             break;
         }
-        let t0 = Instant::now();
-        let c0 = crate::realtime::thread_cpu_time();
+        pacer.begin();
         let sample = device.read(core.tick, core.dt);
         let mut out = core.tick_force(sample);
         // The physics is back: beat before taking the watchdog's flag, or the watchdog would
@@ -1005,8 +1137,7 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
         } else {
             sink.send(&out.force);
         }
-        let t1 = Instant::now();
-        let c1 = crate::realtime::thread_cpu_time();
+        let (period, compute, t1) = pacer.end(core.tick);
         // The tick's rest and the checkpoint, in the tick's slack (the module docs say why): not
         // part of the tick's compute, which ends with the send; a late one shows as the next
         // tick's lateness.
@@ -1015,71 +1146,12 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
         }
         shared.heartbeat.store(shared.now_ns().max(1), Ordering::Release);
         n += 1;
-        let p = last_start.map_or(cfg.dt(), |s| (t0 - s).as_secs_f64());
-        last_start = Some(t0);
-        let compute = (t1 - t0).as_secs_f64();
-        let cpu = match (c0, c1) {
-            (Some(a), Some(b)) => (b - a).clamp(0.0, compute),
-            _ => compute,
-        };
-        deadline += period;
-        let late = t1.saturating_duration_since(deadline);
-        let overrun = t1 > deadline;
-        times.push(p, compute, cpu, overrun, (t1 - start).as_secs_f64(), core.tick);
-        let snap = Snapshot {
-            tick: core.tick,
-            time: core.tick as f64 * core.dt,
-            device: out.device,
-            tool: out.tool,
-            force: out.force,
-            raw_force: out.raw_force,
-            tissue_force: out.tissue,
-            period: p,
-            compute,
-            overruns: times.overruns(),
-            faults: core.faults,
-            buttons: out.buttons,
-            physics_ticks: core.tick,
-        };
-        shared.snapshot.publish(&snap);
-        if cfg.surface_every > 0 && core.tick.is_multiple_of(cfg.surface_every) {
-            let r = shared.surface.reads() + shared.interior.reads();
-            if r != reads {
-                (reads, read_tick) = (r, core.tick);
-            }
-            let watched = core.tick.saturating_sub(read_tick) <= IDLE_SNAPSHOT_TICKS;
-            if watched || published.is_none_or(|t| core.tick - t >= IDLE_SNAPSHOT_TICKS) {
-                published = Some(core.tick);
-                let physics = &core.physics;
-                shared.surface.publish_with(core.tick, |out| {
-                    physics.surface(out);
-                    out.len()
-                });
-                shared.interior.publish_with(core.tick, |out| physics.interior(out));
-            }
-        }
-        if late > period {
-            // More than a whole tick late: start again from now (no burst of catch-up ticks).
-            deadline = t1;
-        }
-        wait_until(deadline, spin);
-        if realtime.granted() {
-            // A real-time servo that computes through its whole period (the physics slower than
-            // real time) would use the whole core, and the kernel's RT throttle would then take
-            // it off the CPU for ~50 ms (a watchdog trip, a zeroed force): it rests a little
-            // every tick instead, so that it stays under the throttle's 95% (crate::realtime).
-            let rested = Instant::now().saturating_duration_since(t1);
-            if rested < min_rest {
-                std::thread::sleep(min_rest - rested);
-            }
-        }
+        shared.snapshot.publish(&snapshot(&core, &out, period, compute, pacer.overruns(), core.tick));
+        surfaces.tick(core.tick, core.physics.as_ref(), &shared);
+        pacer.wait(t1);
     }
     sink.send(&Vec3::zeros());
-    // Done before the statistics: sorting a long run's times (240,000 ticks at 4 kHz for a
-    // minute) takes tens of milliseconds, which the watchdog took for a stalled servo.
-    let elapsed = (Instant::now() - start).as_secs_f64();
-    shared.done.store(true, Ordering::Release);
-    let stats = times.finish(elapsed);
+    let (stats, realtime) = pacer.finish(&shared);
     let trips = shared.trips.load(Ordering::Relaxed);
     ServoReport { core, device, stats, watchdog_trips: trips, realtime, physics: None }
 }
@@ -1090,23 +1162,15 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
 /// proxy).
 fn run_render(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shared: Arc<Shared>) -> ServoReport {
     let sink = device.sink();
-    let period = Duration::from_secs_f64(cfg.dt());
-    let spin = Duration::from_secs_f64(cfg.spin);
-    let mut times = TickTimes::new(cfg.stats_ticks, cfg.rate_hz);
-    let start = Instant::now();
-    let mut deadline = start;
-    let mut last_start: Option<Instant> = None;
+    let mut pacer = Pacer::new(&cfg);
     let mut seen = (0u64, 0u64);
     shared.heartbeat.store(shared.now_ns().max(1), Ordering::Release);
     let mut n: u64 = 0;
-    let min_rest = period.mul_f64(0.06);
-    let realtime = if cfg.realtime { crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY) } else { Realtime::Off };
     loop {
         if shared.stop.load(Ordering::Acquire) || cfg.max_ticks.is_some_and(|m| n >= m) || device.finished(core.tick, core.dt) {
             break;
         }
-        let t0 = Instant::now();
-        let c0 = crate::realtime::thread_cpu_time();
+        pacer.begin();
         let sample = device.read(core.tick, core.dt);
         let m = shared.model.latest();
         // A new tick's model, or the same tick's replaced by a fault in its finish.
@@ -1131,53 +1195,13 @@ fn run_render(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfi
             shared.target.set(&core.coupling.proxy);
             shared.target_tick.store(core.tick, Ordering::Release);
         }
-        let t1 = Instant::now();
-        let c1 = crate::realtime::thread_cpu_time();
+        let (period, compute, t1) = pacer.end(core.tick);
         n += 1;
-        let p = last_start.map_or(cfg.dt(), |s| (t0 - s).as_secs_f64());
-        last_start = Some(t0);
-        let compute = (t1 - t0).as_secs_f64();
-        let cpu = match (c0, c1) {
-            (Some(a), Some(b)) => (b - a).clamp(0.0, compute),
-            _ => compute,
-        };
-        deadline += period;
-        let late = t1.saturating_duration_since(deadline);
-        let overrun = t1 > deadline;
-        times.push(p, compute, cpu, overrun, (t1 - start).as_secs_f64(), core.tick);
-        let snap = Snapshot {
-            tick: core.tick,
-            time: core.tick as f64 * core.dt,
-            device: out.device,
-            tool: out.tool,
-            force: out.force,
-            raw_force: out.raw_force,
-            tissue_force: out.tissue,
-            period: p,
-            compute,
-            overruns: times.overruns(),
-            faults: core.faults,
-            buttons: out.buttons,
-            physics_ticks: shared.physics_ticks.load(Ordering::Relaxed),
-        };
-        shared.snapshot.publish(&snap);
-        if late > period {
-            deadline = t1;
-        }
-        wait_until(deadline, spin);
-        if realtime.granted() {
-            let rested = Instant::now().saturating_duration_since(t1);
-            if rested < min_rest {
-                std::thread::sleep(min_rest - rested);
-            }
-        }
+        shared.snapshot.publish(&snapshot(&core, &out, period, compute, pacer.overruns(), shared.physics_ticks.load(Ordering::Relaxed)));
+        pacer.wait(t1);
     }
     sink.send(&Vec3::zeros());
-    // Done before the statistics: sorting a long run's times (240,000 ticks at 4 kHz for a
-    // minute) takes tens of milliseconds, which the watchdog took for a stalled servo.
-    let elapsed = (Instant::now() - start).as_secs_f64();
-    shared.done.store(true, Ordering::Release);
-    let stats = times.finish(elapsed);
+    let (stats, realtime) = pacer.finish(&shared);
     let trips = shared.trips.load(Ordering::Relaxed);
     ServoReport { core, device, stats, watchdog_trips: trips, realtime, physics: None }
 }
@@ -1198,7 +1222,10 @@ fn run_physics(mut pl: PhysicsLoop, cfg: ServoConfig, shared: Arc<Shared>) -> (P
     let cap = cfg.stats_ticks.max(1);
     let (mut compute, mut lag) = (Vec::<f32>::with_capacity(cap), Vec::<f32>::with_capacity(cap));
     let (mut compute_max, mut lag_max, mut late, mut skipped) = (0.0f64, 0.0f64, 0u64, 0u64);
-    let (mut read_tick, mut reads, mut published) = (0u64, 0u64, None::<u64>);
+    // The viewer's snapshots every `surface_every` servo ticks' worth of time.
+    let scaled = |ticks: u64| ((ticks as f64 * rate / cfg.rate_hz).round() as u64).max(1);
+    let every = if cfg.surface_every > 0 { scaled(cfg.surface_every) } else { 0 };
+    let mut surfaces = SurfacePublisher::new(every, scaled(IDLE_SNAPSHOT_TICKS));
     let mut started: Option<Instant> = None;
     let mut deadline = Instant::now();
     while !shared.done.load(Ordering::Acquire) {
@@ -1209,7 +1236,7 @@ fn run_physics(mut pl: PhysicsLoop, cfg: ServoConfig, shared: Arc<Shared>) -> (P
             continue;
         }
         let t0 = Instant::now();
-        let start = *started.get_or_insert(t0);
+        started.get_or_insert(t0);
         let behind = t0.saturating_duration_since(deadline).as_secs_f64();
         let target = shared.target.get();
         let m = pl.tick(&target);
@@ -1219,27 +1246,7 @@ fn run_physics(mut pl: PhysicsLoop, cfg: ServoConfig, shared: Arc<Shared>) -> (P
         }
         shared.physics_ticks.store(pl.ticks(), Ordering::Relaxed);
         let tick = pl.ticks();
-        if cfg.surface_every > 0 {
-            // The viewer's snapshots every `surface_every` servo ticks' worth of time.
-            let every = ((cfg.surface_every as f64 * rate / cfg.rate_hz).round() as u64).max(1);
-            if tick.is_multiple_of(every) {
-                let r = shared.surface.reads() + shared.interior.reads();
-                if r != reads {
-                    (reads, read_tick) = (r, tick);
-                }
-                let idle = ((IDLE_SNAPSHOT_TICKS as f64 * rate / cfg.rate_hz).round() as u64).max(1);
-                let watched = tick.saturating_sub(read_tick) <= idle;
-                if watched || published.is_none_or(|t| tick - t >= idle) {
-                    published = Some(tick);
-                    let physics = pl.physics();
-                    shared.surface.publish_with(tick, |out| {
-                        physics.surface(out);
-                        out.len()
-                    });
-                    shared.interior.publish_with(tick, |out| physics.interior(out));
-                }
-            }
-        }
+        surfaces.tick(tick, pl.physics(), &shared);
         let t1 = Instant::now();
         let c = (t1 - t0).as_secs_f64();
         compute_max = compute_max.max(c);
@@ -1258,7 +1265,6 @@ fn run_physics(mut pl: PhysicsLoop, cfg: ServoConfig, shared: Arc<Shared>) -> (P
             skipped += ((t1 - deadline).as_secs_f64() / period.as_secs_f64()) as u64;
             deadline = t1;
         }
-        let _ = start;
         wait_until(deadline, Duration::ZERO);
     }
     let elapsed = started.map_or(0.0, |s| s.elapsed().as_secs_f64());
@@ -1268,12 +1274,12 @@ fn run_physics(mut pl: PhysicsLoop, cfg: ServoConfig, shared: Arc<Shared>) -> (P
         achieved_hz: if elapsed > 0.0 { ticks as f64 / elapsed } else { 0.0 },
         ticks,
         elapsed,
-        compute_p50: crate::multirate::percentile(&mut compute, 0.5),
-        compute_p99: crate::multirate::percentile(&mut compute, 0.99),
+        compute_p50: crate::stats::percentile(&mut compute, 0.5),
+        compute_p99: crate::stats::percentile(&mut compute, 0.99),
         compute_max,
         late,
         skipped,
-        lag_p99: crate::multirate::percentile(&mut lag, 0.99),
+        lag_p99: crate::stats::percentile(&mut lag, 0.99),
         lag_max,
     };
     (pl, stats)

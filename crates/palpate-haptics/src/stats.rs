@@ -92,13 +92,7 @@ impl TickTimes {
 
     /// The summary of a run that lasted `elapsed` \[s\].
     pub fn finish(self, elapsed: f64) -> Stats {
-        let pct = |mut v: Vec<f32>, q: f64| -> f64 {
-            if v.is_empty() {
-                return 0.0;
-            }
-            v.sort_by(f32::total_cmp);
-            v[((q * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)] as f64
-        };
+        let pct = |mut v: Vec<f32>, q: f64| percentile(&mut v, q);
         // The first period is the nominal one (there is no previous start): leave it out.
         let periods: Vec<f32> = if self.period.len() > 1 { self.period[1..].to_vec() } else { self.period.clone() };
         Stats {
@@ -120,6 +114,15 @@ impl TickTimes {
             overrun_at: self.overrun_at,
         }
     }
+}
+
+/// Percentile `q` (0..1) of `v`, sorted in place; 0 when empty.
+pub(crate) fn percentile(v: &mut [f32], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f32::total_cmp);
+    v[((q * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)] as f64
 }
 
 /// A run's timing summary (seconds; percentiles over the last `stats_ticks` ticks).

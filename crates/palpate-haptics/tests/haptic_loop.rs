@@ -25,34 +25,12 @@ use std::time::Duration;
 use palpate_core::Vec3;
 use palpate_haptics::devices::{Hand, HandParams, Replay, Scripted};
 use palpate_haptics::record::compare;
-use palpate_haptics::{CouplingParams, Device, DeviceInput, DeviceKind, Fault, ForceSink, HapticCore, HybridPhysics, Physics, Recording, SafetyParams, Servo, ServoConfig, Wall};
+use palpate_haptics::{CouplingParams, Device, DeviceInput, DeviceKind, Fault, HapticCore, HybridPhysics, Physics, Recording, SafetyParams, Servo, ServoConfig, Wall};
 use support::*;
 
 fn wall() -> Wall {
     // The plane z = 0, tissue-like stiffness with a little damping.
     Wall::new(Vec3::zeros(), Vec3::z(), 2000.0, 2.0)
-}
-
-/// A device that presses down into the wall at `z(t)` and reports through `sink`.
-struct Pressing<F: Fn(f64) -> f64 + Send> {
-    z: F,
-    sink: Arc<dyn ForceSink>,
-    ticks: u64,
-}
-
-impl<F: Fn(f64) -> f64 + Send> Device for Pressing<F> {
-    fn read(&mut self, tick: u64, dt: f64) -> Option<DeviceInput> {
-        Some(DeviceInput::at(Vec3::new(0.0, 0.0, (self.z)((tick + 1) as f64 * dt))))
-    }
-    fn sink(&self) -> Arc<dyn ForceSink> {
-        self.sink.clone()
-    }
-    fn kind(&self) -> DeviceKind {
-        DeviceKind::Simulated
-    }
-    fn finished(&self, ticks: u64, _dt: f64) -> bool {
-        ticks >= self.ticks
-    }
 }
 
 fn fast_ramp() -> SafetyParams {
@@ -152,7 +130,7 @@ fn stall_case(spin: f64) {
     log.0.lock().unwrap().reserve(10_000);
     // Held 12 mm into the wall: the coupling (300 N/m) in series with the wall (2000 N/m), 3.1 N,
     // capped at 3 N.
-    let dev = Pressing { z: |_t: f64| -0.012, sink: log.clone(), ticks: 600 };
+    let dev = pressing(|_t: f64| -0.012, log.clone(), 600);
     let cfg = ServoConfig { safety: Some(fast_ramp()), spin, ..Default::default() };
     let core = HapticCore::with_config(Box::new(faulty), &cfg, &dev).unwrap();
     let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();
@@ -183,20 +161,20 @@ fn stall_case(spin: f64) {
 #[test]
 fn ticks_past_the_recording_buffer_are_counted() {
     let sink: Arc<LogSink> = Arc::default();
-    let mut dev = Pressing { z: |_t: f64| -0.012, sink: sink.clone(), ticks: 150 };
+    let mut dev = pressing(|_t: f64| -0.012, sink.clone(), 150);
     let mut core = HapticCore::new(Box::new(wall()), 1000.0, CouplingParams::default(), fast_ramp(), 250, 100);
     assert_eq!(core.run_offline(&mut dev, 1000), 150);
     assert_eq!(core.recording().unwrap().ticks.len(), 100);
     assert_eq!(core.recording_dropped(), 50);
     let mut full = HapticCore::new(Box::new(wall()), 1000.0, CouplingParams::default(), fast_ramp(), 250, 150);
-    full.run_offline(&mut Pressing { z: |_t: f64| -0.012, sink, ticks: 150 }, 1000);
+    full.run_offline(&mut pressing(|_t: f64| -0.012, sink, 150), 1000);
     assert_eq!(full.recording_dropped(), 0);
     assert_eq!(compare(core.recording().unwrap(), full.recording().unwrap()), None, "the kept ticks are the run's first");
 
     // The real-time servo: the buffer fills at tick 100, the physics stalls at tick 200.
     let mut faulty = Faulty::new(wall(), 200);
     faulty.stall = Some(Duration::from_millis(100));
-    let dev = Pressing { z: |_t: f64| -0.012, sink: Arc::new(LogSink::default()), ticks: 300 };
+    let dev = pressing(|_t: f64| -0.012, Arc::new(LogSink::default()), 300);
     let cfg = ServoConfig { record_ticks: 100, safety: Some(fast_ramp()), ..Default::default() };
     let core = HapticCore::with_config(Box::new(faulty), &cfg, &dev).unwrap();
     let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();
@@ -215,7 +193,7 @@ fn ticks_past_the_recording_buffer_are_counted() {
 fn press_through(faulty: Faulty<Wall>) -> (HapticCore, Recording, Arc<LogSink>, u64) {
     let restores = faulty.restores.clone();
     let sink: Arc<LogSink> = Arc::default();
-    let mut dev = Pressing { z: |_t: f64| -0.012, sink: sink.clone(), ticks: 300 };
+    let mut dev = pressing(|_t: f64| -0.012, sink.clone(), 300);
     let mut core = HapticCore::new(Box::new(faulty), 1000.0, CouplingParams::default(), fast_ramp(), 50, 300);
     core.run_offline(&mut dev, 300);
     let rec = core.take_recording().unwrap();
@@ -291,7 +269,7 @@ fn nan_in_the_hybrid_state_is_contained_and_restored() {
 #[test]
 fn a_non_finite_state_behind_a_finite_force_is_a_fault_at_the_next_checkpoint() {
     let sink: Arc<LogSink> = Arc::default();
-    let mut dev = Pressing { z: |_t: f64| -0.004, sink: sink.clone(), ticks: 400 };
+    let mut dev = pressing(|_t: f64| -0.004, sink.clone(), 400);
     let mut physics = Faulty::new(wall(), u64::MAX);
     physics.bad_state_from = Some(120);
     let restores = physics.restores.clone();
@@ -313,7 +291,7 @@ fn force_limit_rate_and_ramp_hold_in_the_loop() {
     // A very stiff wall pressed deep: the coupling asks for far more than 3 N.
     let stiff = Wall::new(Vec3::zeros(), Vec3::z(), 1e5, 5.0);
     let sink: Arc<LogSink> = Arc::default();
-    let mut dev = Pressing { z: |t: f64| if t < 0.3 { 0.002 - 0.1 * t } else { 0.002 - 0.1 * (0.6 - t) }, sink, ticks: 600 };
+    let mut dev = pressing(|t: f64| if t < 0.3 { 0.002 - 0.1 * t } else { 0.002 - 0.1 * (0.6 - t) }, sink, 600);
     let safety = SafetyParams::default();
     let mut core = HapticCore::new(Box::new(stiff), 1000.0, CouplingParams::new(1000.0, 2.0, 0.01), safety, 250, 0);
     let dt = 1e-3;
@@ -339,7 +317,7 @@ fn force_limit_rate_and_ramp_hold_in_the_loop() {
 fn press_cycle_energy(mut core: HapticCore) -> f64 {
     let sink: Arc<LogSink> = Arc::default();
     let z = |t: f64| if t < 0.25 { 0.002 - 0.032 * t } else { 0.002 - 0.032 * (0.5 - t).max(0.0) };
-    let mut dev = Pressing { z, sink, ticks: 600 };
+    let mut dev = pressing(z, sink, 600);
     core.run_offline(&mut dev, 600);
     let rec = core.take_recording().unwrap();
     let forces: Vec<Vec3> = rec.ticks.iter().map(|t| t.force).collect();
@@ -613,7 +591,7 @@ fn overruns_are_told_apart_by_the_servo_threads_cpu_time() {
         } else {
             faulty.stall = Some(Duration::from_millis(5));
         }
-        let dev = Pressing { z: |_t: f64| 0.01, sink: Arc::new(LogSink::default()), ticks: 60 };
+        let dev = pressing(|_t: f64| 0.01, Arc::new(LogSink::default()), 60);
         let cfg = ServoConfig { safety: Some(fast_ramp()), ..Default::default() };
         let core = HapticCore::with_config(Box::new(faulty), &cfg, &dev).unwrap();
         Servo::start(core, Box::new(dev), &cfg).unwrap().join().stats

@@ -22,32 +22,8 @@ use palpate_core::{Mat3, Vec3};
 use palpate_haptics::devices::Scripted;
 use palpate_haptics::multirate::{LocalModel, PhysicsLoop};
 use palpate_haptics::record::compare;
-use palpate_haptics::{CouplingParams, Device, DeviceInput, DeviceKind, Fault, ForceSink, HapticCore, Physics, Recording, SafetyParams, Servo, ServoConfig, Wall};
+use palpate_haptics::{CouplingParams, DeviceInput, Fault, HapticCore, Physics, Recording, SafetyParams, Servo, ServoConfig, Wall};
 use support::*;
-
-/// A device at `z(t)` on the z axis, silent (no sample) while `silent(t)`.
-struct Pressing<F: Fn(f64) -> f64 + Send, S: Fn(f64) -> bool + Send> {
-    z: F,
-    silent: S,
-    sink: Arc<dyn ForceSink>,
-    ticks: u64,
-}
-
-impl<F: Fn(f64) -> f64 + Send, S: Fn(f64) -> bool + Send> Device for Pressing<F, S> {
-    fn read(&mut self, tick: u64, dt: f64) -> Option<DeviceInput> {
-        let t = (tick + 1) as f64 * dt;
-        (!(self.silent)(t)).then(|| DeviceInput::at(Vec3::new(0.0, 0.0, (self.z)(t))))
-    }
-    fn sink(&self) -> Arc<dyn ForceSink> {
-        self.sink.clone()
-    }
-    fn kind(&self) -> DeviceKind {
-        DeviceKind::Simulated
-    }
-    fn finished(&self, ticks: u64, _dt: f64) -> bool {
-        ticks >= self.ticks
-    }
-}
 
 fn fast_ramp() -> SafetyParams {
     SafetyParams { ramp: 0.02, ..Default::default() }
@@ -182,7 +158,7 @@ fn passivity_against_a_stiff_wall_at_both_rates() {
         let mut core = HapticCore::new(Box::new(stiff), rate, CouplingParams::default(), nolimit, 250, 10_000);
         let z = |t: f64| if t < 0.25 { 0.002 - 0.032 * t } else { 0.002 - 0.032 * (0.5 - t).max(0.0) };
         let ticks = (0.6 * rate) as u64;
-        let mut dev = Pressing { z, silent: |_| false, sink: Arc::new(LogSink::default()), ticks };
+        let mut dev = pressing(z, Arc::new(LogSink::default()), ticks);
         core.run_offline_multirate(&mut dev, ticks, physics_rate);
         let rec = core.take_recording().unwrap();
         let forces: Vec<Vec3> = rec.ticks.iter().map(|t| t.force).collect();
@@ -314,7 +290,7 @@ fn the_servo_keeps_its_period_while_the_physics_stalls() {
     let stalled_at = faulty.stalled_at.clone();
     let log = Arc::new(LogSink::default());
     log.0.lock().unwrap().reserve(20_000);
-    let dev = Pressing { z: |_t: f64| -0.012, silent: |_| false, sink: log.clone(), ticks: 1200 };
+    let dev = pressing(|_t: f64| -0.012, log.clone(), 1200);
     let cfg = ServoConfig { rate_hz: 1000.0, physics_rate_hz: Some(1000.0), safety: Some(fast_ramp()), ..Default::default() };
     let core = HapticCore::with_config(Box::new(faulty), &cfg, &dev).unwrap();
     let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();

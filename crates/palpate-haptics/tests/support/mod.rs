@@ -11,7 +11,7 @@ use palpate_core::hybrid::{build, shapes, HybridModel, HybridOptions};
 use palpate_core::material::{Damping, Elasticity};
 use palpate_core::runtime::SimOptions;
 use palpate_core::{Material, StepError, Vec3};
-use palpate_haptics::{ForceSink, HybridPhysics, Identity, Physics};
+use palpate_haptics::{Device, DeviceInput, DeviceKind, ForceSink, HybridPhysics, Identity, Physics};
 
 /// The paper's concentric ellipsoids, at the default build options.
 pub fn ellipsoids() -> &'static HybridModel {
@@ -147,4 +147,34 @@ impl<P: Physics> Physics for Faulty<P> {
 /// times the hand's displacement over it, `sum_k F_k . (x_{k+1} - x_k)`.
 pub fn energy_into_user(forces: &[Vec3], positions: &[Vec3]) -> f64 {
     forces.iter().zip(positions.windows(2)).map(|(f, w)| f.dot(&(w[1] - w[0]))).sum()
+}
+
+/// A device at `z(t)` on the z axis \[m\], silent (no sample) while `silent(t)`, for `ticks`
+/// ticks, reporting through `sink`.
+pub struct Pressing<F: Fn(f64) -> f64 + Send, S: Fn(f64) -> bool + Send> {
+    pub z: F,
+    pub silent: S,
+    pub sink: Arc<dyn ForceSink>,
+    pub ticks: u64,
+}
+
+/// A device at `z(t)` that never falls silent.
+pub fn pressing<F: Fn(f64) -> f64 + Send>(z: F, sink: Arc<dyn ForceSink>, ticks: u64) -> Pressing<F, fn(f64) -> bool> {
+    Pressing { z, silent: |_| false, sink, ticks }
+}
+
+impl<F: Fn(f64) -> f64 + Send, S: Fn(f64) -> bool + Send> Device for Pressing<F, S> {
+    fn read(&mut self, tick: u64, dt: f64) -> Option<DeviceInput> {
+        let t = (tick + 1) as f64 * dt;
+        (!(self.silent)(t)).then(|| DeviceInput::at(Vec3::new(0.0, 0.0, (self.z)(t))))
+    }
+    fn sink(&self) -> Arc<dyn ForceSink> {
+        self.sink.clone()
+    }
+    fn kind(&self) -> DeviceKind {
+        DeviceKind::Simulated
+    }
+    fn finished(&self, ticks: u64, _dt: f64) -> bool {
+        ticks >= self.ticks
+    }
 }
