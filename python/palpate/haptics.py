@@ -194,7 +194,7 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
     ``busy_wait``: both loops' servo spins through each whole period (:data:`BUSY_SPIN`) or, False,
     sleeps through each wait but its last 200 us (:data:`SLEEP_SPIN`); None: :class:`palpate.HapticLoop`'s
     default, busy unless ``realtime`` (the report's ``busy_wait`` says which ran); ``physics_rate``
-    [Hz]: the multirate loop (:class:`palpate.HapticLoop`; the report's ``physics`` holds the
+    [Hz]: the multirate loop, None the single-rate one (:class:`palpate.HapticLoop`; the report's ``physics`` holds the
     physics thread's figures). ``max_force_step_n``: the largest change of the sent force in one
     servo period [N], from the run's recording, and ``max_force_step_contact_n`` the same over the
     periods in contact (the tissue's force nonzero at either end)."""
@@ -206,7 +206,8 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
     busy_wait = (not realtime and physics_rate is None) if busy_wait is None else busy_wait
     ticks = int(round(seconds * rate_hz))
     loop = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz, max_ticks=ticks,
-                         realtime=realtime, threads=threads, spin=spin, physics_rate=physics_rate, record_ticks=ticks)
+                         realtime=realtime, threads=threads, spin=spin, physics_rate=physics_rate,
+                         single_rate=physics_rate is None, record_ticks=ticks)
     steal0 = steal_seconds()
     r = run_live(loop, None, on_status)
     steal1 = steal_seconds()
@@ -232,7 +233,8 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
         ir = run_live(il, None, None)
         r["idle"] = {key: ir[key] for key in ("ticks", "achieved_hz", "elapsed_s", "period_us_p50", "period_us_p99",
                                               "period_us_max", "compute_us_p99", "cpu_us_p99", "overruns",
-                                              "overruns_own", "overruns_machine", "realtime")}
+                                              "overruns_own", "overruns_machine", "realtime",
+                                              "short_slice")}
         r["idle"]["overruns_per_s"] = per_second(ir["overrun_times_s"], ir["elapsed_s"])
     r["cpu_count"] = os.cpu_count()
     r["machine"] = platform.processor() or platform.machine()

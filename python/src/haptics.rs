@@ -31,10 +31,12 @@ use crate::material::PyMaterial;
 /// never sleeps; see the class docs for why). `palpate.haptics.BUSY_SPIN` is the same value.
 const BUSY_SPIN: f64 = 1.0;
 
-/// The default `spin` of the multirate loop's servo [s] (`physics_rate` set): it sleeps through
-/// each wait but its last 200 us, leaving the cores to the physics thread (see the class docs).
-/// `palpate.haptics.SLEEP_SPIN` is the same value.
-const MULTIRATE_SPIN: f64 = 200e-6;
+/// The default `spin` of the multirate loop's servo [s]: it sleeps to each deadline, leaving the
+/// cores to the physics thread (see the class docs).
+const MULTIRATE_SPIN: f64 = 0.0;
+
+/// The physics thread's rate of the multirate loop when none is given [Hz] (at most the servo's).
+const DEFAULT_PHYSICS_RATE_HZ: f64 = 1000.0;
 
 // One per loop, moved rarely: the variants' sizes do not matter.
 #[allow(clippy::large_enum_variant)]
@@ -62,7 +64,7 @@ fn busy(what: &str) -> PyErr {
 /// tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None,
 /// coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None,
 /// stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1,
-/// physics_rate=None)``
+/// physics_rate=None, single_rate=False)``
 ///
 /// Parameters
 /// ----------
@@ -116,8 +118,12 @@ fn busy(what: &str) -> PyErr {
 ///     physics (``palpate_haptics::multirate``). ``stop()``'s report then has ``physics``
 ///     (``rate_hz``, ``achieved_hz``, ``ticks``, ``compute_us_p50`` / ``_p99`` / ``_max``,
 ///     ``lag_us_p99`` / ``_max``, ``late``, ``skipped``); :meth:`run` runs it without a clock, a
-///     multirate recording replaying bit for bit from its recorded schedule. None (default): one
-///     physics tick inside every servo period.
+///     multirate recording replaying bit for bit from its recorded schedule. None (default):
+///     1000 Hz, or ``rate_hz`` if lower. A replay runs at its recording's rates.
+/// single_rate : bool
+///     One physics tick inside every servo period instead (no physics thread; the loop before
+///     the multirate one, kept for comparison: a physics tick longer than the period is a period
+///     the hand misses). Not with ``physics_rate``.
 /// record_ticks : int
 ///     Ticks to record for :meth:`save_recording` (0: none). The buffer is allocated at start
 ///     (144 bytes a tick; a replay's or a script's is at most its length); ticks past it are
@@ -132,10 +138,12 @@ fn busy(what: &str) -> PyErr {
 ///     a compute p99 ~20% lower and 5-50 overruns a minute against 38-234 sleeping (BENCHMARKS.md,
 ///     2026-11-27). ``200e-6`` (``palpate haptic --sleep``) sleeps through each wait but its
 ///     last 200 us, leaving the core to other work.
-///     With ``physics_rate`` the default is ``200e-6``: the servo's work is then ~10-20 us a
-///     period, and a spinning servo takes the core the physics thread needs (Rodero at 1 kHz
-///     with a CPU-bound program beside it: 3,346 late periods in 30 s spinning, 707 sleeping, the
-///     physics 564 against 737 ticks a second; quiet at 4 kHz, 252 a minute against 23 in 30 s).
+///     With ``physics_rate`` the default is 0: the servo's work is then ~10-20 us a period, it
+///     sleeps to each deadline (an ordinary servo thread asks Linux for its shortest time slice
+///     and a 1 us timer slack, so that it wakes on time and preempts a CPU-bound program), and
+///     the core is left to the physics thread. Rodero at 1 kHz with a CPU-bound program beside
+///     it, 30 s: 3,346 late periods spinning, 593 sleeping all but the last 200 us, 41-48
+///     sleeping to the deadline; at 4 kHz 6,329 against 40-47 (BENCHMARKS.md).
 /// realtime : bool
 ///     Run the servo thread under ``SCHED_FIFO`` (priority 80; the watchdog 81) so that the
 ///     machine's other work cannot preempt a tick. Needs root, ``CAP_SYS_NICE`` or an
@@ -278,6 +286,7 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
         }
         None => d.set_item("physics", py.None())?,
     }
+    d.set_item("short_slice", r.short_slice)?;
     d.set_item("realtime", match &r.realtime {
         Realtime::Off => "off".to_string(),
         Realtime::Granted(p) => format!("SCHED_FIFO priority {p}"),
@@ -289,7 +298,7 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
 #[pymethods]
 impl PyHapticLoop {
     #[new]
-    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, silence = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1), physics_rate = None), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1, physics_rate=None)")]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, silence = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1), physics_rate = None, single_rate = false), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1, physics_rate=None, single_rate=False)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -324,6 +333,7 @@ impl PyHapticLoop {
         #[pyo3(from_py_with = conv::arg)] realtime: bool,
         threads: errors::Int,
         #[pyo3(from_py_with = conv::arg)] physics_rate: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] single_rate: bool,
     ) -> PyResult<Self> {
         // Counts as errors::Int: a negative one, or one beyond 64 bits, is a ParameterError
         // (pyo3's usize / u16 conversions raised OverflowError). The rest runs under the panic guard: a panic while opening a recording,
@@ -351,7 +361,12 @@ impl PyHapticLoop {
             }
             let mut replay: Option<Recording> = None;
             let mut rate_hz = rate_hz;
-            let mut physics_rate = physics_rate;
+            if single_rate && physics_rate.is_some() {
+                return Err(errors::param_error_from("physics_rate and single_rate=True together: the single-rate loop has no physics thread"));
+            }
+            // The multirate loop by default, its physics at 1 kHz (or the servo's rate, if lower);
+            // the idle loop has no physics to run.
+            let mut physics_rate = if single_rate || idle { None } else { Some(physics_rate.unwrap_or(DEFAULT_PHYSICS_RATE_HZ.min(rate_hz))) };
             if device == "replay" {
                 let path = recording.as_ref().ok_or_else(|| errors::param_error_from("device 'replay' needs recording=PATH"))?;
                 let r = Recording::load(path).map_err(record_error)?;
@@ -582,7 +597,9 @@ impl PyHapticLoop {
     /// ``bad_inputs``, ``n_faults``, ``faults`` (list of dicts ``tick``, ``time``, ``reason``),
     /// ``watchdog_trips``, ``recording_dropped_ticks`` (ticks past the recording buffer, not
     /// recorded: nonzero means the recording holds only the run's beginning), ``realtime`` (the
-    /// servo's scheduling: ``"off"``, ``"SCHED_FIFO priority 80"`` or ``"refused: ..."``).
+    /// servo's scheduling: ``"off"``, ``"SCHED_FIFO priority 80"`` or ``"refused: ..."``),
+    /// ``short_slice`` (an ordinary servo thread was granted Linux's shortest time slice, which
+    /// lets it preempt a CPU-bound program when it wakes; kernels before 6.12 refuse it).
     fn stop<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         // Out of the mutex before the GIL is released (see the module).
         let taken = std::mem::replace(&mut *self.stage.lock().unwrap(), Stage::Busy("stopping"));

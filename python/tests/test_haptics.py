@@ -48,7 +48,8 @@ def cycle(model, ticks=1200):
 
 def test_replay_through_the_binding_is_bit_identical(model, tmp_path):
     t, k = cycle(model)
-    loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, record_ticks=3000)
+    loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, record_ticks=3000,
+                         single_rate=True)
     r = loop.run()
     assert r["ticks"] == 2000 and r["n_faults"] == 0
     assert r["max_force_n"] > 0.02, "the palpation touches"
@@ -135,7 +136,7 @@ def test_multirate_loop_replays_bit_identically_offline_and_from_live(model, tmp
     r = off.run()
     assert r["ticks"] == 2000 and r["n_faults"] == 0 and r["max_force_n"] > 0.02
     assert r["device_silences"] == 0 and r["model_stalls"] == 0
-    single = _p.HapticLoop(model, m, "scripted", times=t, knots=k, record_ticks=3000)
+    single = _p.HapticLoop(model, m, "scripted", times=t, knots=k, record_ticks=3000, single_rate=True)
     single.run()
     f_off, f_single = off.recorded()["force"], single.recorded()["force"]
     rel = np.sqrt(np.mean(np.sum((f_off - f_single) ** 2, axis=1)) / np.mean(np.sum(f_single ** 2, axis=1)))
@@ -158,8 +159,13 @@ def test_multirate_loop_replays_bit_identically_offline_and_from_live(model, tmp
         a, b = loop.recorded(), again.recorded()
         for key in ("force", "tool", "device"):
             assert np.array_equal(a[key], b[key]), (name, key)
-    # Single-rate loops report no physics thread.
+    # Single-rate loops report no physics thread; the default is multirate, its physics at 1 kHz
+    # or the servo's rate if lower.
     assert single.physics_rate_hz is None
+    assert _p.HapticLoop(model, m, "scripted", times=t, knots=k).physics_rate_hz == 1000.0
+    assert _p.HapticLoop(model, m, "scripted", times=t, knots=k, rate_hz=500.0).physics_rate_hz == 500.0
+    with pytest.raises(ValueError, match="single_rate"):
+        _p.HapticLoop(model, m, "scripted", times=t, knots=k, physics_rate=500.0, single_rate=True)
     with pytest.raises(ValueError, match="physics rate"):
         _p.HapticLoop(model, m, "scripted", times=t, knots=k, physics_rate=50.0)
     with pytest.raises(ValueError, match="physics rate"):

@@ -799,6 +799,9 @@ pub struct ServoReport {
     pub watchdog_trips: u64,
     /// The servo thread's scheduling: [`Realtime::Off`] unless [`ServoConfig::realtime`].
     pub realtime: Realtime,
+    /// An ordinary servo thread was granted Linux's short slice
+    /// ([`crate::realtime::request_short_slice`]).
+    pub short_slice: bool,
     /// The multirate loop's physics thread (`None`: single-rate).
     pub physics: Option<PhysicsStats>,
 }
@@ -974,6 +977,8 @@ struct Pacer {
     /// throttle's 95% (crate::realtime).
     min_rest: Duration,
     realtime: Realtime,
+    /// Whether the kernel granted the short slice.
+    short_slice: bool,
     times: TickTimes,
     start: Instant,
     deadline: Instant,
@@ -988,12 +993,19 @@ impl Pacer {
     fn new(cfg: &ServoConfig) -> Pacer {
         let period = Duration::from_secs_f64(cfg.dt());
         let realtime = if cfg.realtime { crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY) } else { Realtime::Off };
+        // An ordinary servo thread asks for Linux's shortest slice and a 1 us timer slack (no
+        // privilege needed; crate::realtime says why). Measured 2026-12-07 on Rodero with a
+        // CPU-bound program beside the multirate loop (30 s): at 4 kHz 320 late periods without
+        // the slice, 40-47 with it; the slack takes the sleep's wake-up from 50 us late to ~1 us.
+        let short_slice = !realtime.granted() && crate::realtime::request_short_slice(crate::realtime::SERVO_SLICE_NS);
+        crate::realtime::set_timer_slack(crate::realtime::SERVO_TIMER_SLACK_NS);
         let start = Instant::now();
         Pacer {
             period,
             spin: Duration::from_secs_f64(cfg.spin),
             min_rest: period.mul_f64(0.06),
             realtime,
+            short_slice,
             times: TickTimes::new(cfg.stats_ticks, cfg.rate_hz),
             start,
             deadline: start,
@@ -1048,10 +1060,10 @@ impl Pacer {
     /// The run's statistics, `done` set first: sorting a long run's times (240,000 ticks at
     /// 4 kHz for a minute) takes tens of milliseconds, which the watchdog took for a stalled
     /// servo.
-    fn finish(self, shared: &Shared) -> (Stats, Realtime) {
+    fn finish(self, shared: &Shared) -> (Stats, Realtime, bool) {
         let elapsed = (Instant::now() - self.start).as_secs_f64();
         shared.done.store(true, Ordering::Release);
-        (self.times.finish(elapsed), self.realtime)
+        (self.times.finish(elapsed), self.realtime, self.short_slice)
     }
 }
 
@@ -1080,13 +1092,18 @@ impl SurfacePublisher {
         }
         let watched = tick.saturating_sub(self.read_tick) <= self.idle;
         if watched || self.published.is_none_or(|t| tick - t >= self.idle) {
-            self.published = Some(tick);
-            shared.surface.publish_with(tick, |out| {
-                physics.surface(out);
-                out.len()
-            });
-            shared.interior.publish_with(tick, |out| physics.interior(out));
+            self.publish(tick, physics, shared);
         }
+    }
+
+    /// Publishes the surface and the interior now, as of `tick`.
+    fn publish(&mut self, tick: u64, physics: &dyn Physics, shared: &Shared) {
+        self.published = Some(tick);
+        shared.surface.publish_with(tick, |out| {
+            physics.surface(out);
+            out.len()
+        });
+        shared.interior.publish_with(tick, |out| physics.interior(out));
     }
 }
 
@@ -1151,9 +1168,9 @@ fn run(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfig, shar
         pacer.wait(t1);
     }
     sink.send(&Vec3::zeros());
-    let (stats, realtime) = pacer.finish(&shared);
+    let (stats, realtime, short_slice) = pacer.finish(&shared);
     let trips = shared.trips.load(Ordering::Relaxed);
-    ServoReport { core, device, stats, watchdog_trips: trips, realtime, physics: None }
+    ServoReport { core, device, stats, watchdog_trips: trips, realtime, short_slice, physics: None }
 }
 
 /// The multirate loop's servo thread: every period, the device's sample and the physics' newest
@@ -1201,9 +1218,9 @@ fn run_render(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfi
         pacer.wait(t1);
     }
     sink.send(&Vec3::zeros());
-    let (stats, realtime) = pacer.finish(&shared);
+    let (stats, realtime, short_slice) = pacer.finish(&shared);
     let trips = shared.trips.load(Ordering::Relaxed);
-    ServoReport { core, device, stats, watchdog_trips: trips, realtime, physics: None }
+    ServoReport { core, device, stats, watchdog_trips: trips, realtime, short_slice, physics: None }
 }
 
 /// The multirate loop's physics thread: on its own clock (absolute deadlines at the physics
@@ -1226,11 +1243,18 @@ fn run_physics(mut pl: PhysicsLoop, cfg: ServoConfig, shared: Arc<Shared>) -> (P
     let scaled = |ticks: u64| ((ticks as f64 * rate / cfg.rate_hz).round() as u64).max(1);
     let every = if cfg.surface_every > 0 { scaled(cfg.surface_every) } else { 0 };
     let mut surfaces = SurfacePublisher::new(every, scaled(IDLE_SNAPSHOT_TICKS));
+    let mut rest_published = every == 0;
     let mut started: Option<Instant> = None;
     let mut deadline = Instant::now();
     while !shared.done.load(Ordering::Acquire) {
         if shared.target_tick.load(Ordering::Acquire) == 0 {
-            // No device sample yet: nothing to tick against.
+            // No device sample yet: nothing to tick against. A viewer meanwhile draws the tissue
+            // at rest (published once, as tick 1: tick 0 is "nothing yet"), as the single-rate
+            // servo's snapshots show it before a bridge client connects.
+            if !rest_published {
+                rest_published = true;
+                surfaces.publish(1, pl.physics(), &shared);
+            }
             std::thread::sleep(period.min(Duration::from_millis(1)));
             deadline = Instant::now();
             continue;

@@ -87,7 +87,8 @@ def make_loop(a, model, record_ticks: int):
 
     kind, _, arg = a.device.partition(":")
     common = dict(rate_hz=a.rate, record_ticks=record_ticks, max_force=a.max_force, tool_radius=a.tool_radius,
-                  realtime=a.realtime, threads=a.threads, physics_rate=a.physics_hz)
+                  realtime=a.realtime, threads=a.threads, physics_rate=a.physics_hz,
+                  single_rate=a.physics_hz is None)
     if a.busy_wait:
         common["spin"] = haptics.BUSY_SPIN
     elif a.sleep:
@@ -111,6 +112,7 @@ def make_loop(a, model, record_ticks: int):
         if kind == "replay":
             common.pop("rate_hz")
             common.pop("physics_rate")
+            common.pop("single_rate")
             return _p.HapticLoop(model, mat, "replay", recording=arg, **common)
         if kind == "bridge":
             try:

@@ -126,12 +126,13 @@ def cmd_view(a) -> int:
     if not is_loopback(a.host):
         print(f"palpate: warning: serving on {a.host}: anyone who can reach port {a.port} can watch and drive the "
               "simulation (no authentication, no encryption); use 127.0.0.1 and an SSH tunnel instead", file=sys.stderr)
+    hz = physics_rate(a, "view")
     try:
         viewer = Viewer(model, name, host=a.host, port=a.port, device=a.device, bridge_port=a.bridge_port,
                         bridge_host=a.host if a.device == "bridge" else "127.0.0.1", preset=a.preset,
                         tool_radius=a.tool_radius, press_depth=a.press_depth, rate_hz=a.rate, fps=a.fps,
                         max_force=a.max_force, show_core=a.show_core, show_particles=a.show_particles,
-                        realtime=a.realtime, physics_rate=physics_rate(a, "view"))
+                        realtime=a.realtime, physics_rate=hz, single_rate=hz is None)
     except _p.ParameterError as e:
         raise Fail(f"palpate view: {e}") from None
     except OSError as e:

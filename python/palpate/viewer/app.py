@@ -87,7 +87,8 @@ class Viewer:
     [Hz] (the loop's is ``rate_hz``); ``show_core``, ``show_particles``: draw the core's tets and
     the active particles from the start (the GUI's "Show" boxes); ``realtime``: the servo under
     ``SCHED_FIFO`` (:class:`palpate.HapticLoop`), so that the browser and the viewer's own threads
-    cannot preempt a tick. A full-FEM model draws its boundary faces as the surface and its tets
+    cannot preempt a tick; ``physics_rate`` [Hz] and ``single_rate``: the loop's physics thread
+    (:class:`palpate.HapticLoop`; default: multirate, the physics at 1 kHz). A full-FEM model draws its boundary faces as the surface and its tets
     as the "core"; a scene's material is the first preset ("scene: ..."). Raises
     :class:`palpate.ParameterError` for a bad value.
     :meth:`close` stops the loop and the server."""
@@ -97,7 +98,7 @@ class Viewer:
                  preset: Optional[str] = None, tool_radius: float = 0.005, press_depth: float = 0.003,
                  rate_hz: float = 1000.0, fps: float = 30.0, max_force: Optional[float] = None,
                  show_core: bool = False, show_particles: bool = False, realtime: bool = False,
-                 physics_rate: Optional[float] = None):
+                 physics_rate: Optional[float] = None, single_rate: bool = False):
         self.fem = isinstance(model, FemModel)
         presets = dict(_presets())
         if self.fem and model.material is not None:
@@ -145,7 +146,8 @@ class Viewer:
                                          "press_depth": float(press_depth), "bridge_host": bridge_host,
                                          "bridge_port": int(bridge_port), "rate_hz": float(rate_hz),
                                          "max_force": max_force, "realtime": bool(realtime),
-                                         "physics_rate": None if physics_rate is None else float(physics_rate)}
+                                         "physics_rate": None if physics_rate is None else float(physics_rate),
+                                         "single_rate": bool(single_rate)}
         self.fps = float(fps)
         self._show_initial = (bool(show_core), bool(show_particles))
         self.paused = False
@@ -260,7 +262,7 @@ class Viewer:
         s = self.settings
         mat = self.presets[s["preset"]]()
         common: Dict[str, Any] = dict(rate_hz=s["rate_hz"], tool_radius=s["tool_radius"], realtime=s["realtime"],
-                                      physics_rate=s["physics_rate"])
+                                      physics_rate=s["physics_rate"], single_rate=s["single_rate"])
         if s["max_force"] is not None:
             common["max_force"] = s["max_force"]
         if s["device"] == "bridge":
@@ -560,7 +562,7 @@ class Viewer:
             self.stats["max_force_n"] = max(self.stats["max_force_n"], fmag)
             self.stats["loop_ticks"] = int(snap["tick"])
             self.stats["loop_overruns"] = int(snap["overruns"])
-            if self.settings["physics_rate"] is not None:
+            if not self.settings["single_rate"]:
                 # The physics thread's rate over the last half second of frames.
                 self._physics.append((time.monotonic(), int(snap["physics_ticks"])))
                 (t0, n0), (t1, n1) = self._physics[0], self._physics[-1]
