@@ -127,9 +127,10 @@ pub fn request_short_slice(slice_ns: u64) -> bool {
         deadline: u64,
         period: u64,
     }
-    // SAFETY: getpriority on the calling thread (tid from gettid) reads no memory of ours.
+    // SAFETY: gettid takes no argument.
     let tid = unsafe { libc::syscall(libc::SYS_gettid) } as libc::id_t;
     // The thread's own nice value, kept (errno is not needed: a nice of -1 is as good as any).
+    // SAFETY: getpriority on the calling thread's id reads no memory of ours.
     let nice = unsafe { libc::getpriority(libc::PRIO_PROCESS, tid) };
     let attr = SchedAttr { size: std::mem::size_of::<SchedAttr>() as u32, policy: libc::SCHED_OTHER as u32, flags: 0, nice, priority: 0, runtime: slice_ns, deadline: 0, period: 0 };
     // SAFETY: `attr` is a valid sched_attr of the size it declares, alive for the call; pid 0 is

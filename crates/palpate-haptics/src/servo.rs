@@ -1243,7 +1243,6 @@ fn run_physics(mut pl: PhysicsLoop, cfg: ServoConfig, shared: Arc<Shared>) -> (P
     let scaled = |ticks: u64| ((ticks as f64 * rate / cfg.rate_hz).round() as u64).max(1);
     let every = if cfg.surface_every > 0 { scaled(cfg.surface_every) } else { 0 };
     let mut surfaces = SurfacePublisher::new(every, scaled(IDLE_SNAPSHOT_TICKS));
-    let mut rest_published = every == 0;
     let mut started: Option<Instant> = None;
     let mut deadline = Instant::now();
     while !shared.done.load(Ordering::Acquire) {
@@ -1251,8 +1250,7 @@ fn run_physics(mut pl: PhysicsLoop, cfg: ServoConfig, shared: Arc<Shared>) -> (P
             // No device sample yet: nothing to tick against. A viewer meanwhile draws the tissue
             // at rest (published once, as tick 1: tick 0 is "nothing yet"), as the single-rate
             // servo's snapshots show it before a bridge client connects.
-            if !rest_published {
-                rest_published = true;
+            if surfaces.every > 0 && surfaces.published.is_none() {
                 surfaces.publish(1, pl.physics(), &shared);
             }
             std::thread::sleep(period.min(Duration::from_millis(1)));
