@@ -64,7 +64,7 @@ fn busy(what: &str) -> PyErr {
 /// tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None,
 /// coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None,
 /// stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1,
-/// physics_rate=None, single_rate=False)``
+/// physics_rate=None, single_rate=False, unsafe_limits=False)``
 ///
 /// Parameters
 /// ----------
@@ -124,6 +124,13 @@ fn busy(what: &str) -> PyErr {
 ///     One physics tick inside every servo period instead (no physics thread; the loop before
 ///     the multirate one, kept for comparison: a physics tick longer than the period is a period
 ///     the hand misses). Not with ``physics_rate``.
+/// unsafe_limits : bool
+///     Accept a ``max_force`` above the device class's rated force (``kind``: touch 3.3 N,
+///     forcedimension 12 N, hapticmaster 250 N, haply and bridge 3.3 N until checked, simulated
+///     10 N), a ``coupling_stiffness`` above its rated stiffness (1,020 / 14,500 / 50,000 /
+///     1,020 / 3,000 N/m), or a ``stall_timeout`` or ``silence`` over 0.1 s. Without it those
+///     raise ``ParameterError``; with it a ``UserWarning`` says which, and the reports'
+///     ``unsafe_limits`` holds the reason (None otherwise). A replay keeps its recording's limits.
 /// record_ticks : int
 ///     Ticks to record for :meth:`save_recording` (0: none). The buffer is allocated at start
 ///     (144 bytes a tick; a replay's or a script's is at most its length); ticks past it are
@@ -169,6 +176,8 @@ pub struct PyHapticLoop {
     identity: (u64, String),
     /// A multirate recording to replay (`run`: bit for bit, from its recorded schedule).
     replay: Option<Recording>,
+    /// The limit beyond the device class's rating that `unsafe_limits` let through.
+    unsafe_note: Option<String>,
 }
 
 fn kind_of(name: &str) -> PyResult<DeviceKind> {
@@ -298,7 +307,7 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
 #[pymethods]
 impl PyHapticLoop {
     #[new]
-    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, silence = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1), physics_rate = None, single_rate = false), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1, physics_rate=None, single_rate=False)")]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, silence = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1), physics_rate = None, single_rate = false, unsafe_limits = false), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1, physics_rate=None, single_rate=False, unsafe_limits=False)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -334,6 +343,7 @@ impl PyHapticLoop {
         threads: errors::Int,
         #[pyo3(from_py_with = conv::arg)] physics_rate: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] single_rate: bool,
+        #[pyo3(from_py_with = conv::arg)] unsafe_limits: bool,
     ) -> PyResult<Self> {
         // Counts as errors::Int: a negative one, or one beyond 64 bits, is a ParameterError
         // (pyo3's usize / u16 conversions raised OverflowError). The rest runs under the panic guard: a panic while opening a recording,
@@ -387,6 +397,20 @@ impl PyHapticLoop {
             let safety = match &replay {
                 Some(r) => r.safety,
                 None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout), silence: silence.unwrap_or(ds.silence) },
+            };
+            // The device class's rated limits (a replay drives no device: its recorded limits
+            // stand); beyond them only with `unsafe_limits`, and then said.
+            let beyond = if replay.is_some() { None } else { palpate_haptics::safety::check_limits(kind, &coupling, &safety).err() };
+            let unsafe_note = match beyond {
+                Some(why) if !unsafe_limits => {
+                    return Err(errors::param_error_from(format!("{why}: refused (unsafe_limits=True, or --unsafe-limits on the command line, allows it, at the user's risk)")));
+                }
+                Some(why) => {
+                    let msg = std::ffi::CString::new(format!("unsafe limits: {why}")).unwrap_or_default();
+                    PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &msg, 1)?;
+                    Some(why)
+                }
+                None => None,
             };
             let defaults = ServoConfig::default();
             let mut config = ServoConfig { rate_hz, physics_rate_hz: physics_rate, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(if realtime { 0.0 } else if physics_rate.is_some() { MULTIRATE_SPIN } else { BUSY_SPIN }), realtime, ..defaults };
@@ -494,7 +518,7 @@ impl PyHapticLoop {
             let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
             // A multirate recording replays from its own schedule (`run`), not the device's samples.
             let replay = replay.filter(|r| r.physics_rate_hz.is_some());
-            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description), replay })
+            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description), replay, unsafe_note })
         })
     }
 
@@ -617,7 +641,9 @@ impl PyHapticLoop {
         };
         let d = report_dict(py, &report);
         *self.stage.lock().unwrap() = Stage::Done(Box::new(report));
-        d
+        let d = d?;
+        d.set_item("unsafe_limits", self.unsafe_note.clone())?;
+        Ok(d)
     }
 
     /// Runs the loop without a clock in this thread (GIL released) for at most ``max_ticks``
@@ -658,7 +684,9 @@ impl PyHapticLoop {
         let d = PyDict::new(py);
         let filled = core_dict(py, &core, &d);
         *self.stage.lock().unwrap() = Stage::Ready(core, dev);
-        filled.map(|_| d)
+        filled?;
+        d.set_item("unsafe_limits", self.unsafe_note.clone())?;
+        Ok(d)
     }
 
     /// Writes the recording (``record_ticks`` > 0) to ``path``: the device inputs, forces and

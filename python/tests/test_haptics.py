@@ -762,3 +762,33 @@ def test_core_contact_stiffness_reaches_the_hybrid_loop(model):
     assert a.identity != b.identity and a.identity == c.identity
     with pytest.raises(palpate.ParameterError, match="core_contact_stiffness"):
         palpate.HapticLoop(model, haptics.material(), "hand", hand_start=p, core_contact_stiffness=-1.0)
+
+
+def test_limits_beyond_the_device_rating_are_refused_unless_asked(model):
+    # The hostile run of issue 35: a 50 N limit with a Touch, a 100 s watchdog, both accepted.
+    t, k = cycle(model)
+    m = haptics.material()
+    with pytest.raises(_p.ParameterError, match="rated 3.3 N"):
+        _p.HapticLoop(model, m, "scripted", times=t, knots=k, kind="touch", max_force=50.0)
+    with pytest.raises(_p.ParameterError, match="rated 1020 N/m"):
+        _p.HapticLoop(model, m, "scripted", times=t, knots=k, kind="touch", coupling_stiffness=5000.0)
+    with pytest.raises(_p.ParameterError, match="stall_timeout"):
+        _p.HapticLoop(model, m, "scripted", times=t, knots=k, stall_timeout=100.0)
+    with pytest.raises(_p.ParameterError, match="silence"):
+        _p.HapticLoop(model, m, "scripted", times=t, knots=k, silence=0.5)
+    # The class's own rating: a HapticMaster may push 50 N.
+    _p.HapticLoop(model, m, "scripted", times=t, knots=k, kind="hapticmaster", max_force=50.0)
+    with pytest.warns(UserWarning, match="unsafe limits: max_force = 50 N"):
+        loop = _p.HapticLoop(model, m, "scripted", times=t, knots=k, kind="touch", max_force=50.0,
+                             unsafe_limits=True, max_ticks=5)
+    assert "rated 3.3 N" in loop.run()["unsafe_limits"]
+    assert _p.HapticLoop(model, m, "scripted", times=t, knots=k, max_ticks=5).run()["unsafe_limits"] is None
+
+
+def test_cli_refuses_a_force_limit_beyond_the_device(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ellipsoids", "--device", "hand", "--kind", "touch", "--max-force", "50",
+                        "--seconds", "0.05"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert r.returncode != 0 and "rated 3.3 N" in r.stderr and "--unsafe-limits" in r.stderr, r.stderr
+    r = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ellipsoids", "--device", "hand", "--kind", "touch", "--max-force", "50",
+                        "--unsafe-limits", "--seconds", "0.05"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert r.returncode == 0 and "unsafe limits" in r.stderr, r.stderr

@@ -108,6 +108,23 @@ impl DeviceKind {
         (c, SafetyParams::default())
     }
 
+    /// What the class is rated for: the force limit and the coupling's stiffness beyond these
+    /// are refused ([`crate::safety::check_limits`]) unless the user asks for unsafe limits.
+    /// The makers' figures: Touch 3.3 N peak, 1.02-2.31 N/mm by axis (the least); Force
+    /// Dimension omega.3 12 N, 14.5 N/mm (a Falcon saturates at its own ~8 N); Moog FCS
+    /// HapticMaster 250 N, 50 N/mm. The Haply Inverse3's and an unknown bridge client's are
+    /// taken as the Touch's (the most cautious of the classes) until checked; simulated devices
+    /// push no hand, and are bounded as CHAI3D's virtual device (10 N) with the Falcon's 3 N/mm.
+    pub fn rated(self) -> Rated {
+        let (max_force, max_stiffness) = match self {
+            DeviceKind::Simulated => (10.0, 3000.0),
+            DeviceKind::Bridge | DeviceKind::Touch | DeviceKind::Haply => (3.3, 1020.0),
+            DeviceKind::ForceDimension => (12.0, 14_500.0),
+            DeviceKind::HapticMaster => (250.0, 50_000.0),
+        };
+        Rated { max_force, max_stiffness }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
             DeviceKind::Simulated => "simulated",
@@ -118,6 +135,15 @@ impl DeviceKind {
             DeviceKind::HapticMaster => "hapticmaster",
         }
     }
+}
+
+/// A device class's rated figures (SI units; see [`DeviceKind::rated`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rated {
+    /// The largest force the device exerts \[N\].
+    pub max_force: f64,
+    /// The largest stiffness it renders stably \[N/m\].
+    pub max_stiffness: f64,
 }
 
 /// A haptic device as the servo sees it. `read` and the sink's `send` never block (a device

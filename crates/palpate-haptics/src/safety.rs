@@ -10,6 +10,9 @@
 
 use palpate_core::Vec3;
 
+use crate::coupling::CouplingParams;
+use crate::device::DeviceKind;
+
 /// Safety parameters (SI units).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SafetyParams {
@@ -55,6 +58,33 @@ impl SafetyParams {
         }
         Ok(())
     }
+}
+
+/// The longest a watchdog or a silence timeout may be \[s\]: a hand pushed by a stalled
+/// simulation, or by a device that stopped reporting, for longer than this is a hand the loop
+/// no longer controls.
+pub const MAX_TIMEOUT: f64 = 0.100;
+
+/// The limits a device class may run with: a force limit at most the class's rated force, a
+/// coupling at most its rated stiffness, watchdog and silence timeouts at most
+/// [`MAX_TIMEOUT`]. Beyond them, an error that says what and why; the caller may let the user
+/// override it explicitly (`unsafe_limits`), and logs that it did.
+pub fn check_limits(kind: DeviceKind, coupling: &CouplingParams, safety: &SafetyParams) -> Result<(), String> {
+    let r = kind.rated();
+    let name = kind.name();
+    if safety.max_force > r.max_force {
+        return Err(format!("max_force = {} N is above the {name} device class's rated {} N", safety.max_force, r.max_force));
+    }
+    if coupling.stiffness > r.max_stiffness {
+        return Err(format!("coupling stiffness = {} N/m is above the {name} device class's rated {} N/m", coupling.stiffness, r.max_stiffness));
+    }
+    if safety.stall_timeout > MAX_TIMEOUT {
+        return Err(format!("stall_timeout = {} s is above {} s: the watchdog would let a stalled simulation push the hand that long", safety.stall_timeout, MAX_TIMEOUT));
+    }
+    if safety.silence > MAX_TIMEOUT {
+        return Err(format!("silence = {} s is above {} s: a silent device would be pushed that long", safety.silence, MAX_TIMEOUT));
+    }
+    Ok(())
 }
 
 /// The safety layer's state: the last force sent, the ticks since the last (re)start.
@@ -122,5 +152,22 @@ mod tests {
         assert_eq!(s.apply(&Vec3::new(f64::NAN, 0.0, 0.0), dt), Vec3::zeros());
         // after a fault the ramp starts again
         assert!(s.apply(&big, dt).norm() <= big.norm() / 100.0 + 1e-12);
+    }
+
+    /// The rated bounds refuse what the hostile run passed (a 50 N limit with a Touch,
+    /// a 100 s watchdog) and accept every class's defaults.
+    #[test]
+    fn limits_beyond_the_rating_are_refused() {
+        for kind in [DeviceKind::Simulated, DeviceKind::Bridge, DeviceKind::Touch, DeviceKind::ForceDimension, DeviceKind::Haply, DeviceKind::HapticMaster] {
+            let (c, s) = kind.defaults();
+            assert_eq!(check_limits(kind, &c, &s), Ok(()), "{kind:?}");
+        }
+        let (c, s) = DeviceKind::Touch.defaults();
+        let e = check_limits(DeviceKind::Touch, &c, &SafetyParams { max_force: 50.0, ..s }).unwrap_err();
+        assert!(e.contains("max_force = 50 N") && e.contains("3.3 N"), "{e}");
+        assert!(check_limits(DeviceKind::Touch, &CouplingParams { stiffness: 5000.0, ..c }, &s).unwrap_err().contains("5000 N/m"));
+        assert!(check_limits(DeviceKind::HapticMaster, &c, &SafetyParams { stall_timeout: 100.0, ..s }).unwrap_err().contains("stall_timeout"));
+        assert!(check_limits(DeviceKind::Simulated, &c, &SafetyParams { silence: 0.2, ..s }).unwrap_err().contains("silence"));
+        assert_eq!(check_limits(DeviceKind::HapticMaster, &c, &SafetyParams { max_force: 50.0, ..s }), Ok(()));
     }
 }

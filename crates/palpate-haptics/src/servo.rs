@@ -161,6 +161,10 @@ pub struct ServoConfig {
     /// privilege, which [`ServoReport::realtime`] says. Default false. Set `spin` to 0 with it
     /// (the module says why).
     pub realtime: bool,
+    /// Accept a force limit or a coupling beyond the device class's rating, or a watchdog or
+    /// silence timeout over 100 ms ([`crate::safety::check_limits`]); the caller logs it.
+    /// Default false.
+    pub unsafe_limits: bool,
 }
 
 /// Without a reader, the surface and interior snapshots are refreshed about once every this many
@@ -170,7 +174,7 @@ pub const IDLE_SNAPSHOT_TICKS: u64 = 512;
 
 impl Default for ServoConfig {
     fn default() -> Self {
-        ServoConfig { rate_hz: 1000.0, physics_rate_hz: None, coupling: None, safety: None, checkpoint_every: 250, record_ticks: 0, stats_ticks: 600_000, max_ticks: None, spin: 200e-6, surface_every: 32, realtime: false }
+        ServoConfig { rate_hz: 1000.0, physics_rate_hz: None, coupling: None, safety: None, checkpoint_every: 250, record_ticks: 0, stats_ticks: 600_000, max_ticks: None, spin: 200e-6, surface_every: 32, realtime: false, unsafe_limits: false }
     }
 }
 
@@ -305,7 +309,11 @@ impl HapticCore {
     pub fn with_config(physics: Box<dyn Physics>, config: &ServoConfig, device: &dyn Device) -> Result<HapticCore, String> {
         config.check()?;
         let (c, s) = device.kind().defaults();
-        Ok(HapticCore::new(physics, config.rate_hz, config.coupling.unwrap_or(c), config.safety.unwrap_or(s), config.checkpoint_every, config.record_ticks))
+        let (coupling, safety) = (config.coupling.unwrap_or(c), config.safety.unwrap_or(s));
+        if !config.unsafe_limits {
+            crate::safety::check_limits(device.kind(), &coupling, &safety).map_err(|e| format!("{e} (unsafe_limits to allow it)"))?;
+        }
+        Ok(HapticCore::new(physics, config.rate_hz, coupling, safety, config.checkpoint_every, config.record_ticks))
     }
 
     /// One whole tick with the device's sample (`None`: no new sample): [`HapticCore::tick_force`]

@@ -96,7 +96,8 @@ fn replay_through_the_real_time_servo_is_bit_identical() {
     // preemption cannot trip it, so the bit-identity claim is checked on every run (the
     // watchdog's own promise is `watchdog_zeroes_force_within_30ms_of_a_stall`'s).
     let safety = SafetyParams { stall_timeout: 10.0, ..fast_ramp() };
-    let cfg = ServoConfig { record_ticks: 1000, safety: Some(safety), ..Default::default() };
+    // Over the 100 ms bound on purpose: `unsafe_limits`.
+    let cfg = ServoConfig { record_ticks: 1000, safety: Some(safety), unsafe_limits: true, ..Default::default() };
     let dev = Scripted::new(times.clone(), knots.clone()).unwrap();
     let core = HapticCore::with_config(Box::new(wall()), &cfg, &dev).unwrap();
     let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();

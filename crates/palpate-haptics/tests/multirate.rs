@@ -259,7 +259,7 @@ fn replay_of_a_multirate_run_is_bit_identical() {
     // Real time: the physics thread at 500 Hz beside the servo at 2 kHz.
     let dev = Scripted::new(times, knots).unwrap();
     let safety = SafetyParams { stall_timeout: 10.0, ..fast_ramp() };
-    let cfg = ServoConfig { rate_hz: rate, physics_rate_hz: Some(500.0), safety: Some(safety), record_ticks: ticks, checkpoint_every: 100, ..Default::default() };
+    let cfg = ServoConfig { rate_hz: rate, physics_rate_hz: Some(500.0), safety: Some(safety), record_ticks: ticks, checkpoint_every: 100, unsafe_limits: true, ..Default::default() };
     let core = HapticCore::with_config(Box::new(hybrid()), &cfg, &dev).unwrap();
     let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();
     let ps = report.physics.clone().expect("the physics thread's statistics");

@@ -41,6 +41,9 @@ def add_parser(sub) -> None:
     h.add_argument("--host", default="127.0.0.1", help="bridge address to bind (default 127.0.0.1)")
     h.add_argument("--kind", choices=KINDS, default=None, help="the device's make, for the coupling and safety defaults")
     h.add_argument("--max-force", type=float, default=None, metavar="N", help="force limit [N] (default 3)")
+    h.add_argument("--unsafe-limits", action="store_true",
+                   help="allow a --max-force above the device class's rated force (touch 3.3 N, forcedimension 12 N, "
+                        "hapticmaster 250 N), logged; refused otherwise")
     h.add_argument("--tool-radius", type=float, default=0.005, metavar="M", help="tool sphere radius [m] (default 0.005)")
     h.add_argument("--realtime", action="store_true",
                    help="run the servo under SCHED_FIFO so that other work cannot preempt a tick (needs root, "
@@ -88,7 +91,7 @@ def make_loop(a, model, record_ticks: int):
     kind, _, arg = a.device.partition(":")
     common = dict(rate_hz=a.rate, record_ticks=record_ticks, max_force=a.max_force, tool_radius=a.tool_radius,
                   realtime=a.realtime, threads=a.threads, physics_rate=a.physics_hz,
-                  single_rate=a.physics_hz is None)
+                  single_rate=a.physics_hz is None, unsafe_limits=a.unsafe_limits)
     if a.busy_wait:
         common["spin"] = haptics.BUSY_SPIN
     elif a.sleep:

@@ -53,6 +53,9 @@ def add_parser(sub) -> None:
     add_physics_rate(v)
     v.add_argument("--fps", type=float, default=30.0, metavar="HZ", help="viewer update rate [Hz] (default 30; 1 to 120)")
     v.add_argument("--max-force", type=float, default=None, metavar="N", help="force limit [N] (default 3)")
+    v.add_argument("--unsafe-limits", action="store_true",
+                   help="allow a --max-force above the device class's rated force (touch 3.3 N, forcedimension 12 N, "
+                        "hapticmaster 250 N), logged; refused otherwise")
     v.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: Ctrl-C)")
     v.add_argument("--screenshot", default=None, metavar="OUT.png",
                    help="render one frame of a press at the probe point in headless Chromium to OUT.png and exit")
@@ -132,7 +135,8 @@ def cmd_view(a) -> int:
                         bridge_host=a.host if a.device == "bridge" else "127.0.0.1", preset=a.preset,
                         tool_radius=a.tool_radius, press_depth=a.press_depth, rate_hz=a.rate, fps=a.fps,
                         max_force=a.max_force, show_core=a.show_core, show_particles=a.show_particles,
-                        realtime=a.realtime, physics_rate=hz, single_rate=hz is None)
+                        realtime=a.realtime, physics_rate=hz, single_rate=hz is None,
+                        unsafe_limits=a.unsafe_limits)
     except _p.ParameterError as e:
         raise Fail(f"palpate view: {e}") from None
     except OSError as e:

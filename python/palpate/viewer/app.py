@@ -88,7 +88,8 @@ class Viewer:
     the active particles from the start (the GUI's "Show" boxes); ``realtime``: the servo under
     ``SCHED_FIFO`` (:class:`palpate.HapticLoop`), so that the browser and the viewer's own threads
     cannot preempt a tick; ``physics_rate`` [Hz] and ``single_rate``: the loop's physics thread
-    (:class:`palpate.HapticLoop`; default: multirate, the physics at 1 kHz). A full-FEM model draws its boundary faces as the surface and its tets
+    (:class:`palpate.HapticLoop`; default: multirate, the physics at 1 kHz); ``unsafe_limits``: a
+    ``max_force`` above the device class's rating allowed (:class:`palpate.HapticLoop`). A full-FEM model draws its boundary faces as the surface and its tets
     as the "core"; a scene's material is the first preset ("scene: ..."). Raises
     :class:`palpate.ParameterError` for a bad value.
     :meth:`close` stops the loop and the server."""
@@ -98,7 +99,7 @@ class Viewer:
                  preset: Optional[str] = None, tool_radius: float = 0.005, press_depth: float = 0.003,
                  rate_hz: float = 1000.0, fps: float = 30.0, max_force: Optional[float] = None,
                  show_core: bool = False, show_particles: bool = False, realtime: bool = False,
-                 physics_rate: Optional[float] = None, single_rate: bool = False):
+                 physics_rate: Optional[float] = None, single_rate: bool = False, unsafe_limits: bool = False):
         self.fem = isinstance(model, FemModel)
         presets = dict(_presets())
         if self.fem and model.material is not None:
@@ -147,7 +148,7 @@ class Viewer:
                                          "bridge_port": int(bridge_port), "rate_hz": float(rate_hz),
                                          "max_force": max_force, "realtime": bool(realtime),
                                          "physics_rate": None if physics_rate is None else float(physics_rate),
-                                         "single_rate": bool(single_rate)}
+                                         "single_rate": bool(single_rate), "unsafe_limits": bool(unsafe_limits)}
         self.fps = float(fps)
         self._show_initial = (bool(show_core), bool(show_particles))
         self.paused = False
@@ -262,7 +263,8 @@ class Viewer:
         s = self.settings
         mat = self.presets[s["preset"]]()
         common: Dict[str, Any] = dict(rate_hz=s["rate_hz"], tool_radius=s["tool_radius"], realtime=s["realtime"],
-                                      physics_rate=s["physics_rate"], single_rate=s["single_rate"])
+                                      physics_rate=s["physics_rate"], single_rate=s["single_rate"],
+                                      unsafe_limits=s["unsafe_limits"])
         if s["max_force"] is not None:
             common["max_force"] = s["max_force"]
         if s["device"] == "bridge":
