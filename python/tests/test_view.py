@@ -321,7 +321,7 @@ def test_cli_warns_when_serving_beyond_loopback(monkeypatch, capsys):
     monkeypatch.setattr(palpate.viewer, "Viewer", refuse)
     assert main(["view", "ventricle", "--host", "0.0.0.0"]) == 1     # the ParameterError: bad input
     err = capsys.readouterr().err
-    assert "warning: serving on 0.0.0.0" in err and "no authentication" in err
+    assert "warning: serving on 0.0.0.0" in err and "token" in err and "unencrypted" in err
     assert main(["view", "ventricle", "--host", "127.0.0.1"]) == 1
     assert "warning" not in capsys.readouterr().err
 

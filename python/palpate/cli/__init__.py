@@ -30,6 +30,7 @@
         (a vendor device as a bridge client; each vendor SDK an optional extra)
     palpate view [MODEL] [--host IP] [--port N] [--device hand|bridge] [--bridge-port P] [--preset NAME]
                  [--tool-radius M] [--press-depth M] [--fps HZ] [--seconds S] [--screenshot OUT.png [--press M]]
+                 [--token TOKEN] [--require-token]
         (the haptic loop in a browser, viser on 127.0.0.1; palpate/viewer/)
     palpate sweep SPEC.toml [--out DIR] [--workers N | --scheduler ADDRESS] [--resume] [--json] [--quiet]
         (a batch study on Dask: results.parquet, a row per scenario; palpate/sweep/)

@@ -3,6 +3,11 @@
 the force and a live plot; dragging on the surface moves the simulated hand. ``--screenshot
 OUT.png`` renders one frame of a press with the system's headless Chromium and exits.
 
+Only the page's own loopback origin may open the page and its WebSocket, or anything with the
+viewer's token (:mod:`palpate.viewer.origin`); beyond loopback, or with ``--require-token``,
+nothing without it, and the URL printed carries it (``--token`` or ``$PALPATE_VIEW_TOKEN`` to
+choose it; else a random one per run).
+
 MODEL is a hybrid model file (``palpate build``) or a shape name (default ``rodero``; ``ventricle``
 and ``ellipsoids`` build in a second without data), or a full-FEM body: a tet mesh file (``.msh``,
 ``.vtu``, ``.vtk``, ``.npz``, ...; ``--unit`` for its coordinates; the nodes at its lowest z are
@@ -12,7 +17,9 @@ full-FEM body is drawn by its boundary faces (the tool meets its boundary nodes)
 from __future__ import annotations
 
 import ipaddress
+import logging
 import math
+import os
 import sys
 import time
 
@@ -37,8 +44,16 @@ def add_parser(sub) -> None:
     v.add_argument("--unit", choices=("m", "cm", "mm"), default="m",
                    help="a tet mesh file's coordinate unit (default m; the shared lv_*.msh are in cm)")
     v.add_argument("--host", default="127.0.0.1", metavar="IP",
-                   help="address to serve on (default 127.0.0.1; anything else is reachable from the network "
-                        "without authentication: a warning says so)")
+                   help="address to serve on (default 127.0.0.1; anything else is reachable from the network: the "
+                        "page then needs the token in the URL printed, and a warning says that the connection is "
+                        "not encrypted)")
+    v.add_argument("--token", default=os.environ.get("PALPATE_VIEW_TOKEN") or None, metavar="TOKEN",
+                   help="the token that admits a page or WebSocket from anywhere (?token=TOKEN in the URL; 8 or more "
+                        "URL-safe characters; default $PALPATE_VIEW_TOKEN, else a random one per run, printed in "
+                        "the URL when it is required or given)")
+    v.add_argument("--require-token", action="store_true",
+                   help="refuse every request without the token, also from this machine's own pages (always so "
+                        "beyond loopback)")
     v.add_argument("--port", type=int, default=8080, help="port (default 8080; 0: a free one; a busy one: the next free)")
     v.add_argument("--device", choices=DEVICES, default="hand",
                    help="hand: the page moves a simulated hand (default); bridge: a real device over UDP")
@@ -96,6 +111,13 @@ def _check(a) -> None:
     except ValueError:
         if a.host != "localhost":
             raise Usage(f"palpate view: --host {a.host!r} is not an IP address") from None
+    if a.token is not None:
+        from ..viewer.origin import check_token
+
+        try:
+            check_token(a.token)
+        except ValueError as e:
+            raise Usage(f"palpate view: --token: {e}") from None
 
 
 def status_line(s: dict, t: float) -> str:
@@ -103,7 +125,8 @@ def status_line(s: dict, t: float) -> str:
             f"(max {s['max_surface_mm']:.2f}) | {s['fps']:.1f} frames/s"
             + (f" | active particles {s['active_particles']}" if s["active_particles"] is not None else "") + f" | drags {s['drags']} | loop ticks "
             f"{s['loop_ticks']} overruns {s['loop_overruns']} | inputs rejected "
-            f"{s['inputs']['non_finite'] + s['inputs']['rate_limited']} | messages dropped {s['messages']['dropped']}")
+            f"{s['inputs']['non_finite'] + s['inputs']['rate_limited']} | messages dropped {s['messages']['dropped']}"
+            f" | requests refused {sum(s['requests']['refused'].values())}")
 
 
 def cmd_view(a) -> int:
@@ -112,8 +135,6 @@ def cmd_view(a) -> int:
         import viser  # noqa: F401
     except ImportError:
         raise RunFailed("palpate view: needs viser (pip install 'palpate[view]')") from None
-    from .. import _palpate as _p
-    from ..viewer import Viewer
     from ..viewer.app import PRESS_RANGE
 
     if a.screenshot:
@@ -127,18 +148,38 @@ def cmd_view(a) -> int:
             raise Usage(f"palpate view: --press {a.press} m is deeper than the viewer allows")
     name, model = load_view_model(a.model, "view", a.unit)
     if not is_loopback(a.host):
-        print(f"palpate: warning: serving on {a.host}: anyone who can reach port {a.port} can watch and drive the "
-              "simulation (no authentication, no encryption); use 127.0.0.1 and an SSH tunnel instead", file=sys.stderr)
+        print(f"palpate: warning: serving on {a.host}: anyone who can reach port {a.port} can try; only the token in "
+              "the URL printed lets a page in, and it travels unencrypted (no TLS): use 127.0.0.1 and an SSH tunnel "
+              "instead", file=sys.stderr)
     hz = physics_rate(a, "view")
+    # The viewer's refusals (the first of each reason) as the command's warnings.
+    log = logging.getLogger("palpate.viewer")
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("palpate: warning: %(message)s"))
+    log.addHandler(handler)
+    propagate, log.propagate = log.propagate, False
+    try:
+        return _serve(a, name, model, hz)
+    finally:
+        log.removeHandler(handler)
+        log.propagate = propagate
+
+
+def _serve(a, name, model, hz) -> int:
+    from .. import _palpate as _p
+    from ..viewer import OriginCheckUnavailable, Viewer
+
     try:
         viewer = Viewer(model, name, host=a.host, port=a.port, device=a.device, bridge_port=a.bridge_port,
                         bridge_host=a.host if a.device == "bridge" else "127.0.0.1", preset=a.preset,
                         tool_radius=a.tool_radius, press_depth=a.press_depth, rate_hz=a.rate, fps=a.fps,
                         max_force=a.max_force, show_core=a.show_core, show_particles=a.show_particles,
                         realtime=a.realtime, physics_rate=hz, single_rate=hz is None,
-                        unsafe_limits=a.unsafe_limits)
+                        unsafe_limits=a.unsafe_limits, token=a.token, require_token=a.require_token)
     except _p.ParameterError as e:
         raise Fail(f"palpate view: {e}") from None
+    except OriginCheckUnavailable as e:
+        raise RunFailed(f"palpate view: {e}") from None
     except OSError as e:
         raise RunFailed(f"palpate view: cannot serve on {a.host}:{a.port}: {e}") from None
     if viewer.bounds_warning:

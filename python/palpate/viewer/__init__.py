@@ -8,11 +8,15 @@ the loop's simulated hand; a bridge device drives the same view. The viewer read
 snapshots at its own rate and never waits on the loop, nor the loop on it.
 
 :func:`palpate.viewer.browser.screenshot` renders a frame with the system's headless Chromium.
+Who may open the page and its WebSocket (the viewer's own loopback origin, or the viewer's
+token): :mod:`palpate.viewer.origin`.
 Needs the ``view`` extra (``pip install 'palpate[view]'``: viser, and Playwright for pictures).
 """
 from __future__ import annotations
 
 from .app import DEVICES, PRESETS, Viewer
 from .guard import TargetGuard, install_message_bounds
+from .origin import OriginCheckUnavailable, RequestPolicy
 
-__all__ = ["DEVICES", "PRESETS", "TargetGuard", "Viewer", "install_message_bounds"]
+__all__ = ["DEVICES", "OriginCheckUnavailable", "PRESETS", "RequestPolicy", "TargetGuard", "Viewer",
+           "install_message_bounds"]

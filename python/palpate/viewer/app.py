@@ -27,6 +27,7 @@ from .. import _palpate as _p
 from . import colors
 from .fem import FemModel, loop_model
 from .guard import STATS, TargetGuard, finite_number, install_message_bounds
+from .origin import OriginCheckUnavailable, checking, policy_for
 
 #: Scene units per metre (the scene is in millimetres).
 MM = 1000.0
@@ -92,6 +93,14 @@ class Viewer:
     ``max_force`` above the device class's rating allowed (:class:`palpate.HapticLoop`). A full-FEM model draws its boundary faces as the surface and its tets
     as the "core"; a scene's material is the first preset ("scene: ..."). Raises
     :class:`palpate.ParameterError` for a bad value.
+
+    Who may open the page and its WebSocket (:mod:`palpate.viewer.origin`): pages of the viewer's
+    own loopback origin, and anything with the viewer's ``token`` (``None``: a random one,
+    :attr:`token`) in its URL (``?token=``) or the cookie a page loaded with it gets;
+    ``require_token`` (always so when ``host`` is not loopback): nothing without the token, and
+    :attr:`url` carries it (as it does for a token given here). Raises
+    :class:`palpate.viewer.origin.OriginCheckUnavailable` (a ``RuntimeError``) rather than serve
+    unchecked when the installed viser cannot be hooked.
     :meth:`close` stops the loop and the server."""
 
     def __init__(self, model: "_p.HybridModel | FemModel", name: str = "model", *, host: str = "127.0.0.1", port: int = 8080,
@@ -99,7 +108,8 @@ class Viewer:
                  preset: Optional[str] = None, tool_radius: float = 0.005, press_depth: float = 0.003,
                  rate_hz: float = 1000.0, fps: float = 30.0, max_force: Optional[float] = None,
                  show_core: bool = False, show_particles: bool = False, realtime: bool = False,
-                 physics_rate: Optional[float] = None, single_rate: bool = False, unsafe_limits: bool = False):
+                 physics_rate: Optional[float] = None, single_rate: bool = False, unsafe_limits: bool = False,
+                 token: Optional[str] = None, require_token: bool = False):
         self.fem = isinstance(model, FemModel)
         presets = dict(_presets())
         if self.fem and model.material is not None:
@@ -119,6 +129,10 @@ class Viewer:
             raise _p.ParameterError(f"press_depth = {press_depth} m: expected {PRESS_RANGE[0]} to {PRESS_RANGE[1]} m")
         if not (math.isfinite(fps) and 1.0 <= fps <= 120.0):
             raise _p.ParameterError(f"fps = {fps}: expected 1 to 120")
+        try:
+            self.policy = policy_for(host, token, require_token)
+        except ValueError as e:
+            raise _p.ParameterError(f"token: {e}") from None
         import viser  # noqa: F401 - fail early with ImportError when the extra is missing
 
         from ..touch import probe_point, vertex_normals
@@ -174,8 +188,14 @@ class Viewer:
 
         # viser prints a banner and "Server stopped" to stdout whatever `verbose` says: kept off
         # stdout, which carries the command's own lines (and its --json).
-        with contextlib.redirect_stdout(io.StringIO()):
+        with contextlib.redirect_stdout(io.StringIO()), checking(self.policy):
             self.server = _viser.ViserServer(host=host, port=port, label=f"palpate view: {name}", verbose=False)
+        if not self.policy.installed:
+            with contextlib.redirect_stdout(io.StringIO()):
+                self.server.stop()
+            raise OriginCheckUnavailable("cannot check who opens the viewer: this viser (%s) did not start its "
+                                         "server through the hook written for viser 1.1.1; not serving"
+                                         % getattr(_viser, "__version__", "?"))
         self.host = host
         self.port = self.server.get_port()
         self._build_scene()
@@ -187,7 +207,14 @@ class Viewer:
     # -- public -----------------------------------------------------------------------------------
     @property
     def url(self) -> str:
-        return f"http://{self.host}:{self.port}/"
+        """The page's address; with ``?token=`` when the token is required or was given."""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}/" + (f"?token={self.token}" if self.policy.show_token else "")
+
+    @property
+    def token(self) -> str:
+        """The viewer's token: ``?token=`` with it admits a page or a WebSocket from anywhere."""
+        return self.policy.token
 
     @property
     def bridge_address(self) -> Optional[str]:
@@ -227,6 +254,7 @@ class Viewer:
             s = dict(self.stats)
         s["inputs"] = self.guard.counts()
         s["messages"] = STATS.as_dict()
+        s["requests"] = self.policy.counts()
         s["paused"] = self.paused
         s["device"] = self.settings["device"]
         s["loop_error"] = self.loop_error
