@@ -132,15 +132,42 @@ def status_line(s: Optional[Dict[str, Any]], rate_hz: float) -> str:
             f"{s['compute_us']:7.1f} us | force {f:6.3f} N | overruns {s['overruns']} | faults {s['faults']}")
 
 
+def bridge_events(stats: Optional[Dict[str, Any]], seen: Dict[str, Any]) -> list:
+    """What changed at the bridge since ``seen`` (updated in place), as log lines: who holds the
+    tool (each new session), protocol-1 clients refused, hellos refused while busy, packets with a
+    bad tag and packets from outside the session (``HapticLoop.bridge_stats``)."""
+    if stats is None:
+        return []
+    lines = []
+    if stats["sessions"] != seen.get("sessions", 0) and stats["holder"]:
+        lines.append(f"bridge: {stats['holder']} holds the tool (session {stats['sessions']})")
+    if stats["old_version"] and stats["old_client"] != seen.get("old_client"):
+        lines.append(f"bridge: a protocol-1 client at {stats['old_client']} was refused: update it to protocol "
+                     "version 2 (palpate device, or crates/palpate-haptics/PROTOCOL.md)")
+    for key, what in (("busy", "hellos refused while another client holds the tool"),
+                      ("bad_tag", "packets dropped for a tag that does not verify with the key"),
+                      ("no_session", "state packets dropped for naming no open session"),
+                      ("wrong_peer", "state packets dropped for coming from another address than the session's")):
+        if stats[key] > seen.get(key, 0):
+            lines.append(f"bridge: {stats[key]} {what}")
+    seen.update({k: stats[k] for k in ("sessions", "old_client", "busy", "bad_tag", "no_session", "wrong_peer")})
+    return lines
+
+
 def run_live(loop: "_p.HapticLoop", seconds: Optional[float], on_status: Optional[Callable[[str], None]] = None,
-             every: float = 0.2) -> Dict[str, Any]:
+             every: float = 0.2, on_event: Optional[Callable[[str], None]] = None) -> Dict[str, Any]:
     """Starts ``loop``, calls ``on_status(line)`` every ``every`` [s] until it finishes or
-    ``seconds`` [s] pass, stops it and returns its report (:meth:`palpate.HapticLoop.stop`)."""
+    ``seconds`` [s] pass, stops it and returns its report (:meth:`palpate.HapticLoop.stop`).
+    ``on_event(line)`` gets the bridge's events (:func:`bridge_events`) as they happen."""
     loop.start()
     t0 = time.monotonic()
+    seen: Dict[str, Any] = {}
     try:
         while True:
             done = loop.wait(every)
+            if on_event is not None:
+                for line in bridge_events(loop.bridge_stats(), seen):
+                    on_event(line)
             if on_status is not None:
                 on_status(status_line(loop.snapshot(), loop.rate_hz))
             if done or (seconds is not None and time.monotonic() - t0 >= seconds):

@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use palpate_core::runtime::{SimOptions, Tool};
 use palpate_core::{ModelBuilder, Vec3};
 use palpate_haptics::bridge::protocol::Reject;
-use palpate_haptics::bridge::{Bridge, BridgeStats};
+use palpate_haptics::bridge::{Bridge, BridgeError, BridgeOptions, BridgeStats, Key};
 use palpate_haptics::devices::{Hand, HandParams, Replay, Scripted};
 use palpate_haptics::{CouplingParams, Device, DeviceKind, FemOptions, FemPhysics, HapticCore, HybridPhysics, Idle, Physics, Realtime, Recording, SafetyParams, Servo, ServoConfig, ServoHandle, ServoReport, Snapshot, Stats, Vec3Cell};
 use pyo3::prelude::*;
@@ -64,7 +64,7 @@ fn busy(what: &str) -> PyErr {
 /// tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None,
 /// coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None,
 /// stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1,
-/// physics_rate=None, single_rate=False, unsafe_limits=False)``
+/// physics_rate=None, single_rate=False, unsafe_limits=False, bridge_key=None)``
 ///
 /// Parameters
 /// ----------
@@ -131,6 +131,12 @@ fn busy(what: &str) -> PyErr {
 ///     1,020 / 3,000 N/m), or a ``stall_timeout`` or ``silence`` over 0.1 s. Without it those
 ///     raise ``ParameterError``; with it a ``UserWarning`` says which, and the reports'
 ///     ``unsafe_limits`` holds the reason (None otherwise). A replay keeps its recording's limits.
+/// bridge_key : bytes, optional
+///     Device ``"bridge"``: the shared key (at least 16 bytes) of an authenticated bridge: every
+///     packet carries an HMAC-SHA256 tag made with it, and the loop drops any whose tag does not
+///     verify (``palpate.devices.bridge.load_key`` reads one from a file). Required for a ``host``
+///     other than a loopback address; without it only local processes can reach the bridge, and
+///     the loop's session rules (PROTOCOL.md) decide which one moves the tool.
 /// record_ticks : int
 ///     Ticks to record for :meth:`save_recording` (0: none). The buffer is allocated at start
 ///     (144 bytes a tick; a replay's or a script's is at most its length); ticks past it are
@@ -307,7 +313,7 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
 #[pymethods]
 impl PyHapticLoop {
     #[new]
-    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, silence = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1), physics_rate = None, single_rate = false, unsafe_limits = false), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1, physics_rate=None, single_rate=False, unsafe_limits=False)")]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, silence = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1), physics_rate = None, single_rate = false, unsafe_limits = false, bridge_key = None), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1, physics_rate=None, single_rate=False, unsafe_limits=False, bridge_key=None)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -344,6 +350,7 @@ impl PyHapticLoop {
         #[pyo3(from_py_with = conv::arg)] physics_rate: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] single_rate: bool,
         #[pyo3(from_py_with = conv::arg)] unsafe_limits: bool,
+        #[pyo3(from_py_with = conv::arg)] bridge_key: Option<Bound<'_, pyo3::types::PyBytes>>,
     ) -> PyResult<Self> {
         // Counts as errors::Int: a negative one, or one beyond 64 bits, is a ParameterError
         // (pyo3's usize / u16 conversions raised OverflowError). The rest runs under the panic guard: a panic while opening a recording,
@@ -447,7 +454,15 @@ impl PyHapticLoop {
                 "bridge" => {
                     let ip: Ipv4Addr = host.parse().map_err(|_| errors::param_error_from(format!("host = {host:?} is not an IPv4 address")))?;
                     let port = port.ok_or_else(|| errors::param_error_from("device 'bridge' needs port=N (0: any free port)"))?;
-                    let b = Bridge::bind(SocketAddrV4::new(ip, port), kind).map_err(|e| haptics_error(format!("cannot open the bridge on {host}:{port}: {e}")))?;
+                    let key = match &bridge_key {
+                        Some(k) => Some(Key::new(k.as_bytes()).map_err(|e| errors::param_error_from(format!("bridge_key: {e}")))?),
+                        None => None,
+                    };
+                    let b = match Bridge::open(SocketAddrV4::new(ip, port), kind, BridgeOptions { key, ..Default::default() }) {
+                        Ok(b) => b,
+                        Err(e @ BridgeError::KeyRequired(_)) => return Err(errors::param_error_from(format!("{e} (bridge_key=..., or --key-file FILE on the command line)"))),
+                        Err(e) => return Err(haptics_error(e.to_string())),
+                    };
                     let addr = b.local_addr().map_err(haptics_error)?.to_string();
                     bridge = Some((addr, b.stats()));
                     Box::new(b)
@@ -744,8 +759,12 @@ impl PyHapticLoop {
     }
 
     /// The bridge's counters (``received``, ``accepted``, ``sent``, ``send_errors``,
-    /// ``dropped`` and one per reason: ``short``, ``long``, ``bad_magic``, ``bad_version``,
-    /// ``bad_kind``, ``non_finite``, ``out_of_range``, ``out_of_order``), else None.
+    /// ``welcomed`` (hellos answered), ``sessions`` (opened), ``dropped`` and one per reason:
+    /// ``short``, ``long``, ``bad_magic``, ``bad_version``, ``old_version``, ``bad_kind``,
+    /// ``non_finite``, ``out_of_range``, ``out_of_order``, ``bad_tag``, ``no_session``,
+    /// ``wrong_peer``, ``busy``), ``holder`` (the ``host:port`` of the client holding the tool,
+    /// or None) and ``old_client`` (the last ``host:port`` that spoke protocol version 1, or
+    /// None), else None.
     fn bridge_stats<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
         use std::sync::atomic::Ordering::Relaxed;
         let Some((_, s)) = &self.bridge else { return Ok(None) };
@@ -754,10 +773,14 @@ impl PyHapticLoop {
         d.set_item("accepted", s.accepted.load(Relaxed))?;
         d.set_item("sent", s.sent.load(Relaxed))?;
         d.set_item("send_errors", s.send_errors.load(Relaxed))?;
+        d.set_item("welcomed", s.welcomed.load(Relaxed))?;
+        d.set_item("sessions", s.sessions.load(Relaxed))?;
         d.set_item("dropped", s.dropped())?;
         for r in Reject::ALL {
             d.set_item(r.name(), s.rejected(r))?;
         }
+        d.set_item("holder", s.holder().map(|a| a.to_string()))?;
+        d.set_item("old_client", s.old_client().map(|a| a.to_string()))?;
         Ok(Some(d))
     }
 

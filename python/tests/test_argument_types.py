@@ -72,7 +72,7 @@ def world(tmp_path_factory):
         "knots": np.zeros((2, 3)), "recording": str(rec), "port": 0, "host": "127.0.0.1", "kind": "simulated",
         "hand_start": np.array([0.0, 0.0, 0.1]), "idle": False, "coupling_stiffness": 300.0,
         "coupling_damping": 1.0, "proxy_mass": 0.01, "max_force": 3.0, "max_rate": 100.0, "ramp": 0.5,
-        "stall_timeout": 0.1, "silence": 0.05, "physics_rate": 500.0, "single_rate": False, "unsafe_limits": False, "record_ticks": 0, "max_ticks": 1, "spin": 0.0, "realtime": False, "threads": 1, "timeout": 0.0,
+        "stall_timeout": 0.1, "silence": 0.05, "physics_rate": 500.0, "single_rate": False, "unsafe_limits": False, "bridge_key": None, "record_ticks": 0, "max_ticks": 1, "spin": 0.0, "realtime": False, "threads": 1, "timeout": 0.0,
         "p": np.array([0.0, 0.0, 0.1]), "size": (0.02, 0.01, 0.01), "cells": (2, 1, 1), "semi_axes": (0.02, 0.02, 0.03),
         "subdivisions": 1, "layers": 1, "circumferential": 8, "longitudinal": 4, "surface": surf, "spacing": 0.006,
         "r": 0.001, "h": 0.01, "radius": 0.01, "enabled": True, "inner": inner, "outer": surf, "finish": True,

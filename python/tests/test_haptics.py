@@ -339,10 +339,12 @@ def test_bridge_with_the_reference_client_in_a_second_process(model):
     try:
         # The malformed corpus first, from this process: dropped and counted, never moving the tool.
         c = BridgeClient(host, int(port))
-        good = encode_state(5, k[0])
-        corpus = [b"", good[:79], good + b"\0", b"\xff" * 4000, b"XXXX" + good[4:],
-                  good[:4] + b"\x02\x00" + good[6:], encode_state(1, [np.nan, 0, 0]), encode_state(2, [1e9, 0, 0]),
-                  encode_state(3, k[0], orientation=(2.0, 0, 0, 0))]
+        s = c.session
+        good = encode_state(s, 5, k[0])
+        corpus = [b"", good[:111], good + b"\0", b"\xff" * 4000, b"XXXX" + good[4:],
+                  good[:4] + b"\x03\x00" + good[6:], good[:4] + b"\x01\x00" + good[6:],
+                  encode_state(s, 1, [np.nan, 0, 0]), encode_state(s, 2, [1e9, 0, 0]),
+                  encode_state(s, 3, k[0], orientation=(2.0, 0, 0, 0)), encode_state(s ^ 1, 4, k[0])]
         for b in corpus:
             c.send_raw(b)
         deadline = time.monotonic() + 5
@@ -350,7 +352,8 @@ def test_bridge_with_the_reference_client_in_a_second_process(model):
             time.sleep(0.01)
         st = loop.bridge_stats()
         assert st["dropped"] == len(corpus) and st["accepted"] == 0, st
-        assert (st["short"], st["long"], st["bad_magic"], st["bad_version"], st["non_finite"], st["out_of_range"]) == (2, 2, 1, 1, 1, 2)
+        assert (st["short"], st["long"], st["bad_magic"], st["bad_version"], st["old_version"], st["non_finite"],
+                st["out_of_range"], st["no_session"]) == (2, 1, 2, 1, 1, 1, 2, 1), st
         c.close()
         # A second process presses through the probe point and back, receiving forces.
         script = textwrap.dedent(f"""
@@ -378,8 +381,112 @@ def test_bridge_with_the_reference_client_in_a_second_process(model):
         r = loop.stop()
     assert int(n) > 100, out.stdout
     assert float(fmax) > 0.01, f"the child felt the tissue: {out.stdout}"
-    assert st["accepted"] > 100 and st["dropped"] == len(corpus), st
+    # The child's hellos are refused 'busy' until this process's session has been silent for the
+    # hand-over time (0.5 s), then it gets the tool.
+    assert st["accepted"] > 100 and st["dropped"] - st["busy"] == len(corpus), st
+    assert st["sessions"] == 2, st                          # this process's, then the child's
     assert r["n_faults"] == r["watchdog_trips"]
+
+
+def test_a_stranger_on_another_port_cannot_take_the_tool(model):
+    # The issue's attack, through the Python API: a client holds the tool and presses; another
+    # local port sends state packets far ahead in sequence (with no session, a guessed one, and the
+    # client's own id as if sniffed) and asks for a session of its own. The tool stays on the
+    # client's path, the stranger gets no force packet (one refusal, 'busy'), the log names the
+    # holder and the refused hello.
+    import socket
+    from palpate.devices import bridge as br
+
+    t, k = cycle(model)
+    loop = _p.HapticLoop(model, haptics.material(), "bridge", port=0, record_ticks=20_000)
+    host, port = loop.bridge_address.split(":")
+    loop.start()
+    evil = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    evil.connect((host, int(port)))
+    evil.settimeout(0.05)
+    far = np.array([0.3, 0.3, 0.3])
+    try:
+        c = br.BridgeClient(host, int(port))
+        seen, events = {}, []
+        t0 = time.monotonic()
+        sent = 0
+        while time.monotonic() - t0 < 1.0:
+            s = min(1.0, (time.monotonic() - t0) / 0.5)
+            c.send(k[0] + s * (k[1] - k[0]))
+            if sent < 40:
+                evil.send(br.encode_state([0, c.session ^ 0x5A5A, c.session][sent % 3], 1 << 30 + sent % 2, far))
+                sent += 1
+            if sent == 40:
+                evil.send(br.encode_hello(7))
+                sent += 1
+            c.latest()
+            time.sleep(0.002)
+        events += haptics.bridge_events(loop.bridge_stats(), seen)
+        got = []
+        try:
+            while True:
+                got.append(evil.recv(256))
+        except (socket.timeout, BlockingIOError):
+            pass
+        holder = f"{c.sock.getsockname()[0]}:{c.sock.getsockname()[1]}"
+        c.close()
+    finally:
+        evil.close()
+        loop.stop()
+    st = loop.bridge_stats()
+    rec = loop.recorded()
+    assert st["sessions"] == 1 and st["holder"] == holder, st
+    assert st["no_session"] == 27 and st["wrong_peer"] == 13 and st["busy"] == 1, st
+    dev = np.asarray(rec["device"])
+    assert len(dev) > 100 and np.all(np.linalg.norm(dev - far, axis=1) > 0.2), "a stranger's packet moved the device"
+    assert len(got) == 1 and br.decode_handshake(got[0]) == (br.KIND_REFUSED, 0, 7, 1), got
+    assert any(f"{holder} holds the tool" in e for e in events), events
+    assert any("hellos refused" in e for e in events) and any("no open session" in e for e in events), events
+
+
+def test_a_keyed_bridge_and_the_non_loopback_rule(model, tmp_path):
+    from palpate.devices import bridge as br
+
+    key_file = tmp_path / "bridge.key"
+    key_file.write_text("0f" * 32 + "\n")
+    key = br.load_key(str(key_file))
+    assert key == b"0f" * 32
+    with pytest.raises(_p.ParameterError, match="shared key"):
+        _p.HapticLoop(model, haptics.material(), "bridge", port=0, host="0.0.0.0")
+    with pytest.raises(_p.ParameterError, match="at least 16 bytes"):
+        _p.HapticLoop(model, haptics.material(), "bridge", port=0, bridge_key=b"short")
+    (tmp_path / "short.key").write_text("abc\n")
+    with pytest.raises(_p.HapticsError, match="at least 16"):
+        br.load_key(str(tmp_path / "short.key"))
+    loop = _p.HapticLoop(model, haptics.material(), "bridge", port=0, bridge_key=key)
+    host, port = loop.bridge_address.split(":")
+    loop.start()
+    try:
+        for wrong in (None, b"another key of enough bytes"):
+            with pytest.raises(br.BridgeRefused, match="shared key"):
+                br.BridgeClient(host, int(port), key=wrong, timeout=2.0)
+        c = br.BridgeClient(host, int(port), key=key)
+        t, k = cycle(model)
+        forces = 0
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 0.5:
+            c.send(k[0])
+            forces += c.latest() is not None
+            time.sleep(0.002)
+        c.close()
+    finally:
+        loop.stop()
+    st = loop.bridge_stats()
+    assert st["accepted"] > 50 and forces > 20 and st["bad_tag"] >= 2 and st["sessions"] == 1, (st, forces)
+
+
+def test_cli_haptic_bridge_beyond_loopback_needs_a_key(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ventricle", "--device", "bridge:0", "--host", "0.0.0.0",
+                          "--seconds", "0.2"], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 2 and "--key-file" in out.stderr, out.stderr
+    out = subprocess.run([sys.executable, "-m", "palpate", "device", "touch", "--key-file", str(tmp_path / "none.key")],
+                         capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 2 and "cannot read the bridge key" in out.stderr, out.stderr
 
 
 # ------------------------------------------------------------------------------- vendor adapters

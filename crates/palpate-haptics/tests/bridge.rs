@@ -1,9 +1,12 @@
-//! The UDP bridge: a second process drives the loop, and malformed packets are dropped and
-//! counted without moving the tool.
+//! The UDP bridge: a second process drives the loop through a session; malformed packets, and
+//! packets from anyone but the session's client, are dropped and counted without moving the tool.
 //!
 //! What a wrong implementation would do:
 //! - trust a packet's length (read past a short one, or take the head of a long one), or accept
 //!   any version, or a NaN / a position in millimetres, or a late packet, and move the tool;
+//! - trust whoever speaks (another local port with a sequence number far ahead, a guessed or
+//!   sniffed session id, an unsigned packet to a keyed loop) and hand it the tool and the forces;
+//! - shut out a client that restarted (its sequence numbers start again from 1);
 //! - count nothing (the status line could not say why a device does not move);
 //! - block the servo on the socket, or send forces nowhere (the second process gets none);
 //! - behave on packets from its own process and not on a real client's: the second process
@@ -12,13 +15,14 @@
 
 mod support;
 
-use std::net::SocketAddr;
+use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4, UdpSocket};
 use std::process::Command;
+use std::sync::atomic::Ordering::Relaxed;
 use std::time::{Duration, Instant};
 
 use palpate_core::Vec3;
-use palpate_haptics::bridge::protocol::{self, Reject, STATE_BYTES};
-use palpate_haptics::bridge::{Bridge, Client};
+use palpate_haptics::bridge::protocol::{self, Handshake, Refusal, Reject, STATE_BYTES};
+use palpate_haptics::bridge::{Bridge, BridgeError, BridgeOptions, Client, ClientError, Key};
 use palpate_haptics::{Device, DeviceInput, DeviceKind, HapticCore, Servo, ServoConfig, Wall};
 
 /// Polls until the bridge has received `n` packets in all (a localhost datagram takes a moment).
@@ -37,13 +41,14 @@ fn poll_until(b: &mut Bridge, n: u64) -> Option<DeviceInput> {
 /// the 10 m range, off every test's path).
 const MOVED: Vec3 = Vec3::new(0.5, 0.5, 0.5);
 
-/// The malformed corpus, each packet with the reason the bridge must drop it for. `last` is the
-/// state sequence number the bridge accepted last: the packets that fail one check only carry
-/// `last + 1` (a bridge that skipped that check would take them), the out-of-order ones a
-/// duplicate of `last`, an earlier one and one half the ring back. All put the tool at [`MOVED`].
-fn corpus(last: u32) -> Vec<(Vec<u8>, Reject)> {
+/// The malformed corpus, each packet with the reason the bridge must drop it for. `session` is
+/// the client's session and `last` the state sequence number the bridge accepted last: the
+/// packets that fail one check only carry `last + 1` in that session (a bridge that skipped that
+/// check would take them), the out-of-order ones a duplicate of `last`, an earlier one and one
+/// half the ring back. All put the tool at [`MOVED`].
+fn corpus(session: u64, last: u32) -> Vec<(Vec<u8>, Reject)> {
     let next = last.wrapping_add(1);
-    let good = |seq: u32| protocol::encode_state(seq, &DeviceInput::at(MOVED));
+    let good = |seq: u32| protocol::encode_state(session, seq, &DeviceInput::at(MOVED), None);
     let with = |f: &dyn Fn(&mut [u8; STATE_BYTES])| {
         let mut b = good(next);
         f(&mut b);
@@ -52,70 +57,89 @@ fn corpus(last: u32) -> Vec<(Vec<u8>, Reject)> {
     let put = |b: &mut [u8; STATE_BYTES], at: usize, v: f64| b[at..at + 8].copy_from_slice(&v.to_le_bytes());
     vec![
         (vec![], Reject::Short),
-        (good(next)[..79].to_vec(), Reject::Short),
+        (good(next)[..STATE_BYTES - 1].to_vec(), Reject::Short),
         (good(next)[..8].to_vec(), Reject::Short),
         ([good(next).as_slice(), &[0]].concat(), Reject::Long),
-        (vec![0x50; 4000], Reject::Long),
-        (vec![0xff; 65_000], Reject::Long),
+        (vec![0x50; 4000], Reject::BadMagic),
+        (vec![0xff; 65_000], Reject::BadMagic),
         (with(&|b| b[0] ^= 1), Reject::BadMagic),
         (vec![0u8; STATE_BYTES], Reject::BadMagic),
-        (with(&|b| b[4..6].copy_from_slice(&2u16.to_le_bytes())), Reject::BadVersion),
+        (with(&|b| b[4..6].copy_from_slice(&3u16.to_le_bytes())), Reject::BadVersion),
         (with(&|b| b[4..6].copy_from_slice(&0u16.to_le_bytes())), Reject::BadVersion),
+        (with(&|b| b[4..6].copy_from_slice(&1u16.to_le_bytes())), Reject::OldVersion),
         (with(&|b| b[6..8].copy_from_slice(&2u16.to_le_bytes())), Reject::BadKind),
-        (with(&|b| put(b, 16, f64::NAN)), Reject::NonFinite),
-        (with(&|b| put(b, 32, f64::INFINITY)), Reject::NonFinite),
-        (with(&|b| put(b, 48, f64::NEG_INFINITY)), Reject::NonFinite),
-        (with(&|b| put(b, 24, 1e300)), Reject::OutOfRange),
-        (with(&|b| put(b, 16, 120.0)), Reject::OutOfRange), // millimetres sent as metres
-        (with(&|b| put(b, 40, 3.0)), Reject::OutOfRange),   // not a unit quaternion
-        (with(&|b| put(b, 40, 0.0)), Reject::OutOfRange),
+        (with(&|b| b[6..8].copy_from_slice(&9u16.to_le_bytes())), Reject::BadKind),
+        (with(&|b| put(b, 24, f64::NAN)), Reject::NonFinite),
+        (with(&|b| put(b, 40, f64::INFINITY)), Reject::NonFinite),
+        (with(&|b| put(b, 56, f64::NEG_INFINITY)), Reject::NonFinite),
+        (with(&|b| put(b, 32, 1e300)), Reject::OutOfRange),
+        (with(&|b| put(b, 24, 120.0)), Reject::OutOfRange), // millimetres sent as metres
+        (with(&|b| put(b, 48, 3.0)), Reject::OutOfRange),   // not a unit quaternion
+        (with(&|b| put(b, 48, 0.0)), Reject::OutOfRange),
+        // Another session's id, a guess, none: whatever the sequence number says.
+        (protocol::encode_state(session ^ 1, next, &DeviceInput::at(MOVED), None).to_vec(), Reject::NoSession),
+        (protocol::encode_state(0, next.wrapping_add(1 << 30), &DeviceInput::at(MOVED), None).to_vec(), Reject::NoSession),
+        // A tag on an unkeyed loop changes nothing; a state packet of another kind's size is long.
+        ([good(next).as_slice(), &[0; 8]].concat(), Reject::Long),
         (good(last).to_vec(), Reject::OutOfOrder),                   // a duplicate
         (good(last.wrapping_sub(1)).to_vec(), Reject::OutOfOrder),   // late
         (good(last.wrapping_sub(1 << 31)).to_vec(), Reject::OutOfOrder), // half the ring back
     ]
 }
 
+const REASONS: usize = Reject::ALL.len();
+
 /// How many packets of the corpus each reason must count, in [`Reject::ALL`]'s order.
-fn expected_counts() -> [u64; 8] {
-    let mut e = [0u64; 8];
-    for (_, reason) in corpus(0) {
-        e[Reject::ALL.iter().position(|&r| r == reason).unwrap()] += 1;
+fn expected_counts() -> [u64; REASONS] {
+    let mut e = [0u64; REASONS];
+    for (_, reason) in corpus(7, 0) {
+        e[reason.index()] += 1;
     }
     e
+}
+
+/// A client whose session the bridge (polled here, on this thread) has opened.
+fn session(bridge: &mut Bridge, key: Option<Key>) -> Client {
+    let mut c = Client::hello(bridge.local_addr().unwrap(), key).unwrap();
+    let stats = bridge.stats();
+    let n = stats.received.load(Relaxed);
+    poll_until(bridge, n + 1);
+    c.await_session(Duration::from_secs(2)).unwrap();
+    c
 }
 
 #[test]
 fn malformed_packets_are_dropped_counted_and_never_move_the_tool() {
     let mut bridge = Bridge::localhost(0, DeviceKind::Bridge).unwrap();
-    let mut client = Client::connect(bridge.local_addr().unwrap()).unwrap();
+    let mut client = session(&mut bridge, None);
     let stats = bridge.stats();
     let p0 = DeviceInput::at(Vec3::new(0.01, 0.02, 0.03));
     client.send(&p0).unwrap(); // seq 1
-    assert_eq!(poll_until(&mut bridge, 1), Some(p0));
+    assert_eq!(poll_until(&mut bridge, 2), Some(p0));
     let mut core = HapticCore::new(Box::new(Wall::new(Vec3::new(0.0, 0.0, -1.0), Vec3::z(), 1000.0, 0.0)), 1000.0, Default::default(), Default::default(), 250, 0);
     let first = core.step(Some(p0));
     assert_eq!(first.device, p0.position);
 
-    let corpus = corpus(1);
-    let mut expected = [0u64; 8];
+    let corpus = corpus(client.session(), 1);
+    let mut expected = [0u64; REASONS];
     for (k, (bytes, reason)) in corpus.iter().enumerate() {
         client.send_raw(bytes).unwrap();
-        let got = poll_until(&mut bridge, 2 + k as u64);
+        let got = poll_until(&mut bridge, 3 + k as u64);
         assert_eq!(got, None, "packet {k} ({}) was accepted", reason.name());
-        expected[Reject::ALL.iter().position(|r| r == reason).unwrap()] += 1;
+        expected[reason.index()] += 1;
         for r in Reject::ALL {
-            assert_eq!(stats.rejected(r), expected[Reject::ALL.iter().position(|&x| x == r).unwrap()], "after packet {k}: counter {}", r.name());
+            assert_eq!(stats.rejected(r), expected[r.index()], "after packet {k}: counter {}", r.name());
         }
         let out = core.step(got);
         assert_eq!(out.device, p0.position, "packet {k} moved the tool");
     }
     assert_eq!(expected, expected_counts());
     assert_eq!(stats.dropped(), corpus.len() as u64);
-    assert_eq!(stats.accepted.load(std::sync::atomic::Ordering::Relaxed), 1);
+    assert_eq!(stats.accepted.load(Relaxed), 1);
     // A good packet after all that still gets through (sequence 2 follows 1).
     let p2 = DeviceInput::at(Vec3::new(0.0, 0.0, 0.01));
     client.send(&p2).unwrap();
-    assert_eq!(poll_until(&mut bridge, corpus.len() as u64 + 2), Some(p2));
+    assert_eq!(poll_until(&mut bridge, corpus.len() as u64 + 3), Some(p2));
     // The force goes back to the client.
     core.step(Some(p2));
     bridge.sink().send(&Vec3::new(0.0, 0.0, 1.0));
@@ -152,8 +176,8 @@ impl Seen {
 fn bridge_child_process() {
     let Ok(addr) = std::env::var(CHILD_ENV) else { return };
     let server: SocketAddr = addr.parse().unwrap();
-    let mut c = Client::connect(server).unwrap();
-    let n_bad = corpus(0).len();
+    let mut c = Client::connect(server, Duration::from_secs(10)).unwrap();
+    let n_bad = corpus(0, 0).len();
     // Press 10 mm down through the plane z = 0 and back, over 0.6 s, a sample a millisecond,
     // with the malformed corpus in between (held 2 mm clear after 0.6 s, up to 10 s, until the
     // whole corpus is sent: a loaded machine may slow the exchange).
@@ -180,7 +204,7 @@ fn bridge_child_process() {
                 seen.note(f);
             }
             let before = seen.seq;
-            c.send_raw(&corpus(seq)[bad].0).unwrap();
+            c.send_raw(&corpus(c.session(), seq)[bad].0).unwrap();
             bad += 1;
             // The next good packet waits until the servo has ticked with the malformed one alone
             // (three forces on): sent right behind it, the newer good one would win the tick,
@@ -219,8 +243,9 @@ fn a_second_process_drives_the_loop() {
     assert!(out.status.success(), "child failed: {text}\n{}", String::from_utf8_lossy(&out.stderr));
     let line = text.lines().find_map(|l| l.find("CHILD").map(|i| &l[i..])).unwrap_or_else(|| panic!("no report from the child: {text}"));
     let field = |k: &str| -> f64 { line.split_whitespace().find_map(|w| w.strip_prefix(&format!("{k}="))).unwrap().parse().unwrap() };
-    let accepted = stats.accepted.load(std::sync::atomic::Ordering::Relaxed);
-    let received = stats.received.load(std::sync::atomic::Ordering::Relaxed);
+    let accepted = stats.accepted.load(Relaxed);
+    let received = stats.received.load(Relaxed);
+    let welcomed = stats.welcomed.load(Relaxed);
     let trips = report.watchdog_trips;
     println!("{line}; bridge received {received}, accepted {accepted}, dropped {}; watchdog trips {trips}", stats.dropped());
     assert!(accepted > 100, "the loop took the child's states: {accepted}");
@@ -231,14 +256,16 @@ fn a_second_process_drives_the_loop() {
 
     // The corpus from the second process: all of it sent, each packet dropped and counted under
     // its reason, nothing else dropped.
-    let n_bad = corpus(0).len();
+    let n_bad = corpus(0, 0).len();
     assert_eq!(field("bad") as usize, n_bad, "the child sent the whole corpus: {line}");
     let expected = expected_counts();
     for (i, r) in Reject::ALL.iter().enumerate() {
         assert_eq!(stats.rejected(*r), expected[i], "counter {}", r.name());
     }
     assert_eq!(stats.dropped(), n_bad as u64);
-    assert_eq!(received, accepted + stats.dropped(), "every packet read is accepted or counted");
+    assert_eq!(stats.sessions.load(Relaxed), 1, "one session, the child's");
+    assert!(welcomed >= 1, "the child was welcomed");
+    assert_eq!(received, accepted + stats.dropped() + welcomed, "every packet read is accepted, welcomed or counted");
     // ... and none of it moved the tool: every tick's device and tool stay on the child's path
     // (x = y = 0, z within the press), never at MOVED or anywhere else a malformed packet said.
     assert_eq!(report.core.recording_dropped(), 0, "the recording holds the whole exchange");
@@ -259,4 +286,182 @@ fn a_second_process_drives_the_loop() {
     // no force may come flagged zeroed.
     assert_eq!(report.core.faults(), trips, "{:?}", report.core.fault_log());
     assert!(field("zeroed") <= 2.0 * trips as f64, "zeroed forces without a watchdog trip to explain them: {line}");
+}
+
+/// A socket of another local process (another port): the attacker.
+fn stranger(server: SocketAddr) -> UdpSocket {
+    let s = UdpSocket::bind(SocketAddrV4::new(Ipv4Addr::LOCALHOST, 0)).unwrap();
+    s.connect(server).unwrap();
+    s.set_read_timeout(Some(Duration::from_millis(50))).unwrap();
+    s
+}
+
+/// Every datagram waiting on `s` within a short wait.
+fn drain(s: &UdpSocket) -> Vec<Vec<u8>> {
+    let mut got = Vec::new();
+    let mut b = [0u8; 2048];
+    while let Ok(n) = s.recv(&mut b) {
+        got.push(b[..n].to_vec());
+    }
+    got
+}
+
+/// The attack: another local port sends a state packet with a sequence number far ahead
+/// (version 1 took the tool over with one such packet), then guesses session ids, then replays
+/// the session's own id as if sniffed, then asks for a session of its own. None moves the tool,
+/// no force goes to it, each is counted, and the real client keeps the tool.
+#[test]
+fn a_stranger_cannot_take_the_tool() {
+    let mut bridge = Bridge::localhost(0, DeviceKind::Bridge).unwrap();
+    let server = bridge.local_addr().unwrap();
+    let stats = bridge.stats();
+    let mut client = session(&mut bridge, None);
+    let home = DeviceInput::at(Vec3::new(0.0, 0.0, 0.01));
+    client.send(&home).unwrap();
+    assert_eq!(poll_until(&mut bridge, 2), Some(home));
+    assert_eq!(stats.holder(), Some(match client_addr(&client) { SocketAddr::V4(a) => a, _ => unreachable!() }));
+
+    let evil = stranger(server);
+    let moved = DeviceInput::at(MOVED);
+    let attacks: Vec<(Vec<u8>, Reject)> = vec![
+        (protocol::encode_state(0, 1 << 30, &moved, None).to_vec(), Reject::NoSession),
+        (protocol::encode_state(client.session() ^ 0x8000_0000_0000_0000, 1 << 30, &moved, None).to_vec(), Reject::NoSession),
+        (protocol::encode_state(client.session().wrapping_add(1), 2, &moved, None).to_vec(), Reject::NoSession),
+        // The session's own id and the next sequence number: only the address is wrong.
+        (protocol::encode_state(client.session(), 2, &moved, None).to_vec(), Reject::WrongPeer),
+        (protocol::encode_state(client.session(), 1 << 30, &moved, None).to_vec(), Reject::WrongPeer),
+        (protocol::encode_handshake(&Handshake::Hello { nonce: 99 }, None).to_vec(), Reject::Busy),
+    ];
+    let mut received = 2;
+    for (k, (bytes, reason)) in attacks.iter().enumerate() {
+        evil.send(bytes).unwrap();
+        received += 1;
+        assert_eq!(poll_until(&mut bridge, received), None, "attack {k} moved the tool");
+        assert_eq!(stats.rejected(*reason), attacks[..=k].iter().filter(|a| a.1 == *reason).count() as u64, "attack {k}: {}", reason.name());
+        // The loop's forces still go to the client, never to the stranger.
+        bridge.sink().send(&Vec3::new(0.0, 0.0, 0.5));
+        let f = client.recv(Duration::from_secs(2)).unwrap().expect("the client still gets the forces");
+        assert_eq!(f.ack, 1, "the client's own state is the one acknowledged");
+    }
+    let to_evil = drain(&evil);
+    assert_eq!(to_evil.len(), 1, "the stranger gets the busy refusal and nothing else: {} datagrams", to_evil.len());
+    assert_eq!(protocol::decode_handshake(&to_evil[0], None), Ok(Handshake::Refused { nonce: 99, reason: Ok(Refusal::Busy) }));
+    assert_eq!(stats.sessions.load(Relaxed), 1);
+    // The client goes on: its sequence 2 is taken (the stranger's 2 and 2^30 did not advance it).
+    let next = DeviceInput::at(Vec3::new(0.0, 0.0, 0.005));
+    client.send(&next).unwrap();
+    assert_eq!(poll_until(&mut bridge, received + 1), Some(next));
+}
+
+fn client_addr(c: &Client) -> SocketAddr {
+    c.local_addr().unwrap()
+}
+
+/// A client that restarts opens a new session and starts its sequence again from 1: on the same
+/// port at once, on a new port once the old one has been silent for the hand-over time (busy
+/// before that). Version 1 refused the restarted client until its numbers caught up.
+#[test]
+fn a_restarted_client_opens_a_new_session() {
+    let handover = Duration::from_millis(150);
+    let mut bridge = Bridge::open(SocketAddrV4::new(Ipv4Addr::LOCALHOST, 0), DeviceKind::Bridge, BridgeOptions { key: None, handover }).unwrap();
+    let server = bridge.local_addr().unwrap();
+    let stats = bridge.stats();
+    let mut first = session(&mut bridge, None);
+    for k in 0..50 {
+        first.send(&DeviceInput::at(Vec3::new(0.0, 0.0, 0.001 * k as f64))).unwrap();
+    }
+    poll_until(&mut bridge, 51);
+    assert_eq!(stats.accepted.load(Relaxed), 50);
+    // A second client (a restart on a new port) while the first is live: busy, and it keeps asking.
+    let mut second = Client::hello(server, None).unwrap();
+    poll_until(&mut bridge, 52);
+    assert_eq!(stats.rejected(Reject::Busy), 1);
+    // The first falls silent; the loop, polled meanwhile, hands the tool over after `handover`.
+    let t0 = Instant::now();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let waiter = std::thread::spawn(move || {
+        let r = second.await_session(Duration::from_secs(3)).map(|_| ());
+        tx.send(()).unwrap();
+        r.map(|_| second)
+    });
+    while rx.try_recv().is_err() && t0.elapsed() < Duration::from_secs(3) {
+        bridge.poll();
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let mut second = waiter.join().unwrap().expect("the restarted client gets a session");
+    assert!(t0.elapsed() >= handover / 2, "handed over after {:?}", t0.elapsed());
+    assert_eq!(stats.sessions.load(Relaxed), 2);
+    // Its sequence starts from 1 and is taken; the old session's packets are now strangers'.
+    let p = DeviceInput::at(Vec3::new(0.0, 0.01, 0.0));
+    second.send(&p).unwrap();
+    let n = stats.received.load(Relaxed);
+    assert_eq!(poll_until(&mut bridge, n + 1), Some(p));
+    first.send(&DeviceInput::at(MOVED)).unwrap();
+    assert_eq!(poll_until(&mut bridge, n + 2), None);
+    assert_eq!(stats.rejected(Reject::NoSession), 1);
+    // A restart on the same port (a new hello, a new nonce) is welcomed at once, from 1 again.
+    let mut again = Client::hello_from(second.into_socket(), server, None).unwrap();
+    let n = stats.received.load(Relaxed);
+    poll_until(&mut bridge, n + 1);
+    again.await_session(Duration::from_secs(2)).unwrap();
+    assert_eq!(stats.sessions.load(Relaxed), 3);
+    let q = DeviceInput::at(Vec3::new(0.01, 0.0, 0.0));
+    again.send(&q).unwrap();
+    assert_eq!(poll_until(&mut bridge, n + 2), Some(q));
+}
+
+/// With a shared key every packet is signed: a client without it, or with another, is refused
+/// at the hello with the reason; a forged state packet in the session is dropped as `bad_tag`;
+/// the forces the client receives verify. A bridge beyond loopback will not open without a key.
+#[test]
+fn a_keyed_bridge_takes_only_signed_packets() {
+    let key = Key::new(b"a shared key of 32 bytes for it!").unwrap();
+    let mut bridge = Bridge::open(SocketAddrV4::new(Ipv4Addr::LOCALHOST, 0), DeviceKind::Bridge, BridgeOptions { key: Some(key.clone()), ..Default::default() }).unwrap();
+    let server = bridge.local_addr().unwrap();
+    let stats = bridge.stats();
+    for wrong in [None, Some(Key::new(b"another key, also 32 bytes long!").unwrap())] {
+        let mut c = Client::hello(server, wrong).unwrap();
+        let n = stats.received.load(Relaxed);
+        poll_until(&mut bridge, n + 1);
+        match c.await_session(Duration::from_secs(2)) {
+            Err(ClientError::Refused(_, why)) => assert_eq!(why, Refusal::BadKey.message()),
+            other => panic!("a client without the key: {other:?}"),
+        }
+    }
+    assert_eq!((stats.rejected(Reject::BadTag), stats.sessions.load(Relaxed)), (2, 0));
+    let mut client = session(&mut bridge, Some(key.clone()));
+    let p = DeviceInput::at(Vec3::new(0.0, 0.0, 0.02));
+    client.send(&p).unwrap();
+    let n = stats.received.load(Relaxed);
+    assert_eq!(poll_until(&mut bridge, n + 1), Some(p));
+    // The client's own socket, the session's id, the next sequence number, no valid tag.
+    client.send_raw(&protocol::encode_state(client.session(), 2, &DeviceInput::at(MOVED), None)).unwrap();
+    assert_eq!(poll_until(&mut bridge, n + 2), None);
+    assert_eq!(stats.rejected(Reject::BadTag), 3);
+    bridge.sink().send(&Vec3::new(0.0, 0.0, 0.25));
+    let f = client.recv(Duration::from_secs(2)).unwrap().expect("a signed force");
+    assert_eq!(f.force, Vec3::new(0.0, 0.0, 0.25));
+
+    match Bridge::bind(SocketAddrV4::new(Ipv4Addr::UNSPECIFIED, 0), DeviceKind::Bridge) {
+        Err(BridgeError::KeyRequired(_)) => {}
+        other => panic!("0.0.0.0 without a key: {:?}", other.map(|_| ())),
+    }
+}
+
+/// A version-1 client (no sessions) is refused by name: counted as `old_version`, its address
+/// kept for the status line's message.
+#[test]
+fn an_old_client_is_named() {
+    let mut bridge = Bridge::localhost(0, DeviceKind::Bridge).unwrap();
+    let stats = bridge.stats();
+    let old = stranger(bridge.local_addr().unwrap());
+    let mut v1 = [0u8; 80];
+    v1[0..4].copy_from_slice(&protocol::MAGIC.to_le_bytes());
+    v1[4..6].copy_from_slice(&1u16.to_le_bytes());
+    v1[6..8].copy_from_slice(&protocol::KIND_STATE.to_le_bytes());
+    v1[40..48].copy_from_slice(&1.0f64.to_le_bytes());
+    old.send(&v1).unwrap();
+    assert_eq!(poll_until(&mut bridge, 1), None);
+    assert_eq!(stats.rejected(Reject::OldVersion), 1);
+    assert_eq!(stats.old_client().map(SocketAddr::V4), Some(old.local_addr().unwrap()));
 }

@@ -19,6 +19,9 @@ def add_parser(sub) -> None:
     d.add_argument("adapter", choices=ADAPTERS)
     d.add_argument("--port", type=int, default=5005, help="the loop's bridge port (default 5005)")
     d.add_argument("--host", default="127.0.0.1", help="the loop's address (default 127.0.0.1)")
+    d.add_argument("--key-file", default=None, metavar="FILE",
+                   help="the shared key the loop was started with (its --key-file): every packet signed "
+                        "(HMAC-SHA256); required by a loop bound beyond 127.0.0.1")
     d.add_argument("--rate", type=float, default=1000.0, metavar="HZ", help="exchange rate [Hz] (default 1000)")
     d.add_argument("--seconds", type=float, default=None, metavar="S", help="stop after S seconds (default: Ctrl-C)")
     d.add_argument("--scale", type=float, default=1.0, help="world = scale * device + offset (default 1)")
@@ -49,16 +52,21 @@ def make_adapter(a):
 
 
 def cmd_device(a) -> int:
+    from .. import HapticsError
     from ..devices import MissingVendor
-    from ..devices.bridge import run_adapter
+    from ..devices.bridge import load_key, run_adapter
 
     if not (a.rate > 0 and math.isfinite(a.rate)):
         raise Usage(f"palpate device: --rate must be positive, got {a.rate}")
+    try:
+        key = load_key(a.key_file) if a.key_file else None
+    except HapticsError as e:
+        raise Usage(f"palpate device: {e}") from None
     adapter = make_adapter(a)
     try:
-        s = run_adapter(adapter, a.host, a.port, a.rate, a.seconds, lambda line: print(line, flush=True))
-    except MissingVendor as e:
-        raise RunFailed(str(e)) from None
+        s = run_adapter(adapter, a.host, a.port, a.rate, a.seconds, lambda line: print(line, flush=True), key=key)
+    except (MissingVendor, HapticsError) as e:
+        raise RunFailed(f"palpate device {a.adapter}: {e}") from None
     except OSError as e:
         raise RunFailed(f"palpate device {a.adapter}: {e}") from None
     print(f"palpate device {a.adapter}: sent {s['sent']} states, got {s['forces']} forces (max {s['max_force_n']:.3f} N), "

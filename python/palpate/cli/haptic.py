@@ -38,7 +38,11 @@ def add_parser(sub) -> None:
                    help="record the interaction (inputs, forces, model identity); the buffer holds --seconds S of ticks, "
                         f"else the device's length up to {DEFAULT_RECORD_TICKS:,} ticks (5 min at 1 kHz; 144 bytes a tick): "
                         "ticks past it are not recorded, and a warning says how many")
-    h.add_argument("--host", default="127.0.0.1", help="bridge address to bind (default 127.0.0.1)")
+    h.add_argument("--host", default="127.0.0.1",
+                   help="bridge address to bind (default 127.0.0.1; any other needs --key-file)")
+    h.add_argument("--key-file", default=None, metavar="FILE",
+                   help="bridge: a shared key (at least 16 bytes) that signs every packet (HMAC-SHA256, PROTOCOL.md); "
+                        "the device process gives the same file to `palpate device --key-file`")
     h.add_argument("--kind", choices=KINDS, default=None, help="the device's make, for the coupling and safety defaults")
     h.add_argument("--max-force", type=float, default=None, metavar="N", help="force limit [N] (default 3)")
     h.add_argument("--unsafe-limits", action="store_true",
@@ -124,7 +128,12 @@ def make_loop(a, model, record_ticks: int):
                 raise Usage(f"palpate haptic: --device bridge:PORT needs a port number, got {arg!r}") from None
             if not 0 <= port <= 65535:
                 raise Usage(f"palpate haptic: port {port} out of range")
-            return _p.HapticLoop(model, mat, "bridge", port=port, host=a.host, **common)
+            from ..devices.bridge import load_key
+            key = load_key(a.key_file) if a.key_file else None
+            if key is None and a.host not in ("127.0.0.1", "localhost") and not a.host.startswith("127."):
+                raise Usage(f"palpate haptic: --host {a.host} makes the bridge reachable from other machines: "
+                            "give a shared key with --key-file FILE (every packet is then signed), or bind 127.0.0.1")
+            return _p.HapticLoop(model, mat, "bridge", port=port, host=a.host, bridge_key=key, **common)
         if kind == "hand":
             import numpy as np
             t, k = haptics.palpation_cycle(model, a.tool_radius)
@@ -169,7 +178,10 @@ def cmd_haptic(a) -> int:
         if not a.quiet:
             print(("\r" + line) if tty else line, end="" if tty else "\n", flush=True)
 
-    r = haptics.run_live(loop, a.seconds, show)
+    def event(line: str) -> None:
+        print(("\r" if tty and not a.quiet else "") + "palpate haptic: " + line, file=sys.stderr, flush=True)
+
+    r = haptics.run_live(loop, a.seconds, show, on_event=event)
     if tty and not a.quiet:
         print()
     print(f"  {r['ticks']} ticks in {r['elapsed_s']:.2f} s ({r['achieved_hz']:.1f} Hz): period p50 {r['period_us_p50']:.0f} us, "
