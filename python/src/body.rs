@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use numpy::{PyArray1, PyArray2};
-use palpate_core::integrate::{indent, static_solve, IndentOptions, Indenter, StaticOptions};
+use palpate_core::integrate::{indent_with, static_solve_with, IndentOptions, Indenter, StaticOptions};
 use palpate_core::probe::{self, ProbeLoad, ProbeOptions, Ramp, StepClock, StepTotals};
 use palpate_core::{step, Model, ModelBuilder, State, StepMemory, Vec3, Workspace};
 use pyo3::prelude::*;
@@ -57,10 +57,15 @@ impl PyBody {
         &self.model
     }
 
-    fn run_steps(&mut self, n: usize, dt: f64) -> Result<StepTotals, (usize, palpate_core::StepError)> {
+    /// `n` steps; `interrupted` is asked before each (the steps taken before it said stop are
+    /// kept: `Err((k, None))`).
+    fn run_steps(&mut self, n: usize, dt: f64, interrupted: &mut dyn FnMut() -> bool) -> Result<StepTotals, (usize, Option<palpate_core::StepError>)> {
         let mut tot = StepTotals::default();
         for k in 0..n {
-            let r = step(&self.model, &mut self.state, &mut self.ws, dt).map_err(|e| (k, e))?;
+            if k > 0 && interrupted() {
+                return Err((k, None));
+            }
+            let r = step(&self.model, &mut self.state, &mut self.ws, dt).map_err(|e| (k, Some(e)))?;
             tot.add(&r);
         }
         Ok(tot)
@@ -198,8 +203,13 @@ impl PyBody {
     ) -> PyResult<Bound<'py, PyDict>> {
         let n = errors::count(n, "n")?;
         let this = &mut *slf;
+        let mut ctrl_c = errors::CtrlC::new();
         let tot = errors::guard("Body.step", || {
-            py.detach(|| this.run_steps(n, dt)).map_err(|(k, e)| errors::step_error(e, &format!("in step {} of {n}", k + 1)))
+            py.detach(|| this.run_steps(n, dt, &mut || ctrl_c.poll())).map_err(|(k, e)| match e {
+                Some(e) => errors::step_error(e, &format!("in step {} of {n}", k + 1)),
+                // Ctrl-C: the body keeps the k steps it took.
+                None => ctrl_c.finish((), |_| errors::param_error_from("interrupted")),
+            })
         })?;
         let d = PyDict::new(py);
         d.set_item("steps", tot.steps)?;
@@ -337,7 +347,8 @@ impl PyBody {
     /// ``tolerance`` is on max |residual| relative to max |applied force|; ``load_steps`` > 1
     /// applies the load in increments (for large loads). ``None`` takes the core's default
     /// (``StaticOptions::default()``, as ``palpate.defaults.static_solve``).
-    /// Raises ``SolveError`` if Newton does not converge.
+    /// Raises ``SolveError`` if Newton does not converge; Ctrl-C (``KeyboardInterrupt``) stops
+    /// it between Newton iterations.
     #[pyo3(signature = (forces = None, *, max_iterations = None, tolerance = None, load_steps = None))]
     fn static_solve<'py>(
         &self,
@@ -359,7 +370,10 @@ impl PyBody {
         }
         let opts = StaticOptions { max_iterations, tolerance, load_steps: load_steps.max(1) };
         let model = &self.model;
-        let sol = errors::guard("Body.static_solve", || py.detach(|| static_solve(model, &f, &opts)).map_err(errors::solve_error))?;
+        let mut ctrl_c = errors::CtrlC::new();
+        let sol = errors::guard("Body.static_solve", || {
+            py.detach(|| static_solve_with(model, &f, &opts, &mut || ctrl_c.poll())).map_err(|e| ctrl_c.finish(e, errors::solve_error))
+        })?;
         Ok(conv::vec3s_to_py(py, &sol.x))
     }
 
@@ -420,7 +434,10 @@ impl PyBody {
         };
         let ind = Indenter { start, direction: direction / norm, radius };
         let model = &self.model;
-        let pts = errors::guard("Body.indent", || py.detach(|| indent(model, &ind, &travels, &opts)).map_err(errors::solve_error))?;
+        let mut ctrl_c = errors::CtrlC::new();
+        let pts = errors::guard("Body.indent", || {
+            py.detach(|| indent_with(model, &ind, &travels, &opts, &mut || ctrl_c.poll())).map_err(|e| ctrl_c.finish(e, errors::solve_error))
+        })?;
         let out = PyDict::new(py);
         let col = |f: &dyn Fn(&palpate_core::integrate::IndentPoint) -> f64| -> Vec<f64> { pts.iter().map(f).collect() };
         out.set_item("travel", conv::f64s_to_py(py, &col(&|p| p.travel)))?;

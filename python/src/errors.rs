@@ -531,3 +531,43 @@ pub fn warn(py: Python<'_>, msg: String) -> PyResult<()> {
     let msg = CString::new(msg).unwrap_or_else(|_| CString::new("mesh warning").unwrap());
     PyErr::warn(py, &py.get_type::<MeshWarning>(), &msg, 1)
 }
+
+/// Ctrl-C for a long computation run with the GIL released: the core asks [`CtrlC::poll`]
+/// between iterations (`static_solve_with`, `indent_with`, a body's steps), and at most every
+/// 50 ms it takes the GIL and runs Python's signal handlers. A pending `KeyboardInterrupt` (or
+/// whatever a handler raised) stops the computation and is raised by [`CtrlC::finish`]. Python
+/// runs signal handlers on its main thread only; elsewhere this never interrupts.
+pub struct CtrlC {
+    last: std::time::Instant,
+    err: Option<PyErr>,
+}
+
+/// How often the GIL is taken to look for a signal: short against a user's patience, long
+/// against the cost of taking the GIL (microseconds).
+const CTRL_C_POLL: std::time::Duration = std::time::Duration::from_millis(50);
+
+impl CtrlC {
+    pub fn new() -> CtrlC {
+        CtrlC { last: std::time::Instant::now(), err: None }
+    }
+
+    /// Should the computation stop?
+    pub fn poll(&mut self) -> bool {
+        if self.err.is_some() {
+            return true;
+        }
+        if self.last.elapsed() < CTRL_C_POLL {
+            return false;
+        }
+        self.last = std::time::Instant::now();
+        if let Err(e) = Python::attach(|py| py.check_signals()) {
+            self.err = Some(e);
+        }
+        self.err.is_some()
+    }
+
+    /// The signal's exception if the computation was interrupted, else `other`'s conversion.
+    pub fn finish<E>(&mut self, other: E, convert: impl FnOnce(E) -> PyErr) -> PyErr {
+        self.err.take().unwrap_or_else(|| convert(other))
+    }
+}

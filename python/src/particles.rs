@@ -144,9 +144,21 @@ impl PyParticleBody {
         }
         let this = &mut *slf;
         let (model, state, ws) = (&this.model, &mut this.state, &mut this.ws);
+        let mut ctrl_c = errors::CtrlC::new();
         errors::guard("ParticleBody.step", || {
-            py.detach(|| (0..n).try_for_each(|k| palpate_core::meshfree::step(model, state, ws, dt).map(|_| ()).map_err(|e| (k, e))))
-                .map_err(|(k, e)| errors::step_error(e, &format!("in step {} of {n}", k + 1)))
+            py.detach(|| {
+                (0..n).try_for_each(|k| {
+                    // Ctrl-C between steps: the body keeps the steps it took.
+                    if k > 0 && ctrl_c.poll() {
+                        return Err((k, None));
+                    }
+                    palpate_core::meshfree::step(model, state, ws, dt).map(|_| ()).map_err(|e| (k, Some(e)))
+                })
+            })
+            .map_err(|(k, e)| match e {
+                Some(e) => errors::step_error(e, &format!("in step {} of {n}", k + 1)),
+                None => ctrl_c.finish((), |_| errors::param_error_from("interrupted")),
+            })
         })?;
         let substeps = this.model.substeps(dt);
         let d = PyDict::new(py);

@@ -111,6 +111,10 @@ pub enum SolveError {
     NonFinite { what: &'static str, node: usize },
     #[error("{0}")]
     Invalid(String),
+    /// The caller's interrupt (see [`crate::integrate::static_solve_with`]) asked the solve to
+    /// stop; nothing of it is returned.
+    #[error("interrupted after {iterations} Newton iterations")]
+    Interrupted { iterations: usize },
 }
 
 /// A step that could not be completed. The state is left as it was before the step.

@@ -23,7 +23,8 @@
 mod common;
 
 use common::*;
-use palpate_core::integrate::{static_solve, StaticOptions};
+use palpate_core::integrate::{static_solve, static_solve_with, StaticOptions};
+use palpate_core::SolveError;
 use palpate_core::mesh::generate::{base_nodes, box_mesh, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
 use palpate_core::{Model, ModelBuilder, Vec3};
 
@@ -150,4 +151,27 @@ fn default_static_tolerance_is_reachable_at_small_strain() {
     let sol = static_solve(&model, &f, &StaticOptions::default()).expect("default options should converge at small strain");
     let tip = sol.x.iter().zip(model.mesh().points()).filter(|(_, x0)| (x0.x - L).abs() < 1e-12).map(|(x, x0)| x.x - x0.x).fold(0.0, f64::max);
     assert!((tip / (p_total * L / (E * W * W)) - 1.0).abs() < 1e-5);
+}
+
+/// The caller's interrupt stops a solve between Newton iterations and returns nothing of it; an
+/// interrupt that never fires changes nothing (the same answer bit for bit).
+#[test]
+fn an_interrupt_stops_the_solve_between_iterations() {
+    let model = bar();
+    let mut f = vec![Vec3::zeros(); model.n_nodes()];
+    for i in nodes_where(model.mesh(), 0, L, 1e-12) {
+        f[i] = Vec3::new(0.0, 0.0, -1e-3);
+    }
+    let opts = StaticOptions { load_steps: 1_000_000_000, tolerance: 1e-8, ..Default::default() };
+    let mut asked = 0;
+    let r = static_solve_with(&model, &f, &opts, &mut || {
+        asked += 1;
+        asked > 5
+    });
+    assert!(matches!(r, Err(SolveError::Interrupted { .. })), "{r:?}");
+    assert_eq!(asked, 6, "asked before each iteration until it said stop");
+    let small = StaticOptions { tolerance: 1e-8, ..Default::default() };
+    let a = static_solve(&model, &f, &small).unwrap();
+    let b = static_solve_with(&model, &f, &small, &mut || false).unwrap();
+    assert_eq!(a, b);
 }

@@ -188,6 +188,13 @@ fn first_contact(samples: &[Sample], ind: &Indenter, x: &[Vec3]) -> Option<f64> 
 /// ([`SolveError::Invalid`]), a sphere whose path meets no boundary triangle, or Newton failing
 /// at an increment ([`SolveError::NoConvergence`]).
 pub fn indent(model: &Model, ind: &Indenter, travels: &[f64], opts: &IndentOptions) -> Result<Vec<IndentPoint>, SolveError> {
+    indent_with(model, ind, travels, opts, &mut || false)
+}
+
+/// [`indent`], asking `interrupted` before each Newton iteration whether to stop
+/// ([`SolveError::Interrupted`]; see [`super::static_solve_with`]): a fine reference curve takes
+/// half an hour.
+pub fn indent_with(model: &Model, ind: &Indenter, travels: &[f64], opts: &IndentOptions, interrupted: &mut dyn FnMut() -> bool) -> Result<Vec<IndentPoint>, SolveError> {
     let bad = |m: String| Err(SolveError::Invalid(m));
     if !(ind.radius > 0.0 && ind.radius.is_finite()) {
         return bad(format!("sphere radius {} m must be positive and finite", ind.radius));
@@ -320,6 +327,9 @@ pub fn indent(model: &Model, ind: &Indenter, travels: &[f64], opts: &IndentOptio
                 }
                 if it >= opts.max_iterations {
                     return Err(SolveError::NoConvergence { iterations: iterations + it, residual: rnorm, tolerance: (opts.tolerance * scale).max(floor) });
+                }
+                if interrupted() {
+                    return Err(SolveError::Interrupted { iterations: iterations + it });
                 }
                 it += 1;
                 assemble_system(model, &samples, &blocks, k, r, &c, &x, &mut ws, &mut op);

@@ -29,8 +29,8 @@ pub(crate) use factor::ITERATIONS_PER_FACTOR_RATIO;
 pub use factor::DT_CACHE_SIZE;
 pub(crate) use quasi_newton::Lbfgs;
 pub(crate) use semi_implicit::stable_filter_factor;
-pub use statics::{static_solve, StaticOptions, StaticSolution};
-pub use indent::{indent, IndentOptions, IndentPoint, Indenter};
+pub use statics::{static_solve, static_solve_with, StaticOptions, StaticSolution};
+pub use indent::{indent, indent_with, IndentOptions, IndentPoint, Indenter};
 
 use crate::error::StepError;
 use crate::fem::{Model, State, Workspace};

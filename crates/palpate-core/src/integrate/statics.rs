@@ -73,6 +73,14 @@ fn residual(model: &Model, x: &[Vec3], applied: &[Vec3], lam: f64, ws: &mut Work
 
 /// Static equilibrium of `model` under per-node external forces `f_ext` \[N\] `(n_nodes)` and gravity.
 pub fn static_solve(model: &Model, f_ext: &[Vec3], opts: &StaticOptions) -> Result<StaticSolution, SolveError> {
+    static_solve_with(model, f_ext, opts, &mut || false)
+}
+
+/// [`static_solve`], asking `interrupted` before each Newton iteration whether to stop
+/// ([`SolveError::Interrupted`]): how a caller bounds it by a wall clock or lets a user cancel
+/// it (the core has no clock; the Python binding polls Ctrl-C there). Many load steps with many
+/// iterations each can take hours; this is the way out that is not a killed process.
+pub fn static_solve_with(model: &Model, f_ext: &[Vec3], opts: &StaticOptions, interrupted: &mut dyn FnMut() -> bool) -> Result<StaticSolution, SolveError> {
     let n = model.n_nodes();
     if f_ext.len() != n {
         return Err(SolveError::Invalid(format!("f_ext has {} rows, the model has {n} nodes", f_ext.len())));
@@ -89,7 +97,7 @@ pub fn static_solve(model: &Model, f_ext: &[Vec3], opts: &StaticOptions) -> Resu
     // or Newton stalls) is retried in more increments: 4x more each time, up to 256.
     let mut steps = opts.load_steps.max(1);
     loop {
-        match solve_in_increments(model, &applied, scale, opts, steps) {
+        match solve_in_increments(model, &applied, scale, opts, steps, interrupted) {
             Err(SolveError::NotPositiveDefinite { .. } | SolveError::NoConvergence { .. }) if steps < 256 => steps *= 4,
             other => return other,
         }
@@ -97,7 +105,7 @@ pub fn static_solve(model: &Model, f_ext: &[Vec3], opts: &StaticOptions) -> Resu
 }
 
 /// Newton from rest, the load applied in `steps` equal increments.
-fn solve_in_increments(model: &Model, applied: &[Vec3], scale: f64, opts: &StaticOptions, steps: usize) -> Result<StaticSolution, SolveError> {
+fn solve_in_increments(model: &Model, applied: &[Vec3], scale: f64, opts: &StaticOptions, steps: usize, interrupted: &mut dyn FnMut() -> bool) -> Result<StaticSolution, SolveError> {
     let n = model.n_nodes();
     let mut x = model.mesh.points().to_vec();
     let tol = opts.tolerance * scale;
@@ -108,6 +116,9 @@ fn solve_in_increments(model: &Model, applied: &[Vec3], scale: f64, opts: &Stati
     let mut r = 0.0;
     for s in 1..=steps {
         let lam = s as f64 / steps as f64;
+        if interrupted() {
+            return Err(SolveError::Interrupted { iterations });
+        }
         r = residual(model, &x, applied, lam, &mut ws);
         let first = iterations;
         loop {
@@ -119,6 +130,9 @@ fn solve_in_increments(model: &Model, applied: &[Vec3], scale: f64, opts: &Stati
             }
             if iterations - first >= opts.max_iterations {
                 return Err(SolveError::NoConvergence { iterations, residual: r, tolerance: tol.max(floor) });
+            }
+            if interrupted() {
+                return Err(SolveError::Interrupted { iterations });
             }
             iterations += 1;
             // Newton direction: (-K) dx = f.
