@@ -16,7 +16,7 @@ use palpate_core::runtime::{SimOptions, Tool};
 use palpate_core::{ModelBuilder, Vec3};
 use palpate_haptics::bridge::protocol::Reject;
 use palpate_haptics::bridge::{Bridge, BridgeError, BridgeOptions, BridgeStats, Key};
-use palpate_haptics::devices::{Hand, HandParams, Replay, Scripted};
+use palpate_haptics::devices::{Hand, HandParams, Replay, ReplayCheck, Scripted};
 use palpate_haptics::{CouplingParams, Device, DeviceKind, FemOptions, FemPhysics, HapticCore, HybridPhysics, Idle, Physics, Realtime, Recording, SafetyParams, Servo, ServoConfig, ServoHandle, ServoReport, Snapshot, Stats, Vec3Cell};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -182,6 +182,8 @@ pub struct PyHapticLoop {
     identity: (u64, String),
     /// A multirate recording to replay (`run`: bit for bit, from its recorded schedule).
     replay: Option<Recording>,
+    /// A single-rate replay's check of its forces against the recording's.
+    replay_check: Option<Arc<ReplayCheck>>,
     /// The limit beyond the device class's rating that `unsafe_limits` let through.
     unsafe_note: Option<String>,
 }
@@ -425,6 +427,7 @@ impl PyHapticLoop {
 
             let mut hand = None;
             let mut bridge = None;
+            let mut replay_check = None;
             // Ticks a finite device gives (a script's, a replay's): no recording needs more.
             let mut device_ticks: Option<usize> = None;
             let dev: Box<dyn Device> = match device.as_str() {
@@ -440,7 +443,9 @@ impl PyHapticLoop {
                 }
                 "replay" => {
                     device_ticks = replay.as_ref().map(|r| r.ticks.len());
-                    Box::new(Replay::new(replay.as_ref().unwrap()))
+                    let r = Replay::new(replay.as_ref().unwrap());
+                    replay_check = Some(r.check());
+                    Box::new(r)
                 }
                 "hand" => {
                     let at = match hand_start {
@@ -533,7 +538,7 @@ impl PyHapticLoop {
             let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
             // A multirate recording replays from its own schedule (`run`), not the device's samples.
             let replay = replay.filter(|r| r.physics_rate_hz.is_some());
-            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description), replay, unsafe_note })
+            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description), replay, unsafe_note, replay_check })
         })
     }
 
@@ -658,6 +663,7 @@ impl PyHapticLoop {
         *self.stage.lock().unwrap() = Stage::Done(Box::new(report));
         let d = d?;
         d.set_item("unsafe_limits", self.unsafe_note.clone())?;
+        self.replay_report(&d)?;
         Ok(d)
     }
 
@@ -701,6 +707,7 @@ impl PyHapticLoop {
         *self.stage.lock().unwrap() = Stage::Ready(core, dev);
         filled?;
         d.set_item("unsafe_limits", self.unsafe_note.clone())?;
+        self.replay_report(&d)?;
         Ok(d)
     }
 
@@ -811,5 +818,19 @@ impl PyHapticLoop {
             Stage::Taken => "failed",
         };
         format!("HapticLoop({} Hz, {st}; {})", self.config.rate_hz, self.identity.1)
+    }
+}
+
+impl PyHapticLoop {
+    /// A single-rate replay's ``replay_diverged_at`` (the first tick whose force differs from the
+    /// recording's in any bit, or None) and ``replay_divergence`` (why, from the recording: a
+    /// watchdog trip recorded there, or nothing that explains it; None if it did not diverge).
+    fn replay_report(&self, d: &Bound<'_, PyDict>) -> PyResult<()> {
+        if let Some(c) = &self.replay_check {
+            let (at, why) = c.divergence().unzip();
+            d.set_item("replay_diverged_at", at)?;
+            d.set_item("replay_divergence", why)?;
+        }
+        Ok(())
     }
 }

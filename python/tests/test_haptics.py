@@ -329,6 +329,40 @@ def test_run_adapter_against_the_loop_and_its_silence_rule(model, monkeypatch):
     assert after[0] < br.SILENCE_S + 0.25, f"zeroed {after[0] * 1e3:.0f} ms after the last force"
 
 
+def test_a_replay_says_where_and_why_it_leaves_a_recording_with_a_watchdog_trip(model, tmp_path):
+    # A watchdog trip (the physics stalled on the recording's machine) cannot be replayed: the
+    # replay reports the first tick whose force differs and names the recorded trip. The trip is
+    # written into a recording as the servo writes one (the tick's stalled byte, its force the
+    # fault path's zero, the fault count).
+    import struct
+
+    t, k = cycle(model)
+    loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, record_ticks=3000, single_rate=True)
+    loop.run()
+    path = tmp_path / "cycle.palprec"
+    loop.save_recording(str(path))
+    clean = _p.HapticLoop(model, haptics.material(), "replay", recording=str(path)).run()
+    assert clean["replay_diverged_at"] is None and clean["replay_divergence"] is None, clean
+    b = bytearray(path.read_bytes())
+    (desc_len,) = struct.unpack_from("<I", b, 28)
+    faults_at = 32 + desc_len + 9 * 8
+    first = faults_at + 16
+    forces = np.asarray(loop.recorded()["force"])
+    tick = int(np.flatnonzero(np.linalg.norm(forces, axis=1) > 0.02)[0])
+    rec = first + 144 * tick
+    struct.pack_into("<Q", b, faults_at, 1)
+    b[rec + 65] = 1                                  # stalled
+    struct.pack_into("<3d", b, rec + 72, 0.0, 0.0, 0.0)
+    tripped = tmp_path / "tripped.palprec"
+    tripped.write_bytes(bytes(b))
+    r = _p.HapticLoop(model, haptics.material(), "replay", recording=str(tripped)).run()
+    assert r["replay_diverged_at"] == tick, r
+    assert f"watchdog tripped at tick {tick}" in r["replay_divergence"], r["replay_divergence"]
+    out = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ellipsoids", "--device", f"replay:{tripped}",
+                          "--quiet"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert f"left its recording at tick {tick}" in out.stderr and "watchdog tripped" in out.stderr, out.stdout + out.stderr
+
+
 def test_bridge_with_the_reference_client_in_a_second_process(model):
     from palpate.devices.bridge import BridgeClient, encode_state
 

@@ -27,7 +27,9 @@
 //! n         u64      ticks
 //! n records, 144 bytes each:
 //!   position 3 x f64 [m], orientation 4 x f64 (w, x, y, z), buttons u32, pad u32,
-//!   has_input u8 + 7 pad bytes (0: the device gave no sample that tick; the servo held the last),
+//!   has_input u8 (0: the device gave no sample that tick; the servo held the last),
+//!   stalled u8 (1: the watchdog tripped in this tick; 0 in files written before 2026-12-06,
+//!   where it was padding), 6 pad bytes,
 //!   force 3 x f64 [N] (sent), tool 3 x f64 [m] (the proxy), tissue 3 x f64 [N]
 //! (v2) m    u64      model ticks (n for a multirate recording, else 0), then m x u64
 //! (v2) p    u64      physics targets, then p x 3 x f64 [m]
@@ -53,6 +55,9 @@ pub struct TickRecord {
     pub input: DeviceInput,
     /// Did the device give a sample this tick?
     pub has_input: bool,
+    /// Did the watchdog trip in this tick (the physics stalled: an event of the machine's clock,
+    /// which a replay cannot reproduce)? Recordings made before 2026-12-06 say false.
+    pub stalled: bool,
     pub force: Vec3,
     pub tool: Vec3,
     pub tissue: Vec3,
@@ -110,7 +115,8 @@ impl Recording {
             b.extend_from_slice(&t.input.buttons.to_le_bytes());
             b.extend_from_slice(&[0; 4]);
             b.push(t.has_input as u8);
-            b.extend_from_slice(&[0; 7]);
+            b.push(t.stalled as u8);
+            b.extend_from_slice(&[0; 6]);
             for v in [&t.force, &t.tool, &t.tissue] {
                 v.iter().for_each(|&x| f(&mut b, x));
             }
@@ -159,12 +165,13 @@ impl Recording {
             let orientation = [f(), f(), f(), f()];
             let buttons = r.u32().unwrap();
             r.take(4);
-            let has_input = r.take(8).unwrap()[0] != 0;
+            let flags = r.take(8).unwrap();
+            let (has_input, stalled) = (flags[0] != 0, flags[1] != 0);
             let mut f = || r.f64().unwrap();
             let force = Vec3::new(f(), f(), f());
             let tool = Vec3::new(f(), f(), f());
             let tissue = Vec3::new(f(), f(), f());
-            ticks.push(TickRecord { input: DeviceInput { position, orientation, buttons }, has_input, force, tool, tissue });
+            ticks.push(TickRecord { input: DeviceInput { position, orientation, buttons }, has_input, stalled, force, tool, tissue });
         }
         let (mut model_ticks, mut targets) = (Vec::new(), Vec::new());
         if version >= 2 {

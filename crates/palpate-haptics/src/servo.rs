@@ -600,7 +600,7 @@ impl HapticCore {
             // thread); what does not fit is counted, so that a truncated recording is reported
             // rather than passed off as the whole run.
             if r.ticks.len() < r.ticks.capacity() {
-                r.ticks.push(TickRecord { input, has_input, force: out.force, tool: out.tool, tissue: out.tissue });
+                r.ticks.push(TickRecord { input, has_input, stalled: false, force: out.force, tool: out.tool, tissue: out.tissue });
             } else {
                 self.recording_dropped += 1;
             }
@@ -680,10 +680,16 @@ impl HapticCore {
         self.max_force = self.max_force.max(out.force.norm());
     }
 
-    /// The watchdog tripped during the last tick: take the fault path for it.
+    /// The watchdog tripped during the last tick: take the fault path for it, and mark its
+    /// record (a replay cannot reproduce a stall: `devices::replay::divergence_reason`).
     fn stalled(&mut self, seconds: f64, out: &mut TickOut) {
         self.fault(Fault::Stall(seconds), out);
         self.retract(out);
+        if self.recording_dropped == 0 {
+            if let Some(last) = self.recording.as_mut().and_then(|r| r.ticks.last_mut()) {
+                last.stalled = true;
+            }
+        }
     }
 
     /// Runs ticks without a clock (as fast as the physics goes) until the device is finished or

@@ -69,7 +69,40 @@ fn replay_is_bit_identical_offline_and_from_a_file() {
     let rep = again.take_recording().unwrap();
     assert_eq!(rep.ticks.len(), rec.ticks.len());
     assert_eq!(compare(&rec, &rep), None, "replay differs");
+    assert_eq!(replay.check().diverged_at(), None, "the replay's own check agrees");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A recording whose watchdog tripped (a physics stall on the recording machine: the force
+/// zeroed, the ramp restarted) cannot be replayed past the trip; the replay says where its forces
+/// left the recording's and that the recorded trip is why. The trip is made here as the servo
+/// makes it (the record marked stalled, its force the fault path's zero); a force changed with no
+/// trip recorded is reported as unexplained.
+#[test]
+fn a_replay_says_where_and_why_it_left_its_recording() {
+    let rec = record_press(hybrid());
+    let k = rec.ticks.iter().position(|t| t.force.norm() > 0.02).expect("the press touches");
+    let mut tripped = rec.clone();
+    tripped.ticks[k].stalled = true;
+    tripped.ticks[k].force = Vec3::zeros();
+    tripped.faults = 1;
+    let bytes = tripped.to_bytes();
+    assert_eq!(Recording::from_bytes(&bytes, "t").unwrap(), tripped, "the stall flag round-trips");
+    let mut replay = Replay::new(&tripped);
+    let mut again = HapticCore::new(Box::new(hybrid()), rec.rate_hz, rec.coupling, rec.safety, 100, 0);
+    again.run_offline(&mut replay, 5000);
+    let (at, why) = replay.check().divergence().expect("diverged");
+    assert_eq!(at, k as u64);
+    assert!(why.contains(&format!("watchdog tripped at tick {k}")), "{why}");
+
+    let mut edited = rec.clone();
+    edited.ticks[k + 5].force.x += 1e-9;
+    let mut replay = Replay::new(&edited);
+    let mut again = HapticCore::new(Box::new(hybrid()), rec.rate_hz, rec.coupling, rec.safety, 100, 0);
+    again.run_offline(&mut replay, 5000);
+    let (at, why) = replay.check().divergence().expect("diverged");
+    assert_eq!(at, k as u64 + 5);
+    assert!(why.contains("nothing in the recording explains it"), "{why}");
 }
 
 #[test]

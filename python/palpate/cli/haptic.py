@@ -199,6 +199,11 @@ def cmd_haptic(a) -> int:
             print(f"palpate haptic: warning: real-time scheduling {r['realtime']}", file=sys.stderr)
         else:
             print(f"  servo scheduling: {r['realtime']}")
+    if r.get("replay_divergence"):
+        print(f"palpate haptic: warning: the replay left its recording at tick {r['replay_diverged_at']}: "
+              f"{r['replay_divergence']}", file=sys.stderr)
+    elif "replay_diverged_at" in r:
+        print("  replay: every force as recorded, bit for bit")
     bs = loop.bridge_stats()
     if bs is not None:
         print("  bridge: " + ", ".join(f"{k} {v}" for k, v in bs.items()))

@@ -7,5 +7,5 @@ pub mod replay;
 pub mod scripted;
 
 pub use hand::{Hand, HandParams};
-pub use replay::Replay;
+pub use replay::{Replay, ReplayCheck};
 pub use scripted::Scripted;
