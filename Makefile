@@ -138,7 +138,7 @@ distclean: clean
 # fixed and its input kept in fuzz/seeds/TARGET/, which every run replays first.
 FUZZ_SECONDS ?= 60
 FUZZ_SEED ?= 0
-FUZZ_TARGETS := model_file model_payload tet_mesh tri_surface bridge_packet
+FUZZ_TARGETS := model_file model_payload tet_mesh tri_surface bridge_packet recording
 .PHONY: fuzz fuzz-ci
 fuzz:
 	cd fuzz && for t in $(FUZZ_TARGETS); do \

@@ -29,7 +29,14 @@ fuzz_target!(|data: &[u8]| {
         }
         if let Ok(h) = protocol::decode_handshake(data, k) {
             let again = protocol::encode_handshake(&h, k);
-            assert_eq!(&again[..28], &data[..28]);
+            // Read: the header, the session of a welcome, the nonce, the reason of a refusal (the
+            // encoder writes 0 where nothing is read).
+            let (from, to) = match h {
+                protocol::Handshake::Hello { .. } => (16, 24),
+                protocol::Handshake::Welcome { .. } => (8, 24),
+                protocol::Handshake::Refused { .. } => (16, 28),
+            };
+            assert_eq!((&again[..8], &again[from..to]), (&data[..8], &data[from..to]));
         }
     }
 });
