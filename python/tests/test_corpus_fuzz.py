@@ -1,5 +1,6 @@
-"""Randomised mutation fuzzing of palpate's own Python readers (issue 15; cargo-fuzz covers the
-Rust model-file loader and validators, fuzz/): inputs derived from valid files (truncations,
+"""Randomised mutation fuzzing of palpate's own Python readers and the readers it wraps (VTU
+through meshio, NPZ through numpy) (issue 15, issue 35; cargo-fuzz covers the Rust model-file and
+recording loaders, the bridge's decoders and the validators, fuzz/): inputs derived from valid files (truncations,
 byte edits, duplicated or dropped lines, inflated, negative or NaN numbers) must load or raise a
 palpate error, never another exception, each within 2 s.
 
@@ -197,3 +198,48 @@ def test_budget_reaches_the_core(monkeypatch):
         palpate.neighbours(pts, 2.5e-3)
     monkeypatch.delenv("PALPATE_MAX_MEMORY")
     palpate.neighbours(pts, 2.5e-3)
+
+
+def _tet_arrays():
+    m = palpate.box_mesh((0.01, 0.01, 0.01), (2, 1, 1))
+    return np.asarray(m.points), np.asarray(m.tets)
+
+
+def _byte_edits(rng, seeds):
+    """One of ``seeds`` with up to 6 bytes replaced, then cut to 50-100% of its length."""
+    data = bytearray(rng.choice(seeds))
+    for _ in range(rng.randint(0, 6)):
+        data[rng.randrange(len(data))] = rng.randrange(256)
+    return bytes(data[: max(1, int(len(data) * rng.uniform(0.5, 1.0)))])
+
+
+def test_vtu_reader(folder):
+    # meshio's VTU reader behind palpate's checks (issue 35 item 8): ASCII, binary and
+    # zlib-compressed binary seeds, byte edits and truncations (a size field inflated, a header cut,
+    # a compressed block damaged).
+    import meshio
+
+    points, tets = _tet_arrays()
+    seeds = []
+    for k, kw in enumerate(({"binary": False}, {"binary": True, "compression": None}, {"binary": True, "compression": "zlib"})):
+        p = folder / f"seed_{k}.vtu"
+        meshio.write(p, meshio.Mesh(points, [("tetra", tets)]), file_format="vtu", **kw)
+        seeds.append(p.read_bytes())
+        palpate.load_mesh(str(p))                 # the seeds themselves load
+    path = str(folder / "s.vtu")
+    fuzz("vtu", lambda rng: _byte_edits(rng, seeds) if rng.random() < 0.7 else mutated(rng, rng.choice(seeds)),
+         lambda d: (open(path, "wb").write(d), palpate.load_mesh(path)))
+
+
+def test_npz_reader(folder):
+    # palpate's NPZ reader (issue 35 item 8): compressed and stored archives, byte edits and
+    # truncations (the zip directory, a member's .npy header, its data).
+    points, tets = _tet_arrays()
+    seeds = []
+    for k, save in enumerate((np.savez, np.savez_compressed)):
+        p = folder / f"seed_{k}.npz"
+        save(p, points=points, tets=tets)
+        seeds.append(p.read_bytes())
+        palpate.load_mesh(str(p))
+    path = str(folder / "s.npz")
+    fuzz("npz", lambda rng: _byte_edits(rng, seeds), lambda d: (open(path, "wb").write(d), palpate.load_mesh(path)))
