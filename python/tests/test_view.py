@@ -275,6 +275,32 @@ def test_bridge_device_drives_the_view(model):
     assert s["max_force_n"] > 0.02 and s["max_surface_mm"] > 0.5, s
 
 
+def test_a_keyed_bridge_device_drives_the_view(model):
+    # The viewer's bridge with a shared key: a client without it is refused at the hello, one with
+    # it presses the tissue.
+    from palpate.devices.bridge import BridgeClient, BridgeRefused
+    from palpate.viewer import Viewer
+
+    key = b"k" * 32
+    v = Viewer(model, "ventricle", port=0, device="bridge", bridge_port=0, bridge_key=key)
+    try:
+        assert v.wait_ready(60)
+        host, port = v.bridge_address.split(":")
+        with pytest.raises(BridgeRefused, match="shared key"):
+            BridgeClient(host, int(port), timeout=2.0)
+        c = BridgeClient(host, int(port), key=key)
+        a, b = v.home(), v.press_target(0.004)
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 2.0:
+            c.send(a + min(1.0, time.monotonic() - t0) * (b - a))
+            time.sleep(0.002)
+        s = v.status()
+        c.close()
+    finally:
+        v.close()
+    assert s["max_force_n"] > 0.02, s
+
+
 # ------------------------------------------------------------------------------- the command
 
 def run_cli(*args, timeout=120):

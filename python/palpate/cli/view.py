@@ -58,6 +58,9 @@ def add_parser(sub) -> None:
     v.add_argument("--device", choices=DEVICES, default="hand",
                    help="hand: the page moves a simulated hand (default); bridge: a real device over UDP")
     v.add_argument("--bridge-port", type=int, default=0, metavar="P", help="UDP port of the bridge (default 0: a free one)")
+    v.add_argument("--key-file", default=None, metavar="FILE",
+                   help="bridge: a shared key (at least 16 bytes) that signs every packet (HMAC-SHA256); required "
+                        "with --device bridge beyond 127.0.0.1; the device process gives the same file")
     v.add_argument("--preset", default=None, metavar="NAME",
                    help="material preset (default 'haptic (30 kPa, damped)'; also 'myocardium', 'paper ellipsoids')")
     v.add_argument("--tool-radius", type=float, default=0.005, metavar="M",
@@ -169,13 +172,20 @@ def _serve(a, name, model, hz) -> int:
     from .. import _palpate as _p
     from ..viewer import OriginCheckUnavailable, Viewer
 
+    from .. import HapticsError
+    from ..devices.bridge import load_key
+
+    try:
+        key = load_key(a.key_file) if a.key_file else None
+    except HapticsError as e:
+        raise Usage(f"palpate view: {e}") from None
     try:
         viewer = Viewer(model, name, host=a.host, port=a.port, device=a.device, bridge_port=a.bridge_port,
                         bridge_host=a.host if a.device == "bridge" else "127.0.0.1", preset=a.preset,
                         tool_radius=a.tool_radius, press_depth=a.press_depth, rate_hz=a.rate, fps=a.fps,
                         max_force=a.max_force, show_core=a.show_core, show_particles=a.show_particles,
                         realtime=a.realtime, physics_rate=hz, single_rate=hz is None,
-                        unsafe_limits=a.unsafe_limits, token=a.token, require_token=a.require_token)
+                        unsafe_limits=a.unsafe_limits, token=a.token, require_token=a.require_token, bridge_key=key)
     except _p.ParameterError as e:
         raise Fail(f"palpate view: {e}") from None
     except OriginCheckUnavailable as e:

@@ -83,7 +83,8 @@ class Viewer:
 
     ``device`` ``"hand"``: a simulated hand the page moves (drag on the surface, or the gizmo);
     ``"bridge"``: a real device through the UDP bridge on ``bridge_host``:``bridge_port``
-    (:attr:`bridge_address`). ``preset`` is a key of :data:`PRESETS`, ``tool_radius`` [m],
+    (:attr:`bridge_address`; ``bridge_key``, bytes, signs its packets and is required for a
+    ``bridge_host`` beyond loopback: ``crates/palpate-haptics/PROTOCOL.md``). ``preset`` is a key of :data:`PRESETS`, ``tool_radius`` [m],
     ``press_depth`` [m] how deep a drag on the surface presses, ``fps`` the viewer's update rate
     [Hz] (the loop's is ``rate_hz``); ``show_core``, ``show_particles``: draw the core's tets and
     the active particles from the start (the GUI's "Show" boxes); ``realtime``: the servo under
@@ -109,8 +110,11 @@ class Viewer:
                  rate_hz: float = 1000.0, fps: float = 30.0, max_force: Optional[float] = None,
                  show_core: bool = False, show_particles: bool = False, realtime: bool = False,
                  physics_rate: Optional[float] = None, single_rate: bool = False, unsafe_limits: bool = False,
-                 token: Optional[str] = None, require_token: bool = False):
+                 token: Optional[str] = None, require_token: bool = False, bridge_key: Optional[bytes] = None):
         self.fem = isinstance(model, FemModel)
+        # The bridge's shared key (PROTOCOL.md; required beyond loopback): kept out of the
+        # settings, which the page shows.
+        self._bridge_key = bridge_key
         presets = dict(_presets())
         if self.fem and model.material is not None:
             m = model.material
@@ -297,7 +301,7 @@ class Viewer:
             common["max_force"] = s["max_force"]
         if s["device"] == "bridge":
             return _p.HapticLoop(loop_model(self.model), mat, "bridge", port=s["bridge_port"], host=s["bridge_host"],
-                                 **common)
+                                 bridge_key=self._bridge_key, **common)
         return _p.HapticLoop(loop_model(self.model), mat, "hand", hand_start=self.home(), **common)
 
     def _restart(self, wait: bool = True) -> None:
