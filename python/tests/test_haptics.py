@@ -518,6 +518,11 @@ def test_cli_haptic_bridge_beyond_loopback_needs_a_key(tmp_path):
     out = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ventricle", "--device", "bridge:0", "--host", "0.0.0.0",
                           "--seconds", "0.2"], capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert out.returncode == 2 and "--key-file" in out.stderr, out.stderr
+    (tmp_path / "bridge.key").write_text("ab" * 16)
+    out = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ventricle", "--device", "bridge:0", "--host", "0.0.0.0",
+                          "--key-file", str(tmp_path / "bridge.key"), "--seconds", "0.3", "--quiet"],
+                         capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert out.returncode == 0 and "not encrypted" in out.stderr, out.stdout + out.stderr
     out = subprocess.run([sys.executable, "-m", "palpate", "device", "touch", "--key-file", str(tmp_path / "none.key")],
                          capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert out.returncode == 2 and "cannot read the bridge key" in out.stderr, out.stderr

@@ -130,9 +130,14 @@ def make_loop(a, model, record_ticks: int):
                 raise Usage(f"palpate haptic: port {port} out of range")
             from ..devices.bridge import load_key
             key = load_key(a.key_file) if a.key_file else None
-            if key is None and a.host not in ("127.0.0.1", "localhost") and not a.host.startswith("127."):
+            beyond = a.host not in ("127.0.0.1", "localhost") and not a.host.startswith("127.")
+            if key is None and beyond:
                 raise Usage(f"palpate haptic: --host {a.host} makes the bridge reachable from other machines: "
                             "give a shared key with --key-file FILE (every packet is then signed), or bind 127.0.0.1")
+            if beyond:
+                print(f"palpate haptic: warning: the bridge on {a.host} is reachable from other machines; its packets "
+                      "are signed with the key but not encrypted (positions and forces can be read on the network)",
+                      file=sys.stderr)
             return _p.HapticLoop(model, mat, "bridge", port=port, host=a.host, bridge_key=key, **common)
         if kind == "hand":
             import numpy as np
