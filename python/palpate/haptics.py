@@ -132,6 +132,12 @@ def status_line(s: Optional[Dict[str, Any]], rate_hz: float) -> str:
             f"{s['compute_us']:7.1f} us | force {f:6.3f} N | overruns {s['overruns']} | faults {s['faults']}")
 
 
+def loop_rates(physics_rate: Optional[float]) -> Dict[str, Any]:
+    """The :class:`palpate.HapticLoop` keywords for a physics rate [Hz], None meaning the
+    single-rate loop (the commands' ``--single-rate``): ``physics_rate`` and ``single_rate``."""
+    return {"physics_rate": physics_rate, "single_rate": physics_rate is None}
+
+
 def bridge_events(stats: Optional[Dict[str, Any]], seen: Dict[str, Any]) -> list:
     """What changed at the bridge since ``seen`` (updated in place), as log lines: who holds the
     tool (each new session), protocol-1 clients refused, hellos refused while busy, packets with a
@@ -233,8 +239,7 @@ def bench(model: "_p.HybridModel", seconds: float, rate_hz: float = 1000.0, idle
     busy_wait = (not realtime and physics_rate is None) if busy_wait is None else busy_wait
     ticks = int(round(seconds * rate_hz))
     loop = _p.HapticLoop(model, mat, "scripted", times=t, knots=k, rate_hz=rate_hz, max_ticks=ticks,
-                         realtime=realtime, threads=threads, spin=spin, physics_rate=physics_rate,
-                         single_rate=physics_rate is None, record_ticks=ticks)
+                         realtime=realtime, threads=threads, spin=spin, record_ticks=ticks, **loop_rates(physics_rate))
     steal0 = steal_seconds()
     r = run_live(loop, None, on_status)
     steal1 = steal_seconds()

@@ -94,8 +94,7 @@ def make_loop(a, model, record_ticks: int):
 
     kind, _, arg = a.device.partition(":")
     common = dict(rate_hz=a.rate, record_ticks=record_ticks, max_force=a.max_force, tool_radius=a.tool_radius,
-                  realtime=a.realtime, threads=a.threads, physics_rate=a.physics_hz,
-                  single_rate=a.physics_hz is None, unsafe_limits=a.unsafe_limits)
+                  realtime=a.realtime, threads=a.threads, unsafe_limits=a.unsafe_limits, **haptics.loop_rates(a.physics_hz))
     if a.busy_wait:
         common["spin"] = haptics.BUSY_SPIN
     elif a.sleep:

@@ -38,8 +38,7 @@ def cmd_soak(a) -> int:
     t, k = haptics.random_palpation(model, seconds + 1.0, seed=a.seed)
     try:
         loop = _p.HapticLoop(model, haptics.material(), "scripted", times=t, knots=k, rate_hz=a.rate,
-                             max_ticks=int(round(seconds * a.rate)), realtime=a.realtime, physics_rate=hz,
-                             single_rate=hz is None)
+                             max_ticks=int(round(seconds * a.rate)), realtime=a.realtime, **haptics.loop_rates(hz))
     except palpate_errors() as e:
         raise Fail(f"palpate soak: {type(e).__name__}: {e}", cause=e) from None
     show = None if a.json else (lambda line: print(line, flush=True))

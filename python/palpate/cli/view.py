@@ -174,6 +174,7 @@ def _serve(a, name, model, hz) -> int:
 
     from .. import HapticsError
     from ..devices.bridge import load_key
+    from ..haptics import loop_rates
 
     try:
         key = load_key(a.key_file) if a.key_file else None
@@ -184,7 +185,7 @@ def _serve(a, name, model, hz) -> int:
                         bridge_host=a.host if a.device == "bridge" else "127.0.0.1", preset=a.preset,
                         tool_radius=a.tool_radius, press_depth=a.press_depth, rate_hz=a.rate, fps=a.fps,
                         max_force=a.max_force, show_core=a.show_core, show_particles=a.show_particles,
-                        realtime=a.realtime, physics_rate=hz, single_rate=hz is None,
+                        realtime=a.realtime, **loop_rates(hz),
                         unsafe_limits=a.unsafe_limits, token=a.token, require_token=a.require_token, bridge_key=key)
     except _p.ParameterError as e:
         raise Fail(f"palpate view: {e}") from None
