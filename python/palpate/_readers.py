@@ -257,7 +257,12 @@ def npz_precheck(path: str, error: Type[Exception] = MeshError) -> None:
                     raise error(f"{name}: member {member!r}: its .npy header claims a {dims} array of {dtype} "
                                 f"({nbytes:.0f} bytes) but the member holds {max(info.file_size - header_end, 0)} "
                                 "bytes of data (truncated or corrupt)")
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError, NotImplementedError, RuntimeError) as e:
+    except (LimitError, error):
+        raise
+    except zipfile.BadZipFile as e:
+        raise error(f"{name}: cannot read as NPZ (not a zip archive: {e})") from None
+    except Exception as e:  # noqa: BLE001 - untrusted bytes: zlib.error, an unsupported method,
+        # an encrypted member, a bad offset... each a refusal of the file, not a traceback
         raise error(f"{name}: cannot read as NPZ ({type(e).__name__}: {e})") from None
 
 
