@@ -271,6 +271,8 @@ mod tests {
         let e = check("voxel grid", 1e12, 2.0).unwrap_err();
         let msg = e.to_string();
         assert!(msg.contains("voxel grid") && msg.contains("PALPATE_MAX_MEMORY"), "{msg}");
+        // The message says where the budget came from (the limit, or the variable).
+        assert!(!e.budget_source.is_empty() && msg.contains(&e.budget_source), "{msg}");
         assert!(check("x", f64::INFINITY, 1.0).is_err());
         assert!(check("x", f64::NAN, 1.0).is_err());
     }
