@@ -52,6 +52,7 @@ class ParameterKeyError(ParameterError, KeyError): ...
 class LimitError(PalpateError):
     requested: Optional[float]
     budget: Optional[int]
+    budget_source: Optional[str]
 
 class InternalError(PalpateError): ...
 
@@ -336,6 +337,7 @@ class Body:
         max_wall_s: Optional[float] = None,
     ) -> ProbeRun: ...
 
+def memory_budget() -> Tuple[int, str]: ...
 def ellipsoid_wall(
     inner: Optional[Tuple[float, float, float]] = None,
     outer: Optional[Tuple[float, float, float]] = None,

@@ -19,13 +19,13 @@ from typing import Dict, List, Optional, Tuple, Type
 
 import numpy as np
 
-from ._palpate import LimitError, MeshError
+from ._palpate import LimitError, MeshError, memory_budget
 
 # ---------------------------------------------------------------------------------------------
-# Input files and the memory budget (the Rust core's crate::limits, mirrored for the readers)
+# Input files and the memory budget (the Rust core's crate::limits, read through the binding)
 # ---------------------------------------------------------------------------------------------
 
-#: Default memory budget [bytes] of one input (8 GiB), as the core's ``limits::DEFAULT_MAX_MEMORY``.
+#: The budget when no limit of the machine can be read (8 GiB), as ``limits::DEFAULT_MAX_MEMORY``.
 DEFAULT_MAX_MEMORY = 8 << 30
 _UNITS = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 
@@ -44,9 +44,15 @@ def parse_size(text: str) -> Optional[int]:
     return int(v) if 1 <= v < 1.8e19 else None
 
 
+def budget() -> Tuple[int, str]:
+    """The memory budget [bytes] and its source, from the core (:func:`palpate.memory_budget`):
+    one rule for the Rust checks and the Python readers."""
+    return memory_budget()
+
+
 def max_memory() -> int:
-    """The memory budget [bytes]: ``PALPATE_MAX_MEMORY`` when set and readable, else 8 GiB."""
-    return parse_size(os.environ.get("PALPATE_MAX_MEMORY", "")) or DEFAULT_MAX_MEMORY
+    """The memory budget [bytes] (:func:`palpate.memory_budget`)."""
+    return budget()[0]
 
 
 def _human(b: float) -> str:
@@ -61,14 +67,14 @@ def check_budget(what: str, nbytes: float, name: Optional[str] = None) -> None:
     """Refuse ``nbytes`` for ``what`` (prefixed by the file ``name``) over the budget, before
     anything is allocated: a :class:`palpate.LimitError` saying what, how much, the budget and
     how to raise it."""
-    budget = max_memory()
+    budget, source = memory_budget()
     if nbytes <= budget:
         return
     prefix = f"{name}: " if name else ""
-    err = LimitError(f"{prefix}{what}: needs {_human(nbytes)}, over the memory budget of {_human(budget)}; "
-                     "raise the budget with the environment variable PALPATE_MAX_MEMORY (e.g. "
+    err = LimitError(f"{prefix}{what}: needs {_human(nbytes)}, over the memory budget of {_human(budget)} "
+                     f"({source}); set the environment variable PALPATE_MAX_MEMORY to change it (e.g. "
                      "PALPATE_MAX_MEMORY=32G) if the machine has the memory, or check the input")
-    err.requested, err.budget = float(nbytes), budget
+    err.requested, err.budget, err.budget_source = float(nbytes), budget, source
     raise err
 
 
@@ -221,6 +227,63 @@ def vtk_xml_inflated_precheck(path: str, error: Type[Exception] = MeshError) -> 
             pos = start + int(off.group(1))
             header = raw[pos:pos + 3 * hs] if enc is None or enc.group(1) == b"raw" else b64_head(raw[pos:pos + 64])
             add(header, f"appended array {k}, byte {pos}")
+
+
+def npz_precheck(path: str, error: Type[Exception] = MeshError) -> None:
+    """Each member of the NPZ ``path`` against the memory budget before numpy allocates it: the
+    zip directory's uncompressed size (a 3 MB file can hold a 3 GB array of zeros) and the shape
+    x dtype its ``.npy`` header claims (numpy allocates the whole array from the header before it
+    reads a byte: a 300-byte member claiming 1e10 rows asks for 240 GB). A header claiming more
+    bytes than its member holds is refused with ``error`` (a lie numpy would still allocate for).
+    Only headers are read (a few hundred bytes a member); nothing is inflated."""
+    import zipfile
+
+    name = os.path.basename(path)
+    try:
+        with zipfile.ZipFile(path) as z:
+            for info in z.infolist():
+                member = info.filename
+                check_budget(f"zip member {member!r} inflates to {info.file_size} bytes", info.file_size, name)
+                if not member.endswith(".npy"):
+                    continue
+                with z.open(info) as fp:
+                    shape, dtype, header_end = _npy_header(fp, f"{name}: member {member!r}", error)
+                count = float(np.prod([float(d) for d in shape])) if shape else 1.0
+                nbytes = count * dtype.itemsize
+                dims = " x ".join(str(d) for d in shape) or "scalar"
+                check_budget(f"member {member!r}: its .npy header claims a {dims} array of {dtype} "
+                             f"({nbytes:.3e} bytes)", nbytes, name)
+                if not dtype.hasobject and nbytes > info.file_size - header_end:
+                    raise error(f"{name}: member {member!r}: its .npy header claims a {dims} array of {dtype} "
+                                f"({nbytes:.0f} bytes) but the member holds {max(info.file_size - header_end, 0)} "
+                                "bytes of data (truncated or corrupt)")
+    except (LimitError, error):
+        raise
+    except zipfile.BadZipFile as e:
+        raise error(f"{name}: cannot read as NPZ (not a zip archive: {e})") from None
+    except Exception as e:  # noqa: BLE001 - untrusted bytes: zlib.error, an unsupported method,
+        # an encrypted member, a bad offset... each a refusal of the file, not a traceback
+        raise error(f"{name}: cannot read as NPZ ({type(e).__name__}: {e})") from None
+
+
+def _npy_header(fp, where: str, error: Type[Exception]):
+    """``(shape, dtype, header_end)`` of the .npy stream ``fp`` (numpy's own header readers,
+    which parse with ``ast.literal_eval`` and bound the header's length)."""
+    fmt = np.lib.format
+    try:
+        version = fmt.read_magic(fp)
+        if version == (1, 0):
+            shape, _fortran, dtype = fmt.read_array_header_1_0(fp)
+        elif version == (2, 0):
+            shape, _fortran, dtype = fmt.read_array_header_2_0(fp)
+        else:  # (3, 0): a UTF-8 header, read by the same private helper numpy.load uses
+            shape, _fortran, dtype = fmt._read_array_header(fp, version)
+    except Exception as e:  # noqa: BLE001 - untrusted bytes: numpy's parser raises ValueError,
+        # SyntaxError, tokenize.TokenError, UnicodeDecodeError... all mean "not a header"
+        raise error(f"{where}: not a valid .npy header ({type(e).__name__}: {e})") from None
+    if any(not isinstance(d, int) or d < 0 for d in shape):
+        raise error(f"{where}: invalid .npy shape {shape}")
+    return shape, np.dtype(dtype), fp.tell()
 
 
 # ---------------------------------------------------------------------------------------------

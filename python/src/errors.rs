@@ -69,7 +69,8 @@ create_exception!(
     "A size from the input (node or element count, voxel grid, neighbour pairs, steps, a file or its \
      decompressed length) over palpate's memory budget, refused before the memory is taken. The message \
      says what was asked, how much and the budget; raise the budget with the environment variable \
-     PALPATE_MAX_MEMORY (bytes, or e.g. 16G). Attributes `requested` and `budget` [bytes] hold the numbers."
+     PALPATE_MAX_MEMORY (bytes, or e.g. 16G). Attributes `requested` and `budget` [bytes] hold the numbers, `budget_source` where the budget \
+     came from (see `palpate.memory_budget()`)."
 );
 create_exception!(
     palpate,
@@ -243,6 +244,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let limit = py.get_type::<LimitError>();
     limit.setattr("requested", py.None())?;
     limit.setattr("budget", py.None())?;
+    limit.setattr("budget_source", py.None())?;
     m.add("LimitError", limit)?;
     m.add("InternalError", py.get_type::<InternalError>())?;
     m.add("LoadWarning", py.get_type::<LoadWarning>())?;
@@ -374,8 +376,21 @@ pub fn limit_error(e: &core::LimitError, prefix: Option<&str>) -> PyErr {
     Python::attach(|py| {
         set_attr(py, &err, "requested", Some(e.bytes));
         set_attr(py, &err, "budget", Some(e.budget));
+        set_attr(py, &err, "budget_source", Some(e.budget_source.clone()));
     });
     err
+}
+
+/// The memory budget of one input-derived structure now, and where it came from.
+///
+/// Returns ``(bytes, source)``: ``PALPATE_MAX_MEMORY`` when set, else half of the smallest of
+/// the process's address-space limit (RLIMIT_AS, less what is mapped), its cgroup's memory
+/// limit and the memory available (MemAvailable); 8 GiB when none can be read (not Linux).
+/// Read afresh at every call (the memory available changes).
+#[pyfunction]
+pub fn memory_budget() -> (u64, String) {
+    let b = palpate_core::limits::budget();
+    (b.bytes, b.source)
 }
 
 // ---------------------------------------------------------------------------------------------

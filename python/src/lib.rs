@@ -49,6 +49,7 @@ fn _palpate(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<particles::PyParticleBody>()?;
     m.add_class::<hybrid_sim::PyHybridSim>()?;
     m.add_class::<haptics::PyHapticLoop>()?;
+    m.add_function(wrap_pyfunction!(errors::memory_budget, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::truncated_ellipsoid_wall, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::box_mesh, m)?)?;

@@ -197,7 +197,7 @@ impl PyParticleBody {
                 // Before the record doubles: would it fit the memory budget? (Stop, not abort.)
                 if out.tick_wall.len() == out.tick_wall.capacity() {
                     if let Err(e) = palpate_core::limits::check("the per-tick record", 2.0 * out.tick_wall.capacity().max(1) as f64, 8.0) {
-                        out.error = Some(format!("stopped after {k} of {ticks} ticks: the per-tick record would grow past the memory budget of {} (raise it with PALPATE_MAX_MEMORY, or run fewer ticks at a time)", palpate_core::limits::human_bytes(e.budget as f64)));
+                        out.error = Some(format!("stopped after {k} of {ticks} ticks: the per-tick record would grow past the memory budget of {} ({}; set PALPATE_MAX_MEMORY to change it, or run fewer ticks at a time)", palpate_core::limits::human_bytes(e.budget as f64), e.budget_source));
                         break;
                     }
                 }

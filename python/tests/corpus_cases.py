@@ -64,9 +64,9 @@ class Corpus:
         self.cases.append({"name": name, "klass": klass, "kind": "api", "code": code, "expect": list(expect),
                            "types": types, "budget": budget, "names": names, "contains": contains})
 
-    def cli(self, name, klass, argv, codes=(1,), expect_stdout=None, contains=None):
+    def cli(self, name, klass, argv, codes=(1,), expect_stdout=None, contains=None, budget="1G"):
         self.cases.append({"name": name, "klass": klass, "kind": "cli", "argv": list(argv), "codes": list(codes),
-                           "expect_stdout": expect_stdout, "budget": "1G", "contains": contains})
+                           "expect_stdout": expect_stdout, "budget": budget, "contains": contains})
 
 
 # ---------------------------------------------------------------------------------------------
@@ -372,6 +372,21 @@ def _bombs(c: Corpus):
                 fh.write(chunk)
         z.writestr("tets.npy", b"")
     c.api("bomb.npz", "bomb", _loader("mesh", "bomb.npz"), ["error"], ["LimitError"])
+    # Issue 35 item 4: the same bombs with no PALPATE_MAX_MEMORY: the budget follows RLIMIT_AS
+    # (3 GiB in the child), and the refusal names it.
+    for name, kind in (("bomb.vtu", "mesh"), ("bomb.vtp", "surface"), ("bomb.npz", "mesh")):
+        c.api(name.replace(".", "_") + "_rlimit", "bomb", _loader(kind, name), ["error"], ["LimitError"], budget=None,
+              names=[name], contains="RLIMIT_AS")
+    # An .npy header claiming 1e10 x 3 float64 (240 GB) in a member of ~130 bytes: the zip
+    # directory is honest, only the header lies; refused from the header before numpy allocates.
+    with zipfile.ZipFile(c.path("rows_1e10.npz"), "w") as z:
+        for member, shape, descr in (("points.npy", (10**10, 3), "<f8"), ("tets.npy", (1, 4), "<i8")):
+            buf = io.BytesIO()
+            np.lib.format.write_array_header_1_0(buf, {"descr": descr, "fortran_order": False, "shape": shape})
+            z.writestr(member, buf.getvalue() + (b"\0" * 32 if member == "tets.npy" else b""))
+    c.api("npz_header_1e10_rows", "bomb", _loader("mesh", "rows_1e10.npz"), ["error"], ["LimitError"], contains="'points.npy'")
+    c.api("npz_header_1e10_rows_rlimit", "bomb", _loader("mesh", "rows_1e10.npz"), ["error"], ["LimitError"], budget=None,
+          names=["rows_1e10.npz"], contains="RLIMIT_AS")
 
 
 def _generator_cases(c: Corpus):
@@ -472,6 +487,11 @@ def _body_cases(c: Corpus):
         name, klass, code, expect = entry[:4]
         types = entry[4] if len(entry) > 4 else None
         c.api(name, klass, code, expect, types)
+    # Issue 35 item 4: an all-pairs neighbourhood (4096 particles 1 mm apart, a 1 m support:
+    # 16.8 M pairs, 2.3 GB) with no PALPATE_MAX_MEMORY, under RLIMIT_AS 3 GiB: refused from the
+    # budget that follows RLIMIT_AS (with the old fixed 8 GiB: SIGABRT).
+    c.api("pb_all_pairs_rlimit", "abort", _PB + "p = np.mgrid[0:16, 0:16, 0:16].reshape(3, -1).T * 1e-3\npb(radius=1.0, n=p)",
+          ["error"], ["LimitError"], budget=None, contains="RLIMIT_AS")
     # Long runs with no wall-clock cap under a small memory budget: the per-step records stop
     # growing at the budget (the run ends with the steps it took and says why), rather than
     # growing until the process aborts.
@@ -654,3 +674,6 @@ def _cli_cases(c: Corpus):
     for name, klass, argv, codes in cases:
         # The bombs are refused by the inflated-size pre-check: a LimitError, not any input error.
         c.cli(name, klass, argv, codes, contains="LimitError" if "bomb" in name else None)
+    # Issue 35 item 4: with no PALPATE_MAX_MEMORY the budget follows RLIMIT_AS, and says so.
+    c.cli("cli_info_bomb_vtu_rlimit", "bomb", ["info", "{D}/bomb.vtu"], (1,), contains="RLIMIT_AS", budget=None)
+    c.cli("cli_info_npz_1e10_rows_rlimit", "bomb", ["info", "{D}/rows_1e10.npz"], (1,), contains="RLIMIT_AS", budget=None)

@@ -6,7 +6,7 @@ use thiserror::Error;
 /// A size that comes from input and exceeds the memory budget ([`crate::limits`]), refused before
 /// the memory is taken. Names what was asked, how much, the budget and how to raise it.
 #[derive(Debug, Clone, PartialEq, Error)]
-#[error("{what}: {count:.3e} items need {need}, over the memory budget of {have}; raise the budget with the environment variable PALPATE_MAX_MEMORY (e.g. PALPATE_MAX_MEMORY=32G) if the machine has the memory, or check the input", need = crate::limits::human_bytes(*.bytes), have = crate::limits::human_bytes(*.budget as f64))]
+#[error("{what}: {count:.3e} items need {need}, over the memory budget of {have} ({budget_source}); set the environment variable PALPATE_MAX_MEMORY to change it (e.g. PALPATE_MAX_MEMORY=32G) if the machine has the memory, or check the input", need = crate::limits::human_bytes(*.bytes), have = crate::limits::human_bytes(*.budget as f64))]
 pub struct LimitError {
     /// What would have been allocated, e.g. "transmural voxel grid (312 x 905 x 1204 voxels)".
     pub what: String,
@@ -15,6 +15,9 @@ pub struct LimitError {
     pub bytes: f64,
     /// The budget in bytes.
     pub budget: u64,
+    /// Where the budget came from ([`crate::limits::Budget::source`]), e.g. "the cgroup's memory
+    /// limit (2.0 GiB) x 0.5".
+    pub budget_source: String,
 }
 
 /// A tetrahedral mesh that cannot be used. Every variant names the offending element or node.

@@ -46,7 +46,8 @@ pub fn neighbours_within_limited(points: &[Vec3], radius: f64, bytes_per_pair: f
         cell *= 2.0;
     }
     let grid = Grid3 { origin: lo, h: cell, dims: cells_of(cell).map(|d| (d as usize).max(1)) };
-    let budget = limits::max_memory() as f64;
+    let b = limits::budget();
+    let budget = b.bytes as f64;
     // Counting sort of the points by cell.
     let cells = Buckets::build(grid.len(), n, |i| [grid.index_of(grid.cell_clamped(&points[i]))]);
     let r2 = radius * radius;
@@ -78,7 +79,8 @@ pub fn neighbours_within_limited(points: &[Vec3], radius: f64, bytes_per_pair: f
                 what: format!("neighbour pairs of {n} particles within the support radius {radius} m (found {} by particle {i}; the radius may be far larger than the spacing)", idx.len() + row.len()),
                 count: estimate,
                 bytes: estimate * bytes_per_pair,
-                budget: budget as u64,
+                budget: b.bytes,
+                budget_source: b.source,
             });
         }
         idx.extend_from_slice(&row);
