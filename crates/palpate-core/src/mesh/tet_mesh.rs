@@ -74,6 +74,14 @@ impl TetMesh {
         let mut reoriented = Vec::new();
         let mut used = vec![false; n];
         let mut seen: HashMap<[usize; 4], usize> = HashMap::with_capacity(tets.len());
+        // A tet repeated on copied nodes (the same corners under other node numbers) is a
+        // duplicate too: key the tets by the first node at each corner's position, so that
+        // exactly coincident nodes share a key (a mesh written twice into one file, or merged
+        // without welding, doubled the volume and mass there without a word).
+        let mut first_at: HashMap<[u64; 3], usize> = HashMap::with_capacity(n);
+        // `+ 0.0` turns -0.0 into 0.0: the same position, other bits.
+        let canonical: Vec<usize> = pts.iter().enumerate().map(|(i, p)| *first_at.entry([p.x, p.y, p.z].map(|c| (c + 0.0).to_bits())).or_insert(i)).collect();
+        drop(first_at);
         for (t, tet) in tets.iter().enumerate() {
             let mut idx = [0usize; 4];
             for k in 0..4 {
@@ -99,10 +107,21 @@ impl TetMesh {
                 idx.swap(2, 3);
                 reoriented.push(t);
             }
-            let mut key = idx;
+            let mut key = idx.map(|i| canonical[i]);
             key.sort_unstable();
             if let Some(&other) = seen.get(&key) {
-                return Err(MeshError::DuplicateTet { tet: t, other });
+                let first = out.get(other).copied().unwrap_or(idx);
+                let same_nodes = {
+                    let (mut a, mut b) = (idx, first);
+                    a.sort_unstable();
+                    b.sort_unstable();
+                    a == b
+                };
+                return Err(if same_nodes {
+                    MeshError::DuplicateTet { tet: t, other }
+                } else {
+                    MeshError::CoincidentTet { tet: t, other, nodes: idx, other_nodes: first }
+                });
             }
             seen.insert(key, t);
             for &i in &idx {
@@ -223,5 +242,15 @@ mod tests {
         extra.push([5.0, 5.0, 5.0]);
         assert_eq!(TetMesh::from_arrays(&extra, &t).unwrap_err(), MeshError::UnusedNode { node: 4 });
         assert!(matches!(TetMesh::from_arrays(&p, &[[0, 1, 2, 3], [1, 0, 2, 3]]), Err(MeshError::DuplicateTet { tet: 1, other: 0 })));
+        // The same tet on copied nodes (issue 35 item 6): twice the volume, refused too.
+        let twice: Vec<[f64; 3]> = p.iter().chain(p.iter()).copied().collect();
+        assert!(matches!(
+            TetMesh::from_arrays(&twice, &[[0, 1, 2, 3], [4, 6, 5, 7]]),
+            Err(MeshError::CoincidentTet { tet: 1, other: 0, .. })
+        ));
+        // -0.0 is the same corner as 0.0.
+        let mut signed = twice.clone();
+        signed[4] = [-0.0, -0.0, -0.0];
+        assert!(matches!(TetMesh::from_arrays(&signed, &[[0, 1, 2, 3], [4, 5, 6, 7]]), Err(MeshError::CoincidentTet { .. })));
     }
 }
