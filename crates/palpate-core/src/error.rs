@@ -213,6 +213,8 @@ pub enum LoadError {
     NodeOutOfRange { index: usize, node: usize, n_nodes: usize },
     #[error("the load's force is not finite")]
     NonFiniteForce,
+    #[error("the load's force of {norm:e} N is over the bound of {max:e} N (crate::limits::MAX_FORCE_N)", max = crate::limits::MAX_FORCE_N)]
+    ForceTooLarge { norm: f64 },
     #[error("ramp (start {start} s, duration {duration} s): both must be finite and the duration >= 0")]
     BadRamp { start: f64, duration: f64 },
 }
