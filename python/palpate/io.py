@@ -66,7 +66,9 @@ def _read_meshio(path: str, fmt: str):
 #: meshio's VTK readers (VTU, legacy VTK 5.1) drop what they cannot read with a line on stderr
 #: (``meshio._common.warn``, not a Python warning) and go on: cells of a type they do not know, a
 #: corrupt point data array. Such a file loaded without those cells (issue 35 item 6). While
-#: palpate reads with them, each of these modules' ``warn`` raises a MeshError instead.
+#: palpate reads with them, each of these modules' ``warn`` raises a MeshError instead (a swap of
+#: module attributes for the read's duration: a meshio read in another thread at the same time
+#: would see it too, and fail rather than drop, which is the promise anyway).
 _MESHIO_WARNING_MODULES = ("meshio._vtk_common", "meshio.vtu._vtu", "meshio.vtk._vtk_51", "meshio.vtk._vtk_42")
 
 
