@@ -55,6 +55,27 @@ pub(crate) fn volume_and_relative(a: &Vec3, b: &Vec3, c: &Vec3, d: &Vec3) -> (f6
     (vol, relative)
 }
 
+/// For each node the lowest-numbered node at exactly the same position, or None when no two nodes
+/// coincide (the usual case: then a node is its own). By sorting the nodes by their coordinates'
+/// bits (`+ 0.0` makes -0.0 the same corner as 0.0): one sort, no hashing, no table kept when
+/// every position is distinct.
+fn coincident_nodes(pts: &[Vec3]) -> Option<Vec<usize>> {
+    let keys: Vec<[u64; 3]> = pts.iter().map(|p| [p.x, p.y, p.z].map(|c| (c + 0.0).to_bits())).collect();
+    let mut order: Vec<usize> = (0..pts.len()).collect();
+    order.sort_unstable_by_key(|&i| (keys[i], i));
+    if order.windows(2).all(|w| keys[w[0]] != keys[w[1]]) {
+        return None;
+    }
+    let mut canonical: Vec<usize> = (0..pts.len()).collect();
+    // Within a run of equal keys the order is by node number: its first is the lowest.
+    for run in order.chunk_by(|&a, &b| keys[a] == keys[b]) {
+        for &i in run {
+            canonical[i] = run[0];
+        }
+    }
+    Some(canonical)
+}
+
 impl TetMesh {
     /// Validate a mesh given as points `(n_nodes, 3)` \[m\] and tets `(n_tets, 4)` node indices
     /// (signed, so that negative indices from a file are reported rather than wrapped).
@@ -78,10 +99,7 @@ impl TetMesh {
         // duplicate too: key the tets by the first node at each corner's position, so that
         // exactly coincident nodes share a key (a mesh written twice into one file, or merged
         // without welding, doubled the volume and mass there without a word).
-        let mut first_at: HashMap<[u64; 3], usize> = HashMap::with_capacity(n);
-        // `+ 0.0` turns -0.0 into 0.0: the same position, other bits.
-        let canonical: Vec<usize> = pts.iter().enumerate().map(|(i, p)| *first_at.entry([p.x, p.y, p.z].map(|c| (c + 0.0).to_bits())).or_insert(i)).collect();
-        drop(first_at);
+        let canonical = coincident_nodes(&pts);
         for (t, tet) in tets.iter().enumerate() {
             let mut idx = [0usize; 4];
             for k in 0..4 {
@@ -107,7 +125,7 @@ impl TetMesh {
                 idx.swap(2, 3);
                 reoriented.push(t);
             }
-            let mut key = idx.map(|i| canonical[i]);
+            let mut key = canonical.as_ref().map_or(idx, |c| idx.map(|i| c[i]));
             key.sort_unstable();
             if let Some(&other) = seen.get(&key) {
                 let first = out.get(other).copied().unwrap_or(idx);
