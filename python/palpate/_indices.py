@@ -33,6 +33,6 @@ def whole_indices(values, what: str, cols: Optional[int] = None, error: Callable
     if len(bad):
         where = np.unravel_index(bad[0], a.shape)
         at = ", ".join(str(int(i)) for i in where)
-        raise error(f"{what}[{at}] = {a[where]!r} is not a whole number: an index must be one "
+        raise error(f"{what}[{at}] = {float(a[where])!r} is not a whole number: an index must be one "
                     f"({len(bad)} such value{'s' if len(bad) > 1 else ''}; it would have been truncated)")
     return a.astype(np.int64)

@@ -193,10 +193,11 @@ pub fn force(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec3> {
 }
 
 fn force_error(what: &str, f: &Vec3) -> PyErr {
+    let norm = palpate_core::limits::force_magnitude(f);
     crate::errors::param_error_from(format!(
-        "{what}: force ({:e}, {:e}, {:e}) N of magnitude {:e} N is over the bound of {:e} N (the weight of 100 t; \
+        "{what}: force ({:e}, {:e}, {:e}) N of magnitude {norm:e} N is over the bound of {:e} N (the weight of 100 t; \
          a soft-tissue load is tens of newtons: check the units)",
-        f.x, f.y, f.z, f.norm(), palpate_core::limits::MAX_FORCE_N
+        f.x, f.y, f.z, palpate_core::limits::MAX_FORCE_N
     ))
 }
 

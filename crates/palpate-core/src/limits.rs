@@ -22,6 +22,13 @@ pub const DEFAULT_MAX_MEMORY: u64 = 8 << 30;
 /// squared norms (residuals, line searches) stay under 1e12 N^2 where 1e300 N overflowed to inf.
 pub const MAX_FORCE_N: f64 = 1e6;
 
+/// |f| \[N\] for a message, scaled by the largest component: the plain norm of (0, 0, 1e300)
+/// squares to inf.
+pub fn force_magnitude(f: &crate::Vec3) -> f64 {
+    let big = f.amax();
+    if big > 0.0 && big.is_finite() { big * (f / big).norm() } else { big }
+}
+
 /// Is `f` finite with |f| <= [`MAX_FORCE_N`]?
 pub fn force_in_bound(f: &crate::Vec3) -> bool {
     f.x.is_finite() && f.y.is_finite() && f.z.is_finite() && f.norm() <= MAX_FORCE_N

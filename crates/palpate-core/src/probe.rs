@@ -63,7 +63,7 @@ impl ProbeLoad {
             return Err(LoadError::NonFiniteForce);
         }
         if !crate::limits::force_in_bound(&total_force) {
-            return Err(LoadError::ForceTooLarge { norm: total_force.norm() });
+            return Err(LoadError::ForceTooLarge { norm: crate::limits::force_magnitude(&total_force) });
         }
         if !(ramp.duration >= 0.0 && ramp.duration.is_finite() && ramp.start.is_finite()) {
             return Err(LoadError::BadRamp { start: ramp.start, duration: ramp.duration });

@@ -81,7 +81,7 @@ pub fn static_solve(model: &Model, f_ext: &[Vec3], opts: &StaticOptions) -> Resu
         return Err(SolveError::NonFinite { what: "external force", node });
     }
     if let Some(node) = f_ext.iter().position(|f| !crate::limits::force_in_bound(f)) {
-        return Err(SolveError::Invalid(format!("node {node}: external force of {:e} N over the bound of {:e} N (limits::MAX_FORCE_N)", f_ext[node].norm(), crate::limits::MAX_FORCE_N)));
+        return Err(SolveError::Invalid(format!("node {node}: external force of {:e} N over the bound of {:e} N (limits::MAX_FORCE_N)", crate::limits::force_magnitude(&f_ext[node]), crate::limits::MAX_FORCE_N)));
     }
     // Zero increments is no solve at all: refused, not taken as 1 (issue 35 item 6).
     if opts.load_steps == 0 {
