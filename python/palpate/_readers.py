@@ -1,9 +1,9 @@
 """Small, strict ASCII readers for gmsh MSH 2.2 / 4.1 and TetGen .node/.ele files.
 
 meshio reads these formats too, but it maps unknown gmsh node tags silently (a tag of 0 or -1 wraps
-around to the last node) and its TetGen reader stops at comments without saying where. These
-readers report every defect with the file, the line and the element, which is what
-:func:`palpate.load_mesh` promises. Binary gmsh files and MSH 4.0 go to meshio.
+around to the last node, in ASCII and binary files) and its TetGen reader stops at comments without saying where. These
+readers report every defect with the file, the line (or byte) and the element, which is what
+:func:`palpate.load_mesh` promises. Binary gmsh MSH 2.2 and 4.1 are read here too; MSH 4.0 goes to meshio.
 
 Each reader returns ``(points, blocks, node_labels)``: ``points`` a float64 ``(n, 3)`` array in
 the file's units, ``blocks`` a list of :class:`CellBlock` with 0-based node indices (int64) and, per
@@ -434,31 +434,205 @@ def read_gmsh_ascii(path: str, version: str) -> Tuple[np.ndarray, List[CellBlock
     if elements is None:
         raise MeshError(f"{f.name}: no $Elements section (no cells)")
     tags, coords = nodes
+    return _gmsh_assemble(f.name, tags, np.array(coords, dtype=np.float64).reshape(-1, 3),
+                          [(etype, etag, node_tags, f"line {lineno}") for etype, etag, node_tags, lineno in elements])
+
+
+def _gmsh_assemble(name: str, tags: List[int], points: np.ndarray, elements) -> Tuple[np.ndarray, List[CellBlock], List[str]]:
+    """Nodes and elements by tag, as the file gives them, to points and 0-based cell blocks: every
+    element's node tag must be one that $Nodes defines (``elements``: (type, tag, node tags,
+    where in the file))."""
     index = {t: i for i, t in enumerate(tags)}
     if len(index) != len(tags):
         seen = set()
         for t in tags:
             if t in seen:
-                raise MeshError(f"{f.name}: node tag {t} is defined twice in $Nodes")
+                raise MeshError(f"{name}: node tag {t} is defined twice in $Nodes")
             seen.add(t)
-    points = np.array(coords, dtype=np.float64).reshape(-1, 3)
     rows: Dict[str, List[List[int]]] = {}
     labels: Dict[str, List[str]] = {}
-    for etype, etag, node_tags, lineno in elements:
-        name = GMSH_TYPES[etype][0]
+    for etype, etag, node_tags, where in elements:
+        cell = GMSH_TYPES[etype][0]
         conn = []
         for t in node_tags:
             i = index.get(t)
             if i is None:
-                raise MeshError(f"{f.name}: line {lineno}: gmsh element {etag} ({name}) references node tag {t}, "
+                raise MeshError(f"{name}: {where}: gmsh element {etag} ({cell}) references node tag {t}, "
                                 f"which is not defined in $Nodes ({len(tags)} nodes"
                                 + (f", tags {min(tags)}..{max(tags)})" if tags else ")"))
             conn.append(i)
-        rows.setdefault(name, []).append(conn)
-        labels.setdefault(name, []).append(f"gmsh element {etag}, line {lineno}")
-    dims = {name: dim for name, _, dim in GMSH_TYPES.values()}
-    blocks = [CellBlock(name, dims[name], np.array(r, dtype=np.int64), labels[name]) for name, r in rows.items()]
+        rows.setdefault(cell, []).append(conn)
+        labels.setdefault(cell, []).append(f"gmsh element {etag}, {where}")
+    dims = {cell: dim for cell, _, dim in GMSH_TYPES.values()}
+    blocks = [CellBlock(cell, dims[cell], np.array(r, dtype=np.int64), labels[cell]) for cell, r in rows.items()]
     return points, blocks, [f"gmsh node {t}" for t in tags]
+
+
+class _Bytes:
+    """A binary gmsh file read front to back, with the byte offset of every error."""
+
+    def __init__(self, path: str, data: bytes):
+        self.name = os.path.basename(path)
+        self.data = data
+        self.pos = 0
+
+    def error(self, msg: str, at: Optional[int] = None) -> MeshError:
+        return MeshError(f"{self.name}: byte {self.pos if at is None else at}: {msg}")
+
+    def line(self, context: str) -> bytes:
+        """The next line (the sections' headers and counts are ASCII lines), without its newline."""
+        end = self.data.find(b"\n", self.pos)
+        if end < 0:
+            raise MeshError(f"{self.name}: unexpected end of file (truncated?) while reading {context}")
+        out, self.pos = self.data[self.pos:end].rstrip(b"\r"), end + 1
+        return out
+
+    def take(self, fmt: str, count: int, context: str) -> np.ndarray:
+        """``count`` little-endian numbers of numpy type ``fmt`` ('<i4', '<u8', '<f8')."""
+        dt = np.dtype(fmt)
+        need = count * dt.itemsize
+        if count < 0 or self.pos + need > len(self.data):
+            raise MeshError(f"{self.name}: byte {self.pos}: unexpected end of file (truncated?) while reading {context}: "
+                            f"{count} numbers need {need} bytes, {len(self.data) - self.pos} are left")
+        out = np.frombuffer(self.data, dtype=dt, count=count, offset=self.pos)
+        self.pos += need
+        return out
+
+    def end(self, section: str) -> None:
+        """``$End<section>``, after the newline that closes the binary data."""
+        if self.data[self.pos:self.pos + 1] == b"\n":
+            self.pos += 1
+        at = self.pos
+        line = self.line(f"$End{section}")
+        if line.strip() != f"$End{section}".encode():
+            raise self.error(f"expected '$End{section}', got {line[:40]!r} (a wrong count in the section?)", at)
+
+
+def read_gmsh_binary(path: str, version: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:
+    """Read a binary gmsh MSH 2.2 or 4.1 file (little-endian; nodes and elements, other sections
+    skipped), every element's node tag checked against $Nodes as in the ASCII reader. meshio read
+    these before, and mapped an undefined node tag 0 (tag - 1 = -1) to the node with the largest
+    tag without a word (issue 35 item 6)."""
+    check_input_file(path)
+    with open(path, "rb") as fh:
+        b = _Bytes(path, fh.read())
+    v4 = version.startswith("4")
+    b.line("$MeshFormat")
+    head = b.line("$MeshFormat").split()
+    if v4 and len(head) > 2 and head[2] != b"8":
+        raise b.error(f"data-size {head[2].decode('latin-1')!r}: palpate reads binary MSH 4.1 with 8-byte sizes")
+    one = int(b.take("<i4", 1, "the endianness check")[0])
+    if one != 1:
+        raise b.error(f"the endianness check reads {one}, not 1: a big-endian file (palpate reads little-endian ones)")
+    b.end("MeshFormat")
+    nodes = elements = None
+    while b.pos < len(b.data):
+        at = b.pos
+        line = b.line("sections").strip()
+        if not line:
+            continue
+        if not line.startswith(b"$"):
+            raise b.error(f"expected a section header like '$Nodes', got {line[:40]!r}", at)
+        section = line[1:].decode("latin-1")
+        if section == "Nodes":
+            nodes = _gmsh_bin_nodes_v4(b) if v4 else _gmsh_bin_nodes_v2(b)
+        elif section == "Elements":
+            elements = _gmsh_bin_elements_v4(b) if v4 else _gmsh_bin_elements_v2(b)
+        else:
+            end = b.data.find(f"$End{section}".encode(), b.pos)
+            if end < 0:
+                raise b.error(f"${section} is not closed by $End{section}", at)
+            b.pos = end
+            b.line(f"$End{section}")
+            continue
+        b.end(section)
+    if nodes is None:
+        raise MeshError(f"{b.name}: no $Nodes section (no points)")
+    if elements is None:
+        raise MeshError(f"{b.name}: no $Elements section (no cells)")
+    tags, points = nodes
+    return _gmsh_assemble(b.name, tags, points, elements)
+
+
+def _gmsh_count(b: _Bytes, what: str) -> int:
+    at = b.pos
+    t = b.line(what).split()
+    try:
+        n = int(t[0]) if len(t) == 1 else -1
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise b.error(f"expected the number of {what}, got {b' '.join(t)[:40]!r}", at)
+    return n
+
+
+def _gmsh_bin_nodes_v2(b: _Bytes):
+    n = _gmsh_count(b, "nodes")
+    check_budget(f"$Nodes of {n} entries", n * 64.0, b.name)
+    rec = b.take("<u1", n * 28, "$Nodes")   # per node: int32 tag, 3 float64
+    recs = np.frombuffer(rec.tobytes(), dtype=np.dtype([("tag", "<i4"), ("xyz", "<f8", 3)]), count=n)
+    return recs["tag"].astype(np.int64).tolist(), recs["xyz"].astype(np.float64)
+
+
+def _gmsh_bin_elements_v2(b: _Bytes):
+    n = _gmsh_count(b, "elements")
+    check_budget(f"$Elements of {n} entries", n * 64.0, b.name)
+    out = []
+    while len(out) < n:
+        at = b.pos
+        etype, count, ntags = (int(x) for x in b.take("<i4", 3, "an $Elements block header"))
+        if etype not in GMSH_TYPES:
+            raise b.error(f"unknown gmsh element type {etype}", at)
+        if count <= 0 or ntags < 0 or len(out) + count > n:
+            raise b.error(f"an $Elements block of {count} elements with {ntags} tags after {len(out)} of {n} elements", at)
+        nn = GMSH_TYPES[etype][1]
+        start = b.pos
+        rows = b.take("<i4", count * (1 + ntags + nn), f"{count} gmsh elements of type {etype}").reshape(count, -1)
+        size = 4 * (1 + ntags + nn)
+        for k, row in enumerate(rows.tolist()):
+            out.append((etype, row[0], row[1 + ntags:], f"byte {start + k * size}"))
+    return out
+
+
+def _gmsh_bin_nodes_v4(b: _Bytes):
+    n_blocks, n_nodes, _, _ = (int(x) for x in b.take("<u8", 4, "the $Nodes header"))
+    check_budget(f"$Nodes of {n_nodes} entries", n_nodes * 64.0, b.name)
+    tags: List[int] = []
+    coords = []
+    for _ in range(n_blocks):
+        at = b.pos
+        dim, _, parametric = (int(x) for x in b.take("<i4", 3, "a $Nodes entity block header"))
+        count = int(b.take("<u8", 1, "a $Nodes entity block header")[0])
+        if count > n_nodes - len(tags):
+            raise b.error(f"a $Nodes block of {count} nodes after {len(tags)} of {n_nodes}", at)
+        tags.extend(b.take("<u8", count, "$Nodes (node tags)").astype(np.int64).tolist())
+        per = 3 + (dim if parametric else 0)
+        coords.append(b.take("<f8", count * per, "$Nodes (coordinates)").reshape(count, per)[:, :3])
+    if len(tags) != n_nodes:
+        raise b.error(f"$Nodes header announces {n_nodes} nodes, the blocks hold {len(tags)}")
+    return tags, (np.concatenate(coords) if coords else np.zeros((0, 3)))
+
+
+def _gmsh_bin_elements_v4(b: _Bytes):
+    n_blocks, n_elements, _, _ = (int(x) for x in b.take("<u8", 4, "the $Elements header"))
+    check_budget(f"$Elements of {n_elements} entries", n_elements * 64.0, b.name)
+    out = []
+    for _ in range(n_blocks):
+        at = b.pos
+        _, _, etype = (int(x) for x in b.take("<i4", 3, "an $Elements entity block header"))
+        count = int(b.take("<u8", 1, "an $Elements entity block header")[0])
+        if etype not in GMSH_TYPES:
+            raise b.error(f"unknown gmsh element type {etype}", at)
+        if count > n_elements - len(out):
+            raise b.error(f"an $Elements block of {count} elements after {len(out)} of {n_elements}", at)
+        nn = GMSH_TYPES[etype][1]
+        start = b.pos
+        rows = b.take("<u8", count * (1 + nn), f"{count} gmsh elements of type {etype}").reshape(count, 1 + nn)
+        for k, row in enumerate(rows.astype(np.int64).tolist()):
+            out.append((etype, row[0], row[1:], f"byte {start + k * 8 * (1 + nn)}"))
+    if len(out) != n_elements:
+        raise b.error(f"$Elements header announces {n_elements} elements, the blocks hold {len(out)}")
+    return out
 
 
 def _skip_section(f: _Lines, section: str) -> None:

@@ -10,6 +10,7 @@ file names it) and the reason.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import warnings
@@ -19,6 +20,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from . import _readers
+from ._indices import whole_indices
 from ._palpate import MeshError, ParameterError, TetMesh
 
 if TYPE_CHECKING:
@@ -61,9 +63,45 @@ def _read_meshio(path: str, fmt: str):
     return _meshio_arrays(m, name, fmt)
 
 
+#: meshio's VTK readers (VTU, legacy VTK 5.1) drop what they cannot read with a line on stderr
+#: (``meshio._common.warn``, not a Python warning) and go on: cells of a type they do not know, a
+#: corrupt point data array. Such a file loaded without those cells (issue 35 item 6). While
+#: palpate reads with them, each of these modules' ``warn`` raises a MeshError instead (a swap of
+#: module attributes for the read's duration: a meshio read in another thread at the same time
+#: would see it too, and fail rather than drop, which is the promise anyway).
+_MESHIO_WARNING_MODULES = ("meshio._vtk_common", "meshio.vtu._vtu", "meshio.vtk._vtk_51", "meshio.vtk._vtk_42")
+
+
+@contextlib.contextmanager
+def _meshio_warnings_refused(name: str, fmt: str):
+    import importlib
+
+    def refuse(message, highlight=True):
+        m = re.search(r"cannot handle \(type (-?\d+)\)", str(message))
+        if m:
+            raise MeshError(f"{name}: VTK cell type {m.group(1)} is not one meshio reads (cells of that type would be "
+                            "dropped): palpate needs linear tetrahedra (VTK type 10)")
+        raise MeshError(f"{name}: cannot read as {fmt.upper()}: {' '.join(str(message).split())}")
+
+    saved = []
+    for mod_name in _MESHIO_WARNING_MODULES:
+        try:
+            mod = importlib.import_module(mod_name)
+        except ImportError:  # another meshio layout: its warnings stay warnings
+            continue
+        if hasattr(mod, "warn"):
+            saved.append((mod, mod.warn))
+            mod.warn = refuse
+    try:
+        yield
+    finally:
+        for mod, warn in saved:
+            mod.warn = warn
+
+
 def _meshio_read(reader, path: str, name: str, fmt: str):
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _meshio_warnings_refused(name, fmt):
             warnings.simplefilter("ignore")
             return reader(path)
     except MeshError:
@@ -141,8 +179,11 @@ def read_mesh_arrays(path: PathLike, unit: str = "m") -> Tuple[np.ndarray, np.nd
     ext = os.path.splitext(path)[1].lower()
     if ext == ".msh":
         version, binary = _readers.gmsh_format(path)
-        if binary or not (version.startswith("2") or version.startswith("4.1")):
-            points, blocks, node_labels = _read_meshio(path, "gmsh")
+        if not (version.startswith("2") or version.startswith("4.1")):
+            points, blocks, node_labels = _read_meshio(path, "gmsh")   # MSH 4.0
+        elif binary:
+            _readers.gmsh_binary_precheck(path)
+            points, blocks, node_labels = _readers.read_gmsh_binary(path, version)
         else:
             points, blocks, node_labels = _readers.read_gmsh_ascii(path, version)
     elif ext in _MESHIO_FORMATS:
@@ -303,7 +344,7 @@ class VtuSeries:
     def __init__(self, outdir: PathLike, tets: np.ndarray, stem: str = "frame"):
         self.outdir = os.fspath(outdir)
         self.stem = stem
-        self.tets = np.asarray(tets, dtype=np.int64)
+        self.tets = whole_indices(tets, "tets", 4)
         self.entries: List[Tuple[float, str]] = []
         os.makedirs(self.outdir, exist_ok=True)
         remove_frames(self.outdir, [stem])
@@ -325,20 +366,43 @@ class VtuSeries:
         import meshio
 
         fname = f"{self.stem}_{len(self.entries):05d}.vtu"
+        pts = np.asarray(positions, dtype=np.float64)
         pd = {"displacement": np.asarray(displacement, dtype=np.float64),
               "velocity": np.asarray(velocity, dtype=np.float64)}
-        pd.update({k: np.asarray(v) for k, v in (point_data or {}).items()})
+        extra = {k: np.asarray(v) for k, v in (point_data or {}).items()}
+        cd = {k: np.asarray(v) for k, v in (cell_data or {}).items()}
+        self._check_frame(fname, pts, list(pd.items()) + [(f"point_data[{k!r}]", v) for k, v in extra.items()],
+                          [(f"cell_data[{k!r}]", v) for k, v in cd.items()])
+        pd.update(extra)
         mesh = meshio.Mesh(
-            np.asarray(positions, dtype=np.float64),
+            pts,
             [("tetra", self.tets)],
             point_data=pd,
-            cell_data={k: [np.asarray(v)] for k, v in (cell_data or {}).items()},
+            cell_data={k: [v] for k, v in cd.items()},
         )
         path = os.path.join(self.outdir, fname)
         meshio.write(path, mesh, file_format="vtu")  # binary, zlib-compressed: ParaView reads it
         self.entries.append((float(time), fname))
         self._write_pvd()
         return path
+
+    def _check_frame(self, fname: str, pts: np.ndarray, pd: List[Tuple[str, np.ndarray]], cd: List[Tuple[str, np.ndarray]]) -> None:
+        """One row per mesh node in the positions and every point data array, one per tet in every
+        cell data array, before the file is written: a frame with fewer points than the tets use,
+        or a short array, was written and only ParaView failed on it later (issue 35 item 6)."""
+        where = os.path.join(self.outdir, fname)
+        need = int(self.tets.max()) + 1 if len(self.tets) else 0
+        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < need or (len(self.tets) and self.tets.min() < 0):
+            raise ParameterError(f"{where}: positions have shape {pts.shape}; the series' tets use nodes 0..{need - 1}, "
+                                 f"so (n >= {need}, 3) are needed (frame not written)")
+        for name, a in pd:
+            if a.ndim == 0 or len(a) != len(pts):
+                raise ParameterError(f"{where}: {name} has {a.shape[0] if a.ndim else 'no'} rows (shape {a.shape}), "
+                                     f"the frame has {len(pts)} points: one row per point (frame not written)")
+        for name, a in cd:
+            if a.ndim == 0 or len(a) != len(self.tets):
+                raise ParameterError(f"{where}: {name} has {a.shape[0] if a.ndim else 'no'} rows (shape {a.shape}), "
+                                     f"the mesh has {len(self.tets)} tets: one row per tet (frame not written)")
 
     def write_body(self, body: "Body", loaded: Optional[np.ndarray] = None) -> str:
         """Write one frame of a :class:`~palpate.Body` at its time: point data ``displacement``

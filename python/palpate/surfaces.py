@@ -15,6 +15,7 @@ from typing import Dict, Iterable, Optional, Tuple, Union
 import numpy as np
 
 from . import _readers
+from ._indices import whole_indices
 from ._palpate import MeshWarning, ParameterError, SurfaceError, TriSurface
 from .io import unit_scale
 from .vtp import read_vtp
@@ -513,7 +514,7 @@ def orient_consistently(points, triangles) -> Tuple[np.ndarray, int]:
     :func:`repair_surface` to split).
     """
     pts = np.asarray(points, dtype=np.float64)
-    tris = np.array(triangles, dtype=np.int64, copy=True)
+    tris = whole_indices(triangles, "triangles", 3)
     if len(tris) == 0:
         return tris, 0
     out, flipped, _ = _orient(pts, tris)
@@ -560,7 +561,7 @@ def repair_surface(points, triangles, part=None):
     sliver leaves its edges open.
     """
     pts = np.asarray(points, dtype=np.float64)
-    tris = np.array(triangles, dtype=np.int64, copy=True)
+    tris = whole_indices(triangles, "triangles")
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise ParameterError(f"points must have shape (n, 3), got {pts.shape}")
     if tris.ndim != 2 or tris.shape[1] != 3:

@@ -77,6 +77,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 import numpy as np
 
 from ._fields import FieldChecker
+from ._indices import whole_indices
 from ._palpate import PalpateError, ParameterError
 from ._readers import read_text
 from .io import remove_frames, write_pvd
@@ -126,7 +127,7 @@ def vertex_normals(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     is negative (this holds for an open surface such as a truncated ventricle's epicardium).
     Vertices in no triangle get a zero normal."""
     p = np.asarray(points, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
+    t = whole_indices(triangles, "triangles", 3)
     a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
     fn = np.cross(b - a, c - a)                       # 2 x area x unit normal
     n = np.zeros_like(p)

@@ -31,6 +31,7 @@ from typing import Dict, List, Optional, Tuple, Union
 import numpy as np
 
 from . import _readers
+from ._indices import whole_indices
 from ._palpate import SurfaceError
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -206,8 +207,9 @@ class _Reader:
         return pts, tris, cell_data, point_data
 
     def _triangles(self, conn, offsets, n_points, first_cell, where):
-        offsets = offsets.astype(np.int64).ravel()
-        conn = conn.astype(np.int64).ravel()
+        # Whole values only: a float array's 1.5 was truncated to 1 (issue 35 item 6).
+        offsets = whole_indices(offsets, f"{where}Polys offsets", error=self.error).ravel()
+        conn = whole_indices(conn, f"{where}Polys connectivity", error=self.error).ravel()
         starts = np.concatenate([[0], offsets[:-1]])
         sizes = offsets - starts
         bad = np.flatnonzero(sizes < 0)
@@ -455,7 +457,7 @@ def write_vtp(path: PathLike, points, triangles, cell_data: Optional[Dict[str, n
     ``compress`` applies zlib to the binary forms.
     """
     points = np.ascontiguousarray(points, dtype=np.float64)
-    triangles = np.ascontiguousarray(triangles, dtype=np.int64)
+    triangles = np.ascontiguousarray(whole_indices(triangles, "triangles", 3))
     if fmt not in ("ascii", "binary", "appended"):
         raise ValueError(f"fmt must be 'ascii', 'binary' or 'appended', got {fmt!r}")
     hdt = np.dtype({"UInt32": np.uint32, "UInt64": np.uint64}[header_type]).newbyteorder("<")

@@ -83,7 +83,7 @@ impl StepClock for WallClock {
 
 /// One probe load from Python values, its ramp starting at `start` [s].
 fn py_load(n: usize, nodes: Vec<usize>, total_force: &Bound<'_, PyAny>, ramp_time: f64, start: f64) -> PyResult<ProbeLoad> {
-    let total = conv::vec3(total_force, "total_force")?;
+    let total = conv::force(total_force, "total_force")?;
     if !(ramp_time >= 0.0 && ramp_time.is_finite()) {
         return Err(crate::errors::param_error_from(format!("ramp_time = {ramp_time} s must be finite and >= 0")));
     }
@@ -96,6 +96,7 @@ impl PyBody {
         if steps == 0 {
             return Err(crate::errors::param_error_from("steps must be at least 1"));
         }
+        check_run_limits(Some(stable_limit), max_wall_s)?;
         let opts = ProbeOptions { max_wall_s, ..ProbeOptions::new(steps, dt, stable_limit) };
         let run = errors::guard("Body.run_probe", || {
             Ok(py.detach(|| {
@@ -123,6 +124,23 @@ impl PyBody {
         d.set_item("error", run.stop.map(|s| s.to_string()))?;
         Ok(d)
     }
+}
+
+/// A run's `stable_limit` [m] (positive; infinity: no limit) and `max_wall_s` [s] (>= 0, 0
+/// stopping after the first step; None or infinity: no cap). NaN compared false everywhere: a NaN cap was never reached and a
+/// NaN limit called every run unstable, without a word (issue 35 item 6).
+pub(crate) fn check_run_limits(stable_limit: Option<f64>, max_wall_s: Option<f64>) -> PyResult<()> {
+    if let Some(s) = stable_limit {
+        if s.is_nan() || s <= 0.0 {
+            return Err(crate::errors::param_error_from(format!("stable_limit = {s} m must be positive (inf for no limit)")));
+        }
+    }
+    if let Some(w) = max_wall_s {
+        if w.is_nan() || w < 0.0 {
+            return Err(crate::errors::param_error_from(format!("max_wall_s = {w} s must be >= 0 (0: stop after the first step; None for no cap)")));
+        }
+    }
+    Ok(())
 }
 
 /// `state[key]`, or KeyError naming the key.
@@ -228,7 +246,7 @@ impl PyBody {
 
     /// Set the external force on every node [N], array (n, 3); held until changed.
     fn set_forces(&mut self, forces: &Bound<'_, PyAny>) -> PyResult<()> {
-        let f = conv::vec3s(forces, "forces", self.model.n_nodes(), true)?;
+        let f = conv::forces(forces, "forces", self.model.n_nodes())?;
         errors::warn_fixed_load(forces.py(), self.model.fixed(), f.iter().map(|v| v.norm()).enumerate(), "set_forces")?;
         self.state.f_ext = f;
         Ok(())
@@ -362,13 +380,17 @@ impl PyBody {
         let (max_iterations, tolerance, load_steps) =
             (max_iterations.unwrap_or(d.max_iterations), tolerance.unwrap_or(d.tolerance), load_steps.unwrap_or(d.load_steps));
         let f = match forces {
-            Some(f) if !f.is_none() => conv::vec3s(f, "forces", self.model.n_nodes(), true)?,
+            Some(f) if !f.is_none() => conv::forces(f, "forces", self.model.n_nodes())?,
             _ => self.state.f_ext.clone(),
         };
         if !(tolerance > 0.0 && tolerance.is_finite()) {
             return Err(crate::errors::param_error_from(format!("tolerance = {tolerance} must be positive")));
         }
-        let opts = StaticOptions { max_iterations, tolerance, load_steps: load_steps.max(1) };
+        // 0 increments was taken as 1 without a word (issue 35 item 6).
+        if load_steps == 0 {
+            return Err(crate::errors::param_error_from("load_steps = 0: the load is applied in at least 1 increment (give 1 or more, or None for the default)"));
+        }
+        let opts = StaticOptions { max_iterations, tolerance, load_steps };
         let model = &self.model;
         let mut ctrl_c = errors::CtrlC::new();
         let sol = errors::guard("Body.static_solve", || {
@@ -562,7 +584,7 @@ impl PyBody {
         let n = self.model.n_nodes();
         let x = conv::vec3s(&item(&state, "positions")?, "positions", n, true)?;
         let v = conv::vec3s(&item(&state, "velocities")?, "velocities", n, true)?;
-        let f_ext = conv::vec3s(&item(&state, "forces")?, "forces", n, true)?;
+        let f_ext = conv::forces(&item(&state, "forces")?, "forces", n)?;
         let t: f64 = conv::arg(&item(&state, "time")?)?;
         if !t.is_finite() {
             return Err(crate::errors::param_error_from(format!("time = {t} s must be finite")));

@@ -172,6 +172,35 @@ pub fn vec3s(obj: &Bound<'_, PyAny>, what: &str, n: usize, finite: bool) -> PyRe
     Ok(out)
 }
 
+/// External forces \[N\] `(n, 3)`, one row per node (or particle): finite, each within
+/// `palpate_core::limits::MAX_FORCE_N` (1e6 N; why that bound: there). A 1e300 N force was taken
+/// and only failed, or not, steps later.
+pub fn forces(obj: &Bound<'_, PyAny>, what: &str, n: usize) -> PyResult<Vec<Vec3>> {
+    let f = vec3s(obj, what, n, true)?;
+    if let Some(i) = f.iter().position(|v| !palpate_core::limits::force_in_bound(v)) {
+        return Err(force_error(&format!("{what}: row {i}"), &f[i]));
+    }
+    Ok(f)
+}
+
+/// One force \[N\] (3,): finite and within `palpate_core::limits::MAX_FORCE_N`.
+pub fn force(obj: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec3> {
+    let f = vec3(obj, what)?;
+    if !palpate_core::limits::force_in_bound(&f) {
+        return Err(force_error(what, &f));
+    }
+    Ok(f)
+}
+
+fn force_error(what: &str, f: &Vec3) -> PyErr {
+    let norm = palpate_core::limits::force_magnitude(f);
+    crate::errors::param_error_from(format!(
+        "{what}: force ({:e}, {:e}, {:e}) N of magnitude {norm:e} N is over the bound of {:e} N (the weight of 100 t; \
+         a soft-tissue load is tens of newtons: check the units)",
+        f.x, f.y, f.z, palpate_core::limits::MAX_FORCE_N
+    ))
+}
+
 /// One real value per item, shape `(n,)`; `per` names the item (`"(one per particle)"`).
 pub fn reals(obj: &Bound<'_, PyAny>, what: &str, n: usize, per: &str) -> PyResult<Vec<f64>> {
     let a = as_array(obj, what)?;

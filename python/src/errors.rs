@@ -337,7 +337,10 @@ fn set_attr<'py, V: IntoPyObject<'py>>(py: Python<'py>, err: &PyErr, name: &str,
 fn mesh_location(e: &core::MeshError) -> (Option<usize>, Option<usize>) {
     match e {
         core::MeshError::NonFiniteNode { node, .. } | core::MeshError::UnusedNode { node } => (None, Some(*node)),
-        core::MeshError::IndexOutOfRange { tet, .. } | core::MeshError::Degenerate { tet, .. } | core::MeshError::DuplicateTet { tet, .. } => {
+        core::MeshError::IndexOutOfRange { tet, .. }
+        | core::MeshError::Degenerate { tet, .. }
+        | core::MeshError::DuplicateTet { tet, .. }
+        | core::MeshError::CoincidentTet { tet, .. } => {
             (Some(*tet), None)
         }
         core::MeshError::RepeatedNode { tet, node } => (Some(*tet), Some(*node)),

@@ -186,6 +186,7 @@ impl PyParticleBody {
     ) -> PyResult<Bound<'py, PyDict>> {
         let ticks = errors::count(ticks, "ticks")?;
         check_dt(dt)?;
+        crate::body::check_run_limits(None, max_wall_s)?;
         let this = &mut *slf;
         let (model, state, ws) = (&this.model, &mut this.state, &mut this.ws);
         let substeps = model.substeps(dt);
@@ -235,7 +236,7 @@ impl PyParticleBody {
 
     /// Set the external force on every particle [N], (n, 3); held until changed.
     fn set_forces(&mut self, forces: &Bound<'_, PyAny>) -> PyResult<()> {
-        self.state.f_ext = conv::vec3s(forces, "forces", self.model.n_particles(), true)?;
+        self.state.f_ext = conv::forces(forces, "forces", self.model.n_particles())?;
         Ok(())
     }
 
@@ -260,7 +261,7 @@ impl PyParticleBody {
         let n = self.model.n_particles();
         let x = conv::vec3s(&item(&state, "positions")?, "positions", n, true)?;
         let v = conv::vec3s(&item(&state, "velocities")?, "velocities", n, true)?;
-        let f_ext = conv::vec3s(&item(&state, "forces")?, "forces", n, true)?;
+        let f_ext = conv::forces(&item(&state, "forces")?, "forces", n)?;
         let t: f64 = conv::arg(&item(&state, "time")?)?;
         if !t.is_finite() {
             return Err(crate::errors::param_error_from(format!("time = {t} s must be finite")));

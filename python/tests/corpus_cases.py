@@ -162,6 +162,7 @@ def make(folder):
             _mutations(c, f"old_{f}", kind, rng, n_trunc=1, n_flip=1)
 
     _model_file_cases(c, rng)
+    _silent_cases(c)
     _reader_cases(c)
     _generator_cases(c)
     _body_cases(c)
@@ -677,3 +678,142 @@ def _cli_cases(c: Corpus):
     # Issue 35 item 4: with no PALPATE_MAX_MEMORY the budget follows RLIMIT_AS, and says so.
     c.cli("cli_info_bomb_vtu_rlimit", "bomb", ["info", "{D}/bomb.vtu"], (1,), contains="RLIMIT_AS", budget=None)
     c.cli("cli_info_npz_1e10_rows_rlimit", "bomb", ["info", "{D}/rows_1e10.npz"], (1,), contains="RLIMIT_AS", budget=None)
+
+
+# ---------------------------------------------------------------------------------------------
+# Issue 35 item 6: silent acceptances, each now a typed error naming the file or argument, the
+# element and the reason (test_silent_acceptances.py runs these cases alone)
+# ---------------------------------------------------------------------------------------------
+
+def _gmsh22_binary(nodes, tets):
+    """A binary MSH 2.2 file: ``nodes`` [(tag, x, y, z)], ``tets`` [(node tag, ...) x 4], as gmsh
+    writes it (counts in ASCII, records in native little-endian binary)."""
+    out = b"$MeshFormat\n2.2 1 8\n" + struct.pack("<i", 1) + b"\n$EndMeshFormat\n"
+    out += b"$Nodes\n%d\n" % len(nodes) + b"".join(struct.pack("<i3d", *n) for n in nodes) + b"\n$EndNodes\n"
+    # One block of tets (type 4), two tags (physical, geometrical) each.
+    out += b"$Elements\n%d\n" % len(tets) + struct.pack("<3i", 4, len(tets), 2)
+    out += b"".join(struct.pack("<7i", k + 1, 1, 1, *t) for k, t in enumerate(tets)) + b"\n$EndElements\n"
+    return out
+
+
+def _gmsh41_binary(nodes, tets):
+    """A binary MSH 4.1 file (one node block, one element block; size_t = 8 bytes)."""
+    out = b"$MeshFormat\n4.1 1 8\n" + struct.pack("<i", 1) + b"\n$EndMeshFormat\n"
+    tags = [n[0] for n in nodes]
+    out += b"$Nodes\n" + struct.pack("<4Q", 1, len(nodes), min(tags), max(tags))
+    out += struct.pack("<3iQ", 3, 1, 0, len(nodes)) + b"".join(struct.pack("<Q", t) for t in tags)
+    out += b"".join(struct.pack("<3d", *n[1:]) for n in nodes) + b"\n$EndNodes\n"
+    out += b"$Elements\n" + struct.pack("<4Q", 1, len(tets), 1, len(tets)) + struct.pack("<3iQ", 3, 1, 4, len(tets))
+    out += b"".join(struct.pack("<5Q", k + 1, *t) for k, t in enumerate(tets)) + b"\n$EndElements\n"
+    return out
+
+
+#: Two tets sharing a face: nodes 1..5 (node 5 beyond the face 2-3-4 from node 1).
+_TWO_TETS = [(1, 0.0, 0.0, 0.0), (2, 1.0, 0.0, 0.0), (3, 0.0, 1.0, 0.0), (4, 0.0, 0.0, 1.0), (5, 1.0, 1.0, 1.0)]
+
+_VTU_UNKNOWN = """<?xml version="1.0"?>
+<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian">
+<UnstructuredGrid><Piece NumberOfPoints="4" NumberOfCells="2">
+<Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">0 0 0 1 0 0 0 1 0 0 0 1</DataArray></Points>
+<Cells>
+<DataArray type="Int64" Name="connectivity" format="ascii">0 1 2 3 0 1 2</DataArray>
+<DataArray type="Int64" Name="offsets" format="ascii">4 7</DataArray>
+<DataArray type="UInt8" Name="types" format="ascii">10 99</DataArray>
+</Cells></Piece></UnstructuredGrid></VTKFile>
+"""
+
+
+def _silent_cases(c: Corpus):
+    one_tet = "p = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])\n"
+    # 1. VTK cells of an unknown type, every node used by the tet: meshio's VTU and VTK 5.1
+    # readers dropped the cell (a warning printed on stderr) and the mesh loaded without it.
+    n = c.write("s35_vtu_unknown_cell_type.vtu", _VTU_UNKNOWN)
+    c.api("s35_vtu_unknown_cell_type", "silent", _loader("mesh", n), ["error"], ["MeshError"], contains="VTK cell type 99")
+    n = c.write("s35_vtk51_unknown_cell_type.vtk",
+                "# vtk DataFile Version 5.1\nx\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS 4 double\n0 0 0 1 0 0 0 1 0 0 0 1\n"
+                "CELLS 3 7\nOFFSETS vtktypeint64\n0 4 7\nCONNECTIVITY vtktypeint64\n0 1 2 3 0 1 2\nCELL_TYPES 2\n10\n99\n")
+    c.api("s35_vtk51_unknown_cell_type", "silent", _loader("mesh", n), ["error"], ["MeshError"], contains="VTK cell type 99")
+    n = c.write("s35_vtk42_unknown_cell_type.vtk",
+                "# vtk DataFile Version 4.2\nx\nASCII\nDATASET UNSTRUCTURED_GRID\nPOINTS 4 double\n0 0 0 1 0 0 0 1 0 0 0 1\n"
+                "CELLS 2 9\n4 0 1 2 3\n3 0 1 2\nCELL_TYPES 2\n10\n99\n")
+    c.api("s35_vtk42_unknown_cell_type", "silent", _loader("mesh", n), ["error"], ["MeshError"], contains="99")
+    # 2. Binary gmsh: an element's node tag 0 (gmsh tags start at 1) wrapped around to the node
+    # with the largest tag (meshio's index arithmetic: tag - 1 = -1), so that the tet (0, 2, 4, 3)
+    # silently became (5, 2, 4, 3).
+    for ver, make in (("22", _gmsh22_binary), ("41", _gmsh41_binary)):
+        n = c.write(f"s35_gmsh{ver}_bin_tag0.msh", make(_TWO_TETS, [(1, 2, 3, 4), (0, 2, 4, 3)]))
+        c.api(f"s35_gmsh{ver}_bin_tag0", "silent", _loader("mesh", n), ["error"], ["MeshError"],
+              contains="references node tag 0, which is not defined")
+        # The same file with tag 5 where 0 was: valid, and read as written.
+        n = c.write(f"s35_gmsh{ver}_bin_ok.msh", make(_TWO_TETS, [(1, 2, 3, 4), (5, 2, 4, 3)]))
+        c.api(f"s35_gmsh{ver}_bin_ok", "seed", f"m = {_loader('mesh', n)}\n"
+              "assert m.n_tets == 2 and abs(m.volume - 1 / 6 - 1 / 3) < 1e-12, m.volume", ["ok"])
+    # 3. A tet repeated on duplicated nodes (same corners, other node numbers): twice the volume
+    # and mass there. Same node numbers were refused already (DuplicateTet).
+    c.api("s35_tetmesh_duplicate_on_copied_nodes", "silent", one_tet + "palpate.TetMesh(np.vstack([p, p]), [[0, 1, 2, 3], [4, 5, 6, 7]])",
+          ["error"], ["MeshError"], contains="tet 1: duplicate of tet 0")
+    c.api("s35_tetmesh_duplicate_same_nodes", "silent", one_tet + "palpate.TetMesh(p, [[0, 1, 2, 3], [1, 0, 3, 2]])",
+          ["error"], ["MeshError"], contains="tet 1: duplicate of tet 0")
+    np.savez(c.path("s35_duplicate_tet.npz"), points=np.vstack([np.eye(4, 3)[[3, 0, 1, 2]]] * 2),
+             tets=np.array([[0, 1, 2, 3], [4, 5, 6, 7]]))
+    c.api("s35_npz_duplicate_tet", "silent", _loader("mesh", "s35_duplicate_tet.npz"), ["error"], ["MeshError"],
+          contains="duplicate of tet 0")
+    # 4. Fractional triangle indices in a float array: numpy's astype(int64) truncated 1.5 to 1.
+    tri = "v, t, part = palpate.ventricle_surface(24, 8); tf = t.astype(np.float64); tf[3, 1] += 0.5\n"
+    for fn, call in (("orient", "palpate.orient_consistently(v, tf)"), ("repair", "palpate.repair_surface(v, tf)"),
+                     ("write_vtp", "from palpate.vtp import write_vtp; write_vtp(os.path.join(D, 's35_frac.vtp'), v, tf)"),
+                     ("vertex_normals", "from palpate.touch import vertex_normals; vertex_normals(v, tf)")):
+        c.api(f"s35_fractional_triangles_{fn}", "silent", tri + call, ["error"], ["ParameterError"], contains="triangles[3, 1]")
+    c.api("s35_fractional_triangles_trisurface", "silent", tri + "palpate.TriSurface(v, tf)", ["error"], ["ParameterTypeError"],
+          contains="must be an integer array")
+    c.api("s35_fractional_tets_vtu_series", "silent", one_tet + "palpate.VtuSeries(os.path.join(D, 's35_series'), [[0, 1, 2.5, 3]])",
+          ["error"], ["ParameterError"], contains="tets[0, 2]")
+    # 5. A model file whose particle lattice spacing is negative, zero or NaN (checksum refreshed:
+    # a crafted file): it loaded, with a negative shell volume, and failed at the first tick. The
+    # voxel grid's spacing was refused already, as "voxel grid inconsistent": now named.
+    import palpate
+    data = open(c.path("seed.palpate"), "rb").read()
+    info = palpate.HybridModel.load(c.path("seed.palpate")).info()
+    for field, key, says in (("spacing", "spacing_m", "particle lattice spacing"), ("voxel", "voxel_m", "voxel grid spacing")):
+        h = info[key]
+        i = data.find(struct.pack("<d", h), HEADER)
+        assert i > 0 and data.count(struct.pack("<d", h)) == 1, f"the {key} bytes"
+        for tag, bad in (("neg", -h), ("zero", 0.0), ("nan", float("nan"))):
+            n = c.write(f"s35_model_{field}_{tag}.palpate", refresh_checksum(data[:i] + struct.pack("<d", bad) + data[i + 8:]))
+            c.api(f"s35_model_{field}_{tag}", "silent", _loader("model", n), ["error"], ["ModelFileError"], contains=says)
+    # 6. A force of 1e300 N: refused where it enters (the bound: finite, |f| <= 1e6 N).
+    for name, code in (("set_forces", "b = body(); f = np.zeros((b.n_nodes, 3)); f[5, 2] = 1e300\n" + _UNCHANGED.format(call="b.set_forces(f)")),
+                       ("static_solve", "b = body(); f = np.zeros((b.n_nodes, 3)); f[5, 2] = 1e300; b.static_solve(f)"),
+                       ("run_probe", "b = body(); b.run_probe([20], (0, 0, -1e300), 0.1, 5)"),
+                       ("run_loads", "b = body(); b.run_loads([([20], (0, 0, 1e300), 0.1)], 5)"),
+                       ("set_state", "b = body(); s = b.get_state(); s['forces'][5, 2] = 1e300; b.set_state(s)")):
+        c.api(f"s35_body_force_1e300_{name}", "silent", _BODY + code, ["error"], ["ParameterError"], contains="over the bound of 1e6 N")
+    c.api("s35_pb_force_1e300", "silent", _PB + "b = pb(); f = np.zeros((64, 3)); f[3, 0] = 1e300; b.set_forces(f)",
+          ["error"], ["ParameterError"], contains="over the bound of 1e6 N")
+    c.api("s35_body_force_1e5_ok", "seed", _BODY + "b = body(); f = np.zeros((b.n_nodes, 3)); f[5, 2] = 1e5; b.set_forces(f)", ["ok"])
+    # 7. static_solve(load_steps=0): taken as 1 without a word.
+    c.api("s35_static_solve_load_steps_0", "silent", _BODY + "b = body(); b.static_solve(load_steps=0)",
+          ["error"], ["ParameterError"], contains="load_steps")
+    # 8. NaN max_wall_s (never reached: no cap) and stable_limit (every run "unstable").
+    for name, code in (("run_probe_max_wall_nan", "b = body(); b.run_probe([20], (0, 0, -1e-3), 0.1, 5, max_wall_s=float('nan'))"),
+                       ("run_probe_stable_nan", "b = body(); b.run_probe([20], (0, 0, -1e-3), 0.1, 5, stable_limit=float('nan'))"),
+                       ("run_loads_max_wall_nan", "b = body(); b.run_loads([([20], (0, 0, -1e-3), 0.1)], 5, max_wall_s=float('nan'))"),
+                       ("run_loads_stable_nan", "b = body(); b.run_loads([([20], (0, 0, -1e-3), 0.1)], 5, stable_limit=float('nan'))"),
+                       ("run_probe_max_wall_negative", "b = body(); b.run_probe([20], (0, 0, -1e-3), 0.1, 5, max_wall_s=-1.0)")):
+        c.api(f"s35_body_{name}", "silent", _BODY + code, ["error"], ["ParameterError"],
+              contains="max_wall_s" if "wall" in name else "stable_limit")
+    c.api("s35_pb_run_timed_max_wall_nan", "silent", _PB + "b = pb(); b.run_timed(5, max_wall_s=float('nan'))",
+          ["error"], ["ParameterError"], contains="max_wall_s")
+    # 9. A VTU series frame with fewer points, or point data shorter than the points: the files
+    # were written and ParaView failed on them later.
+    series = _BODY + "b = body(); s = palpate.VtuSeries(os.path.join(D, 's35_series9'), mesh.tets)\n"
+    c.api("s35_vtu_series_short_positions", "silent", series + "s.write(0.0, b.positions[:-3], b.displacements[:-3], b.velocities[:-3])",
+          ["error"], ["ParameterError"], contains="positions")
+    c.api("s35_vtu_series_short_point_data", "silent",
+          series + "s.write(0.0, b.positions, b.displacements[:-1], b.velocities)", ["error"], ["ParameterError"], contains="displacement")
+    c.api("s35_vtu_series_short_extra", "silent",
+          series + "s.write(0.0, b.positions, b.displacements, b.velocities, point_data={'p': np.zeros(5)})",
+          ["error"], ["ParameterError"], contains="point_data['p']")
+    c.api("s35_vtu_series_short_cell_data", "silent",
+          series + "s.write(0.0, b.positions, b.displacements, b.velocities, cell_data={'e': np.zeros(2)})",
+          ["error"], ["ParameterError"], contains="cell_data['e']")

@@ -134,6 +134,17 @@ def test_gmsh_reader(folder):
          lambda d: (open(path, "wb").write(d), palpate.load_mesh(path)))
 
 
+def test_gmsh_binary_reader(folder):
+    """palpate's binary MSH 2.2 / 4.1 reader (issue 35 item 6: meshio's wrapped node tags)."""
+    import corpus_cases
+
+    tets = [(1, 2, 3, 4), (5, 2, 4, 3)]
+    seeds = [corpus_cases._gmsh22_binary(corpus_cases._TWO_TETS, tets), corpus_cases._gmsh41_binary(corpus_cases._TWO_TETS, tets)]
+    path = str(folder / "b.msh")
+    fuzz("gmsh_binary", lambda rng: mutated(rng, rng.choice(seeds)),
+         lambda d: (open(path, "wb").write(d), palpate.load_mesh(path)))
+
+
 def test_tetgen_reader(folder):
     node, ele = str(folder / "t.node"), str(folder / "t.ele")
 

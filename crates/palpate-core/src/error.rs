@@ -37,6 +37,10 @@ pub enum MeshError {
     Degenerate { tet: usize, volume: f64, relative: f64 },
     #[error("tet {tet}: duplicate of tet {other}")]
     DuplicateTet { tet: usize, other: usize },
+    /// A tet on other node numbers at the same four corner positions as an earlier one (a mesh
+    /// whose nodes were duplicated): its volume and mass would count twice.
+    #[error("tet {tet}: duplicate of tet {other}: its nodes {nodes:?} lie at the corners of tet {other}'s nodes {other_nodes:?}, so that the volume and mass there would count twice")]
+    CoincidentTet { tet: usize, other: usize, nodes: [usize; 4], other_nodes: [usize; 4] },
     #[error("node {node} is used by no tetrahedron")]
     UnusedNode { node: usize },
     #[error("cells of type '{cell_type}' are not tetrahedra (block {block})")]
@@ -216,6 +220,8 @@ pub enum LoadError {
     NodeOutOfRange { index: usize, node: usize, n_nodes: usize },
     #[error("the load's force is not finite")]
     NonFiniteForce,
+    #[error("the load's force of {norm:e} N is over the bound of {max:e} N (crate::limits::MAX_FORCE_N)", max = crate::limits::MAX_FORCE_N)]
+    ForceTooLarge { norm: f64 },
     #[error("ramp (start {start} s, duration {duration} s): both must be finite and the duration >= 0")]
     BadRamp { start: f64, duration: f64 },
 }

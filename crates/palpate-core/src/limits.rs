@@ -33,6 +33,25 @@ pub const MARGIN: f64 = 0.5;
 // No cap above the machine's limits: the old fixed 8 GiB stood in for not knowing the machine;
 // now that it is read, a 64 GiB workstation may build what fits in 32 GiB without setting
 // PALPATE_MAX_MEMORY, and a 2 GiB container is refused at 1 GiB rather than killed at 2.
+/// The largest external force palpate takes as one node's force or one load's total \[N\]:
+/// 1e6 N, the weight of 100 t. Why this value: soft tissue tears at tens of newtons and a haptic
+/// device renders at most tens (the device classes' ratings in palpate-haptics), so no load of
+/// this domain comes within four orders of it, while a force over it is a unit or data mistake
+/// (1e300 was taken without a word). And it keeps the arithmetic of a step well inside f64:
+/// squared norms (residuals, line searches) stay under 1e12 N^2 where 1e300 N overflowed to inf.
+pub const MAX_FORCE_N: f64 = 1e6;
+
+/// |f| \[N\] for a message, scaled by the largest component: the plain norm of (0, 0, 1e300)
+/// squares to inf.
+pub fn force_magnitude(f: &crate::Vec3) -> f64 {
+    let big = f.amax();
+    if big > 0.0 && big.is_finite() { big * (f / big).norm() } else { big }
+}
+
+/// Is `f` finite with |f| <= [`MAX_FORCE_N`]?
+pub fn force_in_bound(f: &crate::Vec3) -> bool {
+    f.x.is_finite() && f.y.is_finite() && f.z.is_finite() && f.norm() <= MAX_FORCE_N
+}
 
 /// The environment variable that sets the budget.
 pub const ENV: &str = "PALPATE_MAX_MEMORY";

@@ -62,6 +62,9 @@ impl ProbeLoad {
         if !(total_force.x.is_finite() && total_force.y.is_finite() && total_force.z.is_finite()) {
             return Err(LoadError::NonFiniteForce);
         }
+        if !crate::limits::force_in_bound(&total_force) {
+            return Err(LoadError::ForceTooLarge { norm: crate::limits::force_magnitude(&total_force) });
+        }
         if !(ramp.duration >= 0.0 && ramp.duration.is_finite() && ramp.start.is_finite()) {
             return Err(LoadError::BadRamp { start: ramp.start, duration: ramp.duration });
         }

@@ -57,7 +57,7 @@ from typing import List, Optional
 
 from .. import __version__
 from . import bench, build, device, fit, haptic, info, run, soak, sweep, touch, validate, view
-from ._common import EXIT_CODES_HELP, Fail, Parser, interrupted, quiet_pipe, run_guarded
+from ._common import CLOSED_PIPE, EXIT_CODES_HELP, OK, Fail, GuardedStdout, Parser, interrupted, quiet_pipe, run_guarded
 
 #: The commands, in the order of ``palpate --help``: each module adds its parser and handler.
 COMMANDS = (run, bench, build, info, touch, haptic, soak, device, view, sweep, fit, validate)
@@ -101,9 +101,17 @@ def _main(argv: Optional[List[str]]) -> int:
         # the source line.
         print(f"palpate: warning: {' '.join(str(message).split())}", file=sys.stderr)
 
-    with warnings.catch_warnings():
-        warnings.showwarning = one_line
-        return _flushed(run_guarded(lambda: a.func(a)))
+    # A closed stdout never ends the command's work (issue 35 item 7): its prints are dropped from
+    # then on, and a command that otherwise succeeded ends with 141 (128 + SIGPIPE), as Unix tools
+    # killed by SIGPIPE do; one that failed keeps its own code.
+    out = sys.stdout = GuardedStdout(sys.stdout)
+    try:
+        with warnings.catch_warnings():
+            warnings.showwarning = one_line
+            code = _flushed(run_guarded(lambda: a.func(a)))
+    finally:
+        sys.stdout = out._stream
+    return CLOSED_PIPE if out.closed_pipe and code == OK else code
 
 
 def _flushed(code: int) -> int:

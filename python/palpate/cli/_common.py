@@ -153,6 +153,43 @@ def interrupted() -> int:
     return INTERRUPTED
 
 
+class GuardedStdout:
+    """``sys.stdout`` while a command runs: a write or flush that finds the reader gone (EPIPE:
+    ``palpate build ... | head -c 0``) points stdout at /dev/null, as Python's documentation on
+    SIGPIPE recommends, and the command goes on with its real work (the files it writes) instead of
+    ending at its first print (issue 35 item 7). :attr:`closed_pipe` tells the caller to end with
+    :data:`CLOSED_PIPE`. Everything else is the wrapped stream's."""
+
+    def __init__(self, stream):
+        self._stream = stream
+        self.closed_pipe = False
+
+    def _closed(self) -> None:
+        self.closed_pipe = True
+        quiet_pipe()
+
+    def write(self, text: str) -> int:
+        if not self.closed_pipe:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._closed()
+        return len(text)   # the reader has gone: the text is dropped with it
+
+    def writelines(self, lines) -> None:
+        for line in lines:
+            self.write(line)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._closed()
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def quiet_pipe() -> int:
     """stdout was closed by the reader (``| head``): point it at /dev/null so that Python's own
     flush at exit does not print a BrokenPipeError, and end with 141 (128 + SIGPIPE), as Unix

@@ -140,15 +140,17 @@ def cmd_build(a) -> int:
         raise Fail(f"palpate build: {what}: the build failed: {e}", cause=e) from None
     wall = time.perf_counter() - t0
     info = model.info()
+    # The model first, the summary after: the command's work is the file, and stdout may be a
+    # pipe whose reader has gone (`palpate build ... | true` wrote no model; issue 35 item 7).
+    try:
+        model.save(a.output)
+    except (OSError, _p.ModelFileError) as e:
+        raise RunFailed(f"palpate build: cannot write the model: {e}") from None
     print(f"palpate build: {what}: {info['projection']} projection, core fraction {info['core_fraction']:g}; "
           f"{wall:.2f} s including reading the input")
     for w in caught:
         print(f"  note: {w.message}")
     for line in model_lines(info):
         print(line)
-    try:
-        model.save(a.output)
-    except (OSError, _p.ModelFileError) as e:
-        raise RunFailed(f"palpate build: cannot write the model: {e}") from None
     print(f"  wrote {a.output} ({mb(info['file_bytes'])})")
     return 0

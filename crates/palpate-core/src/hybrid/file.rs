@@ -268,6 +268,11 @@ fn semantic(m: &HybridModel) -> Result<(), String> {
             return Err(format!("build statistics: {name} time {t} s must be non-negative and finite"));
         }
     }
+    // The particle lattice's spacing sizes the shell's volume and the support radius: a negative,
+    // zero or NaN one loaded, printed a negative shell volume and failed only at the first tick.
+    if !(m.spacing > 0.0 && m.spacing.is_finite()) {
+        return Err(format!("particle lattice spacing {} m must be positive and finite", m.spacing));
+    }
     if let Some(i) = m.particle_mass.iter().position(|&x| !(x > 0.0 && x.is_finite())) {
         return Err(format!("particle {i}: mass {:?} kg must be positive and finite", m.particle_mass.get(i)));
     }

@@ -139,8 +139,15 @@ pub(super) fn read(r: &mut Reader, m: &mut HybridModel) -> Res<()> {
 
 pub(super) fn check(m: &HybridModel) -> Result<(), String> {
     let g = &m.grid;
-    if !(g.h > 0.0 && g.h.is_finite()) || g.dims.iter().any(|&d| d == 0 || d > 1 << 20) || m.voxel_owner.len() != g.dims.iter().product::<usize>() {
-        return Err("voxel grid inconsistent".into());
+    // Each defect named (issue 35 item 6: a negative spacing was reported as "inconsistent").
+    if !(g.h > 0.0 && g.h.is_finite()) {
+        return Err(format!("voxel grid spacing {} m must be positive and finite", g.h));
+    }
+    if let Some(d) = g.dims.iter().find(|&&d| d == 0 || d > 1 << 20) {
+        return Err(format!("voxel grid of {:?} voxels: {d} voxels along an axis (1 to {} allowed)", g.dims, 1 << 20));
+    }
+    if m.voxel_owner.len() != g.dims.iter().product::<usize>() {
+        return Err(format!("voxel grid of {:?} voxels has {} voxel owners", g.dims, m.voxel_owner.len()));
     }
     Ok(())
 }

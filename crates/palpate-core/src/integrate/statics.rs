@@ -88,6 +88,13 @@ pub fn static_solve_with(model: &Model, f_ext: &[Vec3], opts: &StaticOptions, in
     if let Some(node) = f_ext.iter().position(|f| !is_finite3(f)) {
         return Err(SolveError::NonFinite { what: "external force", node });
     }
+    if let Some(node) = f_ext.iter().position(|f| !crate::limits::force_in_bound(f)) {
+        return Err(SolveError::Invalid(format!("node {node}: external force of {:e} N over the bound of {:e} N (limits::MAX_FORCE_N)", crate::limits::force_magnitude(&f_ext[node]), crate::limits::MAX_FORCE_N)));
+    }
+    // Zero increments is no solve at all: refused, not taken as 1 (issue 35 item 6).
+    if opts.load_steps == 0 {
+        return Err(SolveError::Invalid("load_steps = 0: the load is applied in at least 1 increment".into()));
+    }
     let applied: Vec<Vec3> = (0..n).map(|i| f_ext[i] + model.mass[i] * model.gravity).collect();
     let scale = model.free_nodes.iter().map(|&i| applied[i].norm()).fold(0.0, f64::max);
     if scale == 0.0 || model.free_nodes.is_empty() {
@@ -95,7 +102,7 @@ pub fn static_solve_with(model: &Model, f_ext: &[Vec3], opts: &StaticOptions, in
     }
     // A load too large for one Newton solve from rest (the tangent turns indefinite on the way,
     // or Newton stalls) is retried in more increments: 4x more each time, up to 256.
-    let mut steps = opts.load_steps.max(1);
+    let mut steps = opts.load_steps;
     loop {
         match solve_in_increments(model, &applied, scale, opts, steps, interrupted) {
             Err(SolveError::NotPositiveDefinite { .. } | SolveError::NoConvergence { .. }) if steps < 256 => steps *= 4,

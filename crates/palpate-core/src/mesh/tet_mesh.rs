@@ -55,6 +55,27 @@ pub(crate) fn volume_and_relative(a: &Vec3, b: &Vec3, c: &Vec3, d: &Vec3) -> (f6
     (vol, relative)
 }
 
+/// For each node the lowest-numbered node at exactly the same position, or None when no two nodes
+/// coincide (the usual case: then a node is its own). By sorting the nodes by their coordinates'
+/// bits (`+ 0.0` makes -0.0 the same corner as 0.0): one sort, no hashing, no table kept when
+/// every position is distinct.
+fn coincident_nodes(pts: &[Vec3]) -> Option<Vec<usize>> {
+    let keys: Vec<[u64; 3]> = pts.iter().map(|p| [p.x, p.y, p.z].map(|c| (c + 0.0).to_bits())).collect();
+    let mut order: Vec<usize> = (0..pts.len()).collect();
+    order.sort_unstable_by_key(|&i| (keys[i], i));
+    if order.windows(2).all(|w| keys[w[0]] != keys[w[1]]) {
+        return None;
+    }
+    let mut canonical: Vec<usize> = (0..pts.len()).collect();
+    // Within a run of equal keys the order is by node number: its first is the lowest.
+    for run in order.chunk_by(|&a, &b| keys[a] == keys[b]) {
+        for &i in run {
+            canonical[i] = run[0];
+        }
+    }
+    Some(canonical)
+}
+
 impl TetMesh {
     /// Validate a mesh given as points `(n_nodes, 3)` \[m\] and tets `(n_tets, 4)` node indices
     /// (signed, so that negative indices from a file are reported rather than wrapped).
@@ -74,6 +95,11 @@ impl TetMesh {
         let mut reoriented = Vec::new();
         let mut used = vec![false; n];
         let mut seen: HashMap<[usize; 4], usize> = HashMap::with_capacity(tets.len());
+        // A tet repeated on copied nodes (the same corners under other node numbers) is a
+        // duplicate too: key the tets by the first node at each corner's position, so that
+        // exactly coincident nodes share a key (a mesh written twice into one file, or merged
+        // without welding, doubled the volume and mass there without a word).
+        let canonical = coincident_nodes(&pts);
         for (t, tet) in tets.iter().enumerate() {
             let mut idx = [0usize; 4];
             for k in 0..4 {
@@ -99,10 +125,21 @@ impl TetMesh {
                 idx.swap(2, 3);
                 reoriented.push(t);
             }
-            let mut key = idx;
+            let mut key = canonical.as_ref().map_or(idx, |c| idx.map(|i| c[i]));
             key.sort_unstable();
             if let Some(&other) = seen.get(&key) {
-                return Err(MeshError::DuplicateTet { tet: t, other });
+                let first = out.get(other).copied().unwrap_or(idx);
+                let same_nodes = {
+                    let (mut a, mut b) = (idx, first);
+                    a.sort_unstable();
+                    b.sort_unstable();
+                    a == b
+                };
+                return Err(if same_nodes {
+                    MeshError::DuplicateTet { tet: t, other }
+                } else {
+                    MeshError::CoincidentTet { tet: t, other, nodes: idx, other_nodes: first }
+                });
             }
             seen.insert(key, t);
             for &i in &idx {
@@ -223,5 +260,15 @@ mod tests {
         extra.push([5.0, 5.0, 5.0]);
         assert_eq!(TetMesh::from_arrays(&extra, &t).unwrap_err(), MeshError::UnusedNode { node: 4 });
         assert!(matches!(TetMesh::from_arrays(&p, &[[0, 1, 2, 3], [1, 0, 2, 3]]), Err(MeshError::DuplicateTet { tet: 1, other: 0 })));
+        // The same tet on copied nodes (issue 35 item 6): twice the volume, refused too.
+        let twice: Vec<[f64; 3]> = p.iter().chain(p.iter()).copied().collect();
+        assert!(matches!(
+            TetMesh::from_arrays(&twice, &[[0, 1, 2, 3], [4, 6, 5, 7]]),
+            Err(MeshError::CoincidentTet { tet: 1, other: 0, .. })
+        ));
+        // -0.0 is the same corner as 0.0.
+        let mut signed = twice.clone();
+        signed[4] = [-0.0, -0.0, -0.0];
+        assert!(matches!(TetMesh::from_arrays(&signed, &[[0, 1, 2, 3], [4, 5, 6, 7]]), Err(MeshError::CoincidentTet { .. })));
     }
 }
