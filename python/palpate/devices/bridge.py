@@ -254,8 +254,14 @@ def run_adapter(adapter: Adapter, host: str = "127.0.0.1", port: int = 5005, rat
     session opened with ``key`` if given. Returns ``sent``, ``forces``, ``silences`` (times the
     device's force was zeroed because the loop went silent for :data:`SILENCE_S`),
     ``max_force_n``, ``session``."""
-    client = BridgeClient(host, port, key=key)
+    # The device first: a missing vendor package or an unplugged device is said at once, before
+    # the session waits for a loop (up to its timeout).
     adapter.open()
+    try:
+        client = BridgeClient(host, port, key=key)
+    except BaseException:
+        adapter.close()
+        raise
     period = 1.0 / rate_hz
     stats = {"sent": 0, "forces": 0, "silences": 0, "max_force_n": 0.0, "session": client.session}
     last_force_t = time.monotonic()
