@@ -110,3 +110,18 @@ def check_corpus_entry(name, exp, load, base):
         assert name in msg
         for part in exp["contains"]:
             assert part in msg
+
+
+@pytest.fixture
+def chromium():
+    """The path of a Chromium that Playwright can drive (the viewer's browser tests), or the test
+    skipped with the reason (no Playwright, no browser)."""
+    from palpate.viewer.browser import find_chromium, have_playwright
+
+    ok, why = have_playwright()
+    if not ok:
+        pytest.skip(f"browser test skipped: {why}")
+    exe, why = find_chromium()
+    if exe is None:
+        pytest.skip(f"browser test skipped: {why}")
+    return exe

@@ -6,7 +6,9 @@ palpate error, never another exception, each within 2 s.
 
 Seeded, so a run is reproducible: FUZZ_EXAMPLES (default 150 per target) sets the effort and
 FUZZ_SEED the seed, e.g. ``FUZZ_EXAMPLES=5000 FUZZ_SEED=7 pytest python/tests/test_corpus_fuzz.py``
-for a longer run on demand. A failure prints the input's bytes; it then becomes a case of
+for a longer run on demand; FUZZ_SECONDS instead runs each target for that long and prints the
+number of inputs it ran (``FUZZ_SECONDS=600 pytest -s -k vtu ...``: the 10-minute runs of
+RELIABILITY.md). A failure prints the input's bytes; it then becomes a case of
 corpus_cases.py. (No Hypothesis: it is not among the project's pinned dependencies.)
 """
 import os
@@ -24,6 +26,7 @@ from palpate.vtp import read_vtp, write_vtp
 
 EXAMPLES = int(os.environ.get("FUZZ_EXAMPLES", "150"))
 SEED = int(os.environ.get("FUZZ_SEED", "15"))
+SECONDS = float(os.environ.get("FUZZ_SECONDS", "0"))
 
 GMSH2 = """$MeshFormat
 2.2 0 8
@@ -100,10 +103,13 @@ def mutated(rng: random.Random, seed: bytes) -> bytes:
 
 
 def fuzz(name, make_input, run):
-    """EXAMPLES inputs from ``make_input(rng)`` through ``run(input)``: each must return or raise
-    a PalpateError, within 2 s."""
+    """EXAMPLES inputs (or as many as FUZZ_SECONDS allows) from ``make_input(rng)`` through
+    ``run(input)``: each must return or raise a PalpateError, within 2 s."""
     rng = random.Random(f"{SEED}-{name}")
-    for k in range(EXAMPLES):
+    start = time.monotonic()
+    k = 0
+    while (time.monotonic() - start < SECONDS) if SECONDS > 0 else k < EXAMPLES:
+        k += 1
         x = make_input(rng)
         t0 = time.perf_counter()
         try:
@@ -111,6 +117,8 @@ def fuzz(name, make_input, run):
         except Exception as e:
             raise AssertionError(f"{name} example {k}: {type(e).__name__}: {e}; input {x!r}"[:3000]) from e
         assert time.perf_counter() - t0 < 2.0, f"{name} example {k} took {time.perf_counter() - t0:.1f} s; input {x!r}"[:3000]
+    if SECONDS > 0:
+        print(f"\nfuzz {name}: {k} inputs in {time.monotonic() - start:.0f} s, seed {SEED}, no failure")
 
 
 def _expect_palpate(call):

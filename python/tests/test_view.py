@@ -384,18 +384,6 @@ def test_cli_serves_and_stops(model_file):
 
 # ------------------------------------------------------------------------------- in a real browser
 
-def browser_or_skip():
-    from palpate.viewer.browser import find_chromium, have_playwright
-
-    ok, why = have_playwright()
-    if not ok:
-        pytest.skip(f"browser test skipped: {why}")
-    exe, why = find_chromium()
-    if exe is None:
-        pytest.skip(f"browser test skipped: {why}")
-    return exe
-
-
 def image(png: bytes) -> np.ndarray:
     import io
 
@@ -440,8 +428,8 @@ class Command:
         return self.p.stderr.read()
 
 
-def test_browser_page_renders_and_a_drag_presses_the_surface(model_file):
-    exe = browser_or_skip()
+def test_browser_page_renders_and_a_drag_presses_the_surface(model_file, chromium):
+    exe = chromium
     from playwright.sync_api import sync_playwright
 
     from palpate.viewer.browser import CHROMIUM_ARGS, hide_toasts
@@ -490,8 +478,7 @@ def test_browser_page_renders_and_a_drag_presses_the_surface(model_file):
     assert "Traceback" not in err, err
 
 
-def test_browser_screenshot_command(model_file, tmp_path):
-    browser_or_skip()
+def test_browser_screenshot_command(model_file, tmp_path, chromium):
     out = tmp_path / "view.png"
     r = run_cli(model_file, "--port", "0", "--screenshot", str(out), timeout=240)
     assert r.returncode == 0, r.stderr

@@ -519,26 +519,14 @@ class AttackSite:
         self.httpd.server_close()
 
 
-def browser_or_skip():
-    from palpate.viewer.browser import find_chromium, have_playwright
-
-    ok, why = have_playwright()
-    if not ok:
-        pytest.skip(f"browser test skipped: {why}")
-    exe, why = find_chromium()
-    if exe is None:
-        pytest.skip(f"browser test skipped: {why}")
-    return exe
-
-
-def test_browser_page_from_another_origin_cannot_move_the_tool(model):
+def test_browser_page_from_another_origin_cannot_move_the_tool(model, chromium):
     """Chromium, with evil.example and rebind.example resolved to 127.0.0.1 (as DNS would for the
     attacker): a page of evil.example (and one of another local port) opens the viewer's WebSocket
     and sends the gizmo messages: the connection fails, the viewer counts an Origin refusal, the
     tool does not move. The viewer under rebind.example (DNS rebinding) is 403; framed by
     evil.example it never connects. The viewer's own page still loads and connects, and
     evil.example's page with the token does move the tool (so the browser would have)."""
-    exe = browser_or_skip()
+    exe = chromium
     from playwright.sync_api import sync_playwright
 
     from palpate.viewer import Viewer
