@@ -23,7 +23,7 @@ use std::time::{Duration, Instant};
 use palpate_core::Vec3;
 use palpate_haptics::bridge::protocol::{self, Handshake, Refusal, Reject, STATE_BYTES};
 use palpate_haptics::bridge::{Bridge, BridgeError, BridgeOptions, Client, ClientError, Key};
-use palpate_haptics::{Device, DeviceInput, DeviceKind, HapticCore, Servo, ServoConfig, Wall};
+use palpate_haptics::{Device, DeviceInput, DeviceKind, Fault, HapticCore, Servo, ServoConfig, Wall};
 
 /// Polls until the bridge has received `n` packets in all (a localhost datagram takes a moment).
 fn poll_until(b: &mut Bridge, n: u64) -> Option<DeviceInput> {
@@ -464,4 +464,115 @@ fn an_old_client_is_named() {
     assert_eq!(poll_until(&mut bridge, 1), None);
     assert_eq!(stats.rejected(Reject::OldVersion), 1);
     assert_eq!(stats.old_client().map(SocketAddr::V4), Some(old.local_addr().unwrap()));
+}
+
+/// The hand's worst through the bridge (issue 35): a client in its own thread, on the real
+/// socket and servo thread, aims 25 mm into a stiff wall (a 5 N-scale push: the coupling alone
+/// would ask 5 N), slides 80 mm across it at 0.5 m/s, then stops sending for 0.3 s while it
+/// still listens (a device that stops answering), then comes back. In the single-rate loop and
+/// the multirate one (physics 250 Hz). What a wrong loop would do: pass the coupling's 5 N to
+/// the hand, step the force on the slide's first tick, keep pushing a silent device (0.03-0.07 N
+/// the whole time before issue 34), or give the full force back in one tick when the device
+/// returns.
+#[test]
+fn the_hands_worst_through_the_bridge_is_bounded_faded_and_ramped() {
+    for physics_rate_hz in [None, Some(250.0)] {
+        let label = if physics_rate_hz.is_some() { "multirate" } else { "single-rate" };
+        let bridge = Bridge::localhost(0, DeviceKind::Bridge).unwrap();
+        let addr = bridge.local_addr().unwrap();
+        let cfg = ServoConfig { record_ticks: 60_000, physics_rate_hz, ..Default::default() };
+        let (_, safety) = DeviceKind::Bridge.defaults();
+        let wall = Wall::new(Vec3::zeros(), Vec3::z(), 2000.0, 2.0);
+        let core = HapticCore::with_config(Box::new(wall), &cfg, &bridge).unwrap();
+        let servo = Servo::start(core, Box::new(bridge), &cfg).unwrap();
+
+        // The client: (phase end [s], where the hand aims at t); `None`: silent.
+        let client = std::thread::spawn(move || {
+            let mut c = Client::connect(addr, Duration::from_secs(10)).unwrap();
+            let deep = -0.025;
+            let aim = |t: f64| -> Option<Vec3> {
+                if t < 0.3 {
+                    Some(Vec3::new(0.0, 0.0, 0.002 + (deep - 0.002) * t / 0.3))
+                } else if t < 0.46 {
+                    Some(Vec3::new(0.5 * (t - 0.3), 0.0, deep))
+                } else if t < 0.76 {
+                    None
+                } else if t < 1.6 {
+                    Some(Vec3::new(0.08, 0.0, deep + 0.001))
+                } else {
+                    None
+                }
+            };
+            // (receive time [s], force) of every force packet.
+            let mut got: Vec<(f64, Vec3)> = Vec::new();
+            let t0 = Instant::now();
+            while t0.elapsed() < Duration::from_millis(1700) {
+                let t = t0.elapsed().as_secs_f64();
+                if let Some(x) = aim(t) {
+                    c.send(&DeviceInput::at(x)).unwrap();
+                }
+                while let Some(f) = c.recv(Duration::from_micros(900)).unwrap() {
+                    got.push((t0.elapsed().as_secs_f64(), f.force));
+                    if t0.elapsed().as_secs_f64() > t + 0.001 {
+                        break;
+                    }
+                }
+            }
+            got
+        });
+        let got = client.join().unwrap();
+        let report = servo.stop();
+        let rec = report.core.recording().unwrap();
+        let dt = 1.0 / cfg.rate_hz;
+
+        // Bounded: every force finite and within the limit, on the servo's side and the client's;
+        // the press reaches the limit (the coupling asks for more), and no tick's force jumps by
+        // more than the rate limit allows, on the slide's start or anywhere.
+        assert!(got.len() > 500, "{label}: the client got {} forces", got.len());
+        assert!(got.iter().all(|(_, f)| f.iter().all(|v| v.is_finite()) && f.norm() <= safety.max_force + 1e-9), "{label}");
+        let forces: Vec<Vec3> = rec.ticks.iter().map(|t| t.force).collect();
+        let fmax = forces.iter().map(|f| f.norm()).fold(0.0, f64::max);
+        assert!(fmax <= safety.max_force + 1e-9 && fmax > 0.9 * safety.max_force, "{label}: the press is held at the limit: {fmax}");
+        let jump = forces.windows(2).map(|w| (w[1] - w[0]).norm()).fold(0.0, f64::max);
+        assert!(jump <= safety.max_rate * dt + 1e-9, "{label}: a jump of {jump} N in one tick");
+        assert_eq!(report.core.bad_inputs(), 0, "{label}");
+
+        // Silent: the longest run of ticks without a sample is the client's 0.3 s; the force is
+        // held for the safety's 50 ms, then zero within 30 ms more, and stays zero to its end.
+        let mut runs = Vec::new();
+        let mut start = None;
+        for (k, t) in rec.ticks.iter().enumerate() {
+            match (t.has_input, start) {
+                (false, None) => start = Some(k),
+                (true, Some(s)) => {
+                    runs.push((s, k));
+                    start = None;
+                }
+                _ => {}
+            }
+        }
+        let (s, e) = *runs.iter().max_by_key(|(s, e)| e - s).unwrap_or_else(|| panic!("{label}: no silence recorded"));
+        let silent = (e - s) as f64 * dt;
+        assert!((0.25..0.45).contains(&silent), "{label}: the silence lasted {silent} s");
+        let zero_from = s + ((safety.silence + 0.030) / dt).ceil() as usize + 1;
+        assert!(forces[s..s + (0.040 / dt) as usize].iter().all(|f| f.norm() > 0.5), "{label}: held through the first 40 ms");
+        assert!(forces[zero_from..e].iter().all(|f| f.norm() == 0.0), "{label}: zero 80 ms into the silence until its end");
+        assert!(report.core.silences() >= 1, "{label}");
+        assert!(report.core.fault_log().iter().any(|r| matches!(r.fault, Fault::DeviceSilent(_))), "{label}: the silence is logged");
+        // The client saw it too: zero forces while it listened in silence.
+        assert!(got.iter().any(|(t, f)| (0.6..0.75).contains(t) && f.norm() == 0.0), "{label}: the silent client was sent zero");
+
+        // Back: ramped in over the safety's ramp, not a step, and the full force again.
+        let back = &forces[e..];
+        let first = back.iter().position(|f| f.norm() > 0.0).unwrap_or_else(|| panic!("{label}: no force after the silence"));
+        assert!(back[first].norm() < 0.5, "{label}: the first force back is {} N", back[first].norm());
+        assert!(back.iter().any(|f| f.norm() > 0.9 * safety.max_force), "{label}: the full force again after the ramp");
+        println!(
+            "{label}: {} forces to the client, max {fmax:.3} N, largest jump {jump:.3} N/tick, silence {silent:.3} s, \
+             first back {:.1e} N; faults {:?}",
+            got.len(),
+            back[first].norm(),
+            report.core.fault_log().iter().map(|r| r.fault.to_string()).collect::<Vec<_>>()
+        );
+    }
 }
