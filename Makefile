@@ -15,8 +15,9 @@ BIN := $(VENV)/bin
 # Versions that build together on this machine (see shared/design/stack-notes.md).
 PY_DEPS := maturin==1.16.0 numpy==2.4.6 meshio==5.3.5 matplotlib==3.11.2 pytest==9.2.0 \
            scipy==1.17.1 scikit-fem==12.0.2 \
-           viser==1.1.1 playwright==1.65.2
-# scipy, scikit-fem: the independent reference in python/tests; viser, playwright: `palpate view`
+           viser==1.1.1 playwright==1.65.2 gmsh==4.15.2
+# scipy, scikit-fem: the independent reference in python/tests; gmsh: the tet mesher of Rodero's
+# reference wall (palpate validate, the validate extra; a 40 MB wheel); viser, playwright: `palpate view`
 # and its browser test (the view extra). viser from its PyPI wheel (a source install builds its
 # client with node from the network). Playwright drives the system's Chromium (`make browser`):
 # never `playwright install`.

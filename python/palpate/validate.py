@@ -25,8 +25,12 @@ wall (:func:`wall_mesh`): the inner surface simplified, prism layers along the t
 the outer surface; that mesh is uniform, so its contact converges only as the whole mesh is
 refined. On the synthetic ventricle it serves; on Rodero's ventricle its prisms are nearly flat at
 500 triangles (min dihedral 0.02 deg, 137 of the wall's 163 mL) and twist from 2,000 on, so
-Rodero's reference needs a real tet mesher of the wall (fTetWild is the candidate: `pytetwild`
-0.4.2 has a wheel, but imports pyvista and VTK).
+Rodero's wall is meshed by gmsh (the ``validate`` extra) instead (:func:`gmsh_wall`): the data's
+closed surface (endocardium, epicardium and valve caps in one piece; the two four-triangle specks
+its repair leaves are dropped, they intersect it), simplified by palpate's own quadric-error
+simplifier to the level's triangle count (:meth:`palpate.TriSurface.simplified`), then filled
+with tets by gmsh's Delaunay mesher keeping that surface: uniform levels, each halving the
+element size (:data:`GMSH_LEVELS`).
 
 All lengths in metres, forces in newtons, world frame.
 """
@@ -56,6 +60,9 @@ __all__ = [
     "REFERENCE_LEVELS",
     "BUILT_LEVELS",
     "wall_mesh",
+    "gmsh_wall",
+    "largest_piece",
+    "GMSH_LEVELS",
 ]
 
 #: Mesh levels of the ellipsoid wall's reference: (subdivisions of the geodesic sphere, tet layers
@@ -66,6 +73,13 @@ REFERENCE_LEVELS: Tuple[Tuple[int, int], ...] = ((3, 2), (4, 4), (5, 8))
 #: Mesh levels of a wall palpate meshes through the hybrid build (every shipped wall but the
 #: ellipsoids): (triangles of the simplified inner surface, prism layers to the outer surface).
 BUILT_LEVELS: Tuple[Tuple[int, int], ...] = ((1000, 2), (4000, 4), (16000, 8))
+
+#: Mesh levels of a wall meshed by gmsh (Rodero's): (triangles of the simplified closed surface,
+#: 0); each level halves the element size (measured on Rodero: 2,241, 11,228 and 72,975 tets).
+GMSH_LEVELS: Tuple[Tuple[int, int], ...] = ((1500, 0), (6000, 0), (24000, 0))
+
+#: The walls meshed by gmsh rather than by the hybrid build's prisms.
+GMSH_SHAPES = ("rodero",)
 
 #: The core fraction that makes the hybrid build's core span the wall (a full-FEM mesh of it).
 WALL_FRACTION = 0.999
@@ -249,13 +263,90 @@ def held_below(points: np.ndarray, z: float) -> np.ndarray:
     return np.nonzero(points[:, 2] <= z)[0]
 
 
+def largest_piece(points: np.ndarray, triangles: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """The largest edge-connected piece of a triangle surface (by triangles), its vertices
+    renumbered: what a surface repair's specks (tiny closed pieces, which may cross the main one)
+    are dropped from before a volume is meshed inside it."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    pts, tris = np.asarray(points, dtype=float), np.asarray(triangles, dtype=np.int64)
+    rows = np.repeat(np.arange(len(tris)), 3)
+    incidence = coo_matrix((np.ones(len(rows)), (rows, tris.ravel())), shape=(len(tris), len(pts))).tocsr()
+    _, label = connected_components(incidence @ incidence.T, directed=False)
+    tris = tris[label == np.argmax(np.bincount(label))]
+    used = np.unique(tris)
+    renumber = np.full(len(pts), -1, dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    return pts[used], renumber[tris]
+
+
+def gmsh_wall(surface: _palpate.TriSurface, triangles: Optional[int] = None) -> _palpate.TetMesh:
+    """The solid inside a closed ``surface`` [m] as linear tets: the surface simplified to at most
+    ``triangles`` triangles (:meth:`palpate.TriSurface.simplified`; ``None``: as given), then
+    filled by gmsh's Delaunay mesher, which keeps that surface as the mesh's boundary and sizes
+    the inside from it. Needs gmsh (``pip install palpate[validate]``); a surface that crosses
+    itself is refused by gmsh ("PLC Error: a segment and a facet intersect"), raised as a
+    ``ModelError``."""
+    try:
+        import gmsh
+    except (ImportError, OSError) as e:
+        raise _palpate.ModelError(f"meshing a wall needs gmsh, which could not be imported ({e}): "
+                                  f"pip install 'palpate[validate]'") from None
+    if triangles is not None and triangles < surface.n_triangles:
+        surface = surface.simplified(int(triangles))
+    pts, tris = np.asarray(surface.points), np.asarray(surface.triangles)
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.option.setNumber("Mesh.Algorithm3D", 1)  # Delaunay: keeps the given surface
+        gmsh.model.add("wall")
+        s = gmsh.model.addDiscreteEntity(2)
+        gmsh.model.mesh.addNodes(2, s, np.arange(1, len(pts) + 1), pts.ravel())
+        gmsh.model.mesh.addElementsByType(s, 2, [], (tris + 1).ravel())
+        gmsh.model.geo.addVolume([gmsh.model.geo.addSurfaceLoop([s])])
+        gmsh.model.geo.synchronize()
+        try:
+            gmsh.model.mesh.generate(3)
+        except Exception as e:  # gmsh raises a bare Exception with its last error
+            raise _palpate.ModelError(f"gmsh could not mesh the wall ({surface.n_triangles} triangles): {e}") from None
+        tags, coords, _ = gmsh.model.mesh.getNodes()
+        _, nodes = gmsh.model.mesh.getElementsByType(4)
+    finally:
+        gmsh.finalize()
+    index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
+    index[tags.astype(np.int64)] = np.arange(len(tags))
+    tets = index[np.asarray(nodes, dtype=np.int64).reshape(-1, 4)]
+    points = np.asarray(coords, dtype=float).reshape(-1, 3)
+    used = np.unique(tets)
+    renumber = np.full(len(points), -1, dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    return _palpate.TetMesh(points[used], renumber[tets])
+
+
+def rodero_surface() -> _palpate.TriSurface:
+    """Rodero's left ventricle [m] as one closed surface (its largest piece, :func:`largest_piece`)."""
+    import warnings
+
+    from .data import rodero_lv_path
+    from .hybrid import read_tagged_surface
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", _palpate.MeshWarning)  # the known repair of the shipped file
+        points, triangles, _ = read_tagged_surface(rodero_lv_path(), unit="mm")
+    return _palpate.TriSurface(*largest_piece(points, triangles), source="Rodero left ventricle")
+
+
 def wall_mesh(shape: str, a: int, b: int, case: IndentCase, graded: bool = True
               ) -> Tuple[_palpate.TetMesh, Optional[np.ndarray]]:
     """A full-FEM mesh of the shipped wall ``shape`` and its held nodes (None: below the case's
     ``hold_z``).
 
     ``"ellipsoids"``: ``a`` subdivisions of the geodesic sphere, ``b`` layers, graded toward the
-    tool (:func:`graded_ellipsoid_wall`) unless ``graded`` is false. Other walls: the hybrid
+    tool (:func:`graded_ellipsoid_wall`) unless ``graded`` is false. ``"rodero"``: its closed
+    surface simplified to ``a`` triangles and filled with tets by gmsh (:func:`gmsh_wall`; ``b``
+    unused, 0), held below ``hold_z``. Other walls: the hybrid
     build's own core, taken across the whole wall (core fraction :data:`WALL_FRACTION`): the inner
     surface simplified to ``a`` triangles, ``b`` prism layers along the transmural field to the
     outer surface, held at its base nodes (a closed wall: below ``hold_z``).
@@ -264,6 +355,8 @@ def wall_mesh(shape: str, a: int, b: int, case: IndentCase, graded: bool = True
         if graded:
             return graded_ellipsoid_wall(subdivisions=a, layers=b, focus=-np.asarray(case.direction)), None
         return _palpate.ellipsoid_wall(ELLIPSOIDS_INNER, ELLIPSOIDS_OUTER, subdivisions=a, layers=b), None
+    if shape in GMSH_SHAPES:
+        return gmsh_wall(rodero_surface(), a), None
     from .hybrid import build_shape
 
     try:
@@ -409,6 +502,18 @@ def _richardson(h: np.ndarray, f: np.ndarray) -> Tuple[float, float]:
     return float(f[2] - c * h[2] ** p), p
 
 
+def default_levels(shape: str) -> Tuple[Tuple[int, int], ...]:
+    """The reference's mesh levels of a shipped wall: :data:`REFERENCE_LEVELS` (ellipsoids),
+    :data:`GMSH_LEVELS` (Rodero) or :data:`BUILT_LEVELS` (the others)."""
+    return REFERENCE_LEVELS if shape == "ellipsoids" else GMSH_LEVELS if shape in GMSH_SHAPES else BUILT_LEVELS
+
+
+def default_coarse(shape: str) -> Tuple[int, int]:
+    """The coarse full FEM of about the hybrid core's 900 tets: the ellipsoids' (2, 2) (768 tets),
+    Rodero's surface at 600 triangles (880 tets), the build's (300, 1) (900 tets)."""
+    return (2, 2) if shape == "ellipsoids" else (600, 0) if shape in GMSH_SHAPES else (300, 1)
+
+
 def level_size(shape: str, level: Tuple[int, int]) -> float:
     """A mesh level's element size, relative: the ellipsoids' halves with each subdivision (the
     layers double with it); a built wall's goes as one over the square root of its triangles."""
@@ -417,14 +522,14 @@ def level_size(shape: str, level: Tuple[int, int]) -> float:
 
 
 def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
-                    depths: Sequence[float] = (0.002, 0.004, 0.006), levels: Sequence[Tuple[int, int]] = REFERENCE_LEVELS,
-                    coarse: Tuple[int, int] = (2, 2), young: float = 30e3, poisson: float = 0.4,
+                    depths: Sequence[float] = (0.002, 0.004, 0.006), levels: Optional[Sequence[Tuple[int, int]]] = None,
+                    coarse: Optional[Tuple[int, int]] = None, young: float = 30e3, poisson: float = 0.4,
                     law: str = "neo-hookean", out_dir: Optional[str] = None, model: Optional[_palpate.HybridModel] = None,
                     reference: Optional[str] = None, verbose: bool = True) -> Dict[str, Any]:
     """The hybrid's force and dent against the converged FEM of its wall, and the coarse FEM.
 
-    ``levels``: the reference meshes (see :data:`REFERENCE_LEVELS`); ``coarse``: the
-    (subdivisions, layers) of the ungraded full FEM of about the hybrid core's size. Writes
+    ``levels``: the reference meshes (default :func:`default_levels`); ``coarse``: the level of
+    the ungraded full FEM of about the hybrid core's size (default :func:`default_coarse`). Writes
     ``indentation.json`` and ``indentation.png`` into ``out_dir`` when given. Returns the curves,
     the table rows and the convergence evidence.
 
@@ -439,6 +544,8 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
         raise ValueError(f"shape must be one of {SHAPES}, got {shape!r}")
     if law not in ("neo-hookean", "svk"):
         raise ValueError(f"law must be 'neo-hookean' or 'svk', got {law!r}")
+    levels = default_levels(shape) if levels is None else levels
+    coarse = default_coarse(shape) if coarse is None else coarse
     case = IndentCase(shape=shape, young=young, poisson=poisson, tool_radius=tool_radius, depths=tuple(depths),
                       reference_law=law)
     if model is None:

@@ -149,6 +149,31 @@ impl PyTriSurface {
         per_point(py, points, "points", |p| s.winding_number(p))
     }
 
+    /// This surface simplified by quadric-error edge collapse (Garland and Heckbert 1997; the
+    /// hybrid build's own simplifier of the inner surface) to at most ``triangles`` triangles, or
+    /// as far as its safety checks allow (no topology change, no fold, no sliver): a new
+    /// validated ``TriSurface``. Used to make the coarse levels of a reference mesh from a fine
+    /// organ surface (:func:`palpate.validate.gmsh_wall`). ``ParameterError`` for fewer than 4.
+    #[pyo3(signature = (triangles), text_signature = "($self, triangles)")]
+    fn simplified(&self, py: Python<'_>, triangles: errors::Int) -> PyResult<PyTriSurface> {
+        let target = errors::count(triangles, "triangles")?;
+        if target < 4 {
+            return Err(crate::errors::param_error_from(format!("triangles must be at least 4, got {target}")));
+        }
+        let s = &self.inner;
+        let (surface, warnings) = errors::guard("TriSurface.simplified", || {
+            Ok(py.detach(|| {
+                let out = mesh::simplify::simplify(s.points(), s.triangles(), target);
+                let p: Vec<[f64; 3]> = out.points.iter().map(|v| [v.x, v.y, v.z]).collect();
+                let t: Vec<[i64; 3]> = out.triangles.iter().map(|t| [t[0] as i64, t[1] as i64, t[2] as i64]).collect();
+                TriSurface::from_arrays(&p, &t)
+            }))
+        })?
+        .map_err(surface_error)?;
+        errors::warn_all(py, None, warnings)?;
+        Ok(PyTriSurface { inner: surface })
+    }
+
     fn __len__(&self) -> usize {
         self.inner.n_triangles()
     }

@@ -8,6 +8,16 @@ from ._common import Fail, RunFailed, Usage
 
 
 def _level(text: str, shape: str) -> Tuple[int, int]:
+    from ..validate import GMSH_SHAPES
+
+    if shape in GMSH_SHAPES:
+        try:
+            a = int(text.split(":")[0])
+        except ValueError:
+            raise Usage(f"palpate validate: a mesh level of {shape} is TRIANGLES (e.g. 6000), got {text!r}") from None
+        if not 100 <= a <= 200_000:
+            raise Usage(f"palpate validate: level {text}: {shape}'s surface triangles must be 100 to 200000")
+        return a, 0
     try:
         a, b = (int(v) for v in text.split(":"))
     except ValueError:
@@ -20,7 +30,7 @@ def _level(text: str, shape: str) -> Tuple[int, int]:
 
 
 def add_parser(sub) -> None:
-    from ..validate import BUILT_LEVELS, REFERENCE_LEVELS
+    from ..validate import BUILT_LEVELS, GMSH_LEVELS, REFERENCE_LEVELS
 
     v = sub.add_parser("validate", help="the hybrid model against references palpate computes itself",
                        description="Validation against references palpate computes itself.")
@@ -41,10 +51,11 @@ def add_parser(sub) -> None:
     i.add_argument("--levels", nargs="+", metavar="A:L",
                    help="reference meshes, coarse to fine, each halving the last's element size: for the ellipsoids "
                         "SUBDIVISIONS:LAYERS of the graded wall (default " + " ".join(f"{s}:{l}" for s, l in REFERENCE_LEVELS)
-                        + "), for the other walls TRIANGLES:LAYERS of the build's wall mesh (default "
-                        + " ".join(f"{s}:{l}" for s, l in BUILT_LEVELS) + ")")
+                        + "), for rodero TRIANGLES of its simplified surface filled by gmsh (default "
+                        + " ".join(str(s) for s, _ in GMSH_LEVELS) + "), for the ventricle TRIANGLES:LAYERS of the "
+                        "build's wall mesh (default " + " ".join(f"{s}:{l}" for s, l in BUILT_LEVELS) + ")")
     i.add_argument("--coarse", metavar="A:L", help="the coarse full FEM, ungraded (default 2:2 for the ellipsoids: "
-                   "768 tets; 300:1 for the other walls: 900 tets)")
+                   "768 tets; 600 for rodero: 880 tets; 300:1 for the ventricle: 900 tets)")
     i.add_argument("--young", type=float, default=30e3, metavar="E", help="Young's modulus [Pa] (default 30e3)")
     i.add_argument("--poisson", type=float, default=0.4, metavar="NU", help="Poisson's ratio (default 0.4)")
     i.add_argument("--law", choices=["neo-hookean", "svk"], default="neo-hookean",
@@ -62,14 +73,11 @@ def cmd_indentation(a) -> int:
     from .. import _palpate as _p
     from .. import validate
 
-    from ..validate import BUILT_LEVELS, REFERENCE_LEVELS
-
     if not (a.tool_radius > 0 and all(d > 0 for d in a.depths)):
         raise Usage("palpate validate indentation: --tool-radius and --depths must be positive [m]")
     depths: List[float] = sorted(a.depths)
-    default = REFERENCE_LEVELS if a.shape == "ellipsoids" else BUILT_LEVELS
-    levels = [_level(t, a.shape) for t in a.levels] if a.levels else list(default)
-    coarse = _level(a.coarse, a.shape) if a.coarse else ((2, 2) if a.shape == "ellipsoids" else (300, 1))
+    levels = [_level(t, a.shape) for t in a.levels] if a.levels else list(validate.default_levels(a.shape))
+    coarse = _level(a.coarse, a.shape) if a.coarse else validate.default_coarse(a.shape)
     model = None
     if a.model:
         try:
@@ -84,6 +92,8 @@ def cmd_indentation(a) -> int:
         raise Fail(f"palpate validate indentation: --reference {e}") from None
     except _p.SolveError as e:
         raise RunFailed(f"palpate validate indentation: the reference did not reach equilibrium: {e}") from None
+    except _p.ModelError as e:
+        raise Fail(f"palpate validate indentation: the reference mesh: {e}") from None
     except _p.MaterialError as e:
         raise Fail(f"palpate validate indentation: material: {e}") from None
     if a.quiet:
