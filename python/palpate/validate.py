@@ -325,17 +325,38 @@ def gmsh_wall(surface: _palpate.TriSurface, triangles: Optional[int] = None) -> 
     return _palpate.TetMesh(points[used], renumber[tets])
 
 
-def rodero_surface() -> _palpate.TriSurface:
-    """Rodero's left ventricle [m] as one closed surface (its largest piece, :func:`largest_piece`)."""
+def rodero_surface() -> Tuple[_palpate.TriSurface, np.ndarray]:
+    """Rodero's left ventricle [m] as one closed surface (its largest piece, :func:`largest_piece`)
+    and the points of its base (the valve caps: where the hybrid holds it) [m], (k, 3)."""
     import warnings
 
     from .data import rodero_lv_path
     from .hybrid import read_tagged_surface
+    from .surfaces import BASE
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", _palpate.MeshWarning)  # the known repair of the shipped file
-        points, triangles, _ = read_tagged_surface(rodero_lv_path(), unit="mm")
-    return _palpate.TriSurface(*largest_piece(points, triangles), source="Rodero left ventricle")
+        points, triangles, part = read_tagged_surface(rodero_lv_path(), unit="mm")
+    base = np.unique(np.asarray(triangles)[np.asarray(part) == BASE])
+    return (_palpate.TriSurface(*largest_piece(points, triangles), source="Rodero left ventricle"),
+            np.asarray(points)[base])
+
+
+def held_at_base(mesh: _palpate.TetMesh, surface: _palpate.TriSurface, base: np.ndarray) -> np.ndarray:
+    """The boundary nodes of ``mesh`` (a wall meshed inside ``surface``, maybe simplified) that
+    lie on the base: those whose nearest vertex of ``surface`` is one of the ``base`` points [m]
+    (the hybrid runtime holds a ventricle's core at its base nodes, so its reference holds the
+    wall's base)."""
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(mesh.points)
+    on_surface = np.unique(mesh.boundary_faces())
+    all_pts = np.asarray(surface.points)
+    is_base = np.zeros(len(all_pts), dtype=bool)
+    _, nearest_base = cKDTree(all_pts).query(base)
+    is_base[nearest_base] = True
+    _, nearest = cKDTree(all_pts).query(pts[on_surface])
+    return on_surface[is_base[nearest]]
 
 
 def wall_mesh(shape: str, a: int, b: int, case: IndentCase, graded: bool = True
@@ -346,7 +367,7 @@ def wall_mesh(shape: str, a: int, b: int, case: IndentCase, graded: bool = True
     ``"ellipsoids"``: ``a`` subdivisions of the geodesic sphere, ``b`` layers, graded toward the
     tool (:func:`graded_ellipsoid_wall`) unless ``graded`` is false. ``"rodero"``: its closed
     surface simplified to ``a`` triangles and filled with tets by gmsh (:func:`gmsh_wall`; ``b``
-    unused, 0), held below ``hold_z``. Other walls: the hybrid
+    unused, 0), held at its base (:func:`held_at_base`), as the hybrid is. Other walls: the hybrid
     build's own core, taken across the whole wall (core fraction :data:`WALL_FRACTION`): the inner
     surface simplified to ``a`` triangles, ``b`` prism layers along the transmural field to the
     outer surface, held at its base nodes (a closed wall: below ``hold_z``).
@@ -356,7 +377,9 @@ def wall_mesh(shape: str, a: int, b: int, case: IndentCase, graded: bool = True
             return graded_ellipsoid_wall(subdivisions=a, layers=b, focus=-np.asarray(case.direction)), None
         return _palpate.ellipsoid_wall(ELLIPSOIDS_INNER, ELLIPSOIDS_OUTER, subdivisions=a, layers=b), None
     if shape in GMSH_SHAPES:
-        return gmsh_wall(rodero_surface(), a), None
+        surface, base = rodero_surface()
+        mesh = gmsh_wall(surface, a)
+        return mesh, held_at_base(mesh, surface, base)
     from .hybrid import build_shape
 
     try:

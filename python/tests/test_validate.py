@@ -218,13 +218,24 @@ def test_rodero_wall_levels_halve_the_element_size(lv_path):
     # coarse FEM about the hybrid core's 900 tets, each mesh's volume the surface's within 1% (the
     # coarse one, 600 triangles, measured 0.6% less).
     _gmsh_or_skip()
-    surface = validate.rodero_surface()
+    surface, base = validate.rodero_surface()
     assert surface.n_triangles == 100_316
     case = validate.IndentCase(shape="rodero")
-    sizes = [validate.wall_mesh("rodero", a, b, case)[0] for a, b in validate.GMSH_LEVELS[:2]]
-    coarse = validate.wall_mesh("rodero", *validate.default_coarse("rodero"), case)[0]
-    counts = [m.n_tets for m in (coarse, *sizes)]
+    walls = [validate.wall_mesh("rodero", *validate.default_coarse("rodero"), case)]
+    walls += [validate.wall_mesh("rodero", a, b, case) for a, b in validate.GMSH_LEVELS[:2]]
+    counts = [m.n_tets for m, _ in walls]
     assert 700 <= counts[0] <= 1100, counts
     assert all(4 <= b / a <= 8 for a, b in zip(counts[1:], counts[2:])), counts
-    for m in (coarse, *sizes):
+    # Held at the base, as the hybrid: the held nodes lie within 2 mm of the base's points and
+    # there are more of them on a finer mesh; none on the apex side.
+    from scipy.spatial import cKDTree
+
+    apex_far = np.linalg.norm(base.mean(axis=0) - np.asarray(surface.points), axis=1).max()
+    held_counts = []
+    for m, held in walls:
         assert abs(m.volume / surface.volume - 1) < 0.01
+        d, _ = cKDTree(base).query(np.asarray(m.points)[held])
+        assert len(held) >= 6 and d.max() < 2e-3, (len(held), d.max())
+        assert np.linalg.norm(np.asarray(m.points)[held] - base.mean(axis=0), axis=1).max() < 0.5 * apex_far
+        held_counts.append(len(held))
+    assert held_counts[0] < held_counts[1] < held_counts[2], held_counts
