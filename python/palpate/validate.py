@@ -75,7 +75,7 @@ REFERENCE_LEVELS: Tuple[Tuple[int, int], ...] = ((3, 2), (4, 4), (5, 8))
 BUILT_LEVELS: Tuple[Tuple[int, int], ...] = ((1000, 2), (4000, 4), (16000, 8))
 
 #: Mesh levels of a wall meshed by gmsh (Rodero's): (triangles of the simplified closed surface,
-#: 0); each level halves the element size (measured on Rodero: 2,241, 11,228 and 72,975 tets).
+#: 0); each level halves the element size (measured on Rodero: 2,241, 11,228 and 68,921 tets).
 GMSH_LEVELS: Tuple[Tuple[int, int], ...] = ((1500, 0), (6000, 0), (24000, 0))
 
 #: The walls meshed by gmsh rather than by the hybrid build's prisms.
