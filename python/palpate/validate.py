@@ -37,6 +37,7 @@ All lengths in metres, forces in newtons, world frame.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -274,11 +275,15 @@ def largest_piece(points: np.ndarray, triangles: np.ndarray) -> Tuple[np.ndarray
     rows = np.repeat(np.arange(len(tris)), 3)
     incidence = coo_matrix((np.ones(len(rows)), (rows, tris.ravel())), shape=(len(tris), len(pts))).tocsr()
     _, label = connected_components(incidence @ incidence.T, directed=False)
-    tris = tris[label == np.argmax(np.bincount(label))]
-    used = np.unique(tris)
-    renumber = np.full(len(pts), -1, dtype=np.int64)
+    return _compact(pts, tris[label == np.argmax(np.bincount(label))])
+
+
+def _compact(points: np.ndarray, cells: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """The points ``cells`` use, in order, and the cells renumbered onto them."""
+    used = np.unique(cells)
+    renumber = np.full(len(points), -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
-    return pts[used], renumber[tris]
+    return points[used], renumber[cells]
 
 
 def gmsh_wall(surface: _palpate.TriSurface, triangles: Optional[int] = None) -> _palpate.TetMesh:
@@ -318,16 +323,14 @@ def gmsh_wall(surface: _palpate.TriSurface, triangles: Optional[int] = None) -> 
     index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
     index[tags.astype(np.int64)] = np.arange(len(tags))
     tets = index[np.asarray(nodes, dtype=np.int64).reshape(-1, 4)]
-    points = np.asarray(coords, dtype=float).reshape(-1, 3)
-    used = np.unique(tets)
-    renumber = np.full(len(points), -1, dtype=np.int64)
-    renumber[used] = np.arange(len(used))
-    return _palpate.TetMesh(points[used], renumber[tets])
+    return _palpate.TetMesh(*_compact(np.asarray(coords, dtype=float).reshape(-1, 3), tets))
 
 
+@functools.lru_cache(maxsize=1)
 def rodero_surface() -> Tuple[_palpate.TriSurface, np.ndarray]:
     """Rodero's left ventricle [m] as one closed surface (its largest piece, :func:`largest_piece`)
-    and the points of its base (the valve caps: where the hybrid holds it) [m], (k, 3)."""
+    and the points of its base (the valve caps: where the hybrid holds it) [m], (k, 3), read-only.
+    Read once per process (every reference level of a run meshes the same surface)."""
     import warnings
 
     from .data import rodero_lv_path
@@ -337,9 +340,9 @@ def rodero_surface() -> Tuple[_palpate.TriSurface, np.ndarray]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", _palpate.MeshWarning)  # the known repair of the shipped file
         points, triangles, part = read_tagged_surface(rodero_lv_path(), unit="mm")
-    base = np.unique(np.asarray(triangles)[np.asarray(part) == BASE])
-    return (_palpate.TriSurface(*largest_piece(points, triangles), source="Rodero left ventricle"),
-            np.asarray(points)[base])
+    base = np.asarray(points)[np.unique(np.asarray(triangles)[np.asarray(part) == BASE])]
+    base.setflags(write=False)
+    return _palpate.TriSurface(*largest_piece(points, triangles), source="Rodero left ventricle"), base
 
 
 def held_at_base(mesh: _palpate.TetMesh, surface: _palpate.TriSurface, base: np.ndarray) -> np.ndarray:
@@ -349,14 +352,11 @@ def held_at_base(mesh: _palpate.TetMesh, surface: _palpate.TriSurface, base: np.
     wall's base)."""
     from scipy.spatial import cKDTree
 
-    pts = np.asarray(mesh.points)
+    tree = cKDTree(np.asarray(surface.points))
+    is_base = np.zeros(surface.n_vertices, dtype=bool)
+    is_base[tree.query(base)[1]] = True
     on_surface = np.unique(mesh.boundary_faces())
-    all_pts = np.asarray(surface.points)
-    is_base = np.zeros(len(all_pts), dtype=bool)
-    _, nearest_base = cKDTree(all_pts).query(base)
-    is_base[nearest_base] = True
-    _, nearest = cKDTree(all_pts).query(pts[on_surface])
-    return on_surface[is_base[nearest]]
+    return on_surface[is_base[tree.query(np.asarray(mesh.points)[on_surface])[1]]]
 
 
 def wall_mesh(shape: str, a: int, b: int, case: IndentCase, graded: bool = True
