@@ -569,7 +569,12 @@ impl HapticCore {
     pub(crate) fn begin_multirate(&mut self, physics_rate_hz: f64) -> PhysicsLoop {
         let physics = std::mem::replace(&mut self.physics, Box::new(crate::physics::Idle::default()));
         let cap = self.recording.as_ref().map_or(0, |r| r.ticks.capacity());
-        let p = PhysicsLoop::new(physics, physics_rate_hz, self.checkpoint_every, (cap as f64 * physics_rate_hz * self.dt).ceil() as usize + 1);
+        // The physics ticks on its own clock: when the servo runs slower than its rate (a busy
+        // machine: 1.7 of 2 kHz in CI), more physics ticks fall within the recorded servo ticks
+        // than the nominal ratio gives. Room for twice that (24 bytes a target), so that a
+        // servo running at half its rate still replays.
+        let nominal = (cap as f64 * physics_rate_hz * self.dt).ceil() as usize;
+        let p = PhysicsLoop::new(physics, physics_rate_hz, self.checkpoint_every, 2 * nominal + 64);
         self.tool_speed = p.tool_speed();
         self.physics_dt = p.dt();
         if let Some(r) = &mut self.recording {
