@@ -62,7 +62,6 @@ __all__ = [
     "BUILT_LEVELS",
     "wall_mesh",
     "gmsh_wall",
-    "largest_piece",
     "GMSH_LEVELS",
 ]
 
@@ -264,20 +263,6 @@ def held_below(points: np.ndarray, z: float) -> np.ndarray:
     return np.nonzero(points[:, 2] <= z)[0]
 
 
-def largest_piece(points: np.ndarray, triangles: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    """The largest edge-connected piece of a triangle surface (by triangles), its vertices
-    renumbered: what a surface repair's specks (tiny closed pieces, which may cross the main one)
-    are dropped from before a volume is meshed inside it."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    pts, tris = np.asarray(points, dtype=float), np.asarray(triangles, dtype=np.int64)
-    rows = np.repeat(np.arange(len(tris)), 3)
-    incidence = coo_matrix((np.ones(len(rows)), (rows, tris.ravel())), shape=(len(tris), len(pts))).tocsr()
-    _, label = connected_components(incidence @ incidence.T, directed=False)
-    return _compact(pts, tris[label == np.argmax(np.bincount(label))])
-
-
 def _compact(points: np.ndarray, cells: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     """The points ``cells`` use, in order, and the cells renumbered onto them."""
     used = np.unique(cells)
@@ -328,7 +313,8 @@ def gmsh_wall(surface: _palpate.TriSurface, triangles: Optional[int] = None) -> 
 
 @functools.lru_cache(maxsize=1)
 def rodero_surface() -> Tuple[_palpate.TriSurface, np.ndarray]:
-    """Rodero's left ventricle [m] as one closed surface (its largest piece, :func:`largest_piece`)
+    """Rodero's left ventricle [m] as one closed surface (without its two specks,
+    :meth:`palpate.TriSurface.without_specks`)
     and the points of its base (the valve caps: where the hybrid holds it) [m], (k, 3), read-only.
     Read once per process (every reference level of a run meshes the same surface)."""
     import warnings
@@ -342,7 +328,8 @@ def rodero_surface() -> Tuple[_palpate.TriSurface, np.ndarray]:
         points, triangles, part = read_tagged_surface(rodero_lv_path(), unit="mm")
     base = np.asarray(points)[np.unique(np.asarray(triangles)[np.asarray(part) == BASE])]
     base.setflags(write=False)
-    return _palpate.TriSurface(*largest_piece(points, triangles), source="Rodero left ventricle"), base
+    surface, _ = _palpate.TriSurface(points, triangles, source="Rodero left ventricle").without_specks()
+    return surface, base
 
 
 def held_at_base(mesh: _palpate.TetMesh, surface: _palpate.TriSurface, base: np.ndarray) -> np.ndarray:

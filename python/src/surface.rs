@@ -174,6 +174,23 @@ impl PyTriSurface {
         Ok(PyTriSurface { inner: surface })
     }
 
+    /// This surface without its specks: the closed pieces (triangles connected through shared
+    /// vertices) enclosing less than ``min_volume_fraction`` of the largest piece's volume, as
+    /// a surface repair leaves them (Rodero's ventricle has two, which cross the main piece: a
+    /// tet mesher refuses it). A cavity (an inward piece) counts by its volume's magnitude, so
+    /// a hollow wall keeps it. The hybrid build drops the same specks (at 1e-3) from a tagged
+    /// surface. Returns ``(surface, kept)``: the new validated ``TriSurface`` (vertices
+    /// renumbered in their original order) and the original index of each kept triangle,
+    /// (m',) int64, to carry per-triangle data. ``ParameterError`` unless
+    /// ``0 <= min_volume_fraction < 1``.
+    #[pyo3(signature = (min_volume_fraction = palpate_core::hybrid::MIN_PIECE_VOLUME), text_signature = "($self, min_volume_fraction=0.001)")]
+    fn without_specks<'py>(&self, py: Python<'py>, #[pyo3(from_py_with = conv::arg)] min_volume_fraction: f64) -> PyResult<(PyTriSurface, Bound<'py, PyArray1<i64>>)> {
+        let s = &self.inner;
+        let w = errors::guard("TriSurface.without_specks", || Ok(py.detach(|| s.without_specks(min_volume_fraction))))?.map_err(surface_error)?;
+        let kept: Vec<i64> = w.kept.iter().map(|&t| t as i64).collect();
+        Ok((PyTriSurface { inner: w.surface }, kept.into_pyarray(py)))
+    }
+
     fn __len__(&self) -> usize {
         self.inner.n_triangles()
     }

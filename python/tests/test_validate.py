@@ -180,13 +180,25 @@ def test_a_simplified_surface_keeps_the_shape_with_fewer_triangles():
         s.simplified(3)
 
 
-def test_largest_piece_drops_specks():
+def test_without_specks_drops_specks_and_keeps_a_cavity():
     big, speck = palpate.ellipsoid_surface((0.02, 0.02, 0.03), 2), palpate.ellipsoid_surface((1e-4, 1e-4, 1e-4), 0)
     pts = np.vstack([np.asarray(speck.points) + 0.019, np.asarray(big.points)])
     tris = np.vstack([np.asarray(speck.triangles), np.asarray(big.triangles) + speck.n_vertices])
-    p, t = validate.largest_piece(pts, tris)
-    assert len(t) == big.n_triangles and len(p) == big.n_vertices
-    np.testing.assert_array_equal(p[t], np.asarray(big.points)[np.asarray(big.triangles)])
+    s, kept = palpate.TriSurface(pts, tris).without_specks()
+    assert s.n_triangles == big.n_triangles and s.n_vertices == big.n_vertices
+    np.testing.assert_array_equal(np.asarray(s.points)[np.asarray(s.triangles)], np.asarray(big.points)[np.asarray(big.triangles)])
+    assert kept.dtype == np.int64
+    np.testing.assert_array_equal(kept, np.arange(speck.n_triangles, len(tris)))
+    # Kept at a fraction below the speck's volume (1e-12 / 5e-5 of the big one's).
+    assert palpate.TriSurface(pts, tris).without_specks(1e-9)[0].n_triangles == len(tris)
+    # A hollow wall's cavity (an inward piece) is no speck.
+    inner = palpate.ellipsoid_surface((0.015, 0.015, 0.025), 2)
+    wall = palpate.TriSurface(np.vstack([np.asarray(big.points), np.asarray(inner.points)]),
+                              np.vstack([np.asarray(big.triangles), np.asarray(inner.triangles)[:, ::-1] + big.n_vertices]))
+    assert wall.without_specks()[0].n_triangles == wall.n_triangles
+    for bad in (-0.1, 1.0, float("nan")):
+        with pytest.raises(palpate.ParameterError, match="min_volume_fraction"):
+            wall.without_specks(bad)
 
 
 def _gmsh_or_skip():

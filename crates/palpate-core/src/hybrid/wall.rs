@@ -15,73 +15,15 @@ pub struct Wall {
     pub dropped_pieces: usize,
 }
 
-/// Smallest volume of a closed piece of a tagged wall surface, relative to the largest piece.
+/// Smallest volume of a closed piece of a tagged wall surface, relative to the largest piece
+/// ([`TriSurface::without_specks`]).
 pub const MIN_PIECE_VOLUME: f64 = 1e-3;
-
-/// The pieces of a surface kept by [`drop_specks`].
-struct Kept {
-    surface: TriSurface,
-    parts: Vec<WallPart>,
-    /// Pieces dropped.
-    dropped: usize,
-}
 
 /// One part of a wall as a surface of its own ([`Wall::part`]).
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct PartSurface {
     pub points: Vec<Vec3>,
     pub tris: Vec<[usize; 3]>,
-}
-
-/// Split a closed surface into edge-connected pieces and keep those enclosing at least
-/// [`MIN_PIECE_VOLUME`] of the largest.
-fn drop_specks(surface: TriSurface, parts: Vec<WallPart>) -> Result<Kept, HybridError> {
-    let tris = surface.triangles();
-    let n = surface.n_vertices();
-    // Union-find over vertices through triangles.
-    let mut up: Vec<usize> = (0..n).collect();
-    fn find(up: &mut [usize], mut x: usize) -> usize {
-        while up[x] != x {
-            up[x] = up[up[x]];
-            x = up[x];
-        }
-        x
-    }
-    for t in tris {
-        let a = find(&mut up, t[0]);
-        for &v in &t[1..] {
-            let b = find(&mut up, v);
-            up[b] = a;
-        }
-    }
-    let pts = surface.points();
-    let mut vol: HashMap<usize, f64> = HashMap::new();
-    for t in tris {
-        let r = find(&mut up, t[0]);
-        *vol.entry(r).or_insert(0.0) += pts[t[0]].dot(&pts[t[1]].cross(&pts[t[2]])) / 6.0;
-    }
-    if vol.len() == 1 {
-        return Ok(Kept { surface, parts, dropped: 0 });
-    }
-    let largest = vol.values().copied().fold(0.0, f64::max);
-    let keep: Vec<bool> = tris.iter().map(|t| vol[&find(&mut up, t[0])] >= MIN_PIECE_VOLUME * largest).collect();
-    let dropped = vol.values().filter(|&&v| v < MIN_PIECE_VOLUME * largest).count();
-    let arr: Vec<[f64; 3]> = pts.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let mut used = vec![false; n];
-    let kept: Vec<usize> = (0..tris.len()).filter(|&t| keep[t]).collect();
-    kept.iter().for_each(|&t| tris[t].iter().for_each(|&v| used[v] = true));
-    let mut map = vec![0i64; n];
-    let mut new_pts = Vec::new();
-    for v in 0..n {
-        if used[v] {
-            map[v] = new_pts.len() as i64;
-            new_pts.push(arr[v]);
-        }
-    }
-    let new_tris: Vec<[i64; 3]> = kept.iter().map(|&t| [map[tris[t][0]], map[tris[t][1]], map[tris[t][2]]]).collect();
-    let new_parts: Vec<WallPart> = kept.iter().map(|&t| parts[t]).collect();
-    let (surface, _) = TriSurface::from_arrays(&new_pts, &new_tris)?;
-    Ok(Kept { surface, parts: new_parts, dropped })
 }
 
 impl Wall {
@@ -114,7 +56,9 @@ impl Wall {
         if parts.len() != surface.n_triangles() {
             return Err(HybridError::Parts(format!("{} part tags for {} triangles", parts.len(), surface.n_triangles())));
         }
-        let Kept { surface, parts, dropped } = drop_specks(surface, parts)?;
+        let kept = surface.without_specks(MIN_PIECE_VOLUME)?;
+        let parts: Vec<WallPart> = kept.kept.iter().map(|&t| parts[t]).collect();
+        let (surface, dropped) = (kept.surface, kept.dropped);
         for need in [WallPart::Inner, WallPart::Outer] {
             if !parts.contains(&need) {
                 return Err(HybridError::Parts(format!("no {need:?} triangles")));

@@ -10,10 +10,12 @@ mod tet_mesh;
 
 pub use tet_mesh::{boundary_faces, signed_volume, MeshWarning, TetMesh};
 
+pub mod pieces;
 pub mod sample;
 pub mod simplify;
 pub mod surface;
 
+pub use pieces::{Pieces, WithoutSpecks};
 pub use sample::{sample_between, sample_inside, ParticleSet};
 pub use surface::{ellipsoid_surface, winding_number, SurfaceError, SurfaceWarning, TriSurface};
 
