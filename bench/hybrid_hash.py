@@ -7,8 +7,9 @@ than wall time). A change meant to leave the physics as it is must leave the has
     .venv/bin/python bench/hybrid_hash.py MODEL RADIUS_M [TICKS]
 
 e.g. ``ellipsoids 0.0015``, ``ventricle 0.0016``, ``rodero 0.002`` (about 200 active particles;
-BENCHMARKS.md). For CPU cycles per tick, run it under ``perf record -e cycles:u -c 200000``
-before and after a change (PYTHONPATH pointing at the other build's package).
+docs/history/benchmarks-log.md#before-mass-scaling-second-session). For CPU cycles per tick, run
+it under ``perf record -e cycles:u -c 200000`` before and after a change (PYTHONPATH pointing at
+the other build's package).
 """
 import hashlib
 import sys

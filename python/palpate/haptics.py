@@ -203,7 +203,8 @@ def per_second(times_s, elapsed_s: float) -> list:
 #: The ``spin`` [s] of :class:`palpate.HapticLoop` that never sleeps: longer than any period
 #: (``spin`` takes 0 to 1 s), its default without ``realtime``. The servo then keeps a core busy,
 #: its compute tail is shorter and it overruns less (on the Rodero palpation at 1 kHz, 2026-11-27:
-#: compute p99 ~700-750 us against ~900 us, 5-50 overruns a minute against 38-234; BENCHMARKS.md).
+#: compute p99 ~700-750 us against ~900 us, 5-50 overruns a minute against 38-234;
+#: docs/history/benchmarks-log.md#2026-11-27-tenth-session-the-checkpoint-after-the-send-a-first-tick-without-the-whole-skin-the-busy-servo-by-default).
 BUSY_SPIN = 1.0
 
 #: The ``spin`` [s] of a servo that sleeps through each wait but its last 200 us (``palpate haptic

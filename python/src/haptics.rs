@@ -148,8 +148,9 @@ fn busy(what: &str) -> PyErr {
 ///     1 s, longer than any period: the servo never sleeps and keeps its core busy; 0 with
 ///     ``realtime``). A core that slept starts the next tick with cold caches and, on a virtual
 ///     machine, may be taken away meanwhile: on the Rodero palpation at 1 kHz the busy servo had
-///     a compute p99 ~20% lower and 5-50 overruns a minute against 38-234 sleeping (BENCHMARKS.md,
-///     2026-11-27). ``200e-6`` (``palpate haptic --sleep``) sleeps through each wait but its
+///     a compute p99 ~20% lower and 5-50 overruns a minute against 38-234 sleeping (2026-11-27,
+///     docs/history/benchmarks-log.md#2026-11-27-tenth-session-the-checkpoint-after-the-send-a-first-tick-without-the-whole-skin-the-busy-servo-by-default).
+///     ``200e-6`` (``palpate haptic --sleep``) sleeps through each wait but its
 ///     last 200 us, leaving the core to other work.
 ///     With ``physics_rate`` the default is 0: the servo's work is then ~10-20 us a period, it
 ///     sleeps to each deadline (an ordinary servo thread asks Linux for its shortest time slice
@@ -170,7 +171,9 @@ fn busy(what: &str) -> PyErr {
 ///     servo's and ``threads - 1`` helpers, which spin during a tick and park between ticks
 ///     (under ``SCHED_FIFO`` with ``realtime``). The forces and states are bitwise those of one
 ///     thread (a recording replays alike), only sooner: on a 2-core machine 2 threads take
-///     about a fifth off a Rodero tick (BENCHMARKS.md). Give it cores that are otherwise idle.
+///     about a fifth off a Rodero tick (2026-11-26,
+///     docs/history/benchmarks-log.md#2026-11-26-fourth-session-the-particle-passes-on-two-threads-do-not-pay-on-this-machine-load-09-14-1100-1140-utc).
+///     Give it cores that are otherwise idle.
 ///
 /// Positions in metres, forces in newtons (on the user's hand), the model's world frame.
 #[pyclass(module = "palpate", name = "HapticLoop")]

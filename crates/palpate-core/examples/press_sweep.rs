@@ -16,7 +16,8 @@
 //!
 //! Measured 2026-11-26 on the synthetic ventricle, undamped: 18 of the 24 shells failed (from
 //! 17-20 mm of travel at mid-height, from 6-11 mm beside the held base); see
-//! `runtime::stability` for the trace and why. From 5 mm outside (2026-11-27, BENCHMARKS.md):
+//! `runtime::stability` for the trace and why. From 5 mm outside (2026-11-27,
+//! docs/history/benchmarks-log.md#eighth-session-2026-11-27-a-hard-press-held-on-the-rodero-ventricle-no-longer-chatters):
 //! 15 of 24 undamped and 9 damped on the synthetic ventricle, 1 and 0 on the Rodero ventricle,
 //! 0 on the ellipsoids.
 #[path = "support/mod.rs"]

@@ -11,7 +11,8 @@
 //! pass whose part panics is re-raised on the calling thread after every part has returned (the
 //! parts borrow the caller's data).
 //!
-//! **Measured (2026-11-26, the 2-core machine of BENCHMARKS.md).** Alone
+//! **Measured (2026-11-26, the 2-core machine of BENCHMARKS.md; the runs are in
+//! docs/history/benchmarks-log.md#2026-11-26-fourth-session-the-particle-passes-on-two-threads-do-not-pay-on-this-machine-load-09-14-1100-1140-utc).** Alone
 //! (`examples/pool_tick.rs`), a Rodero tick took 13% and 16% less on two threads than on one in
 //! two runs and 9% more in a third, on a busier minute (means, the helper spinning between
 //! ticks; with 150 us spins it parked between ticks and the wake-up ate the gain). Inside the servo it did not pay on that machine: the process's other threads (the

@@ -146,7 +146,9 @@ pub struct ServoConfig {
     pub max_ticks: Option<u64>,
     /// The last part of each wait that is spun rather than slept \[s\], 0 to 1 s (default 200 us).
     /// A whole period or more: the servo never sleeps and keeps its core busy. Measured on the
-    /// Rodero palpation at 1 kHz (BENCHMARKS.md): the compute p99 4-20% lower in every pair of
+    /// Rodero palpation at 1 kHz (2026-11-26,
+    /// docs/history/benchmarks-log.md#2026-11-26-fifth-session-the-tick-in-morton-order-load-07-10-1412-1420-utc):
+    /// the compute p99 4-20% lower in every pair of
     /// runs; the overruns, which come in the machine's bursts, fewer in three of five runs and
     /// more in two. Not with `realtime`.
     pub spin: f64,

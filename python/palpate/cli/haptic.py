@@ -59,7 +59,8 @@ def add_parser(sub) -> None:
     w = h.add_mutually_exclusive_group()
     w.add_argument("--busy-wait", action="store_true",
                    help="the servo spins through each period instead of sleeping (the default without --realtime): "
-                        "a core kept busy, a shorter compute tail and fewer overruns (BENCHMARKS.md); not with --realtime")
+                        "a core kept busy, a shorter compute tail and fewer overruns (measured on a 2-core machine: "
+                        "docs/history/benchmarks-log.md); not with --realtime")
     w.add_argument("--sleep", action="store_true",
                    help="the servo sleeps through each wait but its last 200 us, leaving its core to other work "
                         "(more overruns on a busy or virtual machine)")

@@ -14,7 +14,8 @@
 //!
 //! Why: one element at a time, the 3x3 algebra of a tet (about 350 flops) left the SIMD units
 //! idle; the element loop had 10% of the samples of a Rodero hybrid tick (900 damped core tets),
-//! 6.6% in lanes (BENCHMARKS.md, "the hybrid tick"). The protocol's full-FEM step is set by its
+//! 6.6% in lanes (docs/history/benchmarks-log.md#third-session-2026-11-26-7-10-off-the-rodero-tick-why-the-rest-is-not-in-tuning).
+//! The protocol's full-FEM step is set by its
 //! factored solve, not by this loop, and did not change.
 //!
 //! `unsafe` here is one call: entering the AVX2 + FMA compiled copy after checking that the CPU

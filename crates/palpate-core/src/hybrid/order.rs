@@ -8,7 +8,8 @@
 //! ventricle's did: a 400-particle ball of its shell spanned 24,600 of its 28,039 particle
 //! indices (108 pages of a per-particle array of 96 bytes; 21 after this stage), and its hybrid
 //! tick takes 27% less time at ~400 active particles in this order, 18% less at ~200
-//! (BENCHMARKS.md). The builder's own stages keep the input's order, so their ties (a voxel as
+//! (docs/history/benchmarks-log.md#fifth-session-2026-11-26-the-models-storage-order--18-and--27-on-rodero).
+//! The builder's own stages keep the input's order, so their ties (a voxel as
 //! near to two triangles) resolve as before: sorting the triangles first gave a slightly
 //! different model (see `runtime/stability.rs` for what that showed).
 

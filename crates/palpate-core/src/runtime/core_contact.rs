@@ -58,8 +58,8 @@
 //! and the coarse core crushed under 7-20 N can fold through itself, where no side is defined (on
 //! Rodero at 3/5 of the height, 2.39 rad: 7.4 -> 13.2 N in a tick at 6.7 mm of travel, the
 //! surface's winding changing 1.5 mm from it). Up to 5 N the 24-point sweeps of the Rodero
-//! ventricle and the ellipsoids change the force by at most 0.27 N a tick (BENCHMARKS.md, ninth
-//! session).
+//! ventricle and the ellipsoids change the force by at most 0.27 N a tick (BENCHMARKS.md, "The
+//! hybrid model under a hand's worst and a hard press").
 
 use super::sim::Sim;
 use super::tool::PointContact;

@@ -38,7 +38,8 @@
 //! (`crate::meshfree` `mass_scaling.rs`) takes 40% of the sub-steps off the Rodero ventricle's
 //! and 30% off the ellipsoids' ticks. The whole tick is over issue 12's mean targets (0.25 ms at
 //! 200 active particles, 0.5 ms at 600): the shell's explicit sub-steps alone fill them
-//! (BENCHMARKS.md, twelfth session; [`stability`] for why their count is what it is), while the
+//! (docs/history/benchmarks-log.md#twelfth-session-2026-11-27-the-shells-sub-steps-alone-fill-the-mean-targets-issue-12s-speed-targets-reported-as-blocked-here;
+//! [`stability`] for why their count is what it is), while the
 //! part of the tick the force waits for holds a 1 kHz servo at 600 ([`tick_force_with`]).
 
 pub mod activation;
