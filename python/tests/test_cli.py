@@ -214,3 +214,24 @@ def test_exit_codes_table_each_code_from_a_real_command(tmp_path):
     assert walked == {c.OK, c.INPUT, c.USAGE, c.FAILED, c.INTERRUPTED, c.CLOSED_PIPE}
     help_text = palpate_cli("--help").stdout
     assert all(f"\n  {code} " in help_text for code in walked), help_text[-1200:]
+
+
+def test_every_help_page_reads_as_written():
+    """Every command's and subcommand's --help, rendered: no literal '%%' (argparse formats help
+    strings, not descriptions: a '%%' in a description is printed as typed; issue 37)."""
+    import argparse
+
+    from palpate.cli import build_parser
+
+    def walk(p):
+        yield p
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                for sub in a.choices.values():
+                    yield from walk(sub)
+
+    pages = list(walk(build_parser()))
+    assert len(pages) > 10
+    for p in pages:
+        text = p.format_help()
+        assert "%%" not in text and "%(" not in text, f"{p.prog}: {text}"

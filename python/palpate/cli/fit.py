@@ -12,7 +12,7 @@ def add_parser(sub) -> None:
     s = sub.add_parser("fit", help="fit Young's modulus (and optionally Poisson's ratio, viscosity) to a measured curve",
                        description="Fit the material of SPEC's loading to a measured force-depth curve (CSV with "
                                    "depth_m and force_n columns): a coarse sweep, then a least-squares refinement; "
-                                   "prints the values, their 95%% confidence intervals and the residual, and plots "
+                                   "prints the values, their 95% confidence intervals and the residual, and plots "
                                    "measured against fitted.")
     s.add_argument("spec", metavar="SPEC.toml")
     s.add_argument("--measured", required=True, metavar="CURVE.csv", help="depth_m, force_n columns [m, N]")
