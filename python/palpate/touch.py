@@ -454,14 +454,15 @@ class _Series:
                              for t, names in self.frames for f in names])
 
 
-def plot_force(rows: np.ndarray, path: str, title: str = "") -> None:
+def plot_force(rows: np.ndarray, path: str, title: str = "") -> bool:
     """``force.png``: normal force [N] against depth [mm], and |f| and the normal force against
-    time [s]; ``rows`` (n, len(COLUMNS)) as in ``force.csv``."""
+    time [s]; ``rows`` (n, len(COLUMNS)) as in ``force.csv``. False (and nothing written) without
+    matplotlib."""
     try:
         import matplotlib
     except ImportError:  # an extra (palpate[plot]): the CSV holds the same data
         print(f"(matplotlib not installed: no {os.path.basename(path)}; pip install 'palpate[plot]')")
-        return
+        return False
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -484,6 +485,7 @@ def plot_force(rows: np.ndarray, path: str, title: str = "") -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return True
 
 
 def run_touch(sim, script: Union[Script, "Trajectory"], out_dir: PathLike, *, dt: float = 1e-3,
@@ -551,8 +553,7 @@ def run_touch(sim, script: Union[Script, "Trajectory"], out_dir: PathLike, *, dt
             if on_tick is not None:
                 on_tick(k + 1, float(times[k]), c, f)
     a = np.array(rows, dtype=np.float64).reshape(-1, len(COLUMNS))
-    if plot:
-        plot_force(a, png_path, title)
+    plotted = plot and plot_force(a, png_path, title)
     done = len(rows)
     ts = tick_s[:done]
     col = {k: i for i, k in enumerate(COLUMNS)}
@@ -568,7 +569,7 @@ def run_touch(sim, script: Union[Script, "Trajectory"], out_dir: PathLike, *, dt
         "max_active": int(a[:, col["active"]].max()) if done else 0,
         "frames": len(series.frames), "every": every, "max_step_m": traj.max_step(dt),
         "point": traj.point.tolist(), "normal": traj.normal.tolist(), "vertex": traj.vertex,
-        "csv": csv_path, "png": png_path if plot else None, "pvd": series.pvd,
+        "csv": csv_path, "png": png_path if plotted else None, "pvd": series.pvd,
         "error": None, "t_failed_s": None,
         "shell_shed": shed, "shell_off_ticks": off,
     }

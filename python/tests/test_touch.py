@@ -258,3 +258,17 @@ def test_run_touch_api_on_tick_and_failure(tmp_path, ventricle_file):
     with pytest.raises(touch.TouchFailed) as e:
         touch.run_touch(_Failing(palpate.HybridSim(m, mat), 5), s, tmp_path / "b", plot=False)
     assert e.value.tick == 5 and e.value.summary["ticks"] == 4
+
+
+def test_no_plot_is_claimed_without_matplotlib(tmp_path, ventricle_file, monkeypatch, capsys):
+    # Issue 37: without matplotlib (an extra) the run wrote no force.png but said it had.
+    import sys
+
+    m = palpate.HybridModel.load(str(ventricle_file))
+    mat = palpate.Material(young=3e4, poisson=0.4, density=1000.0)
+    s = touch.parse_script_text('[probe]\nvertex = "probe"\ngap = 0.001\n[[segment]]\nkind = "press"\n'
+                                'depth = 0.001\nduration = 0.01\n', "p.toml", "toml")
+    monkeypatch.setitem(sys.modules, "matplotlib", None)   # import matplotlib -> ImportError
+    summary = touch.run_touch(palpate.HybridSim(m, mat), s, tmp_path, every=10)
+    assert summary["png"] is None and not (tmp_path / "force.png").exists()
+    assert "matplotlib not installed" in capsys.readouterr().out
