@@ -235,3 +235,21 @@ def test_every_help_page_reads_as_written():
     for p in pages:
         text = p.format_help()
         assert "%%" not in text and "%(" not in text, f"{p.prog}: {text}"
+
+
+@pytest.mark.parametrize("argv", [["sweep", "examples/studies/stiffness.toml", "--out", "OUT"],
+                                  ["fit", "examples/studies/fit_young.toml", "--measured", "examples/studies/measured_probe.csv"]],
+                         ids=["sweep", "fit"])
+def test_a_missing_study_extra_is_named_not_an_internal_error(argv, monkeypatch, capsys, tmp_path):
+    # Issue 37: without the study extra, sweep and fit printed "internal error ... please report it".
+    import sys
+
+    from palpate.cli import main
+
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    argv = [str(tmp_path / "out") if a == "OUT" else (os.path.join(root, a) if a.startswith("examples/") else a) for a in argv]
+    monkeypatch.setitem(sys.modules, "pyarrow", None)   # import pyarrow -> ImportError
+    assert main(argv) == 3
+    err = capsys.readouterr().err
+    assert "pip install 'palpate[study]'" in err and "pyarrow" in err and "internal error" not in err, err
+    assert not (tmp_path / "out").exists()

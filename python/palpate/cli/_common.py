@@ -328,3 +328,20 @@ def model_lines(info: dict) -> List[str]:
     if fb:
         lines.append("  fallbacks: " + ", ".join(f"{k[len('fallback_'):]} {v}" for k, v in fb.items()))
     return lines
+
+
+def require_extra(command: str, extra: str, modules: Tuple[str, ...]) -> None:
+    """Ends ``palpate COMMAND`` with :class:`RunFailed` naming the extra to install when any of
+    ``modules`` (the extra's packages) cannot be imported, before any work: without it, the
+    first import deep in the run was reported as an internal error."""
+    import importlib
+
+    missing = []
+    for m in modules:
+        try:
+            importlib.import_module(m)
+        except ImportError:
+            missing.append(m)
+    if missing:
+        raise RunFailed(f"palpate {command}: needs the {extra} extra ({', '.join(missing)} not installed): "
+                        f"pip install 'palpate[{extra}]'")

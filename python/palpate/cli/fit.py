@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import json
 
-from ._common import Usage
+from ._common import Usage, require_extra
+from .sweep import STUDY_MODULES
 
 
 def add_parser(sub) -> None:
@@ -26,6 +27,7 @@ def add_parser(sub) -> None:
 
 
 def cmd_fit(a) -> int:
+    require_extra("fit", "study", STUDY_MODULES)
     from ..sweep.fit import fit
 
     if a.workers is not None and a.workers < 0:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 
-from ._common import Usage, add_quiet
+from ._common import Usage, add_quiet, require_extra
 
 
 def add_parser(sub) -> None:
@@ -23,7 +23,12 @@ def add_parser(sub) -> None:
     s.set_defaults(func=cmd_sweep)
 
 
+#: The study extra's packages (pyproject's ``study``): Dask's scheduler, Parquet results, the fit.
+STUDY_MODULES = ("dask", "distributed", "pyarrow", "scipy")
+
+
 def cmd_sweep(a) -> int:
+    require_extra("sweep", "study", STUDY_MODULES)
     from ..sweep import sweep
 
     if a.workers is not None and a.workers < 0:
