@@ -287,3 +287,18 @@ def test_the_press_can_follow_a_touch_script(tmp_path):
     (tmp_path / "bad.toml").write_text("[[segment]]\nkind = \"poke\"\n")
     with pytest.raises(ps.SweepSpecError, match="loading.script"):
         ps.spec_from_dict(dict(doc, loading={"kind": "press", "script": "bad.toml"}), base=tmp_path)
+
+
+def test_a_fit_without_matplotlib_keeps_its_values(tmp_path, monkeypatch, capsys):
+    # Issue 37: without matplotlib the fit computed, then crashed on its plot and lost the value.
+    sp = ps.spec_from_dict({"study": {"name": "fit"}, "model": {"mesh": "ellipsoid_192"},
+                            "loading": {"kind": "probe", "steps": 110, "young": 3.0e4}})
+    with sweep_runner.Runner(sweep_runner.model_payload(sp), workers=0) as run:
+        row = run.map([dict(sp.loading, young=3.7e4, scenario=0)])[0]
+    k = np.arange(9, 100, 10)
+    measured = np.column_stack([np.array(row["curve_depth_m"])[k], np.array(row["curve_force_n"])[k]])
+    monkeypatch.setitem(sys.modules, "matplotlib", None)   # import matplotlib -> ImportError
+    r = fit(sp, measured, ["young"], workers=0, plot=str(tmp_path / "fit.png"))
+    assert r.values["young"] == pytest.approx(3.7e4, rel=0.01) and r.plot is None
+    assert not (tmp_path / "fit.png").exists()
+    assert "matplotlib not installed" in capsys.readouterr().err

@@ -147,7 +147,7 @@ def fit(spec: Union[Spec, Dict[str, Any], str, os.PathLike], measured: Union[np.
     """Fit ``params`` (a subset of ``young``, ``poisson``, ``phi``, ``psi``) of ``spec``'s loading
     to ``measured`` ((m, 2) depth [m], force [N], or a CSV path: :func:`read_curve`); the spec's
     other values are kept, its ``[parameters]`` ignored. ``plot``: a PNG of measured against
-    fitted. ``coarse``: grid points per parameter (default by their number). Raises
+    fitted (without matplotlib: none, ``FitResult.plot`` None, a note on stderr). ``coarse``: grid points per parameter (default by their number). Raises
     :class:`FitError` or :class:`SweepSpecError`."""
     from scipy import optimize, stats
 
@@ -269,7 +269,12 @@ def fit(spec: Union[Spec, Dict[str, Any], str, os.PathLike], measured: Union[np.
                        evaluations=count["n"], coarse_best=best, measured=data, fitted_curve=curve,
                        status=str(sol.message))
     if plot:
-        result.plot = _plot(result, plot, sp)
+        try:
+            result.plot = _plot(result, plot, sp)
+        except ImportError:  # matplotlib is an extra (palpate[plot]): the fit stands without its plot
+            import sys
+
+            print(f"(matplotlib not installed: no {plot}; pip install 'palpate[plot]')", file=sys.stderr)
     return result
 
 
