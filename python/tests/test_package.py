@@ -40,6 +40,8 @@ def test_core_dependencies_are_numpy_and_meshio():
     extras = PYPROJECT["optional-dependencies"]
     assert any(d.startswith("matplotlib") for d in extras["plot"])
     assert any(d.startswith("scikit-fem") for d in extras["test"])
+    # "all" (issue 37) is the union of the user-facing extras, nothing missing, nothing else.
+    assert set(extras["all"]) == set().union(*(extras[e] for e in ("plot", "view", "validate", "study")))
 
 
 def test_import_needs_no_extra():
