@@ -272,3 +272,20 @@ def test_no_plot_is_claimed_without_matplotlib(tmp_path, ventricle_file, monkeyp
     summary = touch.run_touch(palpate.HybridSim(m, mat), s, tmp_path, every=10)
     assert summary["png"] is None and not (tmp_path / "force.png").exists()
     assert "matplotlib not installed" in capsys.readouterr().out
+
+
+def test_the_demos_touch_writes_a_preview_not_a_recording(tmp_path, ventricle_file, capsys):
+    # Issue 37: make demo wrote 172 MB of VTU (100 frames of Rodero's skin); now 20 frames, and a
+    # p99 over the 1 ms tick is said to be so.
+    import argparse
+
+    from palpate import demo
+
+    models = {"ventricle": palpate.HybridModel.load(str(ventricle_file))}
+    demo._touch(models, argparse.Namespace(out=str(tmp_path), no_plot=True))
+    out = capsys.readouterr().out
+    pvd = read_pvd(tmp_path / "touch_ventricle" / "touch.pvd")
+    frames = len({t for t, _ in pvd})   # one entry per part of each frame
+    assert demo.DEMO_FRAMES <= frames <= demo.DEMO_FRAMES + 1, frames
+    p99 = float(out.split("p99 ")[1].split(" ms")[0])
+    assert ("over the 1 ms tick" in out) == (p99 > 1.0), out
