@@ -24,11 +24,14 @@ Keyword options (``**opts``) are those of :meth:`palpate.HybridModel.build_neste
 """
 from __future__ import annotations
 
+import math
 import os
+import warnings
 from typing import Any, Optional, Tuple, Union
 
 import numpy as np
 
+from . import _palpate as _p
 from ._palpate import HybridModel, ParameterError
 from ._palpate import ventricle_surface as _ventricle_surface
 from .surfaces import load_surface, read_tagged_surface
@@ -66,26 +69,68 @@ def is_model_file(path: PathLike) -> bool:
         return False
 
 
+#: The volume an organ encloses [m^3]: 1 mL to 1 L (a human heart's left ventricle with its
+#: cavity is about 0.1-0.3 L). Outside it, a surface was most likely read in the wrong unit.
+ORGAN_VOLUME_M3 = (1e-6, 1e-3)
+
+
+def organ_scale_warning(volume: float, unit: str, what: str) -> Optional[str]:
+    """A message when ``what``, read in length unit ``unit``, encloses ``volume`` [m^3] outside
+    :data:`ORGAN_VOLUME_M3`, naming the unit that would put it inside (None when inside). A
+    surface in millimetres read as metres is a 60 m^3 organ: the build would fill it with
+    particles a metre apart and a 5 mm tool would never touch it (issue 37)."""
+    from .io import UNITS
+
+    lo, hi = ORGAN_VOLUME_M3
+    if not (volume > 0 and math.isfinite(volume)) or lo <= volume <= hi:
+        return None
+    in_file = volume / UNITS[unit] ** 3
+    fits = [u for u, s in UNITS.items() if lo <= in_file * s ** 3 <= hi]
+    hint = f"; read in {fits[0]} it would be {in_file * UNITS[fits[0]] ** 3 * 1e3:.3g} L: pass unit='{fits[0]}' " \
+           f"(palpate build --unit {fits[0]})" if fits else ""
+    return (f"{what} encloses {volume:.3g} m^3 ({volume * 1e3:.3g} L) read in {unit}: an organ encloses "
+            f"1 mL to 1 L{hint}")
+
+
+def _check_scale(volume: float, unit: str, what: str, strict: bool) -> None:
+    msg = organ_scale_warning(volume, unit, what)
+    if msg is None:
+        return
+    if strict:
+        raise _p.ParameterError(msg)
+    warnings.warn(msg, _p.MeshWarning, stacklevel=3)
+
+
 def build_from_files(inner: PathLike, outer: PathLike, unit: str = "m", repair: bool = False,
-                     **opts) -> HybridModel:
+                     strict_units: bool = False, **opts) -> HybridModel:
     """Build from two nested closed surface files (the wall lies inside ``outer``, outside
     ``inner``), read by :func:`palpate.load_surface` in length unit ``unit``.
+
+    An outer surface enclosing less than 1 mL or more than 1 L (:func:`organ_scale_warning`: most
+    likely the wrong ``unit``) warns (``MeshWarning``) with the unit that fits, or, with
+    ``strict_units``, raises :class:`palpate.ParameterError` before the build.
 
     Raises :class:`palpate.SurfaceError` naming the file for an unreadable or invalid surface
     and for a pair that is not nested; ``ValueError`` for a bad option.
     """
     si = load_surface(inner, unit=unit, repair=repair)
     so = load_surface(outer, unit=unit, repair=repair)
+    _check_scale(so.volume, unit, f"{os.fspath(outer)}: the outer surface", strict_units)
     return HybridModel.build_nested(si, so, **opts)
 
 
 def build_tagged_file(path: PathLike, unit: str = "m", *, tag_array: Optional[str] = None, inner: _Tags = None,
-                      outer: _Tags = None, base: _Tags = None, repair: bool = True, **opts) -> HybridModel:
+                      outer: _Tags = None, base: _Tags = None, repair: bool = True, strict_units: bool = False,
+                      **opts) -> HybridModel:
     """Build from one closed surface file whose triangles are tagged inner / outer / base
     (:func:`palpate.read_tagged_surface` with ``tag_array``, ``inner``, ``outer``, ``base``,
-    ``repair``; the surface is repaired by default)."""
+    ``repair``; the surface is repaired by default). The wall's volume is checked as
+    :func:`build_from_files` checks the outer surface's (``strict_units`` alike)."""
     points, triangles, part = read_tagged_surface(path, unit=unit, tag_array=tag_array, inner=inner, outer=outer,
                                                   base=base, repair=repair)
+    p, t = np.asarray(points, dtype=float), np.asarray(triangles, dtype=np.int64)
+    volume = abs(float(np.einsum("ij,ij->i", p[t[:, 0]], np.cross(p[t[:, 1]], p[t[:, 2]])).sum()) / 6.0)
+    _check_scale(volume, unit, f"{os.fspath(path)}: the wall", strict_units)
     return HybridModel.build_tagged(points, triangles, part, **opts)
 
 

@@ -367,3 +367,25 @@ def test_rodero_model(lv_path):
     _check_model(m)
     assert len(m.core_base_nodes) > 0
     assert 100e-6 < m.wall_volume < 250e-6                        # an adult LV myocardium, in m^3
+
+
+def test_a_surface_in_the_wrong_unit_is_caught(ellipsoid_stls, tmp_path):
+    # Issue 37: surfaces in millimetres read as metres made a 120 m^3 organ with no warning.
+    msg = hybrid.organ_scale_warning(1.19e5, "m", "outer.stl")   # 119 mL, its millimetres read as metres
+    assert "1.19e+08 L" in msg and "read in mm it would be 0.119 L" in msg and "--unit mm" in msg, msg
+    assert "read in m it would be 0.119 L" in hybrid.organ_scale_warning(1.19e-13, "mm", "x")   # metres read as mm
+    assert hybrid.organ_scale_warning(1.19e-4, "m", "x") is None          # an organ: 119 mL
+    assert "pass unit" not in hybrid.organ_scale_warning(1e12, "m", "x")  # no unit makes it an organ
+    with pytest.raises(palpate.ParameterError, match="encloses .* m\\^3 .*read in m:.*--unit mm"):
+        palpate.build_from_files(ellipsoid_stls["inner"], ellipsoid_stls["outer"], strict_units=True)
+    p, t, part = hybrid.ventricle_surface(48, 12)
+    f = tmp_path / "lv.vtp"
+    f.write_bytes(vtp(p * 1e3, t.tolist(), cell_data={"surface-id": (part.astype(np.int32) + 1)}))
+    with pytest.raises(palpate.ParameterError, match="the wall encloses"):
+        palpate.build_tagged_file(f, unit="m", inner=1, outer=2, base=3, strict_units=True)
+    r = palpate_cli("build", ellipsoid_stls["inner"], ellipsoid_stls["outer"], "--strict-units", "-o", tmp_path / "x.palpate")
+    assert r.returncode == 1 and "--unit mm" in r.stderr and not (tmp_path / "x.palpate").exists(), r.stderr
+    # In the right unit: no note.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", palpate.MeshWarning)
+        hybrid._check_scale(1.19e-4, "mm", "x", strict=True)

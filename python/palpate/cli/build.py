@@ -34,6 +34,9 @@ def add_parser(sub) -> None:
     h.add_argument("-o", "--output", required=True, metavar="MODEL", help="model file to write")
     add_quiet(h)
     h.add_argument("--unit", choices=["m", "cm", "mm"], help="length unit of the surface files (default m)")
+    h.add_argument("--strict-units", action="store_true",
+                   help="refuse a surface enclosing under 1 mL or over 1 L (most likely the wrong --unit) "
+                        "instead of noting it")
     h.add_argument("--tag-array", metavar="NAME", help="integer cell array holding the tags (default surface-id)")
     h.add_argument("--inner", metavar="T[,T...]", help="tag values of the inner surface")
     h.add_argument("--outer", metavar="T[,T...]", help="tag values of the outer surface")
@@ -114,12 +117,12 @@ def cmd_build(a) -> int:
             raise Usage(f"palpate build: {flag} must be positive, got {v}")
     if files:
         what = f"inner {files[0]}, outer {files[1]}"
-        build = lambda: hybrid.build_from_files(files[0], files[1], unit=unit, **opts)  # noqa: E731
+        build = lambda: hybrid.build_from_files(files[0], files[1], unit=unit, strict_units=a.strict_units, **opts)  # noqa: E731
     elif a.tagged is not None:
         what = f"{a.tagged} (tagged)"
         tags = dict(tag_array=a.tag_array, inner=_int_list(a.inner, "--inner"), outer=_int_list(a.outer, "--outer"),
                     base=_int_list(a.base, "--base"))
-        build = lambda: hybrid.build_tagged_file(a.tagged, unit=unit, **tags, **opts)  # noqa: E731
+        build = lambda: hybrid.build_tagged_file(a.tagged, unit=unit, strict_units=a.strict_units, **tags, **opts)  # noqa: E731
     else:
         what = f"shape {a.shape}"
         build = lambda: hybrid.build_shape(a.shape, **opts)  # noqa: E731
