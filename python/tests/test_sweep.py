@@ -6,6 +6,7 @@ task is re-run, the model reaches each worker once, and a fit recovers a known m
 from __future__ import annotations
 
 import json
+import re
 import os
 import subprocess
 import sys
@@ -238,6 +239,16 @@ def test_the_cli_runs_a_study_and_a_fit_and_refuses_a_bad_spec_in_one_line(tmp_p
         fh.write("depth_m,force_n\n")
         for d, f in list(zip(row["curve_depth_m"], row["curve_force_n"]))[9:100:10]:
             fh.write(f"{d!r},{f!r}\n")
+    # Without --json: a table of the rows, and a CSV any reader can open (issue 37: one line, and
+    # Parquet only, which needs pyarrow or pandas).
+    p = run_cli("sweep", "s.toml", "--out", "o2", "--workers", "0", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert re.search(r"scenario +young +status +max_force_n", p.stdout) and "results.csv" in p.stdout, p.stdout
+    import csv
+    with open(tmp_path / "o2" / "results.csv") as fh:
+        got = list(csv.DictReader(fh))
+    assert [float(g["young"]) for g in got] == [3e4, 3.5e4] and "curve_force_n" not in got[0]
+    assert float(got[1]["max_force_n"]) == pytest.approx(row["max_force_n"])
     p = run_cli("fit", "s.toml", "--measured", "m.csv", "--workers", "0", "--json", "--plot", "f.png", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     assert json.loads(p.stdout)["values"]["young"] == pytest.approx(3.5e4, rel=1e-3)

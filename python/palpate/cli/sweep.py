@@ -40,4 +40,23 @@ def cmd_sweep(a) -> int:
     if a.json:
         print(json.dumps({"study": r.manifest["study"], "scenarios": r.done, "failed": r.failed, "ran": r.ran,
                           "table": str(r.path), "model_hash": r.manifest["model_hash"]}))
+    elif not a.quiet:
+        for line in table_lines(r.rows(), list(r.manifest.get("varied") or [])):
+            print(line)
+        print(f"  the table: {r.path} (all columns, curves included) and {r.path.with_suffix('.csv')} (no curves)")
     return 0
+
+
+#: Outcome columns of the printed table.
+SHOWN = ("status", "max_force_n", "final_depth_m", "max_disp_m", "steps_done")
+
+
+def table_lines(rows, varied, most: int = 12):
+    """The study's rows as text: scenario, the varied parameters and :data:`SHOWN` (the first and
+    last ``most // 2`` rows of a longer study)."""
+    cols = ["scenario"] + varied + [c for c in SHOWN if rows and c in rows[0]]
+    cell = lambda v: "-" if v is None else f"{v:.4g}" if isinstance(v, float) else str(v)  # noqa: E731
+    shown = rows if len(rows) <= most else rows[: most // 2] + [None] + rows[-(most // 2):]
+    text = [[c for c in cols]] + [["..."] * len(cols) if r is None else [cell(r.get(c)) for c in cols] for r in shown]
+    w = [max(len(t[j]) for t in text) for j in range(len(cols))]
+    return ["  " + "  ".join(t[j].rjust(w[j]) for j in range(len(cols))) for t in text]

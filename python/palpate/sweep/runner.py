@@ -11,6 +11,8 @@ reference the tests compare the cluster's table with).
 Output folder (``out``):
 - ``results.parquet``: the table, one row per scenario in the study's order (written at the end;
   see :mod:`palpate.sweep.scenario` for the columns);
+- ``results.csv``: the same rows without the curves, for a spreadsheet or a reader without
+  pyarrow or pandas;
 - ``parts/part-NNNNNN.parquet``: the rows as they finished, a part every few seconds (what
   ``resume`` reads back: a killed study keeps everything up to its last part);
 - ``fields/NNNNNNN.npy``: the final displacement fields (``outputs.field``), (n, 3) [m];
@@ -190,6 +192,11 @@ class _Table:
         tmp = path.with_suffix(".tmp")
         pq.write_table(t, tmp)
         os.replace(tmp, path)
+        import pyarrow.csv as pcsv
+        flat = t.drop_columns([c for c in CURVE_COLS if c in t.column_names])
+        tmp_csv = self.out / "results.csv.tmp"
+        pcsv.write_csv(flat, tmp_csv)
+        os.replace(tmp_csv, self.out / "results.csv")
         failed = int(pc.sum(pc.equal(t.column("status"), "failed")).as_py() or 0) if t.num_rows else 0
         return t, path, failed
 
