@@ -31,8 +31,7 @@ from typing import Any, Optional, Tuple, Union
 
 import numpy as np
 
-from . import _palpate as _p
-from ._palpate import HybridModel, ParameterError
+from ._palpate import HybridModel, MeshWarning, ParameterError
 from ._palpate import ventricle_surface as _ventricle_surface
 from .surfaces import load_surface, read_tagged_surface
 
@@ -77,8 +76,8 @@ ORGAN_VOLUME_M3 = (1e-6, 1e-3)
 def organ_scale_warning(volume: float, unit: str, what: str) -> Optional[str]:
     """A message when ``what``, read in length unit ``unit``, encloses ``volume`` [m^3] outside
     :data:`ORGAN_VOLUME_M3`, naming the unit that would put it inside (None when inside). A
-    surface in millimetres read as metres is a 60 m^3 organ: the build would fill it with
-    particles a metre apart and a 5 mm tool would never touch it (issue 37)."""
+    surface in millimetres read as metres makes a 119 mL ventricle 119,000 m^3: the build would
+    fill it with particles metres apart and a 5 mm tool would never touch it (issue 37)."""
     from .io import UNITS
 
     lo, hi = ORGAN_VOLUME_M3
@@ -97,8 +96,8 @@ def _check_scale(volume: float, unit: str, what: str, strict: bool) -> None:
     if msg is None:
         return
     if strict:
-        raise _p.ParameterError(msg)
-    warnings.warn(msg, _p.MeshWarning, stacklevel=3)
+        raise ParameterError(msg)
+    warnings.warn(msg, MeshWarning, stacklevel=3)
 
 
 def build_from_files(inner: PathLike, outer: PathLike, unit: str = "m", repair: bool = False,
