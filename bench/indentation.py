@@ -381,10 +381,10 @@ class FemIndenter:
 
 # ---------------------------------------------------------------------------- hybrid side
 
-def hybrid_curve(depths, material, tool_stiffness=None, ramp_s=0.5, hold_s=0.5, dt=1e-3, model=None, verbose=True):
+def hybrid_curve(depths, material, tool_area_stiffness=None, ramp_s=0.5, hold_s=0.5, dt=1e-3, model=None, verbose=True):
     """Staircase press of the hybrid model; per depth the means over the last half of the hold."""
     model = palpate.build_shape("ventricle") if model is None else model
-    sim = palpate.HybridSim(model, material, tool_radius=R_TOOL, tool_stiffness=tool_stiffness)
+    sim = palpate.HybridSim(model, material, tool_radius=R_TOOL, tool_area_stiffness=tool_area_stiffness)
     P, n = probe()
     S0 = sim.surface.copy()
     t0 = first_contact(S0)
@@ -486,7 +486,7 @@ def main():
                               (f"hybrid damped {args.damping:g} Pa s",
                                palpate.Material(young=bench.E, poisson=bench.NU, density=bench.RHO,
                                                 phi=args.damping, psi=args.damping), None),
-                              ("hybrid tool 30 N/m", bench.material(), 30.0)] + variants:
+                              ("hybrid tool 4.3e7 N/m^3 (half the default)", bench.material(), 4.3e7)] + variants:
             print(f"{label}:", flush=True)
             w = time.perf_counter()
             m = palpate.build_shape("ventricle", core_fraction=cf[0]) if cf else model
@@ -496,7 +496,7 @@ def main():
                       f"{info['particles']} particles", flush=True)
             # one more millimetre of travel: the hybrid's penetration is ~0.5 mm, so that its
             # indentation covers the FEM's
-            rows, t0, ticks = hybrid_curve(depths + [depths[-1] + 1e-3], mat, tool_stiffness=k, model=m)
+            rows, t0, ticks = hybrid_curve(depths + [depths[-1] + 1e-3], mat, tool_area_stiffness=k, model=m)
             timing[label] = (time.perf_counter() - w, len(ticks), float(np.median(ticks)) if len(ticks) else np.nan)
             print(f"  first contact t0 = {t0 * 1e3:.3f} mm, {len(ticks)} ticks, median {timing[label][2] * 1e3:.2f} ms, "
                   f"{timing[label][0]:.1f} s", flush=True)

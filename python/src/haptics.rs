@@ -12,7 +12,7 @@ use std::net::{Ipv4Addr, SocketAddrV4};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use palpate_core::runtime::{SimOptions, Tool};
+use palpate_core::runtime::SimOptions;
 use palpate_core::{ModelBuilder, Vec3};
 use palpate_haptics::bridge::protocol::Reject;
 use palpate_haptics::bridge::{Bridge, BridgeError, BridgeOptions, BridgeStats, Key};
@@ -61,7 +61,7 @@ fn busy(what: &str) -> PyErr {
 ///
 /// ``HapticLoop(model, material, device, *, rate_hz=1000.0, times=None, knots=None,
 /// recording=None, port=None, host="127.0.0.1", kind=None, hand_start=None, idle=False,
-/// tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None,
+/// tool_radius=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None,
 /// coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None,
 /// stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1,
 /// physics_rate=None, single_rate=False, unsafe_limits=False, bridge_key=None)``
@@ -94,16 +94,15 @@ fn busy(what: &str) -> PyErr {
 ///     Hybrid models only: see :class:`HybridSim`.
 /// tool_radius : float, optional
 ///     The tool sphere's radius [m] (default 0.005).
-/// tool_stiffness : float, optional
-///     Hybrid models only: the penalty per contact point [N/m] (default 60).
 /// core_contact_stiffness : float, optional
 ///     Hybrid models only: the tool's wall against the core's surface [N/m] (default 2000): see
 ///     :class:`HybridSim`.
 /// tool_area_stiffness : float, optional
-///     Full-FEM bodies only: the most penalty per unit of surface area [N/m^3] (default
-///     ``12 E* / R``, ten times the tissue's Hertz stiffness per unit area under the sphere:
-///     8.6e7 for myocardium and the 5 mm tool); each tick takes the least of it and what keeps
-///     the contact stable (at 1 kHz on the protocol meshes about 1.5e6 to 2.5e6: that bound sets it).
+///     The penalty per unit of surface area [N/m^3] (default ``12 E* / R``, ten times the
+///     tissue's Hertz stiffness per unit area under the sphere: 8.6e7 for myocardium and the
+///     5 mm tool). A hybrid model's skin vertices carry it by their areas (see
+///     :class:`HybridSim`); a full-FEM body takes each tick the least of it and what keeps the
+///     contact stable (at 1 kHz on the protocol meshes about 1.5e6 to 2.5e6: that bound sets it).
 /// coupling_stiffness, coupling_damping, proxy_mass : float, optional
 ///     The virtual coupling [N/m], [N s/m], [kg] (defaults: the device kind's).
 /// max_force, max_rate, ramp, stall_timeout, silence : float, optional
@@ -318,7 +317,7 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
 #[pymethods]
 impl PyHapticLoop {
     #[new]
-    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, silence = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1), physics_rate = None, single_rate = false, unsafe_limits = false, bridge_key = None), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, tool_stiffness=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1, physics_rate=None, single_rate=False, unsafe_limits=False, bridge_key=None)")]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, silence = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1), physics_rate = None, single_rate = false, unsafe_limits = false, bridge_key = None), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1, physics_rate=None, single_rate=False, unsafe_limits=False, bridge_key=None)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -335,7 +334,6 @@ impl PyHapticLoop {
         hand_start: Option<&Bound<'_, PyAny>>,
         #[pyo3(from_py_with = conv::arg)] idle: bool,
         #[pyo3(from_py_with = conv::arg)] tool_radius: Option<f64>,
-        #[pyo3(from_py_with = conv::arg)] tool_stiffness: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] core_contact_stiffness: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] tool_area_stiffness: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] hold: bool,
@@ -375,7 +373,7 @@ impl PyHapticLoop {
             None => None,
         };
         errors::guard("HapticLoop", || {
-            for (n, v) in [("tool_radius", tool_radius), ("tool_stiffness", tool_stiffness), ("core_contact_stiffness", core_contact_stiffness), ("tool_area_stiffness", tool_area_stiffness), ("coupling_stiffness", coupling_stiffness), ("proxy_mass", proxy_mass), ("max_force", max_force), ("max_rate", max_rate), ("stall_timeout", stall_timeout), ("silence", silence), ("physics_rate", physics_rate)] {
+            for (n, v) in [("tool_radius", tool_radius), ("core_contact_stiffness", core_contact_stiffness), ("tool_area_stiffness", tool_area_stiffness), ("coupling_stiffness", coupling_stiffness), ("proxy_mass", proxy_mass), ("max_force", max_force), ("max_rate", max_rate), ("stall_timeout", stall_timeout), ("silence", silence), ("physics_rate", physics_rate)] {
                 positive(n, v, false)?;
             }
             for (n, v) in [("coupling_damping", coupling_damping), ("ramp", ramp), ("spin", spin)] {
@@ -481,18 +479,11 @@ impl PyHapticLoop {
             let physics: Box<dyn Physics> = if idle {
                 Box::new(Idle::default())
             } else if let Ok(hm) = model.cast::<PyHybridModel>() {
-                if tool_area_stiffness.is_some() {
-                    return Err(errors::param_error_from("tool_area_stiffness: for a full-FEM Body only (a hybrid model's tool stiffness is per contact point: tool_stiffness [N/m])"));
-                }
                 let mut options = SimOptions { hold, ..SimOptions::default() };
-                let mut tool = Tool::default();
                 if let Some(r) = tool_radius {
-                    tool.radius = r;
+                    options.tool.radius = r;
                 }
-                if let Some(k) = tool_stiffness {
-                    tool.stiffness = k;
-                }
-                options.tool = tool;
+                options.tool.area_stiffness = tool_area_stiffness;
                 if let Some(k) = core_contact_stiffness {
                     options.core_contact_stiffness = k;
                 }
@@ -502,9 +493,6 @@ impl PyHapticLoop {
             } else if let Ok(body) = model.cast::<PyBody>() {
                 if threads > 1 {
                     return Err(errors::param_error_from(format!("threads = {threads}: for a hybrid model only (a full-FEM body's tick runs on the servo's thread)")));
-                }
-                if tool_stiffness.is_some() {
-                    return Err(errors::param_error_from("tool_stiffness: for a hybrid model only (a full-FEM Body's contact stiffness is per unit of surface area: tool_area_stiffness [N/m^3])"));
                 }
                 if core_contact_stiffness.is_some() {
                     return Err(errors::param_error_from("core_contact_stiffness: for a hybrid model only (a full-FEM Body has no core under a shell)"));

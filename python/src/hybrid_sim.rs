@@ -3,7 +3,7 @@
 
 use numpy::{PyArray1, PyArray2};
 use palpate_core::parallel::Serial;
-use palpate_core::runtime::{finish_tick, tick, tick_force_with, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, SkinSweep, TickReport, Tool};
+use palpate_core::runtime::{finish_tick, tick, tick_force_with, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, SkinSweep, TickReport, ToolOptions};
 use palpate_core::{StepMemory, Vec3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -20,7 +20,7 @@ use crate::material::PyMaterial;
 /// (15 mm presses, jumps, jabs, fast slides: tests/runtime_hand.rs, ``bench/hybrid_hand.py``);
 /// not yet at its speed target (BENCHMARKS.md).
 ///
-/// ``HybridSim(model, material, *, tool_radius=0.005, tool_stiffness=None,
+/// ``HybridSim(model, material, *, tool_radius=0.005, tool_area_stiffness=None,
 /// core_contact_stiffness=None, hold=True, activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None,
 /// mass_scaling=None, shell_fallback=True, shell_pause=None)``
 ///
@@ -31,9 +31,11 @@ use crate::material::PyMaterial;
 ///     Of the core and the shell (St. Venant-Kirchhoff).
 /// tool_radius : float
 ///     The spherical tool's radius [m].
-/// tool_stiffness : float, optional
-///     Penalty stiffness per skin vertex in contact [N/m] (default 60, see
-///     ``palpate_core::runtime::tool``).
+/// tool_area_stiffness : float, optional
+///     Penalty stiffness per unit of skin area [N/m^3] (default ``12 E* / R``, ten times the
+///     tissue's Hertz stiffness per unit area under the sphere: 8.6e7 for myocardium and the
+///     5 mm tool); each skin vertex in contact carries a third of its triangles' areas, so the
+///     contact is as stiff whatever the skin's tessellation (``palpate_core::runtime::tool``).
 /// core_contact_stiffness : float, optional
 ///     Penalty stiffness of the tool against the core's surface [N/m] (default 2000: ten times
 ///     the tissue's under a 5 mm sphere), met at the surface's point nearest the tool's centre,
@@ -86,14 +88,14 @@ pub struct PyHybridSim {
 #[pymethods]
 impl PyHybridSim {
     #[new]
-    #[pyo3(signature = (model, material, *, tool_radius = None, tool_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None, homogenise = true))]
+    #[pyo3(signature = (model, material, *, tool_radius = None, tool_area_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None, homogenise = true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         #[pyo3(from_py_with = conv::arg)] model: PyRef<'_, PyHybridModel>,
         #[pyo3(from_py_with = conv::arg)] material: PyRef<'_, PyMaterial>,
         #[pyo3(from_py_with = conv::arg)] tool_radius: Option<f64>,
-        #[pyo3(from_py_with = conv::arg)] tool_stiffness: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] tool_area_stiffness: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] core_contact_stiffness: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] hold: bool,
         #[pyo3(from_py_with = conv::arg)] activation_margin: Option<f64>,
@@ -107,18 +109,18 @@ impl PyHybridSim {
     ) -> PyResult<Self> {
         let (linger_ticks, max_substeps) = (errors::count_opt(linger_ticks, "linger_ticks")?, errors::count_opt(max_substeps, "max_substeps")?);
         let shell_pause = errors::count_opt(shell_pause, "shell_pause")?;
-        let mut tool = Tool::default();
+        let mut tool = ToolOptions::default();
         if let Some(r) = tool_radius {
             if !(r > 0.0 && r.is_finite()) {
                 return Err(crate::errors::param_error_from(format!("tool_radius = {r} m must be positive and finite")));
             }
             tool.radius = r;
         }
-        if let Some(k) = tool_stiffness {
+        if let Some(k) = tool_area_stiffness {
             if !(k > 0.0 && k.is_finite()) {
-                return Err(crate::errors::param_error_from(format!("tool_stiffness = {k} N/m must be positive and finite")));
+                return Err(crate::errors::param_error_from(format!("tool_area_stiffness = {k} N/m^3 must be positive and finite")));
             }
-            tool.stiffness = k;
+            tool.area_stiffness = Some(k);
         }
         let mut options = SimOptions { tool, hold, homogenise, ..Default::default() };
         if let Some(k) = core_contact_stiffness {
@@ -304,8 +306,9 @@ impl PyHybridSim {
         self.state.tool.map(|c| conv::vec3_to_py(py, c))
     }
 
-    /// The options the simulation was made with: ``tool_radius`` [m], ``tool_stiffness`` [N/m],
-    /// ``tool_damping`` [N s/m], ``core_contact_stiffness`` [N/m] (the tool against the core's
+    /// The options the simulation was made with: ``tool_radius`` [m], ``tool_area_stiffness``
+    /// [N/m^3] and ``tool_area_damping`` [N s/m^3] (resolved: per unit of skin area),
+    /// ``core_contact_stiffness`` [N/m] (the tool against the core's
     /// surface), ``activation_margin`` [m], ``max_tool_step`` [m],
     /// ``linger_ticks``, ``max_substeps``, ``hold``, ``mass_scaling`` (the quantile), the resolved
     /// ``coupling_stiffness`` [N/m], ``coupling_damping`` [N s/m] and ``confinement_stiffness``
@@ -316,8 +319,8 @@ impl PyHybridSim {
         let o = &self.sim.options;
         let d = PyDict::new(py);
         d.set_item("tool_radius", o.tool.radius)?;
-        d.set_item("tool_stiffness", o.tool.stiffness)?;
-        d.set_item("tool_damping", o.tool.damping)?;
+        d.set_item("tool_area_stiffness", self.sim.tool.stiffness)?;
+        d.set_item("tool_area_damping", self.sim.tool.damping)?;
         d.set_item("core_contact_stiffness", o.core_contact_stiffness)?;
         d.set_item("activation_margin", o.activation_margin)?;
         d.set_item("max_tool_step", o.max_tool_step)?;

@@ -66,7 +66,7 @@ def world(tmp_path_factory):
         "history": 3, "source": "x.msh", "z_cut": 0.0, "tol": 1e-9, "method": "parity", "masses": masses,
         "support_radius": 0.012, "kernel": palpate.Kernel.WENDLAND_C2, "hourglass": 0.1, "min_relative_weight": 0.0,
         "ticks": 1, "i": 0, "s": 0, "path": str(rec), "data": model.to_bytes(), "parts": vparts,
-        "tool_centre": np.array([0.0, 0.0, 0.1]), "tool_radius": 0.005, "tool_stiffness": 100.0, "core_contact_stiffness": 2000.0, "tool_area_stiffness": 1e7, "hold": True,
+        "tool_centre": np.array([0.0, 0.0, 0.1]), "tool_radius": 0.005, "core_contact_stiffness": 2000.0, "tool_area_stiffness": 1e7, "hold": True,
         "activation_margin": 0.001, "max_tool_step": 0.001, "linger_ticks": 10, "max_substeps": 50,
         "mass_scaling": 0.95, "shell_fallback": True, "shell_pause": 10, "homogenise": True, "device": "hand", "rate_hz": 1000.0, "times": np.array([0.0, 1.0]),
         "knots": np.zeros((2, 3)), "recording": str(rec), "port": 0, "host": "127.0.0.1", "kind": "simulated",

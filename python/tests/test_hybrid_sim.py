@@ -60,8 +60,8 @@ def test_press_pushes_back_and_release_lets_go(ventricle, material):
 def test_bad_input_is_refused(ventricle, material):
     with pytest.raises(ValueError, match="tool_radius"):
         palpate.HybridSim(ventricle, material, tool_radius=-1.0)
-    with pytest.raises(ValueError, match="tool_stiffness"):
-        palpate.HybridSim(ventricle, material, tool_stiffness=float("nan"))
+    with pytest.raises(ValueError, match="tool_area_stiffness"):
+        palpate.HybridSim(ventricle, material, tool_area_stiffness=float("nan"))
     sim = palpate.HybridSim(ventricle, material)
     with pytest.raises(ValueError, match="tool_centre"):
         sim.step([np.nan, 0.0, 0.0])
@@ -101,7 +101,7 @@ def test_core_contact_stiffness_and_the_shell_options_survive_a_pickle(ventricle
     assert sim.options["core_contact_stiffness"] == 500.0
     assert palpate.HybridSim(ventricle, material).options["core_contact_stiffness"] == 2000.0
     back = pickle.loads(pickle.dumps(sim))
-    for k in ("core_contact_stiffness", "shell_fallback", "shell_pause", "tool_stiffness"):
+    for k in ("core_contact_stiffness", "shell_fallback", "shell_pause", "tool_area_stiffness"):
         assert back.options[k] == sim.options[k], k
     paused = pickle.loads(pickle.dumps(palpate.HybridSim(ventricle, material, shell_pause=7)))
     assert paused.options["shell_fallback"] is True and paused.options["shell_pause"] == 7
@@ -248,13 +248,19 @@ def test_a_failed_shell_is_shed_and_the_press_goes_on(ventricle, material):
     where it needs ~12) diverges under a 3 mm press; the tick goes on with the core and the skin
     (``last["shell_failed"]``), the shell stays off ``shell_pause`` ticks (``shell_off``), the
     force stays finite and pushes back. With ``shell_fallback=False`` the same press raises
-    ``StepError`` with the core as it was."""
+    ``StepError`` with the core as it was. The contact is softer than the default (1e7 N/m^3,
+    26 N/m on this skin's 2.6 mm^2 a vertex): with the default (8.6e7), or with 2.3e7, the
+    under-stepped shell fails in the first tick, before it has carried the skin anywhere (nothing
+    to lift); with 4e6 or 1e7 in the second (measured). The skin the shell left fades back
+    under the tool, so the tick right after a failure at a shallow press may touch nothing: the
+    force never pulls, and pushes back whenever the skin is touched."""
     p, n = None, None
+    soft = dict(max_substeps=3, shell_pause=20, tool_area_stiffness=1e7)
     for fallback in (True, False):
-        sim = palpate.HybridSim(ventricle, material, max_substeps=3, shell_fallback=fallback, shell_pause=20)
+        sim = palpate.HybridSim(ventricle, material, shell_fallback=fallback, **soft)
         assert sim.options["shell_fallback"] is fallback and sim.options["shell_pause"] == (20 if fallback else None)
         p, n = _press_point(sim)
-        failed, off, raised = [], 0, False
+        failed, off, raised, pushed = [], 0, False, 0
         copy, compared = None, False
         for k in range(150):
             depth = 3e-3 * min(1.0, (k + 1) / 50)
@@ -271,15 +277,18 @@ def test_a_failed_shell_is_shed_and_the_press_goes_on(ventricle, material):
                 failed.append(k)
                 assert sim.last["active"] == 0 and sim.active.size == 0
             off += sim.last["shell_off"]
-            if off and sim.last["shell_off"]:
-                assert f @ n > 0.0, "the skin and the core push back while the shell is off"
+            assert f @ n >= 0.0, "the organ never pulls the tool"
+            if sim.last["shell_off"]:
+                pushed += f @ n > 0.0
+                if sim.last["skin_contacts"]:
+                    assert f @ n > 0.0, "the skin and the core push back while the shell is off"
             if fallback and failed and k == failed[0] + 5:
                 # Mid-fade: the skin the shell left is lifted off its ties, and a restored copy
                 # (through a pickle-able dict) ticks as the original, bit for bit.
                 state = sim.get_state()
                 assert state["skin_lift_vertices"].size > 0 and state["skin_lift_offsets"].shape == (state["skin_lift_vertices"].size, 3)
                 assert state["skin_lift_start"] == failed[0]
-                copy = palpate.HybridSim(ventricle, material, max_substeps=3, shell_fallback=True, shell_pause=20)
+                copy = palpate.HybridSim(ventricle, material, shell_fallback=True, **soft)
                 stale = dict(state, skin_lift_vertices=np.array([10**9]), skin_lift_offsets=np.zeros((1, 3)))
                 with pytest.raises(ValueError):
                     copy.set_state(stale)
@@ -289,6 +298,9 @@ def test_a_failed_shell_is_shed_and_the_press_goes_on(ventricle, material):
                 copy, compared = None, True
         if fallback:
             assert failed and not raised and off >= 20 and compared, (failed, off, compared)
+            # The hand feels the organ through the pause (the first tick or two after a failure
+            # at a shallow press may find the skin lifted away from the tool).
+            assert pushed >= off - 2, (pushed, off)
             # The shell comes back after each pause (and, under-stepped, fails again).
             assert all(b - a >= 21 for a, b in zip(failed, failed[1:])), failed
         else:

@@ -92,7 +92,7 @@ def test_bodies_cross_processes():
 
 
 def test_hybrid_sim_pickles_and_ticks_on_bit_identically():
-    sim, path = ellipsoids_sim(tool_stiffness=80.0, max_tool_step=4e-4, mass_scaling=0.9)
+    sim, path = ellipsoids_sim(tool_area_stiffness=1e8, max_tool_step=4e-4, mass_scaling=0.9)
     for c in path[:56]:
         sim.step(c)
     back = pickle.loads(pickle.dumps(sim))

@@ -9,7 +9,7 @@
 //! (`POINT=zi,ti` runs one point: height `zi` in 1..=4, angle `ti` in 0..6; `TRACE=1` prints
 //! each tick's force, sub-steps, active set and contacts, `TRACE=2` also the skin vertices inside
 //! the tool, `TRACE=3` the core's surface contact; `TOOL_K`, `TOOL_C`: the contact's
-//! stiffness \[N/m\] and damping \[N s/m\] per point; `HOLD_MM`: press to that depth and
+//! stiffness \[N/m^3\] and damping \[N s/m^3\] per unit of skin area; `HOLD_MM`: press to that depth and
 //! hold, whatever the force). Per point it also prints how far the force along the press fell
 //! below its running maximum while the tool went on in ("gave way": the organ letting the tool
 //! through, a slope the tool slid down, or a hollow wall caving in).
@@ -170,13 +170,13 @@ fn main() {
         f => HybridModel::load(std::path::Path::new(f)).unwrap(),
     };
     let mut options = SimOptions { shell_fallback: if fallback { SimOptions::default().shell_fallback } else { None }, ..SimOptions::default() };
-    // TOOL_K [N/m], TOOL_C [N s/m]: the contact's stiffness and damping per point.
+    // TOOL_K [N/m^3], TOOL_C [N s/m^3]: the contact's stiffness and damping per unit of skin area.
     let env = |k: &str| std::env::var(k).ok().and_then(|s| s.parse::<f64>().ok());
     if let Some(k) = env("TOOL_K") {
-        options.tool.stiffness = k;
+        options.tool.area_stiffness = Some(k);
     }
     if let Some(c) = env("TOOL_C") {
-        options.tool.damping = c;
+        options.tool.area_damping = c;
     }
     let sim = Sim::new(model, tissue(damped), options).unwrap();
     let (lo, hi) = sim.hybrid.outer_points.iter().fold((Vec3::repeat(f64::MAX), Vec3::repeat(f64::MIN)), |(l, h), p| (l.inf(p), h.sup(p)));

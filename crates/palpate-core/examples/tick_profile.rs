@@ -24,13 +24,13 @@ fn main() {
     let mat = tissue(std::env::var("UNDAMPED").is_err());
     let mut o = SimOptions::default();
     o.tool.radius = radius;
-    // TOOL_K [N/m], TOOL_C [N s/m]: the contact's stiffness and damping per point.
+    // TOOL_K [N/m^3], TOOL_C [N s/m^3]: the contact's stiffness and damping per unit of skin area.
     let env = |k: &str| std::env::var(k).ok().and_then(|s| s.parse::<f64>().ok());
     if let Some(k) = env("TOOL_K") {
-        o.tool.stiffness = k;
+        o.tool.area_stiffness = Some(k);
     }
     if let Some(c) = env("TOOL_C") {
-        o.tool.damping = c;
+        o.tool.area_damping = c;
     }
     // SUPPORT: the kernel's support radius in lattice spacings (SimOptions::support_spacings).
     if let Some(h) = env("SUPPORT") {

@@ -4,7 +4,7 @@
 //! tick time; then the tick-time percentiles.
 //!
 //! Study switches (environment): `UNDAMPED=1` (no viscosity), `FORCE=2` (stop advancing once the
-//! force reaches 2 N), `TOOL_K`, `TOOL_C` (contact stiffness [N/m], damping [N s/m]), `MARGIN`
+//! force reaches 2 N), `TOOL_K`, `TOOL_C` (contact stiffness [N/m^3], damping [N s/m^3] per unit of skin area), `MARGIN`
 //! (activation margin [mm]), `COUPLING_K`, `COUPLING_C`, `DEBUG=1` (every 5 ticks: the fastest
 //! active particle, the smallest det F, the core's displacement).
 #[path = "support/mod.rs"]
@@ -28,10 +28,10 @@ fn main() {
         opts.coupling = Some(palpate_core::runtime::Coupling { stiffness: k, damping: env("COUPLING_C").unwrap_or(0.0) });
     }
     if let Some(k) = env("TOOL_K") {
-        opts.tool.stiffness = k;
+        opts.tool.area_stiffness = Some(k);
     }
     if let Some(c) = env("TOOL_C") {
-        opts.tool.damping = c;
+        opts.tool.area_damping = c;
     }
     if let Some(m) = env("MARGIN") {
         opts.activation_margin = m * 1e-3;

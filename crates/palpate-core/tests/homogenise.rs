@@ -64,7 +64,7 @@ fn the_runtime_stiffens_the_core_only_when_asked() {
 #[test]
 fn the_core_under_the_active_shell_is_the_tissues() {
     let (_, m) = walls::ellipsoids();
-    let tool = palpate_core::runtime::tool::Tool { radius: 0.015, ..Default::default() };
+    let tool = palpate_core::runtime::ToolOptions { radius: 0.015, ..Default::default() };
     let options = SimOptions { tool, ..Default::default() };
     let f = m.homogenisation.factor(0.4);
     let paper = held_press(&Sim::new(m.clone(), tissue(0.4), SimOptions { homogenise: false, ..options }).unwrap());

@@ -387,7 +387,8 @@ fn a_failed_shell_step_is_shed_and_the_tick_goes_on_with_the_core() {
 
 /// The hand's worst where the shell cannot follow: a press toward 2 N beside the held base of the
 /// synthetic ventricle (z = 33.6 mm, 6 mm below the base; measured: the SVK core's elements
-/// under the tool collapse there from ~11 mm of travel, the shell's ties turned with them
+/// under the tool collapse there from ~6.5 mm of travel (measured 2026-12-07, with a contact
+/// of 60-170 N/m a skin vertex alike), the shell's ties turned with them
 /// distort the particles past what the sub-step cap holds, and the shell's step diverges).
 /// With the fallback every tick succeeds, the force stays finite and bounded, and the shell is
 /// shed at most once per pause.
@@ -422,8 +423,13 @@ fn a_press_toward_2_n_beside_the_held_base_never_fails_a_tick() {
     // Before 2026-11-27 this was 1.53 N: the contact held explicitly over the core's step
     // chattered, and the skin went back to its ties at once (runtime::core_contact, SkinLift).
     // Measured since: 0.112 N, at the shed tick (0.25 -> 0.14 N: the core, pressed directly
-    // now, gives way where the particles held), then at most 0.05 N a tick.
-    assert!(off_jump < 0.15, "from the shed on the force changed by {off_jump:.3} N in a tick");
+    // now, gives way where the particles held), then at most 0.05 N a tick. With the contact per
+    // unit of skin area (2026-12-07; this skin's vertices carry 2.0 mm^2, 172 N/m each) the
+    // shell fails at 6.55 mm of travel (6.35-6.55 mm with 3e7-8.6e7 N/m^3: the core's collapse,
+    // not the contact, sets it); its last ticks before the shed climb to the sub-step cap and
+    // the force spikes 0.28 -> 0.36 N, so the largest change is 0.179 N, of which the shed
+    // itself (0.28 -> 0.20 N) is 0.08 N; 0.087 and 0.109 N with 6e7 and 3e7 N/m^3.
+    assert!(off_jump < 0.2, "from the shed on the force changed by {off_jump:.3} N in a tick");
     assert!(fmax < 5.0, "largest force {fmax} N");
     assert!(failures <= 5, "{failures} failures in 500 ticks: more than one per pause");
     assert!(st.skin.iter().chain(&st.core.x).all(|x| x.iter().all(|c| c.is_finite())));

@@ -17,7 +17,8 @@ use palpate_core::mesh::generate::TruncatedEllipsoidWall;
 use palpate_core::meshfree::ParticleModelBuilder;
 use palpate_core::integrate::CorePotential;
 use palpate_core::material::{Damping, Elasticity};
-use palpate_core::runtime::{Activation, Confinement, CoreContact, Placement, Sim, SimOptions, Tool};
+use palpate_core::runtime::{Activation, AreaTool, Confinement, CoreContact, Placement, Sim, SimOptions, Tool, ToolOptions};
+use palpate_core::error::ModelError;
 use palpate_core::Vec3;
 use std::collections::BTreeSet;
 use std::sync::OnceLock;
@@ -231,7 +232,47 @@ fn stiffness_and_damping_helpers() {
     assert_eq!(Confinement::default(), Confinement { stiffness: 60.0, reach: 3 });
 }
 
-/// The numbers behind DEFAULT_STIFFNESS (tool.rs docs): the model's particle mass, the stable
+/// The runtime's contact is per unit of skin area (tool.rs docs): the skin vertices' areas share
+/// the skin's, the default is ten times the tissue's Hertz stiffness per unit area at a
+/// quarter-radius press and follows the radius, a given one is kept, nonsense is refused by name.
+#[test]
+fn the_contact_is_per_unit_of_skin_area() {
+    let m = ventricle();
+    let mat = Material::myocardium();
+    let sim = Sim::new(m.clone(), mat, SimOptions::default()).unwrap();
+    let p = &m.outer_points;
+    // A third of each triangle's area to each of its vertices (they sum to the skin's area), at
+    // most the cap: this skin (2.7 mm^2 a vertex on a 0.9 mm lattice) is mostly capped.
+    let mut third = vec![0.0; p.len()];
+    for t in &m.outer_tris {
+        let a = 0.5 * (p[t[1]] - p[t[0]]).cross(&(p[t[2]] - p[t[0]])).norm() / 3.0;
+        t.iter().for_each(|&v| third[v] += a);
+    }
+    let cap = palpate_core::runtime::sim::SKIN_AREA_CAP_SPACINGS2 * m.spacing * m.spacing;
+    assert_eq!(sim.skin_area.len(), p.len());
+    assert!(sim.skin_area.iter().zip(&third).all(|(&a, &t)| (a - t.min(cap)).abs() <= 1e-12 * t && a > 0.0));
+    let capped = third.iter().filter(|&&t| t > cap).count();
+    assert!(capped > 0 && capped < p.len(), "{capped} of {} capped", p.len());
+    let e_star = mat.young() / (1.0 - mat.poisson().powi(2));
+    let r = sim.tool.radius;
+    assert_eq!(r, 5e-3);
+    assert!(sim.tool.stiffness >= 10.0 * e_star / (1.7 * 0.5 * r), "{} N/m^3", sim.tool.stiffness);
+    assert_eq!(sim.tool.stiffness, AreaTool::default_stiffness(&mat, r));
+    let with = |tool: ToolOptions| Sim::new(m.clone(), mat, SimOptions { tool, ..SimOptions::default() });
+    let big = with(ToolOptions { radius: 2.0 * r, ..ToolOptions::default() }).unwrap();
+    assert!((big.tool.stiffness / sim.tool.stiffness - 0.5).abs() < 1e-12);
+    assert_eq!(with(ToolOptions { area_stiffness: Some(1e7), ..ToolOptions::default() }).unwrap().tool.stiffness, 1e7);
+    for (tool, name) in [
+        (ToolOptions { area_stiffness: Some(f64::NAN), ..ToolOptions::default() }, "tool area stiffness [N/m^3]"),
+        (ToolOptions { area_stiffness: Some(-1.0), ..ToolOptions::default() }, "tool area stiffness [N/m^3]"),
+        (ToolOptions { radius: 0.0, ..ToolOptions::default() }, "tool radius [m]"),
+        (ToolOptions { area_damping: f64::INFINITY, ..ToolOptions::default() }, "tool area damping [N s/m^3]"),
+    ] {
+        assert!(matches!(with(tool), Err(ModelError::Parameter { name: n, .. }) if n == name), "{tool:?}");
+    }
+}
+
+/// The numbers behind DEFAULT_STIFFNESS (a point penalty's default; tool.rs docs): the model's particle mass, the stable
 /// sub-step of a particle body on its lattice (spacing and masses of the model, myocardium, the
 /// support radius of tests/meshfree.rs), the stability bound m / h^2 and the tissue's E* R.
 #[test]

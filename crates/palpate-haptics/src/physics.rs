@@ -248,21 +248,14 @@ impl Default for FemOptions {
 pub const FEM_CONTACT_STABILITY: f64 = 1.0;
 /// Damping ratio of the contact (of critical, at the stability bound).
 pub const FEM_CONTACT_DAMPING_RATIO: f64 = 0.5;
-/// The default area stiffness in units of `E* / R` ([`default_area_stiffness`]).
-pub const AREA_STIFFNESS_PER_E_OVER_R: f64 = 12.0;
+pub use palpate_core::runtime::tool::AREA_STIFFNESS_PER_E_OVER_R;
 
 /// The default penalty stiffness per unit area \[N/m^3\] for a tissue of `material` under a
-/// sphere of `radius` \[m\]: `12 E* / R`, `E* = E / (1 - nu^2)`, ten times the tissue's own
-/// stiffness per unit area under the sphere. Hertz: a pressure `p` on a disc of radius `a` of
-/// an elastic half-space sinks it by `16 p a / (3 pi E*) ~ 1.7 p a / E*` on average, a stiffness
-/// per unit area of `E* / (1.7 a)`; at a quarter-radius press (`a = sqrt(R d) = R / 2`) that is
-/// `1.18 E* / R`. Ten times it, the contact adds ~10% compliance in series with the tissue and
-/// sinks ~10% of the indentation into the tool (as `Tool`'s default does per point). Myocardium
-/// (30 kPa, `nu = 0.4`) under the 5 mm sphere: 8.6e7 N/m^3. At 1 kHz on the protocol meshes the
-/// stability bound is lower (see [`FemPhysics`]), and sets the stiffness.
+/// sphere of `radius` \[m\]: `12 E* / R` ([`AreaTool::default_stiffness`], the hybrid's too).
+/// At 1 kHz on the protocol meshes the stability bound is lower (see [`FemPhysics`]), and sets
+/// the stiffness.
 pub fn default_area_stiffness(material: &Material, radius: f64) -> f64 {
-    let nu = material.poisson();
-    AREA_STIFFNESS_PER_E_OVER_R * material.young() / (1.0 - nu * nu) / radius
+    AreaTool::default_stiffness(material, radius)
 }
 
 /// A full-FEM body (`palpate_core::fem`, stepped by [`palpate_core::step`] with the model's

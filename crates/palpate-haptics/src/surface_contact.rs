@@ -19,7 +19,7 @@
 //! meets a patch of radius `sqrt(2 R d)` and, from 1 mm deep, a dozen samples or more wherever
 //! it is (the nodes do not matter).
 //!
-//! Each sample's penalty is [`Tool::contact`] (the hybrid runtime's point contact, with the
+//! Each sample's penalty is [`palpate_core::runtime::Tool::contact`] (the hybrid runtime's point contact, with the
 //! stiffness `k_a A_s` and damping `c_a A_s`); its force goes to the triangle's nodes with the
 //! sample's barycentric weights. That spread is the transpose of the interpolation `x_s = sum_i
 //! b_si x_i`, so the nodal forces are exactly `-dU/dx_i` (the damping aside), the sample forces
@@ -65,7 +65,7 @@
 //! allocated.
 
 use palpate_core::runtime::tool::ContactSum;
-use palpate_core::runtime::Tool;
+pub use palpate_core::runtime::AreaTool;
 use palpate_core::{ModelError, Vec3};
 
 /// Largest spacing of the contact samples, as a fraction of the tool's radius.
@@ -75,23 +75,6 @@ pub const REACH_MARGIN: f64 = 0.25;
 /// Most contact samples [`SurfaceContact::new`] makes (24 bytes each): a tool far smaller than
 /// the mesh's triangles is refused rather than sampled into gigabytes.
 pub const MAX_SAMPLES: usize = 8_000_000;
-
-/// The sphere's penalty per unit area: radius \[m\], stiffness \[N/m^3\] and approach damping
-/// \[N s/m^3\] per unit of the surface's rest area.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AreaTool {
-    pub radius: f64,
-    pub stiffness: f64,
-    pub damping: f64,
-}
-
-impl AreaTool {
-    /// The point contact of a sample carrying `area` \[m^2\].
-    #[inline]
-    pub fn sample(&self, area: f64) -> Tool {
-        Tool { radius: self.radius, stiffness: self.stiffness * area, damping: self.damping * area }
-    }
-}
 
 /// The boundary triangles, their contact samples and the per-tick scratch (module docs).
 #[derive(Debug, Clone)]

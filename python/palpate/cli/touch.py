@@ -28,8 +28,8 @@ def add_parser(sub) -> None:
     t.add_argument("--phi", type=float, default=0.0, help="damping phi [Pa s] (default 0)")
     t.add_argument("--psi", type=float, default=0.0, help="damping psi [Pa s] (default 0)")
     t.add_argument("--tool-radius", type=float, default=None, metavar="M", help="tool sphere radius [m] (default the core's, 5 mm)")
-    t.add_argument("--tool-stiffness", type=float, default=None, metavar="K",
-                   help="penalty stiffness per skin vertex in contact [N/m] (default the core's)")
+    t.add_argument("--tool-area-stiffness", type=float, default=None, metavar="K",
+                   help="penalty stiffness per unit of skin area [N/m^3] (default 12 E*/R: 8.6e7 for the default tissue and tool)")
     t.add_argument("--free", action="store_true", help="do not hold the core at its base (or lower 30%%)")
     add_quiet(t)
     t.add_argument("--dt", type=float, default=1e-3, metavar="S", help="tick [s] (default 1e-3)")
@@ -76,7 +76,7 @@ def cmd_touch(a) -> int:
 
     _positive("--dt", a.dt)
     for flag, v in (("--young", a.young), ("--density", a.density), ("--tool-radius", a.tool_radius),
-                    ("--tool-stiffness", a.tool_stiffness)):
+                    ("--tool-area-stiffness", a.tool_area_stiffness)):
         _positive(flag, v)
     for flag, v in (("--phi", a.phi), ("--psi", a.psi)):
         _positive(flag, v, allow_zero=True)
@@ -92,7 +92,7 @@ def cmd_touch(a) -> int:
         raise Fail(f"palpate touch: material: {e}") from None
     model, what = _model(a)
     try:
-        sim = _p.HybridSim(model, material, tool_radius=a.tool_radius, tool_stiffness=a.tool_stiffness,
+        sim = _p.HybridSim(model, material, tool_radius=a.tool_radius, tool_area_stiffness=a.tool_area_stiffness,
                            hold=not a.free)
     except ValueError as e:
         raise Fail(f"palpate touch: {e}") from None

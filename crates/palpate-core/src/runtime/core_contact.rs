@@ -21,7 +21,8 @@
 //! chatter). In the potential the contact's stiffness is part of what the step minimises, so no
 //! tick bound applies.
 //!
-//! The energy is the penalty's, `k d^2 / 2` per point (`d` the depth in the sphere, see
+//! The energy is the penalty's, `k_a A_v d^2 / 2` per skin vertex (`d` the depth in the sphere,
+//! `A_v` the skin area the vertex carries, `k_a` the tool's stiffness per unit area, see
 //! [`super::tool`]), over the skin vertices within reach (each at its tie, a function of the
 //! core's nodes, [`super::embed::Embedding::position`]; the forces go to the nodes through the
 //! tie's exact transpose, [`super::embed::Embedding::spread`]), plus the core's surface below.
@@ -127,11 +128,11 @@ impl CoreContact<'_> {
     /// contact being the tool's penalty at rest ([`super::Tool::contact`] with no velocities:
     /// the damping is left out, see the module docs).
     fn each_skin(&self, x: &[Vec3], mut visit: impl FnMut(usize, PointContact)) {
-        let tool = &self.sim.options.tool;
+        let tool = &self.sim.tool;
         let at_rest = Vec3::zeros();
         for &v in self.skin {
             let p = self.sim.skin.position(v, x) + self.lift_scale * self.lift[v];
-            if let Some(c) = tool.contact(&self.centre, &at_rest, &p, &at_rest) {
+            if let Some(c) = tool.sample(self.sim.skin_area[v]).contact(&self.centre, &at_rest, &p, &at_rest) {
                 visit(v, c);
             }
         }

@@ -63,4 +63,4 @@ pub use sim::{Sim, SimOptions};
 pub use stability::Shell;
 pub use state::{SimSnapshot, SimState, SimWorkspace, SkinSweep, SHED_FADE_TICKS};
 pub use tick::{finish_tick, tick, tick_force_with, tick_with, Finished, TickReport};
-pub use tool::{ContactSum, PointContact, Tool};
+pub use tool::{AreaTool, ContactSum, PointContact, Tool, ToolOptions};

@@ -6,7 +6,7 @@ use super::coupling::Coupling;
 use super::embed::Embedding;
 use super::stability::Shell;
 use super::state::SimState;
-use super::tool::Tool;
+use super::tool::{AreaTool, ToolOptions};
 use crate::error::ModelError;
 use crate::fem::{Model, ModelBuilder};
 use crate::hybrid::HybridModel;
@@ -30,8 +30,9 @@ pub struct SimOptions {
     pub coupling_depth_spacings: f64,
     /// The core's integrator (default: the quasi-Newton backward Euler, stable at any press).
     pub integrator: Integrator,
-    /// The tool (default: a 5 mm sphere, see [`super::tool`] for the stiffness).
-    pub tool: Tool,
+    /// The tool (default: a 5 mm sphere, its penalty per unit of skin area `12 E* / R`, see
+    /// [`super::tool`]).
+    pub tool: ToolOptions,
     /// Ticks a region stays active after its last contact (default 100: 0.1 s at 1 kHz, so a
     /// slide does not toggle particles every tick).
     pub linger_ticks: u64,
@@ -97,7 +98,7 @@ impl Default for SimOptions {
             support_spacings: 1.8,
             coupling_depth_spacings: 1.5,
             integrator: Integrator::quasi_newton(),
-            tool: Tool::default(),
+            tool: ToolOptions::default(),
             linger_ticks: 100,
             activation_margin: 1e-3,
             coupling: None,
@@ -147,6 +148,12 @@ pub struct Sim {
     /// whose particles carry it over an active zone ([`SkinCarriers`]).
     pub skin_carriers: SkinCarriers,
     pub options: SimOptions,
+    /// The tool, its penalty per unit area resolved for the material ([`ToolOptions::resolve`]).
+    pub tool: AreaTool,
+    /// The rest area each outer (skin) vertex carries in the tool's contact \[m^2\]: a third of
+    /// its outer triangles' areas (the skin's total area, shared by its vertices), at most
+    /// [`SKIN_AREA_CAP_SPACINGS2`] squared lattice spacings.
+    pub skin_area: Vec<f64>,
     /// The factor the core's material is stiffened by (1: not homogenised; see
     /// [`SimOptions::homogenise`] and `runtime/homogenised_core.rs`).
     pub stiffening: f64,
@@ -238,6 +245,14 @@ impl Sim {
     /// within 30% of the core's height from its lowest point, so that a press cannot push the
     /// organ away.
     pub fn new(hybrid: HybridModel, material: Material, options: SimOptions) -> Result<Sim, ModelError> {
+        let tool = options.tool.resolve(&material);
+        let positive = |name, value: f64| if value > 0.0 && value.is_finite() { Ok(()) } else { Err(ModelError::Parameter { name, value, reason: "must be positive and finite" }) };
+        positive("tool radius [m]", tool.radius)?;
+        positive("tool area stiffness [N/m^3]", tool.stiffness)?;
+        if !(tool.damping >= 0.0 && tool.damping.is_finite()) {
+            return Err(ModelError::Parameter { name: "tool area damping [N s/m^3]", value: tool.damping, reason: "must be non-negative and finite" });
+        }
+        let skin_area = skin_areas(&hybrid.outer_points, &hybrid.outer_tris, SKIN_AREA_CAP_SPACINGS2 * hybrid.spacing * hybrid.spacing);
         let pts: Vec<[f64; 3]> = hybrid.core_points.iter().map(|p| [p.x, p.y, p.z]).collect();
         let tets: Vec<[i64; 4]> = hybrid.core_tets.iter().map(|t| t.map(|i| i as i64)).collect();
         let (mesh, _) = TetMesh::from_arrays(&pts, &tets)?;
@@ -293,7 +308,7 @@ impl Sim {
         let skin_face_reach = skin.face_reach(hybrid.core_faces.len());
         let skin_carriers = SkinCarriers::new(&hybrid);
         let node_tets = Buckets::build(core.n_nodes(), core.n_tets(), |t| core.mesh().tets()[t]);
-        Ok(Sim { hybrid, core, particles, particle_tie, skin, skin_face_reach, coupled, coupling, confinement, shell, core_surface, shell_mass: attached, skin_carriers, options, stiffening, node_tets })
+        Ok(Sim { hybrid, core, particles, particle_tie, skin, skin_face_reach, coupled, coupling, confinement, shell, core_surface, shell_mass: attached, skin_carriers, options, tool, skin_area, stiffening, node_tets })
     }
 
     /// The factor the core's material was stiffened by (1: not homogenised; see
@@ -333,4 +348,32 @@ impl Sim {
 fn lowest_nodes(points: &[Vec3], fraction: f64) -> Vec<usize> {
     let cut = crate::hybrid::homogenise::held_cut(points, fraction);
     (0..points.len()).filter(|&i| points[i].z <= cut).collect()
+}
+
+/// The most skin area one vertex carries in the tool's contact, in squared lattice spacings
+/// ([`Sim::skin_area`]).
+///
+/// Why a cap: a skin much coarser than the particle lattice puts a whole triangle fan's penalty
+/// on one vertex, carried by the few particles under it. Uncapped, on a 66-vertex ellipsoid skin
+/// (230 mm^2 a vertex, 4 mm lattice) the 4 mm sphere met one vertex with 25 kN/m: the vertex and
+/// its particles bounced off the tool, the force 1.7 N one tick and 0 the next three. Capped, such
+/// a skin's contact is softer per area than asked (the tool sinks between its vertices anyway).
+/// Rodero's skin (0.72 mm^2 a vertex on a 1.6 mm lattice) is not capped, the ellipsoids' (median
+/// 2.8 mm^2, cap 3.3 mm^2 on 1.15 mm) only at its largest vertices; the tests' synthetic
+/// ventricle (median 2.7 mm^2 on 0.90 mm) mostly, at 2.0 mm^2 (172 N/m a vertex with the 5 mm
+/// tool, 2.9x the per-point 60 N/m of before). Why 2.5: it holds every hybrid test, the coarse
+/// 66-vertex model's included (2026-12-07); no bounce was seen up to it, and an uncapped vertex
+/// of 14 squared spacings bounced. A damping near critical for the mass a vertex carries
+/// (`1 / sum(w_p^2 / m_p)`) would let coarse skins be as stiff as fine ones: not yet tried.
+pub const SKIN_AREA_CAP_SPACINGS2: f64 = 2.5;
+
+/// A third of each vertex's triangles' areas \[m^2\] `(n_points)`, at most `cap`.
+fn skin_areas(points: &[Vec3], tris: &[[usize; 3]], cap: f64) -> Vec<f64> {
+    let mut area = vec![0.0; points.len()];
+    for t in tris {
+        let a = 0.5 * (points[t[1]] - points[t[0]]).cross(&(points[t[2]] - points[t[0]])).norm() / 3.0;
+        t.iter().for_each(|&v| area[v] += a);
+    }
+    area.iter_mut().for_each(|a| *a = a.min(cap));
+    area
 }

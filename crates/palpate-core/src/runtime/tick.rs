@@ -321,7 +321,7 @@ pub fn tick_force_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, t
                     xs += w * sub.x[p];
                     vs += w * sub.v[p];
                 }
-                if let Some(contact) = o.tool.contact(&c, &tool_v, &xs, &vs) {
+                if let Some(contact) = sim.tool.sample(sim.skin_area[v]).contact(&c, &tool_v, &xs, &vs) {
                     // The transpose of the placement: `w_p` of the force to each particle under,
                     // the skin tie's share to the core less the particles' ties' shares.
                     skin_to_core[v] += contact.force;
@@ -581,15 +581,20 @@ fn substeps(sim: &Sim, particles: &meshfree::ParticleState, ws: &mut SimWorkspac
     let held = sim.particles.fixed();
     let stretch2 = particles.active.iter().filter(|&&p| !held[p]).map(|&p| stretch_bound(&sim.particles.deformation_gradient(p, &particles.x))).fold(1.0, f64::max);
     let mass = sim.particles.masses();
+    // Each skin vertex's penalty is the tool's per unit area times the vertex's area: the share
+    // of a particle is that area times its weight over its mass.
     let mut top = 0.0f64;
-    for &(p, w) in &ws.near_items {
-        ws.contact_share[p] += w / mass[p];
-        top = top.max(ws.contact_share[p]);
+    for (k, &v) in ws.near.iter().enumerate() {
+        let area = sim.skin_area[v];
+        for &(p, w) in &ws.near_items[ws.near_ptr[k]..ws.near_ptr[k + 1]] {
+            ws.contact_share[p] += area * w / mass[p];
+            top = top.max(ws.contact_share[p]);
+        }
     }
     for &(p, _) in &ws.near_items {
         ws.contact_share[p] = 0.0;
     }
-    let tool = &sim.options.tool;
+    let tool = &sim.tool;
     sim.shell.substeps(dt, stretch2, tool.stiffness * top, tool.damping * top, sim.options.max_substeps)
 }
 

@@ -23,9 +23,31 @@
 //!   is one more force per point, allocation-free, with a known stability limit (below), while
 //!   constraints need a projection or a solve coupled across the contact set every sub-step.
 //!
-//! The cost is a small interpenetration, `d = f / (n k)` at force `f`.
+//! The cost is a small interpenetration, `d = f / (n k)` at force `f` (on the paper's ellipsoids
+//! 0.14-0.2 mm at 2-5 mm of travel with the default, below).
 //!
-//! # Choosing the stiffness
+//! # Per unit area: the runtime's contact ([`AreaTool`])
+//! The hybrid runtime gives each skin vertex the penalty of the skin area it carries (a third of
+//! its outer triangles' rest areas): `k_v = k_a A_v` with `k_a` \[N/m^3\] per unit area, default
+//! [`AreaTool::default_stiffness`] `= 12 E* / R` (the full-FEM body's in the haptics crate too).
+//! A penalty per point made the contact as stiff as the skin was fine. Measured on the paper's
+//! ellipsoids (5 mm sphere, 2 mm of travel, 1.15 mm lattice), the outer surface at 1,026 / 4,098
+//! / 16,386 vertices (2026-12-07, `python/tests/test_validate.py`): per unit area the force was
+//! 0.088 / 0.092 / 0.090 N and the tool sank 0.31 / 0.16 / 0.17 mm into the skin; with 60 N/m a
+//! vertex (before), at 2,050 / 4,098 / 16,386 vertices, 0.062 / 0.084 / 0.091 N and 0.88-1.60 /
+//! 0.39-0.46 / 0.16-0.19 mm. What is left of the force's spread is the shell's own geometry (a
+//! coarser outer polyhedron is a thinner wall). On the Rodero skin (0.72 mm^2 a vertex) the
+//! default is the 62 N/m a vertex it had; on the ellipsoids' (2.8 mm^2) four times that.
+//!
+//! A vertex carries at most [`super::sim::SKIN_AREA_CAP_SPACINGS2`] squared lattice spacings:
+//! on a skin much coarser than the lattice (the tests' 66-vertex ellipsoid, 230 mm^2 a vertex on
+//! a 4 mm lattice) one vertex, carried by the few particles under it, met the sphere with 25 kN/m
+//! and bounced off it (1.7 N one tick, 0 the next three). Capped, such a skin's contact is softer
+//! per area than asked (the 1,026-vertex ellipsoid above: 11 mm^2 a vertex capped at 3.3, the
+//! tool sank 0.31 mm where it sinks 0.16 into the finer skins; its force 5% below theirs), and a
+//! skin that the cap binds everywhere is a point contact again, `k_a` times the cap a vertex.
+
+//! # Stability and fidelity
 //! Two bounds meet:
 //! - **Stability** of an explicit sub-step `h` on the lightest contacted particle of mass `m`:
 //!   central differences are stable while the largest `omega^2 = k_total / m` satisfies
@@ -33,30 +55,23 @@
 //!   (`S` = [`STABILITY_SAFETY`] = 0.9: the particle body's sub-step is that fraction of its
 //!   critical step), so in the worst case (the stiffest internal mode at the contacted particle,
 //!   along the normal) the contact spring may add `k <= (4 - (2 S)^2) m / h^2 = 0.76 m / h^2`:
-//!   [`Tool::stiffness_for`].
+//!   [`Tool::stiffness_for`]. The runtime does not bound the contact by it: its sub-step count
+//!   counts the contact's share of each particle ([`super::stability`]), and the contact is cheap
+//!   there (on the Rodero ventricle 60 / 120 / 240 / 480 N/m a vertex took 12.0 / 12.7 / 13.9 /
+//!   16.2 sub-steps a tick; on the ellipsoids 60 / 240 / 960 N/m 16.0 / 17.1 / 19.9).
 //! - **Fidelity**: the contact springs in series with the tissue should be stiffer than the
 //!   tissue under the sphere, `k_tissue ~ 2 E* a` (Hertz: `E* = E / (1 - nu^2)`, contact radius
-//!   `a = sqrt(R d)`), about `E* R` at `d ~ R / 4`, shared by the surface particles under the
-//!   contact patch (area `~ pi R d`).
-//!
-//! Measured on the synthetic truncated ventricle of the tests (28,000 particles, 0.90 mm
-//! lattice, 7.2e-7 kg particles; tests/runtime_parts.rs prints them): myocardium (30 kPa,
-//! `nu = 0.4`) gives a stable particle sub-step of 9.3e-5 s, so `0.76 m / h^2 = 63 N/m`; and
-//! `E* R = 179 N/m` for the 5 mm sphere, over ~24 surface particles at 1.25 mm depth: ~7 N/m
-//! per point. The default [`DEFAULT_STIFFNESS`] = 60 N/m is ~8x the tissue's per point (the
-//! contact springs add ~12% compliance in series with the tissue, and the penetration is ~12% of
-//! the indentation) and inside the worst-case stability bound (`omega h = 0.85` for the contact
-//! spring alone). The bound scales with `m / h^2 ~ rho spacing^3 / h^2`, and `h ~ spacing / c`,
-//! so `~ rho c^2 spacing = (lambda + 2 mu) spacing`: stiffer tissue or a coarser lattice allows
-//! a stiffer contact. Other models and materials should take
-//! `DEFAULT_STIFFNESS.min(Tool::stiffness_for(lightest mass, sub-step))`.
+//!   `a = sqrt(R d)`), about `E* R` at `d ~ R / 4`; per unit area, `E* / (1.7 a)`
+//!   ([`AreaTool::default_stiffness`]).
 
+use crate::material::Material;
 use crate::math::Vec3;
 use crate::meshfree::STABILITY_SAFETY;
 
 /// Default tool radius \[m\] (the 5 mm sphere).
 pub const DEFAULT_RADIUS: f64 = 5.0e-3;
-/// Default penalty stiffness per contact point \[N/m\] (see the module docs for the reason).
+/// Default penalty stiffness of [`Tool::default`], a point penalty \[N/m\] (the runtime's is per
+/// unit area: [`AreaTool`]).
 pub const DEFAULT_STIFFNESS: f64 = 60.0;
 /// Default contact damping per contact point \[N s/m\]: 0.15 of the critical damping
 /// `2 sqrt(k m)` of [`DEFAULT_STIFFNESS`] on a 7.2e-7 kg particle (`2 sqrt(60 * 7.2e-7) ~ 0.013`).
@@ -177,5 +192,77 @@ impl Tool {
             }
         }
         sum
+    }
+}
+
+/// The default penalty per unit area in units of `E* / R` ([`AreaTool::default_stiffness`]).
+pub const AREA_STIFFNESS_PER_E_OVER_R: f64 = 12.0;
+
+/// Default approach damping per unit of skin area \[N s/m^3\]: the 0.002 N s/m a skin vertex of
+/// the per-point contact had (see [`DEFAULT_DAMPING`] for why so little) over the Rodero
+/// ventricle's 0.72 mm^2 a vertex.
+pub const DEFAULT_AREA_DAMPING: f64 = 2.8e3;
+
+/// The tool's penalty per unit of the surface's rest area: radius \[m\], stiffness \[N/m^3\] and
+/// approach damping \[N s/m^3\]. A point carrying the area `A` \[m^2\] meets the tool as the
+/// point penalty [`AreaTool::sample`] `= Tool { k A, c A }`: the contact's stiffness over a patch
+/// is then `k` times the patch's area whatever the tessellation of the surface (a penalty per
+/// point makes a skin twice as fine twice as stiff: measured on the paper's ellipsoids with
+/// 2,050 / 4,098 / 16,386 skin vertices at 60 N/m each, the 5 mm sphere sank 0.9-1.6 / 0.39-0.46
+/// / 0.16-0.19 mm into the skin at 2-6 mm of travel).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AreaTool {
+    /// Sphere radius \[m\].
+    pub radius: f64,
+    /// Penalty stiffness per unit area \[N/m^3\].
+    pub stiffness: f64,
+    /// Approach damping per unit area \[N s/m^3\].
+    pub damping: f64,
+}
+
+impl AreaTool {
+    /// The point contact of a point carrying `area` \[m^2\].
+    #[inline]
+    pub fn sample(&self, area: f64) -> Tool {
+        Tool { radius: self.radius, stiffness: self.stiffness * area, damping: self.damping * area }
+    }
+
+    /// The default penalty per unit area \[N/m^3\] for a tissue of `material` under a sphere of
+    /// `radius` \[m\]: `12 E* / R`, `E* = E / (1 - nu^2)`, ten times the tissue's own stiffness
+    /// per unit area under the sphere. Hertz: a pressure `p` on a disc of radius `a` of an
+    /// elastic half-space sinks it by `16 p a / (3 pi E*) ~ 1.7 p a / E*` on average, a stiffness
+    /// per unit area of `E* / (1.7 a)`; at a quarter-radius press (`a = sqrt(R d) = R / 2`) that
+    /// is `1.18 E* / R`. Ten times it, the contact adds ~10% compliance in series with the
+    /// tissue. Myocardium (30 kPa, `nu = 0.4`) under the 5 mm sphere: 8.6e7 N/m^3 (on the Rodero
+    /// skin, 0.72 mm^2 a vertex, 62 N/m a vertex: the per-point default it replaces; on the
+    /// paper's ellipsoids, 2.7 mm^2 a vertex, 4x that).
+    pub fn default_stiffness(material: &Material, radius: f64) -> f64 {
+        let nu = material.poisson();
+        AREA_STIFFNESS_PER_E_OVER_R * material.young() / (1.0 - nu * nu) / radius
+    }
+}
+
+/// The tool of a hybrid simulation as its options give it ([`super::SimOptions::tool`]):
+/// resolved against the material by [`ToolOptions::resolve`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ToolOptions {
+    /// Sphere radius \[m\] (default [`DEFAULT_RADIUS`], 5 mm).
+    pub radius: f64,
+    /// Penalty stiffness per unit of skin area \[N/m^3\]; `None` (default):
+    /// [`AreaTool::default_stiffness`] of the material and the radius.
+    pub area_stiffness: Option<f64>,
+    /// Approach damping per unit of skin area \[N s/m^3\] (default [`DEFAULT_AREA_DAMPING`]).
+    pub area_damping: f64,
+}
+
+impl Default for ToolOptions {
+    fn default() -> Self { ToolOptions { radius: DEFAULT_RADIUS, area_stiffness: None, area_damping: DEFAULT_AREA_DAMPING } }
+}
+
+impl ToolOptions {
+    /// The tool with its stiffness resolved for `material`.
+    pub fn resolve(&self, material: &Material) -> AreaTool {
+        let stiffness = self.area_stiffness.unwrap_or_else(|| AreaTool::default_stiffness(material, self.radius));
+        AreaTool { radius: self.radius, stiffness, damping: self.area_damping }
     }
 }
