@@ -30,7 +30,7 @@ TICKS = 120        # a gentle script: 3 mm over 30 ticks, slide 10 mm over 60 (0
 TARGET = 300
 
 KEYS = {
-    "model": str, "core_tets": int, "particles": int, "active_target": int, "tool_radius_m": float,
+    "model": str, "core_tets": int, "particles": int, "active_target": int, "tool_radius_m": float, "tool_area_stiffness": float,
     "active_particles_mean": float, "active_particles_max": int, "ticks": int, "tick_ms_mean": float,
     "tick_ms_p50": float, "tick_ms_p99": float, "tick_ms_max": float, "stable": bool, "max_force_n": float,
     "cpu_count": int, "python_version": str, "palpate_version": str, "date": str,
@@ -141,6 +141,12 @@ def test_cli_json_with_a_given_radius(tmp_path, ellipsoids):
     row = json.loads(r.stdout)
     assert row["model"] == "ell.palpate" and row["stable"] and row["tool_radius_m"] == 3e-3
     assert row["ticks"] == bh.MIN_TICKS and row["calibration"] == [[3e-3, row["active_particles_calibrated"]]]
+    # The contact's default is 12 E*/R for the bench's tissue; a given one is what runs.
+    e_star = bh.material().young / (1 - bh.material().poisson ** 2)
+    assert row["tool_area_stiffness"] == pytest.approx(12 * e_star / 3e-3, rel=1e-12)
+    r = _cli(path, "--active", 200, "--radius", 3e-3, "--ticks", bh.MIN_TICKS, "--json", "--tool-area-stiffness", 2e7)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["tool_area_stiffness"] == 2e7
 
 
 def test_demo_hybrid_rows_reduced(ellipsoids, capsys):

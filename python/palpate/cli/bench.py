@@ -77,6 +77,8 @@ def add_parser(sub) -> None:
                    help="tool radius [m]: skip the calibration")
     h.add_argument("--mass-scaling", type=float, default=None, metavar="Q",
                    help="the shell's mass-scaling quantile in (0, 1] (default: HybridSim's, 0.95; 1 scales nothing)")
+    h.add_argument("--tool-area-stiffness", type=float, default=None, metavar="K",
+                   help="the contact's penalty per unit of skin area [N/m^3] (default: HybridSim's, 12 E*/R)")
     h.add_argument("--json", action="store_true", help="one JSON object")
     add_quiet(h)
     h.set_defaults(func=cmd_bench_hybrid)
@@ -381,7 +383,8 @@ def cmd_bench_hybrid(a) -> int:
         name, model = load_hybrid_model(a.model, "bench hybrid")
     try:
         with _progress.task(f"bench hybrid {name}: calibrating and timing", quiet=a.json):
-            r = bh.run(model, a.active, a.ticks, radius=a.radius, name=name, mass_scaling=a.mass_scaling)
+            r = bh.run(model, a.active, a.ticks, radius=a.radius, name=name, mass_scaling=a.mass_scaling,
+                       tool_area_stiffness=a.tool_area_stiffness)
     except ValueError as e:
         raise Fail(f"palpate bench hybrid: {e}") from None
     except palpate_errors() as e:
