@@ -49,6 +49,14 @@ create_exception!(
 create_exception!(palpate, MeshWarning, PyUserWarning, "Something in a mesh was repaired (e.g. inverted tets reoriented).");
 create_exception!(
     palpate,
+    UnitWarning,
+    PyUserWarning,
+    "A value most likely given in the wrong unit (palpate's are SI: m, Pa, kg/m^3, s): a Young's modulus outside \
+     soft tissue's 100 Pa to 10 MPa, a tool radius over 5 cm, a tool target over 1 m from the organ. The message \
+     names the value and the unit that fits; ``strict_units=True`` makes it a ParameterError."
+);
+create_exception!(
+    palpate,
     SurfaceError,
     MeshError,
     "A triangle surface (array or file) that cannot be used, or surfaces that do not nest. The message \
@@ -240,6 +248,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("SolveError", py.get_type::<SolveError>())?;
     m.add("StepError", py.get_type::<StepError>())?;
     m.add("MeshWarning", py.get_type::<MeshWarning>())?;
+    m.add("UnitWarning", py.get_type::<UnitWarning>())?;
     m.add("ModelFileError", py.get_type::<ModelFileError>())?;
     let limit = py.get_type::<LimitError>();
     limit.setattr("requested", py.None())?;
@@ -542,6 +551,16 @@ pub fn warn_all<W: Display>(py: Python<'_>, source: Option<&str>, warnings: impl
         })?;
     }
     Ok(())
+}
+
+/// Issue `msg` as a `palpate.UnitWarning`, or, with `strict`, return it as a
+/// `palpate.ParameterError` (`"{msg} (strict_units)"`).
+pub fn unit_check(py: Python<'_>, msg: String, strict: bool) -> PyResult<()> {
+    if strict {
+        return Err(param_error_from(format!("{msg} (strict_units)")));
+    }
+    let msg = CString::new(msg).unwrap_or_else(|_| CString::new("unit warning").unwrap());
+    PyErr::warn(py, &py.get_type::<UnitWarning>(), &msg, 1)
 }
 
 /// Issue `msg` as a `palpate.MeshWarning`.

@@ -3,7 +3,7 @@
 
 use numpy::{PyArray1, PyArray2};
 use palpate_core::parallel::Serial;
-use palpate_core::runtime::{finish_tick, tick, tick_force_with, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, SkinSweep, TickReport, ToolOptions};
+use palpate_core::runtime::{finish_tick, scale, tick, tick_force_with, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, SkinSweep, TickReport, ToolOptions};
 use palpate_core::{StepMemory, Vec3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -22,7 +22,7 @@ use crate::material::PyMaterial;
 ///
 /// ``HybridSim(model, material, *, tool_radius=0.005, tool_area_stiffness=None,
 /// core_contact_stiffness=None, hold=True, activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None,
-/// mass_scaling=None, shell_fallback=True, shell_pause=None)``
+/// mass_scaling=None, shell_fallback=True, shell_pause=None, homogenise=True, strict_units=False)``
 ///
 /// Parameters
 /// ----------
@@ -71,6 +71,12 @@ use crate::material::PyMaterial;
 ///     Stiffen the core by the model's homogenisation factor at the material's Poisson's ratio
 ///     (default True; ``HybridModel.homogenisation``), so that where no particle is active the
 ///     core bends as the whole wall does. False: the paper's core, stiff as the tissue.
+/// strict_units : bool, optional
+///     Values most likely in the wrong unit (a Young's modulus outside soft tissue's 100 Pa to
+///     10 MPa, a tool radius over 5 cm, a tool target more than 1 m from the organ's bounding
+///     box: ``palpate_core::runtime::scale``) warn with ``palpate.UnitWarning`` naming the unit
+///     that fits (a far target once a simulation); True makes each a ``ParameterError`` (the
+///     target's in ``step``, before the tick).
 ///
 /// ``get_state()`` / ``set_state(s)`` save and restore everything a tick carries to the next (the
 /// ticks after a restore repeat the original's bit for bit); a ``HybridSim`` pickles (its model,
@@ -83,12 +89,17 @@ pub struct PyHybridSim {
     state: SimState,
     ws: SimWorkspace,
     last: TickReport,
+    /// The outer surface's bounding box at rest (the tool target's unit check).
+    bbox: (Vec3, Vec3),
+    strict_units: bool,
+    /// A far target was warned about (once a simulation).
+    warned_far: bool,
 }
 
 #[pymethods]
 impl PyHybridSim {
     #[new]
-    #[pyo3(signature = (model, material, *, tool_radius = None, tool_area_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None, homogenise = true))]
+    #[pyo3(signature = (model, material, *, tool_radius = None, tool_area_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None, homogenise = true, strict_units = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -106,6 +117,7 @@ impl PyHybridSim {
         #[pyo3(from_py_with = conv::arg)] shell_fallback: bool,
         shell_pause: Option<errors::Int>,
         #[pyo3(from_py_with = conv::arg)] homogenise: bool,
+        #[pyo3(from_py_with = conv::arg)] strict_units: bool,
     ) -> PyResult<Self> {
         let (linger_ticks, max_substeps) = (errors::count_opt(linger_ticks, "linger_ticks")?, errors::count_opt(max_substeps, "max_substeps")?);
         let shell_pause = errors::count_opt(shell_pause, "shell_pause")?;
@@ -162,10 +174,14 @@ impl PyHybridSim {
             (true, None) => options.shell_fallback,
         };
         let (hm, mat) = (model.model.clone(), material.inner);
+        for w in scale::parameter_warnings(&mat, options.tool.radius) {
+            errors::unit_check(py, format!("HybridSim: {w}"), strict_units)?;
+        }
         let sim = errors::guard("HybridSim", || py.detach(|| Sim::new(hm, mat, options)).map_err(errors::model_error))?;
         let state = SimState::rest(&sim);
         let ws = SimWorkspace::new(&sim);
-        Ok(PyHybridSim { sim, state, ws, last: TickReport::default() })
+        let bbox = scale::bounding_box(&sim.hybrid.outer_points);
+        Ok(PyHybridSim { sim, state, ws, last: TickReport::default(), bbox, strict_units, warned_far: false })
     }
 
     /// One tick of ``dt`` [s] with the tool's centre at ``tool_centre`` (3,) [m]; returns the
@@ -188,6 +204,12 @@ impl PyHybridSim {
         #[pyo3(from_py_with = conv::arg)] finish: bool,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let c = conv::vec3(tool_centre, "tool_centre")?;
+        if !self.warned_far || self.strict_units {
+            if let Some(w) = scale::target_warning(&self.bbox.0, &self.bbox.1, &c) {
+                errors::unit_check(py, format!("HybridSim.step: {w}"), self.strict_units)?;
+                self.warned_far = true;
+            }
+        }
         let (sim, state, ws) = (&self.sim, &mut self.state, &mut self.ws);
         let r = errors::guard("HybridSim.step", || {
             py.detach(|| if finish { tick(sim, state, ws, c, dt) } else { tick_force_with(sim, state, ws, c, dt, &Serial) })
@@ -310,7 +332,7 @@ impl PyHybridSim {
     /// [N/m^3] and ``tool_area_damping`` [N s/m^3] (resolved: per unit of skin area),
     /// ``core_contact_stiffness`` [N/m] (the tool against the core's
     /// surface), ``activation_margin`` [m], ``max_tool_step`` [m],
-    /// ``linger_ticks``, ``max_substeps``, ``hold``, ``mass_scaling`` (the quantile), the resolved
+    /// ``linger_ticks``, ``max_substeps``, ``hold``, ``strict_units``, ``mass_scaling`` (the quantile), the resolved
     /// ``coupling_stiffness`` [N/m], ``coupling_damping`` [N s/m] and ``confinement_stiffness``
     /// [N/m], and what the mass scaling did: ``mass_scaling_applied``, ``added_mass_fraction``
     /// (of the shell's mass), ``scaled_particles``, ``omega_max`` [rad/s] of the shell at rest.
@@ -327,6 +349,7 @@ impl PyHybridSim {
         d.set_item("linger_ticks", o.linger_ticks)?;
         d.set_item("max_substeps", o.max_substeps)?;
         d.set_item("hold", o.hold)?;
+        d.set_item("strict_units", self.strict_units)?;
         d.set_item("homogenise", o.homogenise)?;
         d.set_item("core_stiffening", self.sim.core_stiffening())?;
         d.set_item("shell_fallback", o.shell_fallback.is_some())?;
@@ -518,7 +541,7 @@ impl PyHybridSim {
     /// back to (``sim = snapshot.copy()``) or to try a different touch from. Ticks of the copy
     /// repeat those of the original bit for bit.
     fn copy(&self) -> PyHybridSim {
-        PyHybridSim { sim: self.sim.clone(), state: self.state.clone(), ws: self.ws.clone(), last: self.last }
+        PyHybridSim { sim: self.sim.clone(), state: self.state.clone(), ws: self.ws.clone(), last: self.last, bbox: self.bbox, strict_units: self.strict_units, warned_far: self.warned_far }
     }
 
     fn __copy__(&self) -> PyHybridSim {

@@ -57,6 +57,39 @@ def test_press_pushes_back_and_release_lets_go(ventricle, material):
     assert sim.time == pytest.approx(0.602) and sim.ticks == 602
 
 
+def test_unit_mistakes_warn_or_are_refused(ventricle, material):
+    """Issue 37: values most likely in the wrong unit (E typed in kPa, a tool radius in mm, a tool
+    target in mm) warn with ``UnitWarning`` naming the unit that fits; ``strict_units=True``
+    refuses them (the target before the tick: nothing moves). Plausible values say nothing."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sim = palpate.HybridSim(ventricle, material)
+        p, n = _press_point(sim)
+        sim.step(p + n * 0.004)
+    with pytest.warns(palpate.UnitWarning, match=r"typed in kPa\? 30 kPa is 30000 Pa"):
+        palpate.HybridSim(ventricle, palpate.Material(young=30.0, poisson=0.4))
+    with pytest.warns(palpate.UnitWarning, match=r"tool radius 5 m is over 5 cm.*5 mm is 0.005 m"):
+        palpate.HybridSim(ventricle, material, tool_radius=5.0)
+    far = p * 1e3                                     # the same point in mm
+    with pytest.warns(palpate.UnitWarning, match="m from the organ"):
+        sim.step(far)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sim.step(far)                                 # once a simulation
+    with pytest.raises(palpate.ParameterError, match=r"Young's modulus 30 Pa.*\(strict_units\)"):
+        palpate.HybridSim(ventricle, palpate.Material(young=30.0, poisson=0.4), strict_units=True)
+    with pytest.raises(palpate.ParameterError, match=r"10 MPa"):
+        palpate.HybridSim(ventricle, palpate.Material(young=3e9, poisson=0.4), strict_units=True)
+    strict = palpate.HybridSim(ventricle, material, strict_units=True)
+    assert strict.options["strict_units"] is True
+    with pytest.raises(palpate.ParameterError, match="from the organ"):
+        strict.step(far)
+    assert strict.ticks == 0 and strict.tool_position is None
+    assert issubclass(palpate.UnitWarning, UserWarning)
+
+
 def test_bad_input_is_refused(ventricle, material):
     with pytest.raises(ValueError, match="tool_radius"):
         palpate.HybridSim(ventricle, material, tool_radius=-1.0)

@@ -131,6 +131,9 @@ def test_slide_along_the_normal_is_refused(tmp_path):
     (["--every", "0"], "--every", 2), (["--young", "-3"], "--young", 2),
     # bad input (1): a value palpate's Material refuses (MaterialError)
     (["--poisson", "0.7"], "material", 1),
+    # bad input (1): a value most likely in the wrong unit, refused with --strict-units (issue 37)
+    (["--young", "30", "--strict-units"], "typed in kPa? 30 kPa is 30000 Pa", 1),
+    (["--tool-radius", "5", "--strict-units"], "5 mm is 0.005 m", 1),
 ])
 def test_bad_options_exit_2_or_1(tmp_path, capsys, args, what, code):
     rc = main(["touch", "--shape", "ventricle", "--script", str(SCRIPTS / "press_release.csv"),

@@ -18,7 +18,7 @@
     palpate info MESH [--unit m|cm|mm]  (a tet mesh file)
     palpate touch MODEL|--shape NAME --script SCRIPT.toml|SCRIPT.csv [--out DIR] [--every K] [--dt S]
                   [--tool-radius M] [--tool-area-stiffness K] [--young E] [--poisson NU] [--density RHO]
-                  [--phi P] [--psi P] [--free] [--quiet]
+                  [--phi P] [--psi P] [--free] [--strict-units] [--quiet]
         (a scripted touch of a hybrid model: force.csv, force.png, touch.pvd; palpate/touch.py)
     palpate haptic MODEL --device scripted:SCRIPT|replay:FILE|bridge:PORT|hand [--rate HZ] [--seconds S]
                    [--record FILE] [--kind KIND] [--max-force N] [--host IP] [--quiet]

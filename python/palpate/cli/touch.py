@@ -31,6 +31,9 @@ def add_parser(sub) -> None:
     t.add_argument("--tool-area-stiffness", type=float, default=None, metavar="K",
                    help="penalty stiffness per unit of skin area [N/m^3] (default 12 E*/R: 8.6e7 for the default tissue and tool)")
     t.add_argument("--free", action="store_true", help="do not hold the core at its base (or lower 30%%)")
+    t.add_argument("--strict-units", action="store_true",
+                   help="refuse (exit 1) a Young's modulus outside 100 Pa-10 MPa or a tool radius over 5 cm instead of "
+                        "warning (most likely the wrong unit: palpate's are SI)")
     add_quiet(t)
     t.add_argument("--dt", type=float, default=1e-3, metavar="S", help="tick [s] (default 1e-3)")
     t.add_argument("--every", type=int, default=None, metavar="K",
@@ -93,7 +96,7 @@ def cmd_touch(a) -> int:
     model, what = _model(a)
     try:
         sim = _p.HybridSim(model, material, tool_radius=a.tool_radius, tool_area_stiffness=a.tool_area_stiffness,
-                           hold=not a.free)
+                           hold=not a.free, strict_units=a.strict_units)
     except ValueError as e:
         raise Fail(f"palpate touch: {e}") from None
     except _p.PalpateError as e:

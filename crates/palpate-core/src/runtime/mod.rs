@@ -48,6 +48,7 @@ pub mod core_contact;
 pub mod coupling;
 pub mod embed;
 pub(crate) mod homogenised_core;
+pub mod scale;
 pub mod sim;
 pub mod stability;
 pub mod state;
