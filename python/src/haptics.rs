@@ -12,7 +12,7 @@ use std::net::{Ipv4Addr, SocketAddrV4};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use palpate_core::runtime::SimOptions;
+use palpate_core::runtime::{scale, SimOptions};
 use palpate_core::{ModelBuilder, Vec3};
 use palpate_haptics::bridge::protocol::Reject;
 use palpate_haptics::bridge::{Bridge, BridgeError, BridgeOptions, BridgeStats, Key};
@@ -64,7 +64,7 @@ fn busy(what: &str) -> PyErr {
 /// tool_radius=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None,
 /// coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None,
 /// stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1,
-/// physics_rate=None, single_rate=False, unsafe_limits=False, bridge_key=None)``
+/// physics_rate=None, single_rate=False, unsafe_limits=False, bridge_key=None, strict_units=False)``
 ///
 /// Parameters
 /// ----------
@@ -136,6 +136,11 @@ fn busy(what: &str) -> PyErr {
 ///     verify (``palpate.devices.bridge.load_key`` reads one from a file). Required for a ``host``
 ///     other than a loopback address; without it only local processes can reach the bridge, and
 ///     the loop's session rules (PROTOCOL.md) decide which one moves the tool.
+/// strict_units : bool
+///     Values most likely in the wrong unit (a Young's modulus outside 100 Pa to 10 MPa, a tool
+///     radius over 5 cm, a ``hand_start`` or :meth:`set_hand_target` more than 1 m from the
+///     model's bounding box: positions in mm) warn with ``palpate.UnitWarning`` (a far target
+///     once a loop); True makes each a ``ParameterError``.
 /// record_ticks : int
 ///     Ticks to record for :meth:`save_recording` (0: none). The buffer is allocated at start
 ///     (144 bytes a tick; a replay's or a script's is at most its length); ticks past it are
@@ -188,6 +193,11 @@ pub struct PyHapticLoop {
     replay_check: Option<Arc<ReplayCheck>>,
     /// The limit beyond the device class's rating that `unsafe_limits` let through.
     unsafe_note: Option<String>,
+    /// The model's bounding box at rest and `strict_units` (the hand target's unit check), and
+    /// whether a far target was warned about (once a loop).
+    bbox: (Vec3, Vec3),
+    strict_units: bool,
+    warned_far: std::sync::atomic::AtomicBool,
 }
 
 fn kind_of(name: &str) -> PyResult<DeviceKind> {
@@ -317,7 +327,7 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
 #[pymethods]
 impl PyHapticLoop {
     #[new]
-    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, silence = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1), physics_rate = None, single_rate = false, unsafe_limits = false, bridge_key = None), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1, physics_rate=None, single_rate=False, unsafe_limits=False, bridge_key=None)")]
+    #[pyo3(signature = (model, material, device, *, rate_hz = 1000.0, times = None, knots = None, recording = None, port = None, host = String::from("127.0.0.1"), kind = None, hand_start = None, idle = false, tool_radius = None, core_contact_stiffness = None, tool_area_stiffness = None, hold = true, coupling_stiffness = None, coupling_damping = None, proxy_mass = None, max_force = None, max_rate = None, ramp = None, stall_timeout = None, silence = None, record_ticks = errors::Int::Fits(0), max_ticks = None, spin = None, realtime = false, threads = errors::Int::Fits(1), physics_rate = None, single_rate = false, unsafe_limits = false, bridge_key = None, strict_units = false), text_signature = "(model, material, device, *, rate_hz=1000.0, times=None, knots=None, recording=None, port=None, host=\"127.0.0.1\", kind=None, hand_start=None, idle=False, tool_radius=None, core_contact_stiffness=None, tool_area_stiffness=None, hold=True, coupling_stiffness=None, coupling_damping=None, proxy_mass=None, max_force=None, max_rate=None, ramp=None, stall_timeout=None, silence=None, record_ticks=0, max_ticks=None, spin=None, realtime=False, threads=1, physics_rate=None, single_rate=False, unsafe_limits=False, bridge_key=None, strict_units=False)")]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -354,6 +364,7 @@ impl PyHapticLoop {
         #[pyo3(from_py_with = conv::arg)] single_rate: bool,
         #[pyo3(from_py_with = conv::arg)] unsafe_limits: bool,
         #[pyo3(from_py_with = conv::arg)] bridge_key: Option<Bound<'_, pyo3::types::PyBytes>>,
+        #[pyo3(from_py_with = conv::arg)] strict_units: bool,
     ) -> PyResult<Self> {
         // Counts as errors::Int: a negative one, or one beyond 64 bits, is a ParameterError
         // (pyo3's usize / u16 conversions raised OverflowError). The rest runs under the panic guard: a panic while opening a recording,
@@ -426,6 +437,19 @@ impl PyHapticLoop {
             let mut config = ServoConfig { rate_hz, physics_rate_hz: physics_rate, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(if realtime { 0.0 } else if physics_rate.is_some() { MULTIRATE_SPIN } else { BUSY_SPIN }), realtime, ..defaults };
             config.check().map_err(errors::param_error_from)?;
 
+            // Values most likely in the wrong unit (palpate_core::runtime::scale): warned, or
+            // refused with strict_units; the model's box for the hand target's check.
+            let tool_r = tool_radius.unwrap_or(palpate_core::runtime::tool::DEFAULT_RADIUS);
+            for w in scale::parameter_warnings(&material.inner, tool_r) {
+                errors::unit_check(py, format!("HapticLoop: {w}"), strict_units)?;
+            }
+            let bbox = if let Ok(hm) = model.cast::<PyHybridModel>() {
+                scale::bounding_box(&hm.borrow().model.outer_points)
+            } else if let Ok(body) = model.cast::<PyBody>() {
+                scale::bounding_box(body.borrow().model().mesh().points())
+            } else {
+                (Vec3::repeat(f64::NEG_INFINITY), Vec3::repeat(f64::INFINITY)) // refused below
+            };
             let mut hand = None;
             let mut bridge = None;
             let mut replay_check = None;
@@ -453,6 +477,9 @@ impl PyHapticLoop {
                         Some(p) => conv::vec3(p, "hand_start")?,
                         None => return Err(errors::param_error_from("device 'hand' needs hand_start=(3,) [m]")),
                     };
+                    if let Some(w) = scale::target_warning(&bbox.0, &bbox.1, &at) {
+                        errors::unit_check(py, format!("HapticLoop: hand_start: {w}"), strict_units)?;
+                    }
                     let h = Hand::new(HandParams::default(), at);
                     hand = Some(h.target());
                     Box::new(h)
@@ -529,7 +556,7 @@ impl PyHapticLoop {
             let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
             // A multirate recording replays from its own schedule (`run`), not the device's samples.
             let replay = replay.filter(|r| r.physics_rate_hz.is_some());
-            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description), replay, unsafe_note, replay_check })
+            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description), replay, unsafe_note, replay_check, bbox, strict_units, warned_far: Default::default() })
         })
     }
 
@@ -743,9 +770,16 @@ impl PyHapticLoop {
 
     /// Moves the simulated hand's target to ``p`` (3,) [m] (device ``"hand"`` only); never
     /// blocks the loop.
-    fn set_hand_target(&self, p: &Bound<'_, PyAny>) -> PyResult<()> {
+    fn set_hand_target(&self, py: Python<'_>, p: &Bound<'_, PyAny>) -> PyResult<()> {
         let v = conv::vec3(p, "p (the hand's target)")?;
         let h = self.hand.as_ref().ok_or_else(|| haptics_error("set_hand_target needs device 'hand'"))?;
+        use std::sync::atomic::Ordering::Relaxed;
+        if !self.warned_far.load(Relaxed) || self.strict_units {
+            if let Some(w) = scale::target_warning(&self.bbox.0, &self.bbox.1, &v) {
+                errors::unit_check(py, format!("HapticLoop.set_hand_target: {w}"), self.strict_units)?;
+                self.warned_far.store(true, Relaxed);
+            }
+        }
         h.set(&v);
         Ok(())
     }

@@ -872,6 +872,34 @@ def test_full_fem_body_hand_worst_stays_finite():
         palpate.HapticLoop(m.body.mesh, m.material, "hand", hand_start=p)
 
 
+def test_unit_mistakes_warn_or_are_refused(model):
+    """Issue 37: a hand target in mm (the same point 1000x farther), E in kPa or a tool radius in
+    mm warn with ``UnitWarning`` (the target once a loop), and ``strict_units=True`` refuses
+    them; plausible values say nothing."""
+    import warnings
+
+    p = np.asarray(model.outer_points).max(axis=0) + 0.01
+    mat = haptics.material()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        loop = palpate.HapticLoop(model, mat, "hand", hand_start=p, max_ticks=5)
+        loop.set_hand_target(p - 0.005)
+    with pytest.warns(palpate.UnitWarning, match="set_hand_target.*m from the organ"):
+        loop.set_hand_target(p * 1e3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        loop.set_hand_target(p * 1e3)                  # once a loop
+    with pytest.warns(palpate.UnitWarning, match="hand_start.*m from the organ"):
+        palpate.HapticLoop(model, mat, "hand", hand_start=p * 1e3, max_ticks=5)
+    with pytest.warns(palpate.UnitWarning, match="typed in kPa"):
+        palpate.HapticLoop(model, palpate.Material(young=30.0, poisson=0.4), "hand", hand_start=p, max_ticks=5)
+    with pytest.raises(palpate.ParameterError, match=r"tool radius 5 m.*\(strict_units\)"):
+        palpate.HapticLoop(model, mat, "hand", hand_start=p, tool_radius=5.0, strict_units=True)
+    strict = palpate.HapticLoop(model, mat, "hand", hand_start=p, max_ticks=5, strict_units=True)
+    with pytest.raises(palpate.ParameterError, match="m from the organ"):
+        strict.set_hand_target(p * 1e3)
+
+
 def test_contact_stiffness_is_per_unit_area(model):
     """The tool meets a full-FEM body's surface and a hybrid model's skin with a penalty per unit
     area (``tool_area_stiffness`` [N/m^3]); the per-point ``tool_stiffness`` [N/m] of before is
