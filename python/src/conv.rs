@@ -360,3 +360,15 @@ pub fn flagged_to_py<'py>(py: Python<'py>, flags: &[bool]) -> Bound<'py, PyArray
     let idx: Vec<usize> = flags.iter().enumerate().filter(|(_, &f)| f).map(|(i, _)| i).collect();
     usizes_to_py(py, &idx)
 }
+
+/// The extent of `points` \[m\] as `"0.052 x 0.052 x 0.084"` (4 significant digits): a repr that
+/// shows at once a mesh read in the wrong unit (issue 37).
+pub fn extent_text(points: &[Vec3]) -> String {
+    let (lo, hi) = palpate_core::runtime::scale::bounding_box(points);
+    if points.is_empty() {
+        return "0 x 0 x 0".to_string();
+    }
+    let e = hi - lo;
+    use palpate_core::runtime::scale::sig;
+    format!("{} x {} x {}", sig(e.x), sig(e.y), sig(e.z))
+}

@@ -119,7 +119,7 @@ impl PyTetMesh {
     }
 
     fn __repr__(&self) -> String {
-        format!("TetMesh(n_nodes={}, n_tets={}, volume={:.6e} m^3)", self.inner.n_nodes(), self.inner.n_tets(), self.inner.volume())
+        format!("TetMesh(n_nodes={}, n_tets={}, volume={:.6e} m^3, extent {} m)", self.inner.n_nodes(), self.inner.n_tets(), self.inner.volume(), crate::conv::extent_text(self.inner.points()))
     }
 }
 

@@ -196,7 +196,7 @@ impl PyTriSurface {
     }
 
     fn __repr__(&self) -> String {
-        format!("TriSurface(n_vertices={}, n_triangles={}, volume={:.6e} m^3)", self.inner.n_vertices(), self.inner.n_triangles(), self.inner.volume())
+        format!("TriSurface(n_vertices={}, n_triangles={}, volume={:.6e} m^3, extent {} m)", self.inner.n_vertices(), self.inner.n_triangles(), self.inner.volume(), crate::conv::extent_text(self.inner.points()))
     }
 }
 

@@ -304,6 +304,10 @@ def test_cli_build_files_and_tagged(ellipsoid_stls, tmp_path):
     assert r.returncode == 0, r.stderr
     i = palpate.HybridModel.load(out).info()
     assert i["projection"] == "radial" and i["core_fraction"] == 0.4
+    # The size read, in the unit assumed and in metres (issue 37): a wrong --unit shows at once.
+    ext = np.ptp(np.asarray(palpate.HybridModel.load(out).outer_points), axis=0)
+    line = next(ln for ln in r.stdout.splitlines() if "input read in mm" in ln)
+    assert f"{ext[0] * 1e3:.4g} x" in line and f"({ext[0]:.4g} x" in line and line.endswith(" m)"), line
     p, t, part = hybrid.ventricle_surface(48, 12)
     f = tmp_path / "lv.vtp"
     f.write_bytes(vtp(p * 1e3, t.tolist(), cell_data={"surface-id": (part.astype(np.int32) + 1)}))

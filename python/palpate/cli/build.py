@@ -6,6 +6,8 @@ from __future__ import annotations
 import math
 from typing import Optional
 
+import numpy as np
+
 from .. import _palpate as _p
 from .. import _progress
 from .. import defaults
@@ -67,6 +69,18 @@ def add_parser(sub) -> None:
                    help="keep the core as stiff as the tissue (the paper's core; by default the build computes "
                         "how much stiffer the core must be to bend as the whole wall does, VALIDATION.md)")
     h.set_defaults(func=cmd_build)
+
+
+def input_extent_line(model, unit: str) -> str:
+    """The outer surface's extent in the unit the input was read in, and in metres: a surface
+    read in the wrong unit shows at once (issue 37: 52 x 52 x 84 mm, not 52 x 52 x 84 m)."""
+    from ..io import UNITS
+
+    p = np.asarray(model.outer_points, dtype=float)
+    ext = p.max(axis=0) - p.min(axis=0)
+    s = UNITS[unit]
+    return (f"  input read in {unit}: the outer surface spans " + " x ".join(f"{v / s:.4g}" for v in ext)
+            + f" {unit} (" + " x ".join(f"{v:.4g}" for v in ext) + " m)")
 
 
 def _int_list(text: Optional[str], flag: str):
@@ -153,6 +167,8 @@ def cmd_build(a) -> int:
           f"{wall:.2f} s including reading the input")
     for w in caught:
         print(f"  note: {w.message}")
+    if files or a.tagged is not None:
+        print(input_extent_line(model, unit))
     for line in model_lines(info):
         print(line)
     print(f"  wrote {a.output} ({mb(info['file_bytes'])})")

@@ -30,8 +30,11 @@ fn thousand(value: f64, lo: f64, hi: f64) -> Option<(f64, &'static str)> {
 }
 
 /// `x` to 4 significant digits, without trailing zeros (a Young's modulus from Lame constants
-/// comes back as 29999.999999996).
-fn sig(x: f64) -> String {
+/// comes back as 29999.999999996): `0.052`, `30000`, `1.235e-05` below 1e-4.
+pub fn sig(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && x.abs() < 1e-4 {
+        return format!("{x:.3e}");
+    }
     if x == 0.0 || !x.is_finite() {
         return x.to_string();
     }
