@@ -2,9 +2,10 @@
 (:class:`palpate.HybridSim`) at a chosen number of active particles (issue 12).
 
 The case. A built hybrid model (a model file, or a shape of :func:`palpate.build_shape`), the
-material of the runtime's benchmarks (E = 30 kPa, nu = 0.4, 1000 kg/m^3, the paper's damping
-(0.5, 0.5), i.e. ``phi = psi = 1.0`` Pa s in palpate's convention), the core held
-(``hold=True``), the default tool stiffness, activation margin (1 mm), linger (100 ticks) and tool
+default tissue (:data:`palpate.defaults.tissue`: E = 30 kPa, nu = 0.4, 1060 kg/m^3; 1000 kg/m^3
+until 2026-12-07) with the paper's damping (0.5, 0.5), i.e. ``phi = psi = 1.0`` Pa s in palpate's
+convention, the material of ``palpate haptic`` too, the core held (``hold=True``), the default
+tool stiffness, activation margin (1 mm), linger (100 ticks) and tool
 speed cap (0.5 mm a tick). One thread (the core spawns none).
 
 The probe point (:func:`probe`). The outer (skin) vertex on the +x half of the outer surface's
@@ -67,10 +68,11 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 
 from . import _palpate as _p
+from . import defaults as _defaults
 
-E = 3.0e4                      # [Pa]
-NU = 0.4
-RHO = 1000.0                   # [kg/m^3]
+E = _defaults.tissue.young     # [Pa]
+NU = _defaults.tissue.poisson
+RHO = _defaults.tissue.density  # [kg/m^3]
 PHI = PSI = 1.0                # [Pa s]: the paper's (0.5, 0.5) (palpate stores them doubled)
 DT = 1e-3                      # one haptic tick [s]
 DEPTH = 3e-3                   # press depth [m]

@@ -17,6 +17,11 @@ cannot disagree::
 * :data:`static_solve`: :meth:`palpate.Body.static_solve`'s (``StaticOptions::default()``).
 * :data:`particles`: :class:`palpate.ParticleBody`'s ``kernel``, ``hourglass`` and
   ``min_relative_weight`` (``palpate_core::meshfree``).
+* :data:`tissue`: the default tissue (``Material::myocardium()``: E = 30 kPa, nu = 0.4,
+  1060 kg/m^3), the tissue of ``palpate touch``, ``palpate haptic``, the demo and scene files,
+  and the hybrid builder's density; :func:`tissue_material` makes it a :class:`palpate.Material`.
+  (``palpate bench`` keeps the shared benchmark protocol's 1000 kg/m^3, to compare with its
+  peers.)
 
 Units are SI, as in the functions that take them.
 """
@@ -80,13 +85,32 @@ class ParticleDefaults:
     min_relative_weight: float
 
 
+@dataclass(frozen=True)
+class TissueDefaults:
+    """The default tissue (``Material::myocardium()``)."""
+    young: float                   # [Pa]
+    poisson: float                 # [-]
+    density: float                 # [kg/m^3]
+
+
+def tissue_material(**overrides: Any) -> "_p.Material":
+    """The default tissue as a :class:`palpate.Material` (St. Venant-Kirchhoff, undamped), with
+    ``overrides`` (``young``, ``poisson``, ``density``, ``phi``, ``psi``, ``law``) applied."""
+    kw: Dict[str, Any] = dict(young=tissue.young, poisson=tissue.poisson, density=tissue.density)
+    kw.update(overrides)
+    return _p.Material(**kw)
+
+
 _RAW = _p._defaults()
 hybrid = HybridDefaults(**_RAW["hybrid"])
 quasi_newton = QuasiNewtonDefaults(**_RAW["quasi_newton"])
 newton = NewtonDefaults(**_RAW["newton"])
 static_solve = StaticSolveDefaults(**_RAW["static_solve"])
 particles = ParticleDefaults(**_RAW["particles"])
-del _RAW
+_M = _p.Material.myocardium()
+tissue = TissueDefaults(young=float(round(_M.young, 6)), poisson=float(round(_M.poisson, 12)), density=_M.density)
+del _RAW, _M
 
-__all__ = ["hybrid", "quasi_newton", "newton", "static_solve", "particles", "HybridDefaults",
-           "QuasiNewtonDefaults", "NewtonDefaults", "StaticSolveDefaults", "ParticleDefaults"]
+__all__ = ["hybrid", "quasi_newton", "newton", "static_solve", "particles", "tissue", "tissue_material",
+           "HybridDefaults", "QuasiNewtonDefaults", "NewtonDefaults", "StaticSolveDefaults", "ParticleDefaults",
+           "TissueDefaults"]

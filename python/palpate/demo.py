@@ -97,7 +97,9 @@ def _touch(models: dict, a) -> None:
     from . import touch
 
     shape = "rodero" if "rodero" in models else "ventricle"
-    sim = _p.HybridSim(models[shape], _p.Material(young=3e4, poisson=0.4, density=1000.0))
+    from . import defaults
+
+    sim = _p.HybridSim(models[shape], defaults.tissue_material())   # the default tissue, as palpate touch
     out = os.path.join(a.out, f"touch_{shape}")
     print(f"\nscripted touch of the {shape} model (palpate touch; examples/scripts/press_hold_slide.toml): "
           f"press 4 mm, hold, slide 8 mm, release, 1 ms ticks:")

@@ -18,10 +18,12 @@ from typing import Any, Callable, Dict, Optional, Tuple
 import numpy as np
 
 from . import _palpate as _p
+from . import defaults as _defaults
 
-#: The material of the benchmark and the soak [Pa, -, kg/m^3, Pa s] (palpate.bench_hybrid's:
-#: myocardium-like with the paper's damping).
-YOUNG, POISSON, DENSITY, PHI, PSI = 3.0e4, 0.4, 1000.0, 1.0, 1.0
+#: The material of ``palpate haptic``, the haptic benchmark and the soak [Pa, -, kg/m^3, Pa s]:
+#: the default tissue (:data:`palpate.defaults.tissue`) with the paper's damping.
+YOUNG, POISSON, DENSITY = _defaults.tissue.young, _defaults.tissue.poisson, _defaults.tissue.density
+PHI, PSI = 1.0, 1.0
 #: The scripted palpation of the benchmark: press depth [m], slide [m], one cycle's length [s].
 PRESS_DEPTH, PRESS_SLIDE, CYCLE_S = 0.004, 0.006, 2.0
 #: JSON keys of ``palpate bench haptic`` (at least these).

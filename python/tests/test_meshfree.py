@@ -85,6 +85,21 @@ def test_defaults_are_the_cores():
     assert (nt.max_iterations, nt.tolerance) == (d.newton.max_iterations, d.newton.tolerance)
     assert set(d.hybrid.options()) == {"projection", "core_fraction", "core_triangles", "core_layers", "spacing",
                                        "particles", "density", "min_region_particles", "field_voxels", "homogenise"}
+    # One default tissue (issue 36): the core's Material::myocardium, the builder's density, and
+    # the tissue of palpate touch, palpate haptic and the hybrid bench.
+    from palpate import bench_hybrid, haptics
+    from palpate.cli import touch
+
+    m = palpate.Material.myocardium()
+    assert (d.tissue.young, d.tissue.poisson, d.tissue.density) == (30e3, 0.4, 1060.0) == (
+        round(m.young, 6), round(m.poisson, 12), m.density)
+    assert d.hybrid.density == d.tissue.density
+    t = d.tissue_material(phi=1.0)
+    assert (t.density, t.phi) == (1060.0, 1.0) and abs(t.young - 30e3) < 1e-6
+    for mod in (touch, haptics):
+        assert (mod.YOUNG, mod.POISSON, mod.DENSITY) == (d.tissue.young, d.tissue.poisson, d.tissue.density)
+    assert (bench_hybrid.E, bench_hybrid.NU, bench_hybrid.RHO) == (d.tissue.young, d.tissue.poisson, d.tissue.density)
+    assert haptics.material().density == bench_hybrid.material().density == d.tissue.density
 
 
 def test_hybrid_builders_refuse_an_unknown_option():

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import math
 
+from .. import defaults as _defaults
 from ._common import Fail, RunFailed, Usage, add_quiet, fmt_mm, num
 
-#: Material defaults [Pa, -, kg/m^3]: those of the hybrid tests and the benchmark.
-YOUNG, POISSON, DENSITY = 3.0e4, 0.4, 1000.0
+#: Material defaults [Pa, -, kg/m^3]: the default tissue (palpate.defaults.tissue:
+#: Material::myocardium in the core), whose density the builder's particles have too.
+YOUNG, POISSON, DENSITY = _defaults.tissue.young, _defaults.tissue.poisson, _defaults.tissue.density
 
 
 def add_parser(sub) -> None:

@@ -31,7 +31,8 @@ pub struct HybridOptions {
     pub core_layers: usize,
     /// Particle spacing.
     pub spacing: Spacing,
-    /// Density of the wall \[kg/m^3\] (particle masses).
+    /// Density of the wall \[kg/m^3\] (particle masses; default the default tissue's,
+    /// [`crate::material::Material::myocardium`]: 1060).
     pub density: f64,
     /// Fewest particles an activation region should hold: nv(p_s) grows by rings of triangles
     /// until RV(p_s) has at least this many (or [`MAX_RINGS`] rings).
@@ -66,7 +67,7 @@ impl Default for HybridOptions {
             core_triangles: 0,
             core_layers: 1,
             spacing: Spacing::Count(28_000),
-            density: 1000.0,
+            density: crate::material::Material::myocardium().density(),
             min_region_particles: 50,
             field_voxels: 120_000,
             homogenise: true,

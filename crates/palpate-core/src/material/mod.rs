@@ -166,6 +166,10 @@ impl Material {
     }
 
     /// Myocardium-like soft tissue in SI: E = 30 kPa, nu = 0.4, rho = 1060 kg/m^3, no damping.
+    /// palpate's default tissue: the hybrid builder's density, and the tissue of `palpate
+    /// touch`, `palpate haptic`, the demo and scene files (Python: `palpate.defaults.tissue`),
+    /// read from here so that they cannot disagree. (The shared benchmark protocol's tissue is
+    /// 1000 kg/m^3: `palpate bench` keeps it, to compare with its peers.)
     pub fn myocardium() -> Material {
         Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1060.0, Damping::NONE)
             .expect("preset is valid")
