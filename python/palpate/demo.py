@@ -104,7 +104,7 @@ def _touch(models: dict, a) -> None:
     print(f"\nscripted touch of the {shape} model (palpate touch; examples/scripts/press_hold_slide.toml): "
           f"press 4 mm, hold, slide 8 mm, release, 1 ms ticks:")
     try:
-        # 20 frames (about 35 MB of VTU on Rodero's skin; palpate touch's default 100 wrote 172 MB).
+        # 20 frames (about 35 MB of VTU on Rodero's skin; palpate touch's default of about 80 wrote 172 MB).
         script = touch.default_script()
         every = touch.default_every(int(round(script.duration / 1e-3)), frames=DEMO_FRAMES)
         s = touch.run_touch(sim, script, out, tool_radius=0.005, plot=not a.no_plot, every=every,

@@ -611,7 +611,7 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
         os.makedirs(out_dir, exist_ok=True)
         with open(os.path.join(out_dir, "indentation.json"), "w") as fh:
             json.dump(_jsonable(result), fh, indent=1)
-        plot(result, os.path.join(out_dir, "indentation.png"))
+        result["plot"] = plot(result, os.path.join(out_dir, "indentation.png"))
     return result
 
 
@@ -685,9 +685,16 @@ def format_table(result: Dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def plot(result: Dict[str, Any], path: str) -> None:
-    """Force against indentation (hybrid, coarse, each reference level) and the dent profiles."""
-    import matplotlib
+def plot(result: Dict[str, Any], path: str) -> Optional[str]:
+    """Force against indentation (hybrid, coarse, each reference level) and the dent profiles,
+    written to ``path``; returns ``path``, or None (and says so) without matplotlib, which the
+    ``validate`` extra does not install (the ``plot`` extra does): the table and
+    ``indentation.json`` are the result, the plot a view of it."""
+    try:
+        import matplotlib
+    except ImportError:
+        print(f"(matplotlib not installed: no {os.path.basename(path)}; pip install 'palpate[plot]')")
+        return None
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -723,6 +730,7 @@ def plot(result: Dict[str, Any], path: str) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return path
 
 
 def _jsonable(o: Any) -> Any:

@@ -276,3 +276,14 @@ def test_the_contact_is_as_stiff_whatever_the_skin_tessellation():
     # The contact adds little compliance: the tool sinks under a tenth of the indentation (under
     # a fifth into the capped coarse skin).
     assert pen5 < 0.1 * ind5 and pen6 < 0.1 * ind6 and pen4 < 0.2 * ind4, runs
+
+
+def test_no_plot_without_matplotlib(tmp_path, monkeypatch, capsys):
+    # The validate extra does not install matplotlib: the plot is skipped and said so (the
+    # table and indentation.json are the result), not a crash after the run.
+    import sys
+
+    monkeypatch.setitem(sys.modules, "matplotlib", None)   # import matplotlib -> ImportError
+    path = tmp_path / "indentation.png"
+    assert validate.plot({"references": []}, str(path)) is None
+    assert not path.exists() and "matplotlib not installed: no indentation.png" in capsys.readouterr().out

@@ -98,5 +98,6 @@ def cmd_indentation(a) -> int:
         raise Fail(f"palpate validate indentation: material: {e}") from None
     if a.quiet:
         print(validate.format_table(result))
-    print(f"wrote {a.out}/indentation.json and {a.out}/indentation.png")
+    plotted = f" and {a.out}/indentation.png" if result.get("plot") else ""
+    print(f"wrote {a.out}/indentation.json{plotted}")
     return 0
