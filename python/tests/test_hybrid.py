@@ -37,7 +37,8 @@ def _check_model(m, particles=28000, tol=0.05):
     assert abs(len(m.particles) - particles) <= tol * particles, len(m.particles)
     assert i["particles"] == len(m.particles) == len(m.particle_masses)
     assert abs(m.core_volume + m.shell_volume - m.wall_volume) <= 0.02 * m.wall_volume
-    assert np.isclose(m.particle_masses.sum(), 1000.0 * m.shell_volume, rtol=1e-9)
+    assert np.isclose(m.particle_masses.sum(), palpate.defaults.hybrid.density * m.shell_volume, rtol=1e-9)
+    assert palpate.defaults.hybrid.density == palpate.defaults.tissue.density == 1060.0
     b = m.skin_barycentric
     assert b.shape == (len(m.outer_points), 3)
     assert (b >= 0).all() and (b <= 1).all() and np.allclose(b.sum(axis=1), 1.0)
