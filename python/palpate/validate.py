@@ -286,7 +286,18 @@ def gmsh_wall(surface: _palpate.TriSurface, triangles: Optional[int] = None) -> 
     if triangles is not None and triangles < surface.n_triangles:
         surface = surface.simplified(int(triangles))
     pts, tris = np.asarray(surface.points), np.asarray(surface.triangles)
+    # gmsh's initialize sets SIGPIPE's disposition back to the default in the whole process, where
+    # Python ignores it: a later write to a closed socket or pipe (the viewer's, the bridge's)
+    # then kills the process instead of raising BrokenPipeError. Found by the test suite's
+    # sigaction check (python/tests/conftest.py), which two CI runs killed by SIGPIPE led to.
+    import signal
+    import threading
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    sigpipe = signal.getsignal(signal.SIGPIPE) if main_thread else None
     gmsh.initialize(["-noenv"], readConfigFiles=False)
+    if sigpipe is not None:
+        signal.signal(signal.SIGPIPE, sigpipe)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.NumThreads", 1)
@@ -305,6 +316,8 @@ def gmsh_wall(surface: _palpate.TriSurface, triangles: Optional[int] = None) -> 
         _, nodes = gmsh.model.mesh.getElementsByType(4)
     finally:
         gmsh.finalize()
+        if sigpipe is not None:
+            signal.signal(signal.SIGPIPE, sigpipe)
     index = np.full(int(tags.max()) + 1, -1, dtype=np.int64)
     index[tags.astype(np.int64)] = np.arange(len(tags))
     tets = index[np.asarray(nodes, dtype=np.int64).reshape(-1, 4)]
