@@ -563,6 +563,43 @@ pub fn unit_check(py: Python<'_>, msg: String, strict: bool) -> PyResult<()> {
     PyErr::warn(py, &py.get_type::<UnitWarning>(), &msg, 1)
 }
 
+/// The tool target's unit check of a `HybridSim` or a `HapticLoop`: a target more than
+/// [`palpate_core::runtime::scale::TOOL_REACH_M`] from the organ's bounding box warns once (or,
+/// with `strict`, is refused every time).
+pub struct TargetCheck {
+    lo: palpate_core::Vec3,
+    hi: palpate_core::Vec3,
+    /// `strict_units`: refuse rather than warn.
+    pub strict: bool,
+    warned: std::sync::atomic::AtomicBool,
+}
+
+impl TargetCheck {
+    /// The check against the box `[lo, hi]` \[m\].
+    pub fn new((lo, hi): (palpate_core::Vec3, palpate_core::Vec3), strict: bool) -> TargetCheck {
+        TargetCheck { lo, hi, strict, warned: Default::default() }
+    }
+
+    /// Check `target` \[m\]; `what` prefixes the message (the call that gave it).
+    pub fn check(&self, py: Python<'_>, what: &str, target: &palpate_core::Vec3) -> PyResult<()> {
+        use std::sync::atomic::Ordering::Relaxed;
+        if self.warned.load(Relaxed) && !self.strict {
+            return Ok(());
+        }
+        if let Some(w) = palpate_core::runtime::scale::target_warning(&self.lo, &self.hi, target) {
+            unit_check(py, format!("{what}: {w}"), self.strict)?;
+            self.warned.store(true, Relaxed);
+        }
+        Ok(())
+    }
+}
+
+impl Clone for TargetCheck {
+    fn clone(&self) -> Self {
+        TargetCheck { lo: self.lo, hi: self.hi, strict: self.strict, warned: self.warned.load(std::sync::atomic::Ordering::Relaxed).into() }
+    }
+}
+
 /// Issue `msg` as a `palpate.MeshWarning`.
 pub fn warn(py: Python<'_>, msg: String) -> PyResult<()> {
     let msg = CString::new(msg).unwrap_or_else(|_| CString::new("mesh warning").unwrap());

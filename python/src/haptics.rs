@@ -193,11 +193,8 @@ pub struct PyHapticLoop {
     replay_check: Option<Arc<ReplayCheck>>,
     /// The limit beyond the device class's rating that `unsafe_limits` let through.
     unsafe_note: Option<String>,
-    /// The model's bounding box at rest and `strict_units` (the hand target's unit check), and
-    /// whether a far target was warned about (once a loop).
-    bbox: (Vec3, Vec3),
-    strict_units: bool,
-    warned_far: std::sync::atomic::AtomicBool,
+    /// The hand target's unit check (the model's bounding box at rest, `strict_units`).
+    target_check: errors::TargetCheck,
 }
 
 fn kind_of(name: &str) -> PyResult<DeviceKind> {
@@ -443,13 +440,13 @@ impl PyHapticLoop {
             for w in scale::parameter_warnings(&material.inner, tool_r) {
                 errors::unit_check(py, format!("HapticLoop: {w}"), strict_units)?;
             }
-            let bbox = if let Ok(hm) = model.cast::<PyHybridModel>() {
+            let target_check = errors::TargetCheck::new(if let Ok(hm) = model.cast::<PyHybridModel>() {
                 scale::bounding_box(&hm.borrow().model.outer_points)
             } else if let Ok(body) = model.cast::<PyBody>() {
                 scale::bounding_box(body.borrow().model().mesh().points())
             } else {
                 (Vec3::repeat(f64::NEG_INFINITY), Vec3::repeat(f64::INFINITY)) // refused below
-            };
+            }, strict_units);
             let mut hand = None;
             let mut bridge = None;
             let mut replay_check = None;
@@ -477,9 +474,7 @@ impl PyHapticLoop {
                         Some(p) => conv::vec3(p, "hand_start")?,
                         None => return Err(errors::param_error_from("device 'hand' needs hand_start=(3,) [m]")),
                     };
-                    if let Some(w) = scale::target_warning(&bbox.0, &bbox.1, &at) {
-                        errors::unit_check(py, format!("HapticLoop: hand_start: {w}"), strict_units)?;
-                    }
+                    target_check.check(py, "HapticLoop: hand_start", &at)?;
                     let h = Hand::new(HandParams::default(), at);
                     hand = Some(h.target());
                     Box::new(h)
@@ -556,7 +551,7 @@ impl PyHapticLoop {
             let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
             // A multirate recording replays from its own schedule (`run`), not the device's samples.
             let replay = replay.filter(|r| r.physics_rate_hz.is_some());
-            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description), replay, unsafe_note, replay_check, bbox, strict_units, warned_far: Default::default() })
+            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description), replay, unsafe_note, replay_check, target_check })
         })
     }
 
@@ -773,13 +768,7 @@ impl PyHapticLoop {
     fn set_hand_target(&self, py: Python<'_>, p: &Bound<'_, PyAny>) -> PyResult<()> {
         let v = conv::vec3(p, "p (the hand's target)")?;
         let h = self.hand.as_ref().ok_or_else(|| haptics_error("set_hand_target needs device 'hand'"))?;
-        use std::sync::atomic::Ordering::Relaxed;
-        if !self.warned_far.load(Relaxed) || self.strict_units {
-            if let Some(w) = scale::target_warning(&self.bbox.0, &self.bbox.1, &v) {
-                errors::unit_check(py, format!("HapticLoop.set_hand_target: {w}"), self.strict_units)?;
-                self.warned_far.store(true, Relaxed);
-            }
-        }
+        self.target_check.check(py, "HapticLoop.set_hand_target", &v)?;
         h.set(&v);
         Ok(())
     }

@@ -89,11 +89,8 @@ pub struct PyHybridSim {
     state: SimState,
     ws: SimWorkspace,
     last: TickReport,
-    /// The outer surface's bounding box at rest (the tool target's unit check).
-    bbox: (Vec3, Vec3),
-    strict_units: bool,
-    /// A far target was warned about (once a simulation).
-    warned_far: bool,
+    /// The tool target's unit check (the outer surface's bounding box at rest, `strict_units`).
+    target_check: errors::TargetCheck,
 }
 
 #[pymethods]
@@ -180,8 +177,8 @@ impl PyHybridSim {
         let sim = errors::guard("HybridSim", || py.detach(|| Sim::new(hm, mat, options)).map_err(errors::model_error))?;
         let state = SimState::rest(&sim);
         let ws = SimWorkspace::new(&sim);
-        let bbox = scale::bounding_box(&sim.hybrid.outer_points);
-        Ok(PyHybridSim { sim, state, ws, last: TickReport::default(), bbox, strict_units, warned_far: false })
+        let target_check = errors::TargetCheck::new(scale::bounding_box(&sim.hybrid.outer_points), strict_units);
+        Ok(PyHybridSim { sim, state, ws, last: TickReport::default(), target_check })
     }
 
     /// One tick of ``dt`` [s] with the tool's centre at ``tool_centre`` (3,) [m]; returns the
@@ -204,12 +201,7 @@ impl PyHybridSim {
         #[pyo3(from_py_with = conv::arg)] finish: bool,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let c = conv::vec3(tool_centre, "tool_centre")?;
-        if !self.warned_far || self.strict_units {
-            if let Some(w) = scale::target_warning(&self.bbox.0, &self.bbox.1, &c) {
-                errors::unit_check(py, format!("HybridSim.step: {w}"), self.strict_units)?;
-                self.warned_far = true;
-            }
-        }
+        self.target_check.check(py, "HybridSim.step", &c)?;
         let (sim, state, ws) = (&self.sim, &mut self.state, &mut self.ws);
         let r = errors::guard("HybridSim.step", || {
             py.detach(|| if finish { tick(sim, state, ws, c, dt) } else { tick_force_with(sim, state, ws, c, dt, &Serial) })
@@ -349,7 +341,7 @@ impl PyHybridSim {
         d.set_item("linger_ticks", o.linger_ticks)?;
         d.set_item("max_substeps", o.max_substeps)?;
         d.set_item("hold", o.hold)?;
-        d.set_item("strict_units", self.strict_units)?;
+        d.set_item("strict_units", self.target_check.strict)?;
         d.set_item("homogenise", o.homogenise)?;
         d.set_item("core_stiffening", self.sim.core_stiffening())?;
         d.set_item("shell_fallback", o.shell_fallback.is_some())?;
@@ -541,7 +533,7 @@ impl PyHybridSim {
     /// back to (``sim = snapshot.copy()``) or to try a different touch from. Ticks of the copy
     /// repeat those of the original bit for bit.
     fn copy(&self) -> PyHybridSim {
-        PyHybridSim { sim: self.sim.clone(), state: self.state.clone(), ws: self.ws.clone(), last: self.last, bbox: self.bbox, strict_units: self.strict_units, warned_far: self.warned_far }
+        PyHybridSim { sim: self.sim.clone(), state: self.state.clone(), ws: self.ws.clone(), last: self.last, target_check: self.target_check.clone() }
     }
 
     fn __copy__(&self) -> PyHybridSim {

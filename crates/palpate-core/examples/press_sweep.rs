@@ -179,7 +179,7 @@ fn main() {
         options.tool.area_damping = c;
     }
     let sim = Sim::new(model, tissue(damped), options).unwrap();
-    let (lo, hi) = sim.hybrid.outer_points.iter().fold((Vec3::repeat(f64::MAX), Vec3::repeat(f64::MIN)), |(l, h), p| (l.inf(p), h.sup(p)));
+    let (lo, hi) = palpate_core::runtime::scale::bounding_box(&sim.hybrid.outer_points);
     let mut failed = 0;
     for zi in 1..=4 {
         let z = lo.z + (hi.z - lo.z) * zi as f64 / 5.0;
