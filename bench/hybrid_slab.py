@@ -13,49 +13,11 @@ per depth a 0.5 s ramp and a 0.5 s hold at 1 kHz) and the force is printed besid
 from __future__ import annotations
 
 import argparse
-from typing import Tuple
 
 import numpy as np
 
 import palpate
 from palpate import validate
-
-
-def box_surface(width: float, height: float, n: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The box ``[-w/2, w/2]^2 x [0, h]`` as ``n x n`` quads on top and bottom (and as many as fit on
-    the sides), split into outward-facing triangles: points (k, 3), triangles (m, 3), parts (m,)
-    (0 bottom = inner, 1 top = outer, 2 sides = base)."""
-    nz = max(2, round(n * height / width))
-    ids: dict = {}
-
-    def pid(p) -> int:
-        return ids.setdefault(tuple(np.round(p, 12)), len(ids))
-
-    tris, parts = [], []
-
-    def quad(a, b, c, d, part):  # counter-clockwise seen from outside
-        tris.extend([[pid(a), pid(b), pid(c)], [pid(a), pid(c), pid(d)]])
-        parts.extend([part, part])
-
-    xs, zs = np.linspace(-width / 2, width / 2, n + 1), np.linspace(0.0, height, nz + 1)
-    w2 = width / 2
-    for i in range(n):
-        for j in range(n):
-            x0, x1, y0, y1 = xs[i], xs[i + 1], xs[j], xs[j + 1]
-            quad((x0, y0, height), (x1, y0, height), (x1, y1, height), (x0, y1, height), 1)
-            quad((x0, y0, 0.0), (x0, y1, 0.0), (x1, y1, 0.0), (x1, y0, 0.0), 0)
-    for i in range(n):
-        a, b = xs[i], xs[i + 1]
-        for k in range(nz):
-            z0, z1 = zs[k], zs[k + 1]
-            quad((a, -w2, z0), (b, -w2, z0), (b, -w2, z1), (a, -w2, z1), 2)
-            quad((b, w2, z0), (a, w2, z0), (a, w2, z1), (b, w2, z1), 2)
-            quad((w2, a, z0), (w2, b, z0), (w2, b, z1), (w2, a, z1), 2)
-            quad((-w2, b, z0), (-w2, a, z0), (-w2, a, z1), (-w2, b, z1), 2)
-    points = np.zeros((len(ids), 3))
-    for p, k in ids.items():
-        points[k] = p
-    return points, np.array(tris, dtype=np.int64), np.array(parts, dtype=np.int64)
 
 
 def main() -> None:
@@ -67,7 +29,7 @@ def main() -> None:
     ap.add_argument("--radius", type=float, default=0.005, help="sphere radius [m] (default 0.005)")
     ap.add_argument("--depths", type=float, nargs="+", default=[0.001, 0.002, 0.004], help="travels [m]")
     a = ap.parse_args()
-    points, tris, parts = box_surface(a.width, a.height, a.cells)
+    points, tris, parts = validate.slab_surface(a.width, a.height, a.cells)
     model = palpate.HybridModel.build_tagged(points, tris, parts, core_fraction=a.core_fraction)
     print(model)
     case = validate.IndentCase(shape="slab", tool_radius=a.radius, point=(0.0, 0.0, a.height),

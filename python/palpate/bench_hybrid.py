@@ -219,7 +219,7 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
     --help`` and the module docs). ``model_spec``: a shape name, a model file path or a
     :class:`palpate.HybridModel` (named ``name``); ``mass_scaling``: the shell's mass-scaling
     quantile (``HybridSim``'s default if ``None``; 1.0 scales nothing); ``tool_area_stiffness``:
-    the contact's penalty per unit of skin area [N/m^3] (``HybridSim``'s default, ``12 E*/R``,
+    the contact's penalty per unit of skin area [N/m^3] (``HybridSim``'s default, ``12 E*/min(R, 4h)``,
     if ``None``). Raises
     :class:`palpate.ParameterError` (a ``ValueError``) for bad arguments."""
     if isinstance(active, bool) or not isinstance(active, (int, np.integer)) or active <= 0:

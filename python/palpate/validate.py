@@ -57,6 +57,7 @@ __all__ = [
     "hybrid_curve",
     "dent_profile",
     "hertz_force",
+    "slab_surface",
     "run_indentation",
     "REFERENCE_LEVELS",
     "BUILT_LEVELS",
@@ -100,6 +101,47 @@ def hertz_force(young: float, poisson: float, radius: float, depth: np.ndarray) 
     half-space: ``4/3 E/(1 - nu^2) sqrt(R) d^(3/2)``."""
     d = np.asarray(depth, dtype=float)
     return 4.0 / 3.0 * young / (1.0 - poisson**2) * math.sqrt(radius) * np.clip(d, 0.0, None) ** 1.5
+
+
+def slab_surface(width: float, height: float, cells: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A box ``[-w/2, w/2]^2 x [0, h]`` [m] as one closed surface for
+    :meth:`palpate.HybridModel.build_tagged`: ``cells x cells`` quads on top and bottom (and as
+    many as fit on the sides), split into outward-facing triangles. Returns points (k, 3) [m],
+    triangles (m, 3) and their parts (m,): 0 the bottom (inner: the core grows up from it), 1 the
+    top (outer: the skin), 2 the sides (base: the runtime holds the core's nodes there; the bottom
+    is free). The hybrid's Hertz slab (``bench/hybrid_slab.py``, ``tests/test_validate.py``)."""
+    nz = max(2, round(cells * height / width))
+    ids: Dict[Tuple[float, float, float], int] = {}
+
+    def pid(p: Tuple[float, float, float]) -> int:
+        return ids.setdefault(tuple(np.round(p, 12)), len(ids))
+
+    tris: List[List[int]] = []
+    parts: List[int] = []
+
+    def quad(a, b, c, d, part: int) -> None:  # counter-clockwise seen from outside
+        tris.extend([[pid(a), pid(b), pid(c)], [pid(a), pid(c), pid(d)]])
+        parts.extend([part, part])
+
+    xs, zs = np.linspace(-width / 2, width / 2, cells + 1), np.linspace(0.0, height, nz + 1)
+    w2 = width / 2
+    for i in range(cells):
+        for j in range(cells):
+            x0, x1, y0, y1 = xs[i], xs[i + 1], xs[j], xs[j + 1]
+            quad((x0, y0, height), (x1, y0, height), (x1, y1, height), (x0, y1, height), 1)
+            quad((x0, y0, 0.0), (x0, y1, 0.0), (x1, y1, 0.0), (x1, y0, 0.0), 0)
+    for i in range(cells):
+        a, b = xs[i], xs[i + 1]
+        for k in range(nz):
+            z0, z1 = zs[k], zs[k + 1]
+            quad((a, -w2, z0), (b, -w2, z0), (b, -w2, z1), (a, -w2, z1), 2)
+            quad((b, w2, z0), (a, w2, z0), (a, w2, z1), (b, w2, z1), 2)
+            quad((w2, a, z0), (w2, b, z0), (w2, b, z1), (w2, a, z1), 2)
+            quad((-w2, b, z0), (-w2, a, z0), (-w2, a, z1), (-w2, b, z1), 2)
+    points = np.zeros((len(ids), 3))
+    for q, k in ids.items():
+        points[k] = q
+    return points, np.array(tris, dtype=np.int64), np.array(parts, dtype=np.int64)
 
 
 def _mobius(dirs: np.ndarray, focus: np.ndarray, k: float) -> np.ndarray:

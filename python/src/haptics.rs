@@ -98,9 +98,10 @@ fn busy(what: &str) -> PyErr {
 ///     Hybrid models only: the tool's wall against the core's surface [N/m] (default 2000): see
 ///     :class:`HybridSim`.
 /// tool_area_stiffness : float, optional
-///     The penalty per unit of surface area [N/m^3] (default ``12 E* / R``, ten times the
-///     tissue's Hertz stiffness per unit area under the sphere: 8.6e7 for myocardium and the
-///     5 mm tool). A hybrid model's skin vertices carry it by their areas (see
+///     The penalty per unit of surface area [N/m^3] (default ``12 E* / min(R, 4 h)``, ``h`` a
+///     hybrid model's lattice spacing, ``12 E* / R`` on a full-FEM body: ten times the tissue's
+///     Hertz stiffness per unit area under the smallest contact the model resolves; 8.6e7 for
+///     myocardium and the 5 mm tool on the Rodero model). A hybrid model's skin vertices carry it by their areas (see
 ///     :class:`HybridSim`); a full-FEM body takes each tick the least of it and what keeps the
 ///     contact stable (at 1 kHz on the protocol meshes about 1.5e6 to 2.5e6: that bound sets it).
 /// coupling_stiffness, coupling_damping, proxy_mass : float, optional

@@ -32,10 +32,11 @@ use crate::material::PyMaterial;
 /// tool_radius : float
 ///     The spherical tool's radius [m].
 /// tool_area_stiffness : float, optional
-///     Penalty stiffness per unit of skin area [N/m^3] (default ``12 E* / R``, ten times the
-///     tissue's Hertz stiffness per unit area under the sphere: 8.6e7 for myocardium and the
-///     5 mm tool); each skin vertex in contact carries a third of its triangles' areas, so the
-///     contact is as stiff whatever the skin's tessellation (``palpate_core::runtime::tool``).
+///     Penalty stiffness per unit of skin area [N/m^3] (default ``12 E* / min(R, 4 h)``, with
+///     ``h`` the model's lattice spacing: ten times the tissue's Hertz stiffness per unit area
+///     under the smallest contact the model resolves; 8.6e7 for myocardium and the 5 mm tool on
+///     the Rodero model); each skin vertex in contact carries a third of its triangles' areas, so
+///     the contact is as stiff whatever the skin's tessellation (``palpate_core::runtime::tool``).
 /// core_contact_stiffness : float, optional
 ///     Penalty stiffness of the tool against the core's surface [N/m] (default 2000: ten times
 ///     the tissue's under a 5 mm sphere), met at the surface's point nearest the tool's centre,

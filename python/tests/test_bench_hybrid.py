@@ -141,9 +141,10 @@ def test_cli_json_with_a_given_radius(tmp_path, ellipsoids):
     row = json.loads(r.stdout)
     assert row["model"] == "ell.palpate" and row["stable"] and row["tool_radius_m"] == 3e-3
     assert row["ticks"] == bh.MIN_TICKS and row["calibration"] == [[3e-3, row["active_particles_calibrated"]]]
-    # The contact's default is 12 E*/R for the bench's tissue; a given one is what runs.
+    # The contact's default is 12 E*/min(R, 4h) for the bench's tissue; a given one is what runs.
     e_star = bh.material().young / (1 - bh.material().poisson ** 2)
-    assert row["tool_area_stiffness"] == pytest.approx(12 * e_star / 3e-3, rel=1e-12)
+    h = ellipsoids.spacing
+    assert row["tool_area_stiffness"] == pytest.approx(12 * e_star / min(3e-3, 4 * h), rel=1e-12)
     r = _cli(path, "--active", 200, "--radius", 3e-3, "--ticks", bh.MIN_TICKS, "--json", "--tool-area-stiffness", 2e7)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["tool_area_stiffness"] == 2e7

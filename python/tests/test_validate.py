@@ -292,3 +292,79 @@ def test_no_plot_without_matplotlib(tmp_path, monkeypatch, capsys):
     path = tmp_path / "indentation.png"
     assert validate.plot({"references": []}, str(path)) is None
     assert not path.exists() and "matplotlib not installed: no indentation.png" in capsys.readouterr().out
+
+
+@pytest.fixture(scope="module")
+def slab():
+    """Issue 33 item 3's slab: 80 x 80 x 40 mm held at its sides (the runtime holds the core's
+    nodes on the base part), the bottom free; the core takes 0.85 of the height, so the top 6 mm
+    are particles (about 28,000, 1.09 mm apart). Built without homogenisation (its factor on this
+    slab is 0.96, within 1% of the force: VALIDATION.md)."""
+    points, tris, parts = validate.slab_surface(0.08, 0.04, 50)
+    return palpate.HybridModel.build_tagged(points, tris, parts, core_fraction=0.85, homogenise=False)
+
+
+def _slab_press(model, radius, travels, young=E):
+    case = validate.IndentCase(shape="slab", tool_radius=radius, point=(0.0, 0.0, 0.04), direction=(0.0, 0.0, -1.0),
+                               depths=tuple(travels), young=young)
+    hyb = validate.hybrid_curve(model, case, ramp_s=0.3, hold_s=0.3)
+    # (hybrid_curve adds a travel 30% past the deepest.)
+    d, f = np.asarray(hyb["indentation"]), np.asarray(hyb["force"])
+    return d, f, validate.hertz_force(young, NU, radius, d)
+
+
+@pytest.fixture(scope="module")
+def slab_presses(slab):
+    """The slab pressed by a 7.5 and a 15 mm sphere (travels 2 / 3 mm and 3.4 / 4.4 mm, and 30%
+    past the deepest): {radius: (indentation, force, Hertz)}."""
+    return {radius: _slab_press(slab, radius, travels) for radius, travels in ((0.0075, (0.002, 0.003)),
+                                                                               (0.015, (0.0034, 0.0044)))}
+
+
+def test_a_sphere_on_the_hybrid_slab_follows_hertz(slab, slab_presses):
+    # Issue 33 item 3 (VALIDATION.md, "Hertz on a hybrid slab"). The slab's own converged FEM
+    # follows Hertz here (15 mm sphere, 135k tets: +12 / +8 / +4 / +3% at 0.8-4.5 mm, converging
+    # toward it). Measured 2026-12-07 (0.5 s ramps; the test's 0.3 s give the same within 1%): 7.5 mm sphere +7 / -1% at 1.85 / 2.81 mm of
+    # indentation (3.4 / 4.2 spacings of contact radius); 15 mm sphere +14 / +5% at 3.1 / 4.2 mm
+    # (6.3 / 7.2 spacings). Not yet the issue's bound: under the 15 mm sphere at 3-4.5 spacings the
+    # force is +22 / +19% (the default contact, 12 E*/min(R, 4h), took it from +34 / +25%).
+    for radius, (d, f, hertz) in slab_presses.items():
+        a = np.sqrt(radius * d) / slab.spacing
+        assert (a >= 3.0).all(), a
+        err = f / hertz - 1.0
+        assert (np.abs(err) <= 0.15).all(), (radius, d, f, hertz, err)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 33: on the slab the force grows with the radius 12% faster than the "
+                                       "exact sphere's sqrt(R) (VALIDATION.md)")
+def test_the_hybrid_slabs_force_grows_as_the_square_root_of_the_radius(slab_presses):
+    # Hertz: at a given indentation F is proportional to sqrt(R). The 15 mm curve (log-log
+    # between its points) at the 7.5 mm sphere's deepest indentation, against sqrt(2) times the
+    # 7.5 mm force, corrected by the exact sphere's (Sneddon's) departure from Hertz at each d / R.
+    (d1, f1, _), (d2, f2, _) = slab_presses[0.0075], slab_presses[0.015]
+    at = d1[-1]
+    assert d2[0] <= at <= d2[-1], (d1, d2)
+    f15 = np.exp(np.interp(np.log(at), np.log(d2), np.log(f2)))
+    ratio = f15 / f1[-1] / (np.sqrt(2.0) * _sneddon_over_hertz(0.015, at) / _sneddon_over_hertz(0.0075, at))
+    assert ratio == pytest.approx(1.0, abs=0.10), ratio
+
+
+def _sneddon_over_hertz(radius, d):
+    """The exact rigid sphere's force (Sneddon 1965) over Hertz's at indentation ``d``."""
+    from scipy.optimize import brentq
+    a = brentq(lambda a: a / 2 * np.log((radius + a) / (radius - a)) - d, 1e-12, radius * (1 - 1e-12))
+    sneddon = 0.5 * ((a * a + radius * radius) * np.log((radius + a) / (radius - a)) - 2 * a * radius)
+    return sneddon / (4.0 / 3.0 * np.sqrt(radius) * d**1.5)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 33: the shell-core coupling springs are capped by the exchange's "
+                                       "explicit stability, not scaled with E (VALIDATION.md)")
+def test_the_hybrid_slabs_force_is_proportional_to_e(slab):
+    # Hertz: F proportional to E at a given indentation. Everything in the model should scale with
+    # E; the coupling springs do not: capped by the core nodes' masses over the tick squared
+    # (10 N/m here against E h = 33 N/m at 30 kPa), they make the force 1.7-1.75x, not 2x, when E
+    # doubles (measured 2026-12-07: F / Hertz 1.22 / 1.07 / 0.91 / 0.80 at 15 / 30 / 60 / 120 kPa).
+    d1, f1, _ = _slab_press(slab, 0.0075, (0.0015,), young=E)
+    d2, f2, _ = _slab_press(slab, 0.0075, (0.0015,), young=2 * E)
+    ratio = (f2 / f1) * (d1 / d2) ** 1.5  # at the same indentation (Hertz's d^1.5)
+    assert ratio == pytest.approx(2.0, rel=0.02), (d1, d2, f1, f2)

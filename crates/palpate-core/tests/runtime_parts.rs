@@ -256,11 +256,18 @@ fn the_contact_is_per_unit_of_skin_area() {
     let e_star = mat.young() / (1.0 - mat.poisson().powi(2));
     let r = sim.tool.radius;
     assert_eq!(r, 5e-3);
-    assert!(sim.tool.stiffness >= 10.0 * e_star / (1.7 * 0.5 * r), "{} N/m^3", sim.tool.stiffness);
-    assert_eq!(sim.tool.stiffness, AreaTool::default_stiffness(&mat, r));
+    // Ten times the tissue's stiffness per unit area under the smallest contact the lattice
+    // resolves (radius min(R / 2, 2 h)): on this 0.9 mm lattice the spacing sets it.
+    let a_min = (0.5 * r).min(2.0 * m.spacing);
+    assert!(2.0 * m.spacing < 0.5 * r);
+    assert!(sim.tool.stiffness >= 10.0 * e_star / (1.7 * a_min), "{} N/m^3", sim.tool.stiffness);
+    assert_eq!(sim.tool.stiffness, AreaTool::default_stiffness(&mat, r, m.spacing));
     let with = |tool: ToolOptions| Sim::new(m.clone(), mat, SimOptions { tool, ..SimOptions::default() });
+    // A larger sphere keeps it; a smaller one than four spacings is stiffer, as 1 / R.
     let big = with(ToolOptions { radius: 2.0 * r, ..ToolOptions::default() }).unwrap();
-    assert!((big.tool.stiffness / sim.tool.stiffness - 0.5).abs() < 1e-12);
+    assert_eq!(big.tool.stiffness, sim.tool.stiffness);
+    let small = with(ToolOptions { radius: 1e-3, ..ToolOptions::default() }).unwrap();
+    assert!((small.tool.stiffness * 1e-3 / (12.0 * e_star) - 1.0).abs() < 1e-12);
     assert_eq!(with(ToolOptions { area_stiffness: Some(1e7), ..ToolOptions::default() }).unwrap().tool.stiffness, 1e7);
     for (tool, name) in [
         (ToolOptions { area_stiffness: Some(f64::NAN), ..ToolOptions::default() }, "tool area stiffness [N/m^3]"),

@@ -251,11 +251,13 @@ pub const FEM_CONTACT_DAMPING_RATIO: f64 = 0.5;
 pub use palpate_core::runtime::tool::AREA_STIFFNESS_PER_E_OVER_R;
 
 /// The default penalty stiffness per unit area \[N/m^3\] for a tissue of `material` under a
-/// sphere of `radius` \[m\]: `12 E* / R` ([`AreaTool::default_stiffness`], the hybrid's too).
+/// sphere of `radius` \[m\]: `12 E* / R` ([`AreaTool::default_stiffness`], the hybrid's too; the
+/// mesh's resolution is not counted: on the protocol meshes the stability bound sets the
+/// stiffness far below it).
 /// At 1 kHz on the protocol meshes the stability bound is lower (see [`FemPhysics`]), and sets
 /// the stiffness.
 pub fn default_area_stiffness(material: &Material, radius: f64) -> f64 {
-    AreaTool::default_stiffness(material, radius)
+    AreaTool::default_stiffness(material, radius, f64::INFINITY)
 }
 
 /// A full-FEM body (`palpate_core::fem`, stepped by [`palpate_core::step`] with the model's

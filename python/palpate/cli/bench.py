@@ -78,7 +78,7 @@ def add_parser(sub) -> None:
     h.add_argument("--mass-scaling", type=float, default=None, metavar="Q",
                    help="the shell's mass-scaling quantile in (0, 1] (default: HybridSim's, 0.95; 1 scales nothing)")
     h.add_argument("--tool-area-stiffness", type=float, default=None, metavar="K",
-                   help="the contact's penalty per unit of skin area [N/m^3] (default: HybridSim's, 12 E*/R)")
+                   help="the contact's penalty per unit of skin area [N/m^3] (default: HybridSim's, 12 E*/min(R, 4h) with h the lattice spacing)")
     h.add_argument("--json", action="store_true", help="one JSON object")
     add_quiet(h)
     h.set_defaults(func=cmd_bench_hybrid)

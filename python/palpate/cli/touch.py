@@ -31,7 +31,7 @@ def add_parser(sub) -> None:
     t.add_argument("--psi", type=float, default=0.0, help="damping psi [Pa s] (default 0)")
     t.add_argument("--tool-radius", type=float, default=None, metavar="M", help="tool sphere radius [m] (default the core's, 5 mm)")
     t.add_argument("--tool-area-stiffness", type=float, default=None, metavar="K",
-                   help="penalty stiffness per unit of skin area [N/m^3] (default 12 E*/R: 8.6e7 for the default tissue and tool)")
+                   help="penalty stiffness per unit of skin area [N/m^3] (default 12 E*/min(R, 4h), h the lattice spacing: 8.6e7 for the default tissue and tool on Rodero)")
     t.add_argument("--free", action="store_true", help="do not hold the core at its base (or lower 30%%)")
     t.add_argument("--strict-units", action="store_true",
                    help="refuse (exit 1) a Young's modulus outside 100 Pa-10 MPa or a tool radius over 5 cm instead of "

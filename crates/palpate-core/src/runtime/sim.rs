@@ -30,7 +30,7 @@ pub struct SimOptions {
     pub coupling_depth_spacings: f64,
     /// The core's integrator (default: the quasi-Newton backward Euler, stable at any press).
     pub integrator: Integrator,
-    /// The tool (default: a 5 mm sphere, its penalty per unit of skin area `12 E* / R`, see
+    /// The tool (default: a 5 mm sphere, its penalty per unit of skin area `12 E* / min(R, 4 h)`, see
     /// [`super::tool`]).
     pub tool: ToolOptions,
     /// Ticks a region stays active after its last contact (default 100: 0.1 s at 1 kHz, so a
@@ -245,7 +245,7 @@ impl Sim {
     /// within 30% of the core's height from its lowest point, so that a press cannot push the
     /// organ away.
     pub fn new(hybrid: HybridModel, material: Material, options: SimOptions) -> Result<Sim, ModelError> {
-        let tool = options.tool.resolve(&material);
+        let tool = options.tool.resolve(&material, hybrid.spacing);
         let positive = |name, value: f64| if value > 0.0 && value.is_finite() { Ok(()) } else { Err(ModelError::Parameter { name, value, reason: "must be positive and finite" }) };
         positive("tool radius [m]", tool.radius)?;
         positive("tool area stiffness [N/m^3]", tool.stiffness)?;

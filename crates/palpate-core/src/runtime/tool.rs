@@ -29,7 +29,8 @@
 //! # Per unit area: the runtime's contact ([`AreaTool`])
 //! The hybrid runtime gives each skin vertex the penalty of the skin area it carries (a third of
 //! its outer triangles' rest areas): `k_v = k_a A_v` with `k_a` \[N/m^3\] per unit area, default
-//! [`AreaTool::default_stiffness`] `= 12 E* / R` (the full-FEM body's in the haptics crate too).
+//! [`AreaTool::default_stiffness`] `= 12 E* / min(R, 4 h)` with `h` the lattice spacing (the
+//! full-FEM body's in the haptics crate too, with `min(R, 4 h) = R`).
 //! A penalty per point made the contact as stiff as the skin was fine. Measured on the paper's
 //! ellipsoids (5 mm sphere, 2 mm of travel, 1.15 mm lattice), the outer surface at 1,026 / 4,098
 //! / 16,386 vertices (2026-12-07, `python/tests/test_validate.py`): per unit area the force was
@@ -198,6 +199,10 @@ impl Tool {
 /// The default penalty per unit area in units of `E* / R` ([`AreaTool::default_stiffness`]).
 pub const AREA_STIFFNESS_PER_E_OVER_R: f64 = 12.0;
 
+/// The smallest contact the default penalty is stiff for, as a diameter in lattice spacings
+/// ([`AreaTool::default_stiffness`]: `min(R, 4 h)`; a contact radius of two spacings).
+pub const CONTACT_SPACINGS: f64 = 4.0;
+
 /// Default approach damping per unit of skin area \[N s/m^3\]: the 0.002 N s/m a skin vertex of
 /// the per-point contact had (see [`DEFAULT_DAMPING`] for why so little) over the Rodero
 /// ventricle's 0.72 mm^2 a vertex.
@@ -228,17 +233,27 @@ impl AreaTool {
     }
 
     /// The default penalty per unit area \[N/m^3\] for a tissue of `material` under a sphere of
-    /// `radius` \[m\]: `12 E* / R`, `E* = E / (1 - nu^2)`, ten times the tissue's own stiffness
-    /// per unit area under the sphere. Hertz: a pressure `p` on a disc of radius `a` of an
-    /// elastic half-space sinks it by `16 p a / (3 pi E*) ~ 1.7 p a / E*` on average, a stiffness
-    /// per unit area of `E* / (1.7 a)`; at a quarter-radius press (`a = sqrt(R d) = R / 2`) that
-    /// is `1.18 E* / R`. Ten times it, the contact adds ~10% compliance in series with the
-    /// tissue. Myocardium (30 kPa, `nu = 0.4`) under the 5 mm sphere: 8.6e7 N/m^3 (on the Rodero
-    /// skin, 0.72 mm^2 a vertex, 62 N/m a vertex: the per-point default it replaces; on the
-    /// paper's ellipsoids, 2.7 mm^2 a vertex, 4x that).
-    pub fn default_stiffness(material: &Material, radius: f64) -> f64 {
+    /// `radius` \[m\] on a model that resolves contacts down to a radius of two `spacing`s \[m\]:
+    /// `12 E* / min(R, 4 h)`, `E* = E / (1 - nu^2)`, ten times the tissue's own stiffness per
+    /// unit area under the smallest contact the model resolves. Hertz: a pressure `p` on a disc
+    /// of radius `a` of an elastic half-space sinks it by `16 p a / (3 pi E*) ~ 1.7 p a / E*` on
+    /// average, a stiffness per unit area of `E* / (1.7 a)`, larger the smaller the contact. The
+    /// smallest contact that matters is a quarter-radius press (`a = R / 2`: `1.18 E* / R`) or,
+    /// under a large sphere, two lattice spacings (below that the lattice cannot shape the dent):
+    /// ten times it, the contact adds at most ~10% compliance in series with the tissue.
+    ///
+    /// Why the spacing (2026-12-07): with `12 E* / R` alone a 15 mm sphere's contact was 4x the
+    /// tissue's at a shallow press, and its compliance blunted the indenter: on an 80 x 80 x 40 mm
+    /// hybrid slab (`bench/hybrid_slab.py`, 1.09 mm lattice) the force at 0.64 / 1.44 mm of
+    /// indentation was +34 / +25% over Hertz with 2.9e7 N/m^3, +20 / +19% with 1.2e8 and +16 / +18%
+    /// with 4e8 (a converged FEM of the same slab, 135k tets: +12 / +8%, converging toward Hertz).
+    /// Myocardium (30 kPa, `nu = 0.4`) under the 5 mm sphere: 8.6e7 N/m^3 on the Rodero model
+    /// (1.63 mm lattice: the radius sets it; 0.72 mm^2 a skin vertex, 62 N/m a vertex, the per-point
+    /// default it replaces), 9.3e7 on the paper's ellipsoids (1.15 mm); under a 15 mm sphere 6.6e7
+    /// and 9.3e7 (the spacing sets it). `spacing` infinite: `12 E* / R`.
+    pub fn default_stiffness(material: &Material, radius: f64, spacing: f64) -> f64 {
         let nu = material.poisson();
-        AREA_STIFFNESS_PER_E_OVER_R * material.young() / (1.0 - nu * nu) / radius
+        AREA_STIFFNESS_PER_E_OVER_R * material.young() / (1.0 - nu * nu) / radius.min(CONTACT_SPACINGS * spacing)
     }
 }
 
@@ -249,7 +264,7 @@ pub struct ToolOptions {
     /// Sphere radius \[m\] (default [`DEFAULT_RADIUS`], 5 mm).
     pub radius: f64,
     /// Penalty stiffness per unit of skin area \[N/m^3\]; `None` (default):
-    /// [`AreaTool::default_stiffness`] of the material and the radius.
+    /// [`AreaTool::default_stiffness`] of the material, the radius and the model's spacing.
     pub area_stiffness: Option<f64>,
     /// Approach damping per unit of skin area \[N s/m^3\] (default [`DEFAULT_AREA_DAMPING`]).
     pub area_damping: f64,
@@ -260,9 +275,9 @@ impl Default for ToolOptions {
 }
 
 impl ToolOptions {
-    /// The tool with its stiffness resolved for `material`.
-    pub fn resolve(&self, material: &Material) -> AreaTool {
-        let stiffness = self.area_stiffness.unwrap_or_else(|| AreaTool::default_stiffness(material, self.radius));
+    /// The tool with its stiffness resolved for `material` on a lattice of `spacing` \[m\].
+    pub fn resolve(&self, material: &Material, spacing: f64) -> AreaTool {
+        let stiffness = self.area_stiffness.unwrap_or_else(|| AreaTool::default_stiffness(material, self.radius, spacing));
         AreaTool { radius: self.radius, stiffness, damping: self.area_damping }
     }
 }
