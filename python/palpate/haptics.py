@@ -166,10 +166,13 @@ def run_live(loop: "_p.HapticLoop", seconds: Optional[float], on_status: Optiona
              every: float = 0.2, on_event: Optional[Callable[[str], None]] = None) -> Dict[str, Any]:
     """Starts ``loop``, calls ``on_status(line)`` every ``every`` [s] until it finishes or
     ``seconds`` [s] pass, stops it and returns its report (:meth:`palpate.HapticLoop.stop`).
-    ``on_event(line)`` gets the bridge's events (:func:`bridge_events`) as they happen."""
+    ``on_event(line)`` gets the bridge's events (:func:`bridge_events`) as they happen. Ctrl-C
+    (``KeyboardInterrupt``) stops the loop the same way: the report then has ``interrupted``
+    True (a session is often ended so; its summary and recording are still wanted)."""
     loop.start()
     t0 = time.monotonic()
     seen: Dict[str, Any] = {}
+    interrupted = False
     try:
         while True:
             done = loop.wait(every)
@@ -180,8 +183,11 @@ def run_live(loop: "_p.HapticLoop", seconds: Optional[float], on_status: Optiona
                 on_status(status_line(loop.snapshot(), loop.rate_hz))
             if done or (seconds is not None and time.monotonic() - t0 >= seconds):
                 break
+    except KeyboardInterrupt:
+        interrupted = True
     finally:
         report = loop.stop()
+    report["interrupted"] = interrupted
     return report
 
 

@@ -262,6 +262,7 @@ fn core_dict<'py>(py: Python<'py>, core: &HapticCore, d: &Bound<'py, PyDict>) ->
         e.set_item("tick", f.tick)?;
         e.set_item("time", f.time)?;
         e.set_item("reason", f.fault.to_string())?;
+        e.set_item("fault", f.counted)?;
         faults.append(e)?;
     }
     d.set_item("n_faults", core.faults())?;
@@ -652,8 +653,9 @@ impl PyHapticLoop {
     /// and the late ticks right after one: the physics' own), ``overruns_machine`` (the rest: the
     /// thread kept off the CPU, or woken late), ``overrun_times_s`` (wall time since the start of
     /// each logged overrun), ``max_force_n``, ``energy_into_user_j``,
-    /// ``bad_inputs``, ``n_faults``, ``faults`` (list of dicts ``tick``, ``time``, ``reason``),
-    /// ``watchdog_trips``, ``recording_dropped_ticks`` (ticks past the recording buffer, not
+    /// ``bad_inputs``, ``n_faults`` (the ticks whose force a failure zeroed), ``faults`` (the log:
+    /// dicts ``tick``, ``time``, ``reason``, ``fault``: True for a counted fault, False for an
+    /// event logged only, such as a device silence's fade or a watchdog trip), ``watchdog_trips``, ``recording_dropped_ticks`` (ticks past the recording buffer, not
     /// recorded: nonzero means the recording holds only the run's beginning), ``realtime`` (the
     /// servo's scheduling: ``"off"``, ``"SCHED_FIFO priority 80"`` or ``"refused: ..."``),
     /// ``short_slice`` (an ordinary servo thread was granted Linux's shortest time slice, which

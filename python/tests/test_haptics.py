@@ -966,3 +966,24 @@ def test_cli_refuses_a_force_limit_beyond_the_device(tmp_path):
     r = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ellipsoids", "--device", "hand", "--kind", "touch", "--max-force", "50",
                         "--unsafe-limits", "--seconds", "0.05"], capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert r.returncode == 0 and "unsafe limits" in r.stderr, r.stderr
+
+
+def test_ctrl_c_on_the_haptic_command_prints_its_summary_and_writes_the_recording(tmp_path):
+    # A session is often ended with Ctrl-C: the loop stops as at --seconds, the summary is printed
+    # and --record written, and the exit code says it was interrupted (130).
+    import signal
+
+    rec = tmp_path / "hand.palprec"
+    # The child gets SIGINT's default disposition (a runner in the background ignores SIGINT and
+    # its children inherit that: Python then installs no Ctrl-C handler; see test_cli).
+    p = subprocess.Popen([sys.executable, "-m", "palpate", "haptic", "ellipsoids", "--device", "hand", "--seconds", "60",
+                          "--record", str(rec), "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert p.stdout.readline().startswith("palpate haptic:")   # the loop is built and starting
+    time.sleep(1.0)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 130, (p.returncode, out, err)
+    assert "interrupted" in err and "Traceback" not in err, err
+    assert "ticks in" in out and "recorded" in out, out
+    assert rec.stat().st_size > 0

@@ -285,7 +285,7 @@ impl PhysicsLoop {
         self.estimate.reset();
         self.faults += 1;
         if self.fault_log.len() < FAULT_LOG {
-            self.fault_log.push(FaultRecord { tick: self.tick, time: self.tick as f64 * self.dt, fault });
+            self.fault_log.push(FaultRecord { tick: self.tick, time: self.tick as f64 * self.dt, fault, counted: true });
         }
         let tool = self.physics.tool().unwrap_or(*target);
         self.model = LocalModel { tick: self.tick, tool, force: Vec3::zeros(), stiffness: Mat3::zeros(), faults: self.faults };

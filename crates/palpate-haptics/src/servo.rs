@@ -113,6 +113,10 @@ pub struct FaultRecord {
     pub tick: u64,
     pub time: f64,
     pub fault: Fault,
+    /// A fault path (counted in [`HapticCore::faults`]: the tick's force zeroed and the physics
+    /// restored, or a non-finite model), or false for an event logged only (a device silence's
+    /// or a stale model's fade beginning, the servo thread's watchdog trip).
+    pub counted: bool,
 }
 
 /// At most this many faults are logged (later ones are counted only).
@@ -414,7 +418,7 @@ impl HapticCore {
 
     pub(crate) fn log(&mut self, fault: Fault) {
         if self.fault_log.len() < FAULT_LOG {
-            self.fault_log.push(FaultRecord { tick: self.tick.saturating_sub(1), time: self.tick.saturating_sub(1) as f64 * self.dt, fault });
+            self.fault_log.push(FaultRecord { tick: self.tick.saturating_sub(1), time: self.tick.saturating_sub(1) as f64 * self.dt, fault, counted: false });
         }
     }
 
@@ -485,6 +489,9 @@ impl HapticCore {
                 out.fault = true;
                 self.faults += 1;
                 self.log(Fault::NonFinite);
+                if let Some(last) = self.fault_log.last_mut() {
+                    last.counted = true;
+                }
             }
         }
         out.tissue = self.tissue;
@@ -675,7 +682,7 @@ impl HapticCore {
             r.faults += 1;
         }
         if self.fault_log.len() < FAULT_LOG {
-            self.fault_log.push(FaultRecord { tick: self.tick - 1, time: (self.tick - 1) as f64 * self.dt, fault });
+            self.fault_log.push(FaultRecord { tick: self.tick - 1, time: (self.tick - 1) as f64 * self.dt, fault, counted: true });
         }
     }
 

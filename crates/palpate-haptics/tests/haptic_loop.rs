@@ -245,7 +245,7 @@ fn nan_from_the_physics_never_reaches_the_device() {
     assert!(sink.0.lock().unwrap().iter().all(|(_, f)| f.iter().all(|c| c.is_finite())));
     assert_eq!(restores, 1);
     assert_eq!(core.faults(), 1);
-    assert!(matches!(core.fault_log()[0], palpate_haptics::FaultRecord { tick: 150, fault: Fault::NonFinite, .. }));
+    assert!(matches!(core.fault_log()[0], palpate_haptics::FaultRecord { tick: 150, fault: Fault::NonFinite, counted: true, .. }));
     assert!(rec.ticks[299].force.norm() > 1.0, "pressing again after the ramp");
 }
 

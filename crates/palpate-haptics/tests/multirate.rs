@@ -110,6 +110,8 @@ fn a_stalled_physics_fades_to_zero_within_30ms() {
         assert!(forces[(0.030 / dt) as usize..].iter().all(|&f| f == 0.0));
         assert_eq!(core.stalls(), 1);
         assert!(matches!(core.fault_log()[0].fault, Fault::Stall(s) if (s - 0.015).abs() < 2.0 * dt));
+        // An event, not a fault: logged, not counted.
+        assert!(!core.fault_log()[0].counted && core.faults() == 0);
         // The physics back: ramped in (fast_ramp: 20 ms), not a step.
         let back = core.render(Some(dev), Some(model(ticks + 2))).force.norm();
         assert!(back > 0.0 && back < 1.0, "{rate} Hz: ramped back in: {back}");
@@ -140,7 +142,8 @@ fn device_silence_fades_to_zero_and_resumes_through_the_ramp() {
         assert_eq!(f(0.381), 0.0, "{label}: zero within 30 ms of the fade's start");
         assert!((381..499).all(|ms| f(ms as f64 * 1e-3) == 0.0), "{label}: zero while silent");
         assert_eq!(core.silences(), 1, "{label}");
-        assert!(core.fault_log().iter().any(|r| matches!(r.fault, Fault::DeviceSilent(s) if (s - 0.05).abs() < 0.002)), "{label}: logged");
+        assert!(core.fault_log().iter().any(|r| matches!(r.fault, Fault::DeviceSilent(s) if (s - 0.05).abs() < 0.002) && !r.counted), "{label}: logged as an event");
+        assert_eq!(core.faults(), 0, "{label}: a silence is not a fault");
         let back = f(0.502);
         assert!(back > 0.0 && back < 0.5, "{label}: ramped in after the silence: {back}");
         assert!(f(0.6) > 2.9, "{label}: full force again");

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 import sys
 
-from ._common import FAILED, Fail, RunFailed, Usage, add_physics_rate, load_hybrid_model, palpate_errors, physics_rate
+from ._common import FAILED, INTERRUPTED, Fail, RunFailed, Usage, add_physics_rate, load_hybrid_model, palpate_errors, physics_rate
 
 DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand"
 KINDS = ("simulated", "bridge", "touch", "forcedimension", "haply", "hapticmaster")
@@ -58,9 +58,10 @@ def add_parser(sub) -> None:
                         "have idle cores (on a 2-core machine they did not help: BENCHMARKS.md)")
     w = h.add_mutually_exclusive_group()
     w.add_argument("--busy-wait", action="store_true",
-                   help="the servo spins through each period instead of sleeping (the default without --realtime): "
-                        "a core kept busy, a shorter compute tail and fewer overruns (measured on a 2-core machine: "
-                        "docs/history/benchmarks-log.md); not with --realtime")
+                   help="the servo spins through each period instead of sleeping (the default of --single-rate "
+                        "without --realtime; the default two-rate loop sleeps to its deadlines, leaving the cores to "
+                        "the physics): a core kept busy, a shorter compute tail and fewer overruns for the single-rate "
+                        "loop (measured on a 2-core machine: docs/history/benchmarks-log.md); not with --realtime")
     w.add_argument("--sleep", action="store_true",
                    help="the servo sleeps through each wait but its last 200 us, leaving its core to other work "
                         "(more overruns on a busy or virtual machine)")
@@ -189,6 +190,8 @@ def cmd_haptic(a) -> int:
     r = haptics.run_live(loop, a.seconds, show, on_event=event)
     if tty and not a.quiet:
         print()
+    if r["interrupted"]:
+        print("palpate haptic: interrupted (Ctrl-C): the loop stopped; its summary and recording follow", file=sys.stderr)
     print(f"  {r['ticks']} ticks in {r['elapsed_s']:.2f} s ({r['achieved_hz']:.1f} Hz): period p50 {r['period_us_p50']:.0f} us, "
           f"p99 {r['period_us_p99']:.0f} us, max {r['period_us_max']:.0f} us; compute p99 {r['compute_us_p99']:.0f} us; "
           f"overruns {r['overruns']} (own {r['overruns_own']}, the machine's {r['overruns_machine']}); max force {r['max_force_n']:.3f} N; faults {r['n_faults']}")
@@ -197,8 +200,11 @@ def cmd_haptic(a) -> int:
         print(f"  physics: {p['ticks']} ticks ({p['achieved_hz']:.1f} of {p['rate_hz']:g} Hz): compute p50 {p['compute_us_p50']:.0f} us, "
               f"p99 {p['compute_us_p99']:.0f} us; lag p99 {p['lag_us_p99']:.0f} us, max {p['lag_us_max']:.0f} us; "
               f"late {p['late']}, skipped {p['skipped']}; device silences {r['device_silences']}, stale models {r['model_stalls']}")
+    # The log holds faults (counted above) and events (a device silence's or a stale model's fade,
+    # a watchdog trip: the force faded or zeroed, nothing failed).
     for f in r["faults"][:10]:
-        print(f"  fault at tick {f['tick']} (t = {f['time']:.3f} s): {f['reason']}")
+        what = "fault" if f.get("fault", True) else "event"
+        print(f"  {what} at tick {f['tick']} (t = {f['time']:.3f} s): {f['reason']}")
     if a.realtime:
         if r["realtime"].startswith("refused"):
             print(f"palpate haptic: warning: real-time scheduling {r['realtime']}", file=sys.stderr)
@@ -222,4 +228,6 @@ def cmd_haptic(a) -> int:
             print(f"palpate haptic: warning: the recording buffer was full: the last {r['recording_dropped_ticks']} of "
                   f"{n + r['recording_dropped_ticks']} ticks were not recorded (--seconds S sizes it; 144 bytes a tick)",
                   file=sys.stderr)
+    if r["interrupted"]:
+        return INTERRUPTED
     return FAILED if r["n_faults"] else 0

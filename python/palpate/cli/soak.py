@@ -52,5 +52,6 @@ def cmd_soak(a) -> int:
               f"overruns {r['overruns']} (own {r['overruns_own']}, the machine's {r['overruns_machine']}); max force {r['max_force_n']:.3f} N; energy into the user "
               f"{r['energy_into_user_j']:.3e} J; faults {r['n_faults']}")
         for f in r["faults"][:10]:
-            print(f"  fault at tick {f['tick']} (t = {f['time']:.3f} s): {f['reason']}", file=sys.stderr)
+            what = "fault" if f.get("fault", True) else "event"
+            print(f"  {what} at tick {f['tick']} (t = {f['time']:.3f} s): {f['reason']}", file=sys.stderr)
     return FAILED if r["n_faults"] else 0
