@@ -9,6 +9,12 @@ per depth a 0.5 s ramp and a 0.5 s hold at 1 kHz) and the force is printed besid
 ``4/3 E/(1 - nu^2) sqrt(R) d^1.5`` with the contact radius ``sqrt(R d)`` in particle spacings.
 
     .venv/bin/python bench/hybrid_slab.py --core-fraction 0.85 --radius 0.005 --depths 0.001 0.002 0.004
+
+``--fem N`` instead presses the slab's own full-FEM reference (Neo-Hookean, ``Body.indent``) on a
+``box_mesh`` of N x N x (2/3 N) cells graded toward the contact, the side nodes held up to the
+core's top as the runtime holds them (VALIDATION.md: 16, 24, 32 give 15k, 55k, 135k tets).
+
+    .venv/bin/python bench/hybrid_slab.py --fem 24 --radius 0.015 --depths 0.0008 0.0017 0.0034 0.0045
 """
 from __future__ import annotations
 
@@ -20,6 +26,27 @@ import palpate
 from palpate import validate
 
 
+def fem_reference(a: argparse.Namespace, grading: float = 1.4) -> None:
+    """The slab's full-FEM reference at the travels ``a.depths``, printed against Hertz."""
+    w, h = a.width, a.height
+    box = palpate.box_mesh(size=(w, w, h), cells=(a.fem, a.fem, max(2, round(a.fem * 2 / 3))))
+    p = np.array(box.points, dtype=float)
+    # Centred, and graded toward (0, 0, h): s -> sign(s) |s|^g across, t -> 1 - (1 - t)^g down.
+    s = (p[:, :2] - w / 2) / (w / 2)
+    p[:, :2] = w / 2 * np.sign(s) * np.abs(s) ** grading
+    p[:, 2] = h * (1 - (1 - p[:, 2] / h) ** grading)
+    mesh = palpate.TetMesh(p, np.array(box.tets))
+    side = (np.abs(np.abs(p[:, 0]) - w / 2) < 1e-9) | (np.abs(np.abs(p[:, 1]) - w / 2) < 1e-9)
+    fixed = np.nonzero(side & (p[:, 2] <= a.core_fraction * h + 1e-9))[0]
+    case = validate.IndentCase(shape="slab", tool_radius=a.radius, point=(0.0, 0.0, h), direction=(0.0, 0.0, -1.0))
+    body = palpate.Body(mesh, case.material(case.reference_law), fixed=fixed)
+    r = body.indent(case.start(), np.asarray(case.direction), a.radius, np.asarray(a.depths),
+                    max_increment=a.radius / 10, sample_spacing=3e-4)
+    hertz = validate.hertz_force(case.young, case.poisson, a.radius, r["indentation"])
+    for d, f, hz in zip(r["indentation"], r["force_along"], hertz):
+        print(f"FEM {mesh.n_tets} tets: indentation {d * 1e3:.3f} mm: {f:.4f} N, Hertz {hz:.4f} N ({100 * (f / hz - 1):+.1f}%)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--width", type=float, default=0.08, help="box width [m] (default 0.08)")
@@ -28,7 +55,11 @@ def main() -> None:
     ap.add_argument("--core-fraction", type=float, default=0.85, help="the core's share of the height (default 0.85)")
     ap.add_argument("--radius", type=float, default=0.005, help="sphere radius [m] (default 0.005)")
     ap.add_argument("--depths", type=float, nargs="+", default=[0.001, 0.002, 0.004], help="travels [m]")
+    ap.add_argument("--fem", type=int, default=None, help="press the slab's full-FEM reference of N x N x 2N/3 cells")
     a = ap.parse_args()
+    if a.fem is not None:
+        fem_reference(a)
+        return
     points, tris, parts = validate.slab_surface(a.width, a.height, a.cells)
     model = palpate.HybridModel.build_tagged(points, tris, parts, core_fraction=a.core_fraction)
     print(model)

@@ -29,8 +29,7 @@ fn main() {
     let depth = f(8) * 1e-3;
     let ticks: usize = a.get(9).map(|s| s.parse().unwrap()).unwrap_or(2000);
     let mat = support::tissue(env("DAMPED").is_some());
-    let mut opts = SimOptions::default();
-    opts.shell_fallback = None;
+    let mut opts = SimOptions { shell_fallback: None, ..SimOptions::default() };
     if let Some(r) = env("R") { opts.tool.radius = r; }
     if let Some(k) = env("COUPLING_K") {
         opts.coupling = Some(palpate_core::runtime::Coupling { stiffness: k, damping: env("COUPLING_C").unwrap_or(0.0) });

@@ -246,7 +246,7 @@ impl AreaTool {
     /// tissue's at a shallow press, and its compliance blunted the indenter: on an 80 x 80 x 40 mm
     /// hybrid slab (`bench/hybrid_slab.py`, 1.09 mm lattice) the force at 0.64 / 1.44 mm of
     /// indentation was +34 / +25% over Hertz with 2.9e7 N/m^3, +20 / +19% with 1.2e8 and +16 / +18%
-    /// with 4e8 (a converged FEM of the same slab, 135k tets: +12 / +8%, converging toward Hertz).
+    /// with 4e8 (a converged FEM of the same slab, 129k tets: +12 / +8%, converging toward Hertz).
     /// Myocardium (30 kPa, `nu = 0.4`) under the 5 mm sphere: 8.6e7 N/m^3 on the Rodero model
     /// (1.63 mm lattice: the radius sets it; 0.72 mm^2 a skin vertex, 62 N/m a vertex, the per-point
     /// default it replaces), 9.3e7 on the paper's ellipsoids (1.15 mm); under a 15 mm sphere 6.6e7
