@@ -38,6 +38,7 @@ import numpy as np
 
 from . import _palpate as _p
 from . import bench
+from ._extras import install_hint
 
 PAPER = {"ellipsoid": (188, 980.0), "ventricle": (1352, 35.0)}
 #: The paper's hybrid ventricle: 330-600 frames/s, 200 active particles on average, 600 at worst.
@@ -238,7 +239,7 @@ def plot_probe(curves, out: str) -> Optional[str]:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:  # an extra (palpate[plot]): the table above holds the numbers
-        print("(matplotlib not installed: no plot; pip install 'palpate[plot]')")
+        print(f"(matplotlib not installed: no plot; {install_hint('plot')})")
         return None
     os.makedirs(out, exist_ok=True)
     fig, ax = plt.subplots(figsize=(8, 4.5))

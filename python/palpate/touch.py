@@ -81,6 +81,7 @@ from ._indices import whole_indices
 from ._palpate import PalpateError, ParameterError
 from ._readers import read_text
 from .io import remove_frames, write_pvd
+from ._extras import install_hint
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -461,7 +462,7 @@ def plot_force(rows: np.ndarray, path: str, title: str = "") -> bool:
     try:
         import matplotlib
     except ImportError:  # an extra (palpate[plot]): the CSV holds the same data
-        print(f"(matplotlib not installed: no {os.path.basename(path)}; pip install 'palpate[plot]')")
+        print(f"(matplotlib not installed: no {os.path.basename(path)}; {install_hint('plot')})")
         return False
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

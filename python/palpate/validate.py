@@ -49,6 +49,7 @@ import numpy as np
 
 from . import _palpate
 from .hybrid import ELLIPSOIDS_INNER, ELLIPSOIDS_OUTER
+from ._extras import install_hint
 
 __all__ = [
     "IndentCase",
@@ -317,14 +318,14 @@ def gmsh_wall(surface: _palpate.TriSurface, triangles: Optional[int] = None) -> 
     """The solid inside a closed ``surface`` [m] as linear tets: the surface simplified to at most
     ``triangles`` triangles (:meth:`palpate.TriSurface.simplified`; ``None``: as given), then
     filled by gmsh's Delaunay mesher, which keeps that surface as the mesh's boundary and sizes
-    the inside from it. Needs gmsh (``pip install palpate[validate]``); a surface that crosses
+    the inside from it. Needs gmsh (the ``validate`` extra); a surface that crosses
     itself is refused by gmsh ("PLC Error: a segment and a facet intersect"), raised as a
     ``ModelError``."""
     try:
         import gmsh
     except (ImportError, OSError) as e:
         raise _palpate.ModelError(f"meshing a wall needs gmsh, which could not be imported ({e}): "
-                                  f"pip install 'palpate[validate]'") from None
+                                  f"{install_hint('validate')}") from None
     if triangles is not None and triangles < surface.n_triangles:
         surface = surface.simplified(int(triangles))
     pts, tris = np.asarray(surface.points), np.asarray(surface.triangles)
@@ -748,7 +749,7 @@ def plot(result: Dict[str, Any], path: str) -> Optional[str]:
     try:
         import matplotlib
     except ImportError:
-        print(f"(matplotlib not installed: no {os.path.basename(path)}; pip install 'palpate[plot]')")
+        print(f"(matplotlib not installed: no {os.path.basename(path)}; {install_hint('plot')})")
         return None
 
     matplotlib.use("Agg")

@@ -88,9 +88,22 @@ def test_plots_without_matplotlib_name_the_extra(monkeypatch, capsys, tmp_path):
     assert demo.plot_probe(curves, str(tmp_path)) is None
     touch.plot_force(np.zeros((0, len(touch.COLUMNS))), str(tmp_path / "force.png"))
     said = capsys.readouterr().out.splitlines()
-    assert len(said) == 2 and all("matplotlib not installed" in s and "pip install 'palpate[plot]'" in s for s in said)
+    assert len(said) == 2 and all("matplotlib not installed" in s and "pip install 'matplotlib" in s and "the plot extra" in s
+                                  for s in said), said
     assert not list(tmp_path.iterdir())
     monkeypatch.undo()
     if importlib.util.find_spec("matplotlib") is not None:   # with the extra: the plot
         assert demo.plot_probe(curves, str(tmp_path)) == str(tmp_path / "demo_probe.png")
         assert (tmp_path / "demo_probe.png").stat().st_size > 0
+
+
+def test_install_hints_name_the_extras_packages_not_pypi():
+    # palpate comes from a wheel or a checkout, not PyPI: `pip install 'palpate[plot]'` would look
+    # there (issue 37). The hint names the extra's packages from the installed metadata.
+    from palpate._extras import extra_packages, install_hint
+
+    assert any(p.startswith("matplotlib") for p in extra_packages("plot"))
+    assert {p.split(">")[0].split("[")[0] for p in extra_packages("study")} >= {"dask", "pyarrow", "scipy"}
+    hint = install_hint("plot")
+    assert hint.startswith("pip install 'matplotlib") and "palpate[" not in hint and "python[plot]" in hint, hint
+    assert extra_packages("no-such-extra") == [] and "python[no-such-extra]" in install_hint("no-such-extra")

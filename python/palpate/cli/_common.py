@@ -343,5 +343,7 @@ def require_extra(command: str, extra: str, modules: Tuple[str, ...]) -> None:
         except ImportError:
             missing.append(m)
     if missing:
+        from .._extras import install_hint
+
         raise RunFailed(f"palpate {command}: needs the {extra} extra ({', '.join(missing)} not installed): "
-                        f"pip install 'palpate[{extra}]'")
+                        f"{install_hint(extra)}")

@@ -16,6 +16,7 @@ from .. import bench
 from .. import bench_hybrid as bh
 from .. import bench_particles as bp
 from ._common import FAILED, Fail, RunFailed, Usage, add_physics_rate, add_quiet, fmt_mm, load_hybrid_model, load_view_model, num, palpate_errors, physics_rate
+from .._extras import install_hint
 
 
 def add_parser(sub) -> None:
@@ -149,7 +150,7 @@ def cmd_bench_view(a) -> int:
     try:
         import viser  # noqa: F401
     except ImportError:
-        raise RunFailed("palpate bench view: needs viser (pip install 'palpate[view]')") from None
+        raise RunFailed(f"palpate bench view: needs viser: {install_hint('view')}") from None
     from ..viewer.browser import find_chromium, have_playwright
 
     ok, why = have_playwright()

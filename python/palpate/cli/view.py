@@ -24,6 +24,7 @@ import sys
 import time
 
 from ._common import Fail, RunFailed, Usage, add_physics_rate, load_view_model, num, physics_rate
+from .._extras import install_hint
 
 #: Status lines on stdout every this many seconds (unless --quiet).
 STATUS_EVERY_S = 1.0
@@ -39,7 +40,7 @@ def add_parser(sub) -> None:
                                    "print its URL. Drag on the "
                                    "surface (or move the gizmo) to press with the simulated hand; --device bridge "
                                    "lets a real device drive the view. Stops on Ctrl-C or after --seconds. Needs "
-                                   "the view extra (pip install 'palpate[view]').")
+                                   "the view extra (its packages: viser and playwright).")
     v.add_argument("model", nargs="?", default="rodero", metavar="MODEL")
     v.add_argument("--unit", choices=("m", "cm", "mm"), default="m",
                    help="a tet mesh file's coordinate unit (default m; the shared lv_*.msh are in cm)")
@@ -137,7 +138,7 @@ def cmd_view(a) -> int:
     try:
         import viser  # noqa: F401
     except ImportError:
-        raise RunFailed("palpate view: needs viser (pip install 'palpate[view]')") from None
+        raise RunFailed(f"palpate view: needs viser: {install_hint('view')}") from None
     from ..viewer.app import PRESS_RANGE
 
     if a.screenshot:

@@ -43,4 +43,4 @@ def import_vendor(name: str) -> Any:
     except ImportError as e:
         raise MissingVendor(
             f"palpate device {name} needs the Python package {package!r} (module {module}), which is not installed "
-            f"({e}): pip install 'palpate[{extra}]' (or pip install {package}), plus {other}") from None
+            f"({e}): pip install {package} (the {extra} extra), plus {other}") from None

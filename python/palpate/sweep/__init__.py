@@ -9,7 +9,7 @@ Parquet table.
 :mod:`~palpate.sweep.spec` says what a study file holds, :mod:`~palpate.sweep.scenario` what a
 row holds, :mod:`~palpate.sweep.runner` where it runs and what it writes, and
 :mod:`~palpate.sweep.fit` how a measured curve gives a material. Needs the ``study`` extra
-(``pip install 'palpate[study]'``: dask[distributed], pyarrow), except ``workers=0`` runs, which
+(the ``study`` extra: dask[distributed], pyarrow), except ``workers=0`` runs, which
 need pyarrow only.
 """
 from .runner import StudyResult, SweepError, sweep

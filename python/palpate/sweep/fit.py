@@ -33,6 +33,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from .. import _palpate as _p
+from .._extras import install_hint
 from .runner import Runner, model_payload
 from .spec import Spec, load_spec, spec_from_dict
 
@@ -274,7 +275,7 @@ def fit(spec: Union[Spec, Dict[str, Any], str, os.PathLike], measured: Union[np.
         except ImportError:  # matplotlib is an extra (palpate[plot]): the fit stands without its plot
             import sys
 
-            print(f"(matplotlib not installed: no {plot}; pip install 'palpate[plot]')", file=sys.stderr)
+            print(f"(matplotlib not installed: no {plot}; {install_hint('plot')})", file=sys.stderr)
     return result
 
 

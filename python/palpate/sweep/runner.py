@@ -40,6 +40,7 @@ import numpy as np
 
 from .. import _palpate as _p
 from .. import __version__
+from .._extras import install_hint
 from .scenario import FIELD, Payload, finite_or_none, run_scenario, save_field
 from .spec import TEXT, WHOLE, Spec, SweepSpecError, load_spec, spec_from_dict
 
@@ -306,7 +307,7 @@ class Runner:
         try:
             from distributed import Client, LocalCluster
         except ImportError:
-            raise SweepError("palpate sweep runs on Dask: pip install 'palpate[study]' (dask[distributed], pyarrow), "
+            raise SweepError(f"palpate sweep runs on Dask: {install_hint('study')}, "
                              "or run in this process with workers=0 (--workers 0)") from None
         if self.client is None:
             if scheduler is not None:

@@ -10,7 +10,7 @@ snapshots at its own rate and never waits on the loop, nor the loop on it.
 :func:`palpate.viewer.browser.screenshot` renders a frame with the system's headless Chromium.
 Who may open the page and its WebSocket (the viewer's own loopback origin, or the viewer's
 token): :mod:`palpate.viewer.origin`.
-Needs the ``view`` extra (``pip install 'palpate[view]'``: viser, and Playwright for pictures).
+Needs the ``view`` extra (viser, and Playwright for pictures).
 """
 from __future__ import annotations
 

@@ -9,6 +9,8 @@ import shutil
 import time
 from typing import Any, Optional, Tuple
 
+from .._extras import install_hint
+
 #: Chromium flags for a headless run on a machine without a GPU or a display (WebGL falls back to
 #: SwiftShader) and without network: no sandbox (root in a container), no background traffic.
 CHROMIUM_ARGS = ("--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
@@ -37,7 +39,7 @@ def have_playwright() -> Tuple[bool, str]:
     try:
         import playwright.sync_api  # noqa: F401
     except ImportError as e:
-        return False, f"the Python package playwright is not installed ({e}; pip install 'palpate[view]')"
+        return False, f"the Python package playwright is not installed ({e}; {install_hint('view')})"
     return True, ""
 
 
