@@ -987,3 +987,30 @@ def test_ctrl_c_on_the_haptic_command_prints_its_summary_and_writes_the_recordin
     assert "interrupted" in err and "Traceback" not in err, err
     assert "ticks in" in out and "recorded" in out, out
     assert rec.stat().st_size > 0
+
+
+def test_devices_command_lists_every_device_and_how_to_run_it(capsys, monkeypatch):
+    # Issue 37: devices you can find. The built-in ones need nothing; each vendor adapter names its
+    # package (looked up, never imported), whether it is installed, and its two commands.
+    import importlib.util
+
+    from palpate.cli import main
+    from palpate.devices import VENDORS
+
+    assert main(["devices", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    names = [r["name"] for r in rows]
+    assert names[:4] == ["hand", "scripted", "replay", "bridge"] and set(names[4:]) == set(VENDORS)
+    for r in rows[4:]:
+        module, package, extra, _ = VENDORS[r["name"]]
+        assert r["kind"] == "vendor" and package in r["needs"] and f"the {extra} extra" in r["needs"]
+        assert f"palpate device {r['name']}" in r["command"] and "--device bridge:" in r["command"]
+        assert r["installed"] == (importlib.util.find_spec(module) is not None)
+    # A package that Python can find is reported installed, without being imported.
+    found = types.SimpleNamespace(name="pyOpenHaptics")
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda m, *a: found if m == "pyOpenHaptics" else real(m, *a))
+    assert main(["devices"]) == 0
+    out = capsys.readouterr().out
+    assert "touch (vendor): 3D Systems / Geomagic Touch (OpenHaptics)  [package installed]" in out
+    assert "pyOpenHaptics" not in sys.modules or sys.modules["pyOpenHaptics"] is None

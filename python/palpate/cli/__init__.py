@@ -1,5 +1,5 @@
 """The ``palpate`` command line (also ``python -m palpate``): one module per command (``run``,
-``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``, ``view``, ``sweep``, ``fit``, ``validate``), shared helpers in ``_common``.
+``bench``, ``build``, ``info``, ``touch``, ``haptic``, ``soak``, ``device``, ``devices``, ``view``, ``sweep``, ``fit``, ``validate``), shared helpers in ``_common``.
 
     palpate run SCENE.toml [--out DIR] [--steps N] [--quiet]
     palpate bench protocol MESH [--force F] [--steps N] [--json] [--integrator NAME] [--newton auto|on|off]
@@ -28,6 +28,8 @@
     palpate bench view [MODEL] [--seconds S] [--rate HZ] [--fps HZ] [--json]
     palpate device touch|forcedimension|haply|hapticmaster [--port P] [--host IP] [--scale S] [--offset X Y Z]
         (a vendor device as a bridge client; each vendor SDK an optional extra)
+    palpate devices [--json]
+        (every device palpate can drive, what it needs, whether it is installed, its command)
     palpate view [MODEL] [--host IP] [--port N] [--device hand|bridge] [--bridge-port P] [--preset NAME]
                  [--tool-radius M] [--press-depth M] [--fps HZ] [--seconds S] [--screenshot OUT.png [--press M]]
                  [--token TOKEN] [--require-token]
@@ -56,11 +58,11 @@ import sys
 from typing import List, Optional
 
 from .. import __version__
-from . import bench, build, device, fit, haptic, info, run, soak, sweep, touch, validate, view
+from . import bench, build, device, devices, fit, haptic, info, run, soak, sweep, touch, validate, view
 from ._common import CLOSED_PIPE, EXIT_CODES_HELP, OK, Fail, GuardedStdout, Parser, interrupted, quiet_pipe, run_guarded
 
 #: The commands, in the order of ``palpate --help``: each module adds its parser and handler.
-COMMANDS = (run, bench, build, info, touch, haptic, soak, device, view, sweep, fit, validate)
+COMMANDS = (run, bench, build, info, touch, haptic, soak, device, devices, view, sweep, fit, validate)
 
 
 def build_parser() -> argparse.ArgumentParser:
