@@ -134,6 +134,11 @@ def status_line(s: Optional[Dict[str, Any]], rate_hz: float) -> str:
             f"{s['compute_us']:7.1f} us | force {f:6.3f} N | overruns {s['overruns']} | faults {s['faults']}")
 
 
+#: The device makes :class:`palpate.HapticLoop` knows (its ``kind``): each sets the coupling's and
+#: the safety's defaults and the limits a user may ask without ``unsafe_limits``.
+DEVICE_KINDS = ("simulated", "bridge", "touch", "forcedimension", "haply", "hapticmaster")
+
+
 def loop_rates(physics_rate: Optional[float]) -> Dict[str, Any]:
     """The :class:`palpate.HapticLoop` keywords for a physics rate [Hz], None meaning the
     single-rate loop (the commands' ``--single-rate``): ``physics_rate`` and ``single_rate``."""

@@ -614,3 +614,26 @@ def test_fem_cli_bad_mesh_is_one_line_and_non_zero(tmp_path):
         assert r.returncode == 1, (path, r.stderr)     # bad input
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and what in lines[0] and "Traceback" not in r.stderr, r.stderr
+
+
+def test_the_view_takes_the_devices_make(model):
+    # Issue 37: `palpate view --kind`, as `palpate haptic --kind`: the make sets the loop's
+    # coupling and safety limits. A Touch is rated 3.3 N: 5 N is refused by the loop it builds.
+    from palpate.viewer import Viewer
+
+    from palpate.cli import main
+
+    with pytest.raises(_p.ParameterError, match="kind"):
+        Viewer(model, port=0, kind="falcon")
+    assert main(["view", "ventricle", "--kind", "falcon"]) == 2          # usage: not a make palpate knows
+    v = Viewer(model, "ventricle", port=0, device="bridge", bridge_port=0, kind="touch", max_force=5.0)
+    try:
+        assert v.loop is None and "max_force" in (v.loop_error or ""), v.loop_error
+    finally:
+        v.close()
+    v = Viewer(model, "ventricle", port=0, device="bridge", bridge_port=0, kind="touch", max_force=3.0)
+    try:
+        assert v.loop is not None and v.loop_error is None, v.loop_error
+        assert v.settings["kind"] == "touch"
+    finally:
+        v.close()

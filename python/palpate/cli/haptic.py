@@ -13,10 +13,12 @@ from __future__ import annotations
 import math
 import sys
 
+from ..haptics import DEVICE_KINDS
 from ._common import FAILED, INTERRUPTED, Fail, RunFailed, Usage, add_physics_rate, load_hybrid_model, palpate_errors, physics_rate
 
 DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand"
-KINDS = ("simulated", "bridge", "touch", "forcedimension", "haply", "hapticmaster")
+#: The device makes of --kind (the library's list).
+KINDS = DEVICE_KINDS
 #: The recording buffer without ``--seconds`` [ticks]: 5 min at 1 kHz, 75 s at 4 kHz (43 MB).
 DEFAULT_RECORD_TICKS = 300_000
 #: The fastest a loop (and so a recording to replay) runs [Hz].

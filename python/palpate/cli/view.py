@@ -25,6 +25,7 @@ import time
 
 from ._common import Fail, RunFailed, Usage, add_physics_rate, load_view_model, num, physics_rate
 from .._extras import install_hint
+from ..haptics import DEVICE_KINDS
 
 #: Status lines on stdout every this many seconds (unless --quiet).
 STATUS_EVERY_S = 1.0
@@ -59,6 +60,8 @@ def add_parser(sub) -> None:
     v.add_argument("--device", choices=DEVICES, default="hand",
                    help="hand: the page moves a simulated hand (default); bridge: a real device over UDP")
     v.add_argument("--bridge-port", type=int, default=0, metavar="P", help="UDP port of the bridge (default 0: a free one)")
+    v.add_argument("--kind", choices=DEVICE_KINDS, default=None,
+                   help="the device's make, for the coupling and safety defaults (as palpate haptic --kind)")
     v.add_argument("--key-file", default=None, metavar="FILE",
                    help="bridge: a shared key (at least 16 bytes) that signs every packet (HMAC-SHA256); required "
                         "with --device bridge beyond 127.0.0.1; the device process gives the same file")
@@ -187,7 +190,8 @@ def _serve(a, name, model, hz) -> int:
                         tool_radius=a.tool_radius, press_depth=a.press_depth, rate_hz=a.rate, fps=a.fps,
                         max_force=a.max_force, show_core=a.show_core, show_particles=a.show_particles,
                         realtime=a.realtime, **loop_rates(hz),
-                        unsafe_limits=a.unsafe_limits, token=a.token, require_token=a.require_token, bridge_key=key)
+                        unsafe_limits=a.unsafe_limits, token=a.token, require_token=a.require_token, bridge_key=key,
+                        kind=a.kind)
     except _p.ParameterError as e:
         raise Fail(f"palpate view: {e}") from None
     except OriginCheckUnavailable as e:

@@ -24,6 +24,7 @@ from typing import Any, Callable, Deque, Dict, Optional, Tuple
 import numpy as np
 
 from .. import _palpate as _p
+from ..haptics import DEVICE_KINDS
 from . import colors
 from .fem import FemModel, loop_model
 from .guard import STATS, TargetGuard, finite_number, install_message_bounds
@@ -91,7 +92,9 @@ class Viewer:
     ``SCHED_FIFO`` (:class:`palpate.HapticLoop`), so that the browser and the viewer's own threads
     cannot preempt a tick; ``physics_rate`` [Hz] and ``single_rate``: the loop's physics thread
     (:class:`palpate.HapticLoop`; default: multirate, the physics at 1 kHz); ``unsafe_limits``: a
-    ``max_force`` above the device class's rating allowed (:class:`palpate.HapticLoop`). A full-FEM model draws its boundary faces as the surface and its tets
+    ``max_force`` above the device class's rating allowed (:class:`palpate.HapticLoop`); ``kind``: the
+    device's make (:data:`palpate.haptics.DEVICE_KINDS`; default: the loop's for the device), which
+    sets the coupling's and the safety's defaults and limits. A full-FEM model draws its boundary faces as the surface and its tets
     as the "core"; a scene's material is the first preset ("scene: ..."). Raises
     :class:`palpate.ParameterError` for a bad value.
 
@@ -110,7 +113,8 @@ class Viewer:
                  rate_hz: float = 1000.0, fps: float = 30.0, max_force: Optional[float] = None,
                  show_core: bool = False, show_particles: bool = False, realtime: bool = False,
                  physics_rate: Optional[float] = None, single_rate: bool = False, unsafe_limits: bool = False,
-                 token: Optional[str] = None, require_token: bool = False, bridge_key: Optional[bytes] = None):
+                 token: Optional[str] = None, require_token: bool = False, bridge_key: Optional[bytes] = None,
+                 kind: Optional[str] = None):
         self.fem = isinstance(model, FemModel)
         # The bridge's shared key (PROTOCOL.md; required beyond loopback): kept out of the
         # settings, which the page shows.
@@ -126,6 +130,8 @@ class Viewer:
             raise _p.ParameterError(f"preset {preset!r}: expected one of {', '.join(presets)}")
         if device not in DEVICES:
             raise _p.ParameterError(f"device {device!r}: expected one of {', '.join(DEVICES)}")
+        if kind is not None and kind not in DEVICE_KINDS:
+            raise _p.ParameterError(f"kind {kind!r}: expected one of {', '.join(DEVICE_KINDS)}")
         lo, hi = TOOL_RADIUS_RANGE
         if not (math.isfinite(tool_radius) and lo <= tool_radius <= hi):
             raise _p.ParameterError(f"tool_radius = {tool_radius} m: expected {lo} to {hi} m")
@@ -166,7 +172,8 @@ class Viewer:
                                          "bridge_port": int(bridge_port), "rate_hz": float(rate_hz),
                                          "max_force": max_force, "realtime": bool(realtime),
                                          "physics_rate": None if physics_rate is None else float(physics_rate),
-                                         "single_rate": bool(single_rate), "unsafe_limits": bool(unsafe_limits)}
+                                         "single_rate": bool(single_rate), "unsafe_limits": bool(unsafe_limits),
+                                         "kind": kind}
         self.fps = float(fps)
         self._show_initial = (bool(show_core), bool(show_particles))
         self.paused = False
@@ -299,6 +306,8 @@ class Viewer:
                                       unsafe_limits=s["unsafe_limits"])
         if s["max_force"] is not None:
             common["max_force"] = s["max_force"]
+        if s["kind"] is not None:
+            common["kind"] = s["kind"]
         if s["device"] == "bridge":
             return _p.HapticLoop(loop_model(self.model), mat, "bridge", port=s["bridge_port"], host=s["bridge_host"],
                                  bridge_key=self._bridge_key, **common)
