@@ -396,7 +396,7 @@ impl HapticCore {
         if w_now < 1.0 && !self.silent {
             self.silent = true;
             self.silences += 1;
-            self.log(Fault::DeviceSilent(t));
+            self.log(Fault::DeviceSilent(t), false);
         } else if w_now == 1.0 {
             self.silent = false;
         }
@@ -416,9 +416,11 @@ impl HapticCore {
         }
     }
 
-    pub(crate) fn log(&mut self, fault: Fault) {
+    /// Logs `fault` at the last tick; `counted`: a fault path (see [`FaultRecord::counted`]),
+    /// which the caller counts.
+    pub(crate) fn log(&mut self, fault: Fault, counted: bool) {
         if self.fault_log.len() < FAULT_LOG {
-            self.fault_log.push(FaultRecord { tick: self.tick.saturating_sub(1), time: self.tick.saturating_sub(1) as f64 * self.dt, fault, counted: false });
+            self.fault_log.push(FaultRecord { tick: self.tick.saturating_sub(1), time: self.tick.saturating_sub(1) as f64 * self.dt, fault, counted });
         }
     }
 
@@ -473,7 +475,7 @@ impl HapticCore {
             if w_now < 1.0 && !self.stale {
                 self.stale = true;
                 self.stalls += 1;
-                self.log(Fault::Stall(age));
+                self.log(Fault::Stall(age), false);
             }
             let c = self.coupling.step_local(&input.position, &self.model, w_model, self.dt, self.tool_speed);
             if c.force.iter().all(|x| x.is_finite()) && self.coupling.proxy.iter().all(|x| x.is_finite()) {
@@ -488,10 +490,7 @@ impl HapticCore {
                 self.tissue = z;
                 out.fault = true;
                 self.faults += 1;
-                self.log(Fault::NonFinite);
-                if let Some(last) = self.fault_log.last_mut() {
-                    last.counted = true;
-                }
+                self.log(Fault::NonFinite, true);
             }
         }
         out.tissue = self.tissue;
@@ -1229,7 +1228,7 @@ fn run_render(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfi
             let stalled = shared.stall_ns.load(Ordering::Relaxed) as f64 * 1e-9;
             out.force = core.safety.zero();
             out.fault = true;
-            core.log(Fault::Stall(stalled));
+            core.log(Fault::Stall(stalled), false);
         }
         if out.fault {
             sink.zeroed();

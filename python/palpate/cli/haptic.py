@@ -17,8 +17,6 @@ from ..haptics import DEVICE_KINDS
 from ._common import FAILED, INTERRUPTED, Fail, RunFailed, Usage, add_physics_rate, load_hybrid_model, palpate_errors, physics_rate
 
 DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand"
-#: The device makes of --kind (the library's list).
-KINDS = DEVICE_KINDS
 #: The recording buffer without ``--seconds`` [ticks]: 5 min at 1 kHz, 75 s at 4 kHz (43 MB).
 DEFAULT_RECORD_TICKS = 300_000
 #: The fastest a loop (and so a recording to replay) runs [Hz].
@@ -45,7 +43,7 @@ def add_parser(sub) -> None:
     h.add_argument("--key-file", default=None, metavar="FILE",
                    help="bridge: a shared key (at least 16 bytes) that signs every packet (HMAC-SHA256, PROTOCOL.md); "
                         "the device process gives the same file to `palpate device --key-file`")
-    h.add_argument("--kind", choices=KINDS, default=None, help="the device's make, for the coupling and safety defaults")
+    h.add_argument("--kind", choices=DEVICE_KINDS, default=None, help="the device's make, for the coupling and safety defaults")
     h.add_argument("--max-force", type=float, default=None, metavar="N", help="force limit [N] (default 3)")
     h.add_argument("--unsafe-limits", action="store_true",
                    help="allow a --max-force above the device class's rated force (touch 3.3 N, forcedimension 12 N, "
