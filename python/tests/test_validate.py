@@ -324,9 +324,9 @@ def slab_presses(slab):
 def test_a_sphere_on_the_hybrid_slab_follows_hertz(slab, slab_presses):
     # Issue 33 item 3 (VALIDATION.md, "Hertz on a hybrid slab"). The slab's own converged FEM
     # follows Hertz here (15 mm sphere, 129k tets: +12 / +8 / +4 / +3% at 0.8-4.5 mm, converging
-    # toward it). Measured 2026-12-07 (0.5 s ramps; the test's 0.3 s give the same within 1%): 7.5 mm sphere +7 / -1% at 1.85 / 2.81 mm of
-    # indentation (3.4 / 4.2 spacings of contact radius); 15 mm sphere +14 / +5% at 3.1 / 4.2 mm
-    # (6.3 / 7.2 spacings). Not yet the issue's bound: under the 15 mm sphere at 3-4.5 spacings the
+    # toward it). Measured 2026-12-07 with this test's set-up: 7.5 mm sphere +7 / -1 / -4% at 1.85 /
+    # 2.81 / 3.63 mm of indentation (3.4 / 4.2 / 4.8 spacings of contact radius); 15 mm sphere
+    # +15 / +6 / +0% at 3.14 / 4.13 / 5.43 mm (6.3 / 7.2 / 8.3 spacings). Not yet the issue's bound: under the 15 mm sphere at 3-4.5 spacings the
     # force is +22 / +19% (the default contact, 12 E*/min(R, 4h), took it from +34 / +25%).
     for radius, (d, f, hertz) in slab_presses.items():
         a = np.sqrt(radius * d) / slab.spacing
