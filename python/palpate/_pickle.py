@@ -57,7 +57,7 @@ def _hybrid_sim(model: Any, material: Any, options: Dict[str, Any], state: Dict[
 # the model (coupling, confinement), so rebuilding from these remakes the same simulation.
 _HYBRID_SIM_OPTIONS = ("tool_radius", "tool_area_stiffness", "core_contact_stiffness", "hold", "activation_margin",
                        "max_tool_step", "linger_ticks", "max_substeps", "mass_scaling", "shell_fallback", "shell_pause",
-                       "homogenise", "strict_units")
+                       "homogenise", "implicit_exchange", "strict_units")
 
 
 def _reduce_hybrid_sim(s: Any):

@@ -39,7 +39,7 @@ class HybridDefaults:
     projection: "_p.Projection"
     core_fraction: float           # [-], of the wall's transmural coordinate
     core_triangles: int            # 0: automatic (the two values below)
-    core_layers: int
+    core_layers: int               # 0: automatic (tets about as tall as wide)
     spacing: Optional[float]       # [m]; None: about ``particles`` particles
     particles: Optional[int]
     density: float                 # [kg/m^3]

@@ -481,11 +481,12 @@ def hybrid_hold_z(sim: _palpate.HybridSim) -> float:
 
 
 def hybrid_curve(model: _palpate.HybridModel, case: IndentCase, *, ramp_s: float = 0.5, hold_s: float = 0.5,
-                 dt: float = 1e-3, verbose: bool = False) -> Dict[str, Any]:
+                 dt: float = 1e-3, verbose: bool = False, implicit_exchange: bool = False) -> Dict[str, Any]:
     """The hybrid model pressed quasi-statically to the case's travels: per depth a ramp of
     ``ramp_s`` then a hold of ``hold_s`` at ``1/dt`` Hz, force and penetration averaged over the
-    hold's second half (settled: its standard deviation is reported)."""
-    sim = _palpate.HybridSim(model, case.material(), tool_radius=case.tool_radius)
+    hold's second half (settled: its standard deviation is reported). ``implicit_exchange``: the
+    ``HybridSim`` option (the shell's springs at the tissue's stiffness)."""
+    sim = _palpate.HybridSim(model, case.material(), tool_radius=case.tool_radius, implicit_exchange=implicit_exchange)
     hold_z = hybrid_hold_z(sim)  # at rest, where the runtime chose its held nodes
     p, n = np.asarray(case.point, dtype=float), np.asarray(case.direction, dtype=float)
     s0 = sim.surface.copy()

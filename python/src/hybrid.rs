@@ -162,7 +162,8 @@ impl PyHybridModel {
     /// surface) the FEM core takes; ``core_triangles``: triangles of the simplified inner
     /// surface (3 tets each per layer; 0: automatic, ``AUTO_CORE_TRIANGLES_CLOSED`` for a closed
     /// wall, ``AUTO_CORE_TRIANGLES_BASE`` for one with a base, raised while prisms would twist);
-    /// ``core_layers``: prism layers of the core; ``spacing`` [m] or, if None, about
+    /// ``core_layers``: prism layers of the core (0: automatic, the core's height over its
+    /// triangles' edge, so that its tets are about as tall as wide); ``spacing`` [m] or, if None, about
     /// ``particles`` particles in the shell; ``density`` [kg/m^3]; ``min_region_particles``:
     /// activation regions grow by rings of outer triangles until they hold this many;
     /// ``field_voxels``: wall voxels of the transmural solve; ``homogenise``: compute the core's

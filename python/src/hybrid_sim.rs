@@ -22,7 +22,8 @@ use crate::material::PyMaterial;
 ///
 /// ``HybridSim(model, material, *, tool_radius=0.005, tool_area_stiffness=None,
 /// core_contact_stiffness=None, hold=True, activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None,
-/// mass_scaling=None, shell_fallback=True, shell_pause=None, homogenise=True, strict_units=False)``
+/// mass_scaling=None, shell_fallback=True, shell_pause=None, homogenise=True, implicit_exchange=False,
+/// strict_units=False)``
 ///
 /// Parameters
 /// ----------
@@ -72,6 +73,13 @@ use crate::material::PyMaterial;
 ///     Stiffen the core by the model's homogenisation factor at the material's Poisson's ratio
 ///     (default True; ``HybridModel.homogenisation``), so that where no particle is active the
 ///     core bends as the whole wall does. False: the paper's core, stiff as the tissue.
+/// implicit_exchange : bool, optional
+///     The springs that tie the shell to the core at the tissue's stiffness ``E h``, their
+///     reactions taken inside the core's step (``palpate_core::runtime::exchange``): the force
+///     proportional to E and Hertz's ``sqrt(R)`` on a thick slab, at 1.8x the tick's cost on
+///     Rodero. Default False: the springs capped by the explicit exchange's stability (2.9 N/m on
+///     Rodero against ``E h`` = 49), within the 1 kHz budget, the force 1.7x for twice E
+///     (VALIDATION.md).
 /// strict_units : bool, optional
 ///     Values most likely in the wrong unit (a Young's modulus outside soft tissue's 100 Pa to
 ///     10 MPa, a tool radius over 5 cm, a tool target more than 1 m from the organ's bounding
@@ -97,7 +105,7 @@ pub struct PyHybridSim {
 #[pymethods]
 impl PyHybridSim {
     #[new]
-    #[pyo3(signature = (model, material, *, tool_radius = None, tool_area_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None, homogenise = true, strict_units = false))]
+    #[pyo3(signature = (model, material, *, tool_radius = None, tool_area_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None, homogenise = true, implicit_exchange = false, strict_units = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -115,6 +123,7 @@ impl PyHybridSim {
         #[pyo3(from_py_with = conv::arg)] shell_fallback: bool,
         shell_pause: Option<errors::Int>,
         #[pyo3(from_py_with = conv::arg)] homogenise: bool,
+        #[pyo3(from_py_with = conv::arg)] implicit_exchange: bool,
         #[pyo3(from_py_with = conv::arg)] strict_units: bool,
     ) -> PyResult<Self> {
         let (linger_ticks, max_substeps) = (errors::count_opt(linger_ticks, "linger_ticks")?, errors::count_opt(max_substeps, "max_substeps")?);
@@ -132,7 +141,7 @@ impl PyHybridSim {
             }
             tool.area_stiffness = Some(k);
         }
-        let mut options = SimOptions { tool, hold, homogenise, ..Default::default() };
+        let mut options = SimOptions { tool, hold, homogenise, implicit_exchange, ..Default::default() };
         if let Some(k) = core_contact_stiffness {
             if !(k > 0.0 && k.is_finite()) {
                 return Err(crate::errors::param_error_from(format!("core_contact_stiffness = {k} N/m must be positive and finite")));
@@ -325,7 +334,7 @@ impl PyHybridSim {
     /// [N/m^3] and ``tool_area_damping`` [N s/m^3] (resolved: per unit of skin area),
     /// ``core_contact_stiffness`` [N/m] (the tool against the core's
     /// surface), ``activation_margin`` [m], ``max_tool_step`` [m],
-    /// ``linger_ticks``, ``max_substeps``, ``hold``, ``strict_units``, ``mass_scaling`` (the quantile), the resolved
+    /// ``linger_ticks``, ``max_substeps``, ``hold``, ``implicit_exchange``, ``strict_units``, ``mass_scaling`` (the quantile), the resolved
     /// ``coupling_stiffness`` [N/m], ``coupling_damping`` [N s/m] and ``confinement_stiffness``
     /// [N/m], and what the mass scaling did: ``mass_scaling_applied``, ``added_mass_fraction``
     /// (of the shell's mass), ``scaled_particles``, ``omega_max`` [rad/s] of the shell at rest.
@@ -344,6 +353,7 @@ impl PyHybridSim {
         d.set_item("hold", o.hold)?;
         d.set_item("strict_units", self.target_check.strict)?;
         d.set_item("homogenise", o.homogenise)?;
+        d.set_item("implicit_exchange", o.implicit_exchange)?;
         d.set_item("core_stiffening", self.sim.core_stiffening())?;
         d.set_item("shell_fallback", o.shell_fallback.is_some())?;
         d.set_item("shell_pause", o.shell_fallback)?;

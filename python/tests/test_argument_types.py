@@ -68,7 +68,7 @@ def world(tmp_path_factory):
         "ticks": 1, "i": 0, "s": 0, "path": str(rec), "data": model.to_bytes(), "parts": vparts,
         "tool_centre": np.array([0.0, 0.0, 0.1]), "tool_radius": 0.005, "core_contact_stiffness": 2000.0, "tool_area_stiffness": 1e7, "hold": True,
         "activation_margin": 0.001, "max_tool_step": 0.001, "linger_ticks": 10, "max_substeps": 50,
-        "mass_scaling": 0.95, "shell_fallback": True, "shell_pause": 10, "homogenise": True, "strict_units": False, "device": "hand", "rate_hz": 1000.0, "times": np.array([0.0, 1.0]),
+        "mass_scaling": 0.95, "shell_fallback": True, "shell_pause": 10, "homogenise": True, "implicit_exchange": False, "strict_units": False, "device": "hand", "rate_hz": 1000.0, "times": np.array([0.0, 1.0]),
         "knots": np.zeros((2, 3)), "recording": str(rec), "port": 0, "host": "127.0.0.1", "kind": "simulated",
         "hand_start": np.array([0.0, 0.0, 0.1]), "idle": False, "coupling_stiffness": 300.0,
         "coupling_damping": 1.0, "proxy_mass": 0.01, "max_force": 3.0, "max_rate": 100.0, "ramp": 0.5,

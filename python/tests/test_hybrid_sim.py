@@ -123,6 +123,29 @@ def test_ticks_release_the_gil(ventricle, material):
     assert counter[0] > 1000 and time.perf_counter() > t0
 
 
+def test_the_implicit_exchange_keeps_the_shell_springs_at_the_tissues_stiffness(ventricle, material):
+    """``implicit_exchange=True``: the springs tying the shell to the core are ``E h`` (the
+    default caps them by the explicit exchange's stability, far below it); a press with it pushes
+    back, harder than with the capped springs, and the option survives a pickle."""
+    import pickle
+
+    capped = palpate.HybridSim(ventricle, material)
+    full = palpate.HybridSim(ventricle, material, implicit_exchange=True)
+    assert capped.options["implicit_exchange"] is False and full.options["implicit_exchange"] is True
+    e_h = material.young * ventricle.spacing
+    assert full.options["coupling_stiffness"] == pytest.approx(e_h, rel=1e-12)
+    assert capped.options["coupling_stiffness"] < 0.5 * e_h
+    assert pickle.loads(pickle.dumps(full)).options["implicit_exchange"] is True
+    p, n = _press_point(full)
+    forces = []
+    for sim in (capped, full):
+        for k in range(400):
+            f = sim.step(p + n * (0.005 - 3e-3 * min(1.0, (k + 1) / 300)))
+        assert np.isfinite(f).all()
+        forces.append(float(f @ n))
+    assert 0.0 < forces[0] < forces[1], forces
+
+
 def test_core_contact_stiffness_and_the_shell_options_survive_a_pickle(ventricle, material):
     """``core_contact_stiffness`` [N/m] sets the tool's wall against the core's surface; it, and
     ``shell_fallback`` / ``shell_pause``, come back from a pickle (the pickle rebuilt the

@@ -298,16 +298,33 @@ def test_no_plot_without_matplotlib(tmp_path, monkeypatch, capsys):
 def slab():
     """Issue 33 item 3's slab: 80 x 80 x 40 mm held at its sides (the runtime holds the core's
     nodes on the base part), the bottom free; the core takes 0.85 of the height, so the top 6 mm
-    are particles (about 28,000, 1.09 mm apart). Built without homogenisation (its factor on this
-    slab is 0.96, within 1% of the force: VALIDATION.md)."""
+    are particles (about 28,000, 1.09 mm apart), and the build's automatic layers make its 34 mm
+    five prisms tall (4,500 tets). Built without homogenisation (its factor on this slab is 0.96,
+    within 1% of the force: VALIDATION.md)."""
     points, tris, parts = validate.slab_surface(0.08, 0.04, 50)
     return palpate.HybridModel.build_tagged(points, tris, parts, core_fraction=0.85, homogenise=False)
 
 
-def _slab_press(model, radius, travels, young=E):
+def test_the_core_is_layered_to_tets_about_as_tall_as_wide(slab):
+    # The build's automatic layers (core_layers = 0): the slab's 34 mm core under 300 triangles
+    # about 7 mm wide takes five layers (one layer of prisms five times as tall as wide made a
+    # 15 mm sphere's force 31% above Hertz at 3.1 mm, five 11%: VALIDATION.md); a ventricle's core,
+    # thinner than wide, one.
+    def layers(m):
+        return len(m.core_tets) // (3 * len(m.core_faces))
+
+    assert layers(slab) == 5, len(slab.core_tets)
+    points, tris, parts = validate.slab_surface(0.08, 0.04, 50)
+    assert layers(palpate.HybridModel.build_tagged(points, tris, parts, core_fraction=0.85, homogenise=False,
+                                                   core_layers=2, particles=2000)) == 2
+    from palpate.hybrid import build_shape
+    assert layers(build_shape("ellipsoids", particles=2000, homogenise=False)) == 1
+
+
+def _slab_press(model, radius, travels, young=E, implicit_exchange=True):
     case = validate.IndentCase(shape="slab", tool_radius=radius, point=(0.0, 0.0, 0.04), direction=(0.0, 0.0, -1.0),
                                depths=tuple(travels), young=young)
-    hyb = validate.hybrid_curve(model, case, ramp_s=0.3, hold_s=0.3)
+    hyb = validate.hybrid_curve(model, case, ramp_s=0.3, hold_s=0.3, implicit_exchange=implicit_exchange)
     # (hybrid_curve adds a travel 30% past the deepest.)
     d, f = np.asarray(hyb["indentation"]), np.asarray(hyb["force"])
     return d, f, validate.hertz_force(young, NU, radius, d)
@@ -316,18 +333,21 @@ def _slab_press(model, radius, travels, young=E):
 @pytest.fixture(scope="module")
 def slab_presses(slab):
     """The slab pressed by a 7.5 and a 15 mm sphere (travels 2 / 3 mm and 3.4 / 4.4 mm, and 30%
-    past the deepest): {radius: (indentation, force, Hertz)}."""
+    past the deepest), the shell's springs at the tissue's stiffness (``implicit_exchange``):
+    {radius: (indentation, force, Hertz)}."""
     return {radius: _slab_press(slab, radius, travels) for radius, travels in ((0.0075, (0.002, 0.003)),
                                                                                (0.015, (0.0034, 0.0044)))}
 
 
 def test_a_sphere_on_the_hybrid_slab_follows_hertz(slab, slab_presses):
-    # Issue 33 item 3 (VALIDATION.md, "Hertz on a hybrid slab"). The slab's own converged FEM
+    # Issue 33 item 3 (VALIDATION.md, "Hertz on a hybrid slab"), with the implicit exchange (the
+    # shell's springs at the tissue's stiffness; the default's capped springs: the xfail below).
+    # The slab's own converged FEM
     # follows Hertz here (15 mm sphere, 129k tets: +12 / +8 / +4 / +3% at 0.8-4.5 mm, converging
-    # toward it). Measured 2026-12-07 with this test's set-up: 7.5 mm sphere +7 / -1 / -4% at 1.85 /
-    # 2.81 / 3.63 mm of indentation (3.4 / 4.2 / 4.8 spacings of contact radius); 15 mm sphere
-    # +15 / +6 / +0% at 3.14 / 4.13 / 5.43 mm (6.3 / 7.2 / 8.3 spacings). Not yet the issue's bound: under the 15 mm sphere at 3-4.5 spacings the
-    # force is +22 / +19% (the default contact, 12 E*/min(R, 4h), took it from +34 / +25%).
+    # toward it). Measured 2026-12-07 with this test's set-up: 7.5 mm sphere +13 / +2 / -4% at 1.84 /
+    # 2.80 / 3.64 mm of indentation (3.4 / 4.2 / 4.8 spacings of contact radius); 15 mm sphere
+    # +11 / -0 / -10% at 3.15 / 4.15 / 5.46 mm (6.3 / 7.2 / 8.3 spacings). Shallower presses of the
+    # 15 mm sphere are not yet within the bound (the xfail below).
     for radius, (d, f, hertz) in slab_presses.items():
         a = np.sqrt(radius * d) / slab.spacing
         assert (a >= 3.0).all(), a
@@ -335,12 +355,38 @@ def test_a_sphere_on_the_hybrid_slab_follows_hertz(slab, slab_presses):
         assert (np.abs(err) <= 0.15).all(), (radius, d, f, hertz, err)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 33: on the slab the force grows with the radius 12% faster than the "
-                                       "exact sphere's sqrt(R) (VALIDATION.md)")
+@pytest.mark.xfail(strict=True, reason="issue 33: with the default, capped shell springs the slab is 10-23% softer than "
+                                       "Hertz (VALIDATION.md)")
+def test_the_default_exchange_follows_hertz_on_the_slab(slab):
+    # The default HybridSim caps the springs tying the shell to the core (10 N/m here against the
+    # tissue's E h = 33 N/m) for the explicit exchange's stability; with the core's automatic
+    # layers the slab is then too soft (measured 2026-12-07: 7.5 mm sphere -17 / -19 / -23% at
+    # 1.86 / 2.83 / 3.68 mm). With one layer of 34 mm prisms it was within 8%: two errors
+    # cancelling.
+    d, f, hertz = _slab_press(slab, 0.0075, (0.002, 0.003), implicit_exchange=False)
+    err = f / hertz - 1.0
+    assert (np.abs(err) <= 0.15).all(), (d, f, hertz, err)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 33: a 15 mm sphere's shallow press on the slab is 20-28% above Hertz "
+                                       "at 4-5.4 spacings of contact radius (VALIDATION.md)")
+def test_a_large_sphere_at_a_shallow_press_follows_hertz(slab):
+    # Measured 2026-12-07: +28 / +20% at 1.40 / 2.29 mm (4.2 / 5.4 spacings). The slab's own FEM
+    # is +12 / +8% at 0.8 / 1.7 mm on 129k tets: a shallow press of a large sphere asks much of
+    # any discretisation; here the coarse core under a 6 mm shell carries the stress bulb's deep
+    # part.
+    d, f, hertz = _slab_press(slab, 0.015, (0.0015,))
+    assert (np.sqrt(0.015 * d) / slab.spacing >= 3.0).all()
+    err = f / hertz - 1.0
+    assert (np.abs(err) <= 0.15).all(), (d, f, hertz, err)
+
+
 def test_the_hybrid_slabs_force_grows_as_the_square_root_of_the_radius(slab_presses):
     # Hertz: at a given indentation F is proportional to sqrt(R). The 15 mm curve (log-log
     # between its points) at the 7.5 mm sphere's deepest indentation, against sqrt(2) times the
     # 7.5 mm force, corrected by the exact sphere's (Sneddon's) departure from Hertz at each d / R.
+    # Measured 2026-12-07 with the implicit exchange: 1.067 (the default's capped springs 1.087;
+    # with them and a one-layer core, 1.12).
     (d1, f1, _), (d2, f2, _) = slab_presses[0.0075], slab_presses[0.015]
     at = d1[-1]
     assert d2[0] <= at <= d2[-1], (d1, d2)
@@ -357,13 +403,11 @@ def _sneddon_over_hertz(radius, d):
     return sneddon / (4.0 / 3.0 * np.sqrt(radius) * d**1.5)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 33: the shell-core coupling springs are capped by the exchange's "
-                                       "explicit stability, not scaled with E (VALIDATION.md)")
 def test_the_hybrid_slabs_force_is_proportional_to_e(slab):
-    # Hertz: F proportional to E at a given indentation. Everything in the model should scale with
-    # E; the coupling springs do not: capped by the core nodes' masses over the tick squared
-    # (10 N/m here against E h = 33 N/m at 30 kPa), they make the force 1.7-1.75x, not 2x, when E
-    # doubles (measured 2026-12-07: F / Hertz 1.22 / 1.07 / 0.91 / 0.80 at 15 / 30 / 60 / 120 kPa).
+    # Hertz: F proportional to E at a given indentation; so is every stiffness of the model with
+    # the implicit exchange, the coupling springs (`E h`) included. Measured 2026-12-07: 2.000.
+    # (The default caps the springs by the explicit exchange's stability, 10 N/m against E h = 33
+    # N/m, and gives 1.77-1.82.)
     d1, f1, _ = _slab_press(slab, 0.0075, (0.0015,), young=E)
     d2, f2, _ = _slab_press(slab, 0.0075, (0.0015,), young=2 * E)
     ratio = (f2 / f1) * (d1 / d2) ** 1.5  # at the same indentation (Hertz's d^1.5)

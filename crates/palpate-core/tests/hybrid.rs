@@ -212,7 +212,7 @@ fn bad_walls_and_options_are_refused() {
         HybridOptions { core_fraction: 1.0, ..Default::default() },
         HybridOptions { core_fraction: f64::NAN, ..Default::default() },
         HybridOptions { core_triangles: 2, ..Default::default() },
-        HybridOptions { core_layers: 0, ..Default::default() },
+        HybridOptions { core_layers: 17, ..Default::default() },
         HybridOptions { spacing: Spacing::Length(-1.0), ..Default::default() },
         HybridOptions { spacing: Spacing::Count(3), ..Default::default() },
         HybridOptions { density: 0.0, ..Default::default() },

@@ -43,7 +43,19 @@ fn momentum(sim: &Sim, st: &SimState) -> Vec3 {
 
 #[test]
 fn coupling_and_ring_conserve_linear_momentum_with_the_tool_away() {
-    let sim = Sim::new(model().clone(), material(), SimOptions { hold: false, ..Default::default() }).unwrap();
+    momentum_with_the_tool_away(false);
+}
+
+/// The same with the springs at `E h` and their implicit share in the core's step
+/// (`runtime/exchange.rs`: translation invariant, so the momentum stays exact).
+#[test]
+fn the_implicit_exchange_conserves_linear_momentum() {
+    momentum_with_the_tool_away(true);
+    momentum_with_the_tool(true);
+}
+
+fn momentum_with_the_tool_away(implicit_exchange: bool) {
+    let sim = Sim::new(model().clone(), material(), SimOptions { hold: false, implicit_exchange, ..Default::default() }).unwrap();
     let mut st = SimState::rest(&sim);
     let mut ws = SimWorkspace::new(&sim);
     for (v, x) in st.core.v.iter_mut().zip(sim.core.mesh().points()) {
@@ -70,7 +82,11 @@ fn coupling_and_ring_conserve_linear_momentum_with_the_tool_away() {
 
 #[test]
 fn with_the_tool_the_momentum_changes_by_its_impulse() {
-    let sim = Sim::new(model().clone(), material(), SimOptions { hold: false, ..Default::default() }).unwrap();
+    momentum_with_the_tool(false);
+}
+
+fn momentum_with_the_tool(implicit_exchange: bool) {
+    let sim = Sim::new(model().clone(), material(), SimOptions { hold: false, implicit_exchange, ..Default::default() }).unwrap();
     let mut st = SimState::rest(&sim);
     let mut ws = SimWorkspace::new(&sim);
     let (p0, n) = press::press_point(&sim.hybrid.outer_points);
@@ -104,8 +120,19 @@ fn with_the_tool_the_momentum_changes_by_its_impulse() {
 /// next contact would meet a stale skin).
 #[test]
 fn the_skin_updated_after_the_force_changes_no_result() {
+    skin_updated_after_the_force(false);
+}
+
+/// The same with the implicit exchange: its potential in an owed core step is rebuilt from the
+/// state (a restored snapshot included), so the split tick still changes nothing.
+#[test]
+fn with_the_implicit_exchange_the_split_tick_changes_no_result() {
+    skin_updated_after_the_force(true);
+}
+
+fn skin_updated_after_the_force(implicit_exchange: bool) {
     // The paper's softer core: its bend carries the far skin past half the live margin.
-    let sim = Sim::new(walls::ellipsoids_papers_core().clone(), material(), SimOptions::default()).unwrap();
+    let sim = Sim::new(walls::ellipsoids_papers_core().clone(), material(), SimOptions { implicit_exchange, ..Default::default() }).unwrap();
     let (p0, n) = press::press_point(&sim.hybrid.outer_points);
     let t = n.cross(&Vec3::z()).normalize();
     let r = sim.options.tool.radius;

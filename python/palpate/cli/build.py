@@ -53,7 +53,8 @@ def add_parser(sub) -> None:
                    help="triangles of the simplified inner surface, 3 tets each per layer (default "
                         f"{d.core_triangles}{': automatic' if d.core_triangles == 0 else ''})")
     h.add_argument("--core-layers", type=int, default=d.core_layers, metavar="N",
-                   help=f"tet layers of the core (default {d.core_layers})")
+                   help="prism layers of the core (default "
+                        f"{d.core_layers}{': automatic, about as tall as wide' if d.core_layers == 0 else ''})")
     g = h.add_mutually_exclusive_group()
     g.add_argument("--spacing", type=float, default=d.spacing, metavar="M", help="particle lattice spacing [m]"
                    + ("" if d.spacing is None else f" (default {num(d.spacing)})"))

@@ -27,7 +27,9 @@ pub struct HybridOptions {
     /// [`AUTO_CORE_TRIANGLES_BASE`] for one with a base, raised by half (up to twice) while the
     /// core cannot be built without twisted prisms.
     pub core_triangles: usize,
-    /// Prism layers of the core.
+    /// Prism layers of the core; 0 (the default): automatic, the core's height over its
+    /// triangles' edge, so that its tets are about as tall as wide (one on the ventricles; see
+    /// `core::auto_layers`).
     pub core_layers: usize,
     /// Particle spacing.
     pub spacing: Spacing,
@@ -65,7 +67,7 @@ impl Default for HybridOptions {
             projection: Projection::Transmural,
             core_fraction: 0.5,
             core_triangles: 0,
-            core_layers: 1,
+            core_layers: 0,
             spacing: Spacing::Count(28_000),
             density: crate::material::Material::myocardium().density(),
             min_region_particles: 50,
@@ -84,8 +86,8 @@ pub(super) fn check(o: &HybridOptions) -> Result<(), HybridError> {
     if o.core_triangles != 0 && o.core_triangles < 4 {
         return bad("core triangles", o.core_triangles as f64, "must be at least 4");
     }
-    if o.core_layers == 0 || o.core_layers > 16 {
-        return bad("core layers", o.core_layers as f64, "must be 1 to 16");
+    if o.core_layers > 16 {
+        return bad("core layers", o.core_layers as f64, "must be 0 (automatic) to 16");
     }
     match o.spacing {
         Spacing::Length(s) if !(s > 0.0 && s.is_finite()) => return bad("particle spacing", s, "must be positive and finite [m]"),

@@ -47,6 +47,7 @@ pub mod confinement;
 pub mod core_contact;
 pub mod coupling;
 pub mod embed;
+pub(crate) mod exchange;
 pub(crate) mod homogenised_core;
 pub mod scale;
 pub mod sim;

@@ -17,7 +17,7 @@ use crate::spatial::csr::Buckets;
 use crate::meshfree::{ParticleModel, ParticleModelBuilder};
 use crate::Integrator;
 
-/// The haptic tick the default coupling stiffness is chosen for \[s\].
+/// The haptic tick the capped coupling stiffness is chosen for \[s\] ([`SimOptions::implicit_exchange`]).
 pub const TICK: f64 = 1e-3;
 
 /// Options of [`Sim::new`]. Lengths in metres; `Default` gives the values documented per field.
@@ -90,6 +90,14 @@ pub struct SimOptions {
     /// built without it): the paper's core, stiff as the tissue, which renders the wall 23-28% too
     /// soft under a large tool on the paper's ellipsoids (VALIDATION.md).
     pub homogenise: bool,
+    /// The shell's coupling springs at the tissue's stiffness `E h`, their reactions taken by the
+    /// core with their implicit share (`runtime/exchange.rs`): the force proportional to E, Hertz's
+    /// `sqrt(R)` on a thick slab (VALIDATION.md), at 1.8x the tick's cost on Rodero (the core's
+    /// step takes 2.6 iterations, not 1). Default false: the springs capped by the explicit
+    /// exchange's stability (`k sum_p w_p <= m / (2 dt^2)` on every core node at the 1 ms tick:
+    /// 2.9 N/m on Rodero against `E h` = 49), which keeps the tick within its real-time target
+    /// but makes the force grow 1.7x, not 2x, with twice E.
+    pub implicit_exchange: bool,
 }
 
 impl Default for SimOptions {
@@ -110,6 +118,7 @@ impl Default for SimOptions {
             core_contact_stiffness: super::core_contact::CORE_CONTACT_STIFFNESS,
             hold: true,
             homogenise: true,
+            implicit_exchange: false,
         }
     }
 }
@@ -286,6 +295,12 @@ impl Sim {
         let coupled: Vec<bool> = particle_tie.offsets().iter().zip(particles.fixed()).map(|(o, &held)| o.norm() <= depth && !held).collect();
         let mean_mass = hybrid.particle_mass.iter().sum::<f64>() / hybrid.particle_mass.len().max(1) as f64;
         let coupling = options.coupling.unwrap_or_else(|| {
+            let c = Coupling::for_tissue(material.young(), h, mean_mass, 0.5);
+            if options.implicit_exchange {
+                // As stiff as the tissue: the core takes the reactions with their implicit share
+                // (super::exchange), stable at any stiffness up to its time.
+                return c;
+            }
             // The core takes the springs' reactions explicitly, once a tick: the springs on a
             // core node, `k sum_p w_p`, must stay below its mass over dt^2 (half of it, at the
             // 1 ms haptic tick) or the exchange diverges; within that, as stiff as the tissue.
@@ -297,7 +312,6 @@ impl Sim {
                 .filter(|&a| weight[a] > 0.0 && !core.fixed()[a])
                 .map(|a| 0.5 * core.masses()[a] / (TICK * TICK * weight[a]))
                 .fold(f64::INFINITY, f64::min);
-            let c = Coupling::for_tissue(material.young(), h, mean_mass, 0.5);
             if c.stiffness > limit { Coupling::for_tissue(limit / h, h, mean_mass, 0.5) } else { c }
         });
         let confinement = Confinement::new(options.confinement_stiffness.unwrap_or(material.young() * h));

@@ -596,6 +596,9 @@ pub struct SimWorkspace {
     /// The core tets brought back to the tissue's stiffness this tick (`homogenised_core.rs`),
     /// and the tick's marks on core nodes and tets.
     pub(crate) soft_tets: Vec<(usize, f64)>,
+    /// The core's predicted positions `x0 + dt v0` of the shell's implicit reactions
+    /// (`exchange.rs`), `(n_core_nodes)`.
+    pub(crate) predicted: Vec<Vec3>,
     pub(crate) node_marks: Vec<u64>,
     pub(crate) tet_marks: Vec<u64>,
 }
@@ -638,6 +641,7 @@ impl SimWorkspace {
             over: vec![0; sim.hybrid.outer_points.len()],
             skin_to_core: vec![Vec3::zeros(); sim.hybrid.outer_points.len()],
             soft_tets: Vec::with_capacity(sim.core.n_tets()),
+            predicted: vec![Vec3::zeros(); sim.core.n_nodes()],
             node_marks: vec![0; sim.core.n_nodes()],
             tet_marks: vec![0; sim.core.n_tets()],
         }

@@ -60,6 +60,7 @@ use crate::meshfree;
 use crate::parallel::{Fork, Serial};
 use crate::spatial::closest_on_triangle;
 use super::stability::stretch_bound;
+use super::exchange::ShellReaction;
 
 /// What a tick did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -472,8 +473,12 @@ pub fn tick_force_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, t
     if touched {
         let momentum_before = if sim.core.is_free_body() { Some(sim.core.momentum(&core.v)) } else { None };
         let softening = Softening { sim, tets: &ws.soft_tets };
-        let both = Sum(&contact, &softening);
-        let potential: &dyn CorePotential = if ws.soft_tets.is_empty() { &contact } else { &both };
+        let no_one: &[usize] = &[];
+        let coupled_active = if sim.options.implicit_exchange { &particles.active[..] } else { no_one };
+        let reaction = ShellReaction::new(sim, coupled_active, &core.x, &core.v, dt, &mut ws.predicted);
+        let inner = Sum(&softening, &reaction);
+        let both = Sum(&contact, &inner);
+        let potential: &dyn CorePotential = &both;
         report.core = match step_with_potential(&sim.core, core, &mut ws.core, dt, potential) {
             Ok(r) => r,
             Err(e) => {
@@ -537,10 +542,15 @@ pub fn finish_tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace) -> Re
         // between the tick and this step brings its own).
         ws.epoch += 1;
         homogenised_core::softened_tets(sim, &state.particles.active, &mut ws.node_marks, &mut ws.tet_marks, ws.epoch, &mut ws.soft_tets);
-        let stepped = if ws.soft_tets.is_empty() {
-            step(&sim.core, &mut state.core, &mut ws.core, dt)
-        } else {
-            step_with_potential(&sim.core, &mut state.core, &mut ws.core, dt, &Softening { sim, tets: &ws.soft_tets })
+        // The shell's reactions (in `f_ext`) with their implicit share (super::exchange).
+        let no_one: &[usize] = &[];
+        let coupled_active = if sim.options.implicit_exchange { &state.particles.active[..] } else { no_one };
+        let reaction = ShellReaction::new(sim, coupled_active, &state.core.x, &state.core.v, dt, &mut ws.predicted);
+        let stepped = match (ws.soft_tets.is_empty(), reaction.is_empty()) {
+            (true, true) => step(&sim.core, &mut state.core, &mut ws.core, dt),
+            (false, true) => step_with_potential(&sim.core, &mut state.core, &mut ws.core, dt, &Softening { sim, tets: &ws.soft_tets }),
+            (true, false) => step_with_potential(&sim.core, &mut state.core, &mut ws.core, dt, &reaction),
+            (false, false) => step_with_potential(&sim.core, &mut state.core, &mut ws.core, dt, &Sum(&Softening { sim, tets: &ws.soft_tets }, &reaction)),
         };
         match stepped {
             Ok(r) => done.core = Some(r),
