@@ -592,7 +592,8 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
                     depths: Sequence[float] = (0.002, 0.004, 0.006), levels: Optional[Sequence[Tuple[int, int]]] = None,
                     coarse: Optional[Tuple[int, int]] = None, young: float = 30e3, poisson: float = 0.4,
                     law: str = "neo-hookean", out_dir: Optional[str] = None, model: Optional[_palpate.HybridModel] = None,
-                    reference: Optional[str] = None, verbose: bool = True) -> Dict[str, Any]:
+                    reference: Optional[str] = None, verbose: bool = True,
+                    implicit_exchange: bool = False) -> Dict[str, Any]:
     """The hybrid's force and dent against the converged FEM of its wall, and the coarse FEM.
 
     ``levels``: the reference meshes (default :func:`default_levels`); ``coarse``: the level of
@@ -604,6 +605,9 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
     are reused instead of computed (they take most of the run's time; the hybrid is what one
     iterates on): its wall, material, law, tool, press and held height must be this run's
     (:func:`load_reference`), and ``levels`` and ``coarse`` are then its own.
+
+    ``implicit_exchange``: the hybrid with the shell's springs at the tissue's stiffness (the
+    ``HybridSim`` option; recorded in the result).
     """
     from .hybrid import SHAPES, build_shape
 
@@ -626,7 +630,7 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
         case.point, case.direction = tuple(float(v) for v in point), tuple(float(v) for v in inward)
     if reference is not None:
         load_reference(reference, case)  # refuse a misfit before the hybrid's minute
-    hyb = hybrid_curve(model, case, verbose=verbose)
+    hyb = hybrid_curve(model, case, verbose=verbose, implicit_exchange=implicit_exchange)
     case.hold_z = hyb["hold_z"]
     if reference is not None:
         refs, coarse_curve = load_reference(reference, case, hyb["probes"])
@@ -661,7 +665,8 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
                          extrapolated=extrapolated[j], hybrid_error_extrapolated=hyb_f[j] / extrapolated[j] - 1,
                          dent_reference=dents["reference"][j], dent_hybrid=dents["hybrid"][j],
                          dent_coarse=dents["coarse"][j]))
-    result = dict(case=asdict(case), hybrid=hyb, references=refs, coarse=coarse_curve, rows=rows, convergence=conv)
+    result = dict(case=asdict(case), hybrid=hyb, references=refs, coarse=coarse_curve, rows=rows, convergence=conv,
+                  implicit_exchange=implicit_exchange)
     if verbose:
         print(format_table(result))
     if out_dir:
