@@ -168,9 +168,11 @@ def bridge_events(stats: Optional[Dict[str, Any]], seen: Dict[str, Any]) -> list
 
 
 def run_live(loop: "_p.HapticLoop", seconds: Optional[float], on_status: Optional[Callable[[str], None]] = None,
-             every: float = 0.2, on_event: Optional[Callable[[str], None]] = None) -> Dict[str, Any]:
-    """Starts ``loop``, calls ``on_status(line)`` every ``every`` [s] until it finishes or
-    ``seconds`` [s] pass, stops it and returns its report (:meth:`palpate.HapticLoop.stop`).
+             every: float = 0.2, on_event: Optional[Callable[[str], None]] = None,
+             until: Optional[Callable[[], bool]] = None) -> Dict[str, Any]:
+    """Starts ``loop``, calls ``on_status(line)`` every ``every`` [s] until it finishes,
+    ``seconds`` [s] pass or ``until()`` is true (checked as often), stops it and returns its
+    report (:meth:`palpate.HapticLoop.stop`).
     ``on_event(line)`` gets the bridge's events (:func:`bridge_events`) as they happen. Ctrl-C
     (``KeyboardInterrupt``) stops the loop the same way: the report then has ``interrupted``
     True (a session is often ended so; its summary and recording are still wanted)."""
@@ -186,7 +188,7 @@ def run_live(loop: "_p.HapticLoop", seconds: Optional[float], on_status: Optiona
                     on_event(line)
             if on_status is not None:
                 on_status(status_line(loop.snapshot(), loop.rate_hz))
-            if done or (seconds is not None and time.monotonic() - t0 >= seconds):
+            if done or (seconds is not None and time.monotonic() - t0 >= seconds) or (until is not None and until()):
                 break
     except KeyboardInterrupt:
         interrupted = True

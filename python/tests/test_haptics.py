@@ -528,6 +528,67 @@ def test_cli_haptic_bridge_beyond_loopback_needs_a_key(tmp_path):
     assert out.returncode == 2 and "cannot read the bridge key" in out.stderr, out.stderr
 
 
+# A stand-in for pyOpenHaptics that a child process can import (a stylus at the device's origin,
+# served by a 1 kHz thread, as the OpenHaptics scheduler would).
+FAKE_TOUCH = {
+    "__init__.py": "",
+    "hd.py": textwrap.dedent("""\
+        def get_transform():
+            return [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+        def get_buttons():
+            return 0
+        def set_force(f):
+            pass
+        """),
+    "hd_callback.py": "def hd_callback(f):\n    return f\n",
+    "hd_device.py": textwrap.dedent("""\
+        import threading, time
+        class HapticDevice:
+            def __init__(self, device_name, callback):
+                self._stop = threading.Event()
+                callback()
+                def serve():
+                    while not self._stop.is_set():
+                        callback()
+                        time.sleep(0.001)
+                self._thread = threading.Thread(target=serve, daemon=True)
+                self._thread.start()
+            def close(self):
+                self._stop.set()
+                self._thread.join(1.0)
+        """),
+}
+
+
+def test_haptic_with_a_vendor_device_starts_its_adapter_beside_the_loop(tmp_path):
+    # `palpate haptic MODEL --device touch`: one command for the common case. The loop binds a
+    # free loopback port with a fresh key and starts `palpate device touch` on it; the adapter's
+    # states reach the loop signed (none refused), the child is stopped with the loop, and the
+    # key's file is gone afterwards. Without the vendor's package: exit 3 and what to install,
+    # before any loop starts.
+    import glob
+    import tempfile
+
+    fake = tmp_path / "vendor" / "pyOpenHaptics"
+    fake.mkdir(parents=True)
+    for name, text in FAKE_TOUCH.items():
+        (fake / name).write_text(text)
+    keys_before = set(glob.glob(os.path.join(tempfile.gettempdir(), "palpate-bridge-*")))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path / "vendor")] + [p for p in [os.environ.get("PYTHONPATH")] if p])}
+    out = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ellipsoids", "--device", "touch", "--seconds", "3",
+                          "--quiet"], capture_output=True, text=True, timeout=300, cwd=ROOT, env=env)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "starting palpate device touch on port" in out.stdout, out.stdout
+    bridge = next(line for line in out.stdout.splitlines() if line.strip().startswith("bridge:"))
+    stats = dict(item.strip().rsplit(" ", 1) for item in bridge.split(":", 1)[1].split(","))
+    assert int(stats["accepted"]) > 500 and int(stats["bad_tag"]) == 0 and int(stats["sessions"]) == 1, bridge
+    assert set(glob.glob(os.path.join(tempfile.gettempdir(), "palpate-bridge-*"))) == keys_before
+    missing = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ellipsoids", "--device", "haply", "--seconds", "1"],
+                             capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert missing.returncode == 3 and "pip install" in missing.stderr and "starting" not in missing.stdout, \
+        missing.stdout + missing.stderr
+
+
 # ------------------------------------------------------------------------------- vendor adapters
 
 VENDOR_MODULES = ("pyOpenHaptics", "forcedimension_core", "HaplyHardwareAPI", "haptic_master")

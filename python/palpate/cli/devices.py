@@ -47,8 +47,9 @@ def device_table() -> List[Dict[str, Any]]:
             found = False
         rows.append(dict(name=name, kind="vendor", what=VENDOR_DEVICES.get(name, name),
                          needs=f"pip install {package} (the {extra} extra), plus {other}", installed=found,
-                         command=f"palpate haptic MODEL --device bridge:5005 --kind {name}   and, in a second shell:   "
-                                 f"palpate device {name} --port 5005"))
+                         command=f"palpate haptic MODEL --device {name} --offset X Y Z   (or two processes: "
+                                 f"palpate haptic MODEL --device bridge:5005 --kind {name}, and palpate device {name} "
+                                 f"--port 5005)"))
     return rows
 
 

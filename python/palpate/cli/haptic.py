@@ -1,7 +1,13 @@
-"""``palpate haptic MODEL --device scripted:SCRIPT|replay:FILE|bridge:PORT|hand``: the haptic loop
-(a native servo thread, :class:`palpate.HapticLoop`) on a hybrid model, headless, with a live
-status line (rate, period, force, overruns). ``--record FILE`` writes the interaction for
+"""``palpate haptic MODEL --device scripted:SCRIPT|replay:FILE|bridge:PORT|hand|VENDOR``: the haptic
+loop (a native servo thread, :class:`palpate.HapticLoop`) on a hybrid model, headless, with a
+live status line (rate, period, force, overruns). ``--record FILE`` writes the interaction for
 ``--device replay:FILE``, which gives the same forces bit for bit.
+
+``--device touch|forcedimension|haply|hapticmaster`` is the common case in one command: the loop
+opens a bridge on a free loopback port with a fresh random key, and starts ``palpate device
+VENDOR`` as a child process on it (the vendor SDK never runs in the servo's process); the loop
+stops when the child does, and the child when the loop does. The two-process form (``--device
+bridge:PORT`` and ``palpate device``) stays for a device on another machine.
 
 The recording's buffer is allocated when the loop starts (the servo thread never allocates), 144
 bytes a tick: with ``--seconds S``, S seconds of ticks (the loop then stops itself after that
@@ -11,12 +17,17 @@ buffer are not recorded: the command says how many, in one warning line on stder
 from __future__ import annotations
 
 import math
+import os
+import secrets
+import subprocess
 import sys
+import tempfile
 
 from ..haptics import DEVICE_KINDS
+from .device import ADAPTERS as VENDOR_ADAPTERS
 from ._common import FAILED, INTERRUPTED, Fail, RunFailed, Usage, add_physics_rate, load_hybrid_model, palpate_errors, physics_rate
 
-DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand"
+DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand, touch|forcedimension|haply|hapticmaster"
 #: The recording buffer without ``--seconds`` [ticks]: 5 min at 1 kHz, 75 s at 4 kHz (43 MB).
 DEFAULT_RECORD_TICKS = 300_000
 #: The fastest a loop (and so a recording to replay) runs [Hz].
@@ -43,7 +54,14 @@ def add_parser(sub) -> None:
     h.add_argument("--key-file", default=None, metavar="FILE",
                    help="bridge: a shared key (at least 16 bytes) that signs every packet (HMAC-SHA256, PROTOCOL.md); "
                         "the device process gives the same file to `palpate device --key-file`")
-    h.add_argument("--kind", choices=DEVICE_KINDS, default=None, help="the device's make, for the coupling and safety defaults")
+    h.add_argument("--kind", choices=DEVICE_KINDS, default=None, help="the device's make, for the coupling and safety defaults "
+                   "(a vendor --device sets its own)")
+    h.add_argument("--scale", type=float, default=1.0,
+                   help="a vendor --device: world = scale * device + offset (default 1, as palpate device)")
+    h.add_argument("--offset", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                   help="a vendor --device: the world position [m] of the device's origin (default: the centre of the "
+                        "organ's bounding box)")
+    h.add_argument("--address", default=None, help="a vendor --device: hapticmaster's IP, haply's serial port (as palpate device)")
     h.add_argument("--max-force", type=float, default=None, metavar="N", help="force limit [N] (default 3)")
     h.add_argument("--unsafe-limits", action="store_true",
                    help="allow a --max-force above the device class's rated force (touch 3.3 N, forcedimension 12 N, "
@@ -106,6 +124,15 @@ def make_loop(a, model, record_ticks: int):
     if a.seconds is not None and kind != "replay":
         common["max_ticks"] = int(math.ceil(a.seconds * a.rate))
     mat = haptics.material()
+    if kind in VENDOR_ADAPTERS:
+        from ..devices import missing_vendor
+
+        why = missing_vendor(kind)
+        if why is not None:
+            raise RunFailed(f"palpate haptic: {why}")
+        common.setdefault("kind", kind)
+        # Loopback, a free port and a key only this process and its child know.
+        return _p.HapticLoop(model, mat, "bridge", port=0, host="127.0.0.1", bridge_key=a.vendor_key, **common)
     try:
         if kind == "scripted":
             if not arg:
@@ -153,6 +180,46 @@ def make_loop(a, model, record_ticks: int):
     raise Usage(f"palpate haptic: unknown device {a.device!r}; expected {DEVICES}")
 
 
+def start_vendor(a, loop, model) -> "subprocess.Popen":
+    """``palpate device VENDOR`` as a child process on the loop's bridge, its key in a file only
+    the user can read (removed once the child has read it: see :func:`cmd_haptic`), the device's
+    origin placed at ``--offset`` (default: the centre of the organ's bounding box)."""
+    import numpy as np
+
+    port = loop.bridge_address.rsplit(":", 1)[1]
+    fd, path = tempfile.mkstemp(prefix="palpate-bridge-", suffix=".key")
+    with os.fdopen(fd, "wb") as f:
+        f.write(a.vendor_key)
+    a.vendor_key_file = path
+    pts = np.asarray(model.outer_points)
+    offset = a.offset if a.offset is not None else 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+    cmd = [sys.executable, "-m", "palpate", "device", a.device, "--port", port, "--host", "127.0.0.1",
+           "--key-file", path, "--scale", repr(float(a.scale)), "--offset", *(repr(float(v)) for v in offset)]
+    if a.address:
+        cmd += ["--address", a.address]
+    print(f"palpate haptic: starting palpate device {a.device} on port {port} (device origin at "
+          f"{', '.join(f'{v:.4f}' for v in offset)} m, scale {a.scale:g})", flush=True)
+    return subprocess.Popen(cmd, stdout=sys.stderr.fileno() if hasattr(sys.stderr, "fileno") else None)
+
+
+def stop_vendor(a, child) -> int:
+    """Ends the child (Ctrl-C as a user would, then a kill after 3 s) and removes the key file;
+    returns its exit code."""
+    if child.poll() is None:
+        child.send_signal(2)  # SIGINT: the adapter zeroes the device's force and closes it
+        try:
+            child.wait(3.0)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
+    if getattr(a, "vendor_key_file", None):
+        try:
+            os.unlink(a.vendor_key_file)
+        except OSError:
+            pass
+    return child.returncode
+
+
 def cmd_haptic(a) -> int:
     from .. import haptics
 
@@ -167,8 +234,25 @@ def cmd_haptic(a) -> int:
     if a.busy_wait and a.realtime:
         raise Usage("palpate haptic: --busy-wait and --realtime together: a real-time thread that never sleeps "
                     "meets the kernel's real-time throttling (50 ms without the CPU every second)")
+    if not (a.scale > 0 and math.isfinite(a.scale)):
+        raise Usage(f"palpate haptic: --scale must be positive, got {a.scale}")
+    vendor = a.device in VENDOR_ADAPTERS
+    a.vendor_key = secrets.token_hex(32).encode() if vendor else None
     name, model = load_hybrid_model(a.model, "haptic")
     loop = make_loop(a, model, record_ticks(a))
+    child = start_vendor(a, loop, model) if vendor else None
+    try:
+        return _run(a, loop, name, child)
+    finally:
+        if child is not None:
+            code = stop_vendor(a, child)
+            if code not in (0, None, -2, 130):
+                print(f"palpate haptic: palpate device {a.device} ended with exit code {code}", file=sys.stderr)
+
+
+def _run(a, loop, name: str, child) -> int:
+    from .. import haptics
+
     where = f" on {loop.bridge_address}" if loop.bridge_address else ""
     phys = f", physics {loop.physics_rate_hz:g} Hz (multirate)" if loop.physics_rate_hz else ""
     print(f"palpate haptic: {name}, device {a.device}{where}, {loop.rate_hz:g} Hz{phys}", flush=True)
@@ -187,7 +271,11 @@ def cmd_haptic(a) -> int:
     def event(line: str) -> None:
         print(("\r" if tty and not a.quiet else "") + "palpate haptic: " + line, file=sys.stderr, flush=True)
 
-    r = haptics.run_live(loop, a.seconds, show, on_event=event)
+    until = (lambda: child.poll() is not None) if child is not None else None
+    r = haptics.run_live(loop, a.seconds, show, on_event=event, until=until)
+    if child is not None and child.poll() is not None and not r["interrupted"]:
+        print(f"palpate haptic: palpate device {a.device} stopped (exit code {child.returncode}): the loop stopped "
+              "with it", file=sys.stderr)
     if tty and not a.quiet:
         print()
     if r["interrupted"]:

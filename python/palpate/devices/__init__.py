@@ -18,7 +18,8 @@ inverse (the scale does not apply to forces).
 from __future__ import annotations
 
 import importlib
-from typing import Any
+import importlib.util
+from typing import Any, Optional
 
 #: Adapter name -> (module, the PyPI package, the pip extra of palpate, what else to install).
 VENDORS = {
@@ -32,6 +33,20 @@ VENDORS = {
 
 class MissingVendor(ImportError):
     """A vendor adapter's SDK package is not installed; the message says what to install."""
+
+
+def missing_vendor(name: str) -> Optional[str]:
+    """What to install for adapter ``name``, or None when its vendor module is found (looked up,
+    not imported: an SDK may touch the hardware when imported)."""
+    module, package, extra, other = VENDORS[name]
+    try:
+        found = importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):
+        found = False
+    if found:
+        return None
+    return (f"palpate device {name} needs the Python package {package!r} (module {module}), which is not installed: "
+            f"pip install {package} (the {extra} extra), plus {other}")
 
 
 def import_vendor(name: str) -> Any:
