@@ -199,7 +199,11 @@ def start_vendor(a, loop, model) -> "subprocess.Popen":
         cmd += ["--address", a.address]
     print(f"palpate haptic: starting palpate device {a.device} on port {port} (device origin at "
           f"{', '.join(f'{v:.4f}' for v in offset)} m, scale {a.scale:g})", flush=True)
-    return subprocess.Popen(cmd, stdout=sys.stderr.fileno() if hasattr(sys.stderr, "fileno") else None)
+    try:
+        out = sys.stderr.fileno()  # the child's lines beside the loop's events, not in its status
+    except (AttributeError, OSError, ValueError):
+        out = None  # a captured stderr (no file descriptor): the child's own stdout
+    return subprocess.Popen(cmd, stdout=out)
 
 
 def stop_vendor(a, child) -> int:
