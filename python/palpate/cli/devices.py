@@ -7,7 +7,6 @@ is present.
 """
 from __future__ import annotations
 
-import importlib.util
 import json
 from typing import Any, Dict, List
 
@@ -36,15 +35,12 @@ def device_table() -> List[Dict[str, Any]]:
     """One dict per device: ``name``, ``kind`` (``"built-in"`` or ``"vendor"``), ``what``,
     ``needs`` (what to install besides palpate), ``installed`` (the vendor's Python package is
     importable; None for the built-in ones), ``command`` (the command or commands that run it)."""
-    from ..devices import VENDORS
+    from ..devices import VENDORS, missing_vendor
 
     rows: List[Dict[str, Any]] = [dict(name=n, kind="built-in", what=w, needs="", installed=None, command=c)
                                   for n, w, c in BUILT_IN]
     for name, (module, package, extra, other) in VENDORS.items():
-        try:
-            found = importlib.util.find_spec(module) is not None
-        except (ImportError, ValueError):
-            found = False
+        found = missing_vendor(name) is None
         rows.append(dict(name=name, kind="vendor", what=VENDOR_DEVICES.get(name, name),
                          needs=f"pip install {package} (the {extra} extra), plus {other}", installed=found,
                          command=f"palpate haptic MODEL --device {name} --offset X Y Z   (or two processes: "
