@@ -384,7 +384,9 @@ impl PyHybridSim {
     /// The state as a dict of copies, everything a tick carries to the next: ``time`` [s],
     /// ``ticks``; ``core_positions`` [m] and ``core_velocities`` [m/s] (n_core, 3) with the core
     /// integrator's memory (``factored_dt`` [s], ``refreshed_at`` [m] or None,
-    /// ``excess_iterations``: as ``Body.get_state``); ``particle_positions`` [m] and
+    /// ``excess_iterations``: as ``Body.get_state``; ``refreshed_stiffness_pairs`` (k, 2) and
+    /// ``refreshed_stiffness_blocks`` [N/m] (k, 3, 3): the shell's coupling stiffness held in that
+    /// refreshed factor, node pairs and 3x3 blocks); ``particle_positions`` [m] and
     /// ``particle_velocities`` [m/s] (n_particles, 3) (the inactive ones where the last tick left
     /// them); ``tool`` [m] (3,) or None; the activation's hysteresis, ``region_last_touched``
     /// (per region the tick of its last contact, -1: never) and ``active_regions`` (in the
@@ -412,6 +414,11 @@ impl PyHybridSim {
         d.set_item("factored_dt", s.core_memory.factored_dt)?;
         d.set_item("refreshed_at", s.core_memory.refreshed_at.as_ref().map(|x| conv::vec3s_to_py(py, x)))?;
         d.set_item("excess_iterations", s.core_memory.excess_iterations)?;
+        let held = &s.core_memory.refreshed_stiffness;
+        let pairs: Vec<[usize; 2]> = held.iter().map(|&(a, b, _)| [a, b]).collect();
+        let blocks: Vec<f64> = held.iter().flat_map(|(_, _, m)| (0..9).map(move |k| m[(k / 3, k % 3)])).collect();
+        d.set_item("refreshed_stiffness_pairs", conv::index_rows_to_py(py, &pairs))?;
+        d.set_item("refreshed_stiffness_blocks", conv::f64s_nd_to_py(py, blocks, &[held.len(), 3, 3]))?;
         d.set_item("particle_positions", conv::vec3s_to_py(py, &s.particle_x))?;
         d.set_item("particle_velocities", conv::vec3s_to_py(py, &s.particle_v))?;
         d.set_item("tool", s.tool.map(|c| conv::vec3_to_py(py, c)))?;
@@ -469,6 +476,7 @@ impl PyHybridSim {
                 factored_dt: conv::arg(&item("factored_dt")?)?,
                 refreshed_at: opt("refreshed_at")?.map(|x| conv::vec3s(&x, "refreshed_at", n_core, true)).transpose()?,
                 excess_iterations: conv::arg(&item("excess_iterations")?)?,
+                refreshed_stiffness: held_stiffness(opt("refreshed_stiffness_pairs")?, opt("refreshed_stiffness_blocks")?, n_core)?,
             },
             particle_x: conv::vec3s(&item("particle_positions")?, "particle_positions", n_p, true)?,
             particle_v: conv::vec3s(&item("particle_velocities")?, "particle_velocities", n_p, true)?,
@@ -571,4 +579,29 @@ impl PyHybridSim {
             self.state.ticks
         )
     }
+}
+
+/// The core's stiffness held in a refreshed factor, from a state's ``refreshed_stiffness_pairs``
+/// (k, 2) and ``refreshed_stiffness_blocks`` (k, 3, 3) [N/m] (both absent from states saved before
+/// they were kept: none).
+fn held_stiffness(pairs: Option<Bound<'_, PyAny>>, blocks: Option<Bound<'_, PyAny>>, n_core: usize) -> PyResult<Vec<(usize, usize, palpate_core::Mat3)>> {
+    let (Some(pairs), Some(blocks)) = (pairs, blocks) else { return Ok(Vec::new()) };
+    let pairs = conv::index_rows::<2>(&pairs, "refreshed_stiffness_pairs")?;
+    let (values, shape) = conv::reals_nd(&blocks, "refreshed_stiffness_blocks")?;
+    let k = pairs.len();
+    if !(shape == [k, 3, 3] || (k == 0 && values.is_empty())) {
+        return Err(errors::param_error_from(format!("refreshed_stiffness_blocks must have shape ({k}, 3, 3), one block per pair, got {shape:?}")));
+    }
+    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+        return Err(errors::param_error_from(format!("refreshed_stiffness_blocks[{}] is not finite ({})", i / 9, values[i])));
+    }
+    let node = |i: i64| usize::try_from(i).ok().filter(|&i| i < n_core);
+    pairs
+        .iter()
+        .enumerate()
+        .map(|(j, &[a, b])| match (node(a), node(b)) {
+            (Some(a), Some(b)) => Ok((a, b, palpate_core::Mat3::from_fn(|r, c| values[9 * j + 3 * r + c]))),
+            _ => Err(errors::param_error_from(format!("refreshed_stiffness_pairs[{j}] = ({a}, {b}): a node out of range for {n_core} core nodes"))),
+        })
+        .collect()
 }

@@ -240,18 +240,22 @@ def _ticks(sim, path):
     return out
 
 
+@pytest.mark.parametrize("implicit", [False, True], ids=["explicit-exchange", "implicit-exchange"])
 @pytest.mark.parametrize("at", [20, 36], ids=["pressing", "lingering"])
-def test_hybrid_sim_state_round_trip_is_bit_identical(at):
+def test_hybrid_sim_state_round_trip_is_bit_identical(at, implicit):
     # At tick 20 the tool presses (forces to repeat); at 36 it has left and two regions linger
-    # (their last-touch ticks decide when their particles leave).
-    sim, path = ellipsoids_sim()
+    # (their last-touch ticks decide when their particles leave). With the implicit exchange the
+    # core's factor holds the shell's springs, which the state carries.
+    sim, path = ellipsoids_sim(implicit_exchange=implicit)
     for c in path[:at]:
         sim.step(c)
     saved = sim.get_state()
     assert saved["tool"] is not None and len(saved["active_regions"]) > 0 and saved["skin_live"] is not None
+    assert (len(saved["refreshed_stiffness_pairs"]) > 0) == implicit
+    assert saved["refreshed_stiffness_blocks"].shape == (len(saved["refreshed_stiffness_pairs"]), 3, 3)
     # Restored into a simulation with another history (its own active regions, skin lists,
     # integrator memory and workspace marks): nothing of that may leak into the ticks after.
-    other, _ = ellipsoids_sim()
+    other, _ = ellipsoids_sim(implicit_exchange=implicit)
     for c in path[::-3]:
         other.step(c)
     other.set_state(saved)
@@ -322,6 +326,16 @@ def test_hybrid_sim_set_state_refuses_what_does_not_fit():
         sim.set_state(dict(saved, region_last_touched=np.full_like(saved["region_last_touched"], -1)))
     with pytest.raises(palpate.StepError, match="region"):
         sim.set_state(dict(saved, active_regions=np.array([10 ** 6])))
+    # The stiffness held in the core's factor: a node out of range, a non-finite or misshapen block.
+    one = dict(saved, refreshed_stiffness_pairs=np.array([[0, 0]]), refreshed_stiffness_blocks=np.eye(3)[None])
+    sim.set_state(one)
+    sim.set_state(saved)
+    with pytest.raises(ValueError, match="refreshed_stiffness_pairs"):
+        sim.set_state(dict(one, refreshed_stiffness_pairs=np.array([[0, 10 ** 6]])))
+    with pytest.raises(ValueError, match="refreshed_stiffness_blocks"):
+        sim.set_state(dict(one, refreshed_stiffness_blocks=np.full((1, 3, 3), np.nan)))
+    with pytest.raises(ValueError, match="refreshed_stiffness_blocks"):
+        sim.set_state(dict(one, refreshed_stiffness_blocks=np.eye(3)))
     assert same_state(sim.get_state(), before)                 # a refused state changes nothing
     # The state of another model: the sizes differ.
     inner, outer = (palpate.ellipsoid_surface(a, 3) for a in ((0.02, 0.02, 0.03), (0.03, 0.03, 0.04)))

@@ -36,6 +36,11 @@ fn main() {
     if let Some(h) = env("SUPPORT") {
         o.support_spacings = h;
     }
+    // IMPLICIT: the shell's springs at the tissue's stiffness, their reaction implicit
+    // (SimOptions::implicit_exchange).
+    if std::env::var("IMPLICIT").is_ok() {
+        o.implicit_exchange = true;
+    }
     if std::env::var("MS").ok().as_deref() == Some("off") {
         o.mass_scaling = None;
     }

@@ -115,3 +115,94 @@ fn prepare_factorises_ahead_without_changing_the_next_steps() {
     assert!(ws.prepare(&model, f64::NAN).is_err());
     assert_eq!(palpate_core::integrate::DT_CACHE_SIZE, 3);
 }
+
+/// A potential stiff against the nodes' inertia: springs of `k` [N/m] from the top nodes to
+/// targets `a` (the hybrid shell's coupling springs in miniature), with or without its
+/// stiffness offered to the factor.
+struct Anchors {
+    nodes: Vec<usize>,
+    targets: Vec<Vec3>,
+    k: f64,
+    offer: bool,
+}
+
+impl palpate_core::integrate::CorePotential for Anchors {
+    fn energy_forces(&self, x: &[Vec3], f: &mut [Vec3]) -> f64 {
+        let mut u = 0.0;
+        for (&i, a) in self.nodes.iter().zip(&self.targets) {
+            let d = x[i] - a;
+            u += 0.5 * self.k * d.norm_squared();
+            f[i] -= self.k * d;
+        }
+        u
+    }
+
+    fn add_stiffness(&self, _x: &[Vec3], add: &mut dyn FnMut(usize, usize, &palpate_core::Mat3)) {
+        if self.offer {
+            for &i in &self.nodes {
+                add(i, i, &palpate_core::Mat3::from_diagonal_element(self.k));
+            }
+        }
+    }
+}
+
+/// A potential's stiffness offered through `add_stiffness` is held in the factor once a refresh
+/// pays: the steps after it take one iteration where, not offered, they keep taking several; and
+/// the memory carries the held blocks, so that a restored workspace repeats the steps bit for bit
+/// (without them it would refactorise the tangent alone and iterate differently).
+#[test]
+fn a_potentials_stiffness_is_held_in_the_refreshed_factor_and_in_the_memory() {
+    let model = clamped_wall(Integrator::quasi_newton());
+    let pts = model.mesh().points();
+    let ztop = pts.iter().map(|p| p.z).fold(f64::MIN, f64::max);
+    let nodes: Vec<usize> = (0..model.n_nodes()).filter(|&i| pts[i].z > ztop - 4e-3 && !model.fixed()[i]).collect();
+    let m_top = nodes.iter().map(|&i| model.masses()[i]).fold(f64::MAX, f64::min);
+    // 20x the lightest top node's inertia m / dt^2 at dt = 1 ms.
+    let k = 20.0 * m_top / 1e-6;
+    let targets: Vec<Vec3> = nodes.iter().map(|&i| pts[i] + Vec3::new(0.0, 0.0, -2e-3)).collect();
+    let run = |offer: bool| {
+        let pot = Anchors { nodes: nodes.clone(), targets: targets.clone(), k, offer };
+        let mut s = State::rest(&model);
+        let mut ws = Workspace::new(&model);
+        let mut iters = Vec::new();
+        for _ in 0..60 {
+            iters.push(palpate_core::integrate::step_with_potential(&model, &mut s, &mut ws, 1e-3, &pot).unwrap().iterations);
+        }
+        (iters, s, ws, pot)
+    };
+    let (with, mut s, mut ws, pot) = run(true);
+    let (without, ..) = run(false);
+    let late = |v: &[usize]| v[40..].iter().sum::<usize>() as f64 / 20.0;
+    assert!(late(&with) < 1.3, "offered: {with:?}");
+    assert!(late(&without) >= 2.0, "not offered: {without:?}");
+    let mem = ws.memory();
+    assert!(mem.refreshed_at.is_some());
+    assert_eq!(mem.refreshed_stiffness.len(), nodes.len(), "one diagonal block per anchored node");
+    let saved = s.clone();
+    let mut a = Vec::new();
+    for _ in 0..20 {
+        a.push(palpate_core::integrate::step_with_potential(&model, &mut s, &mut ws, 1e-3, &pot).unwrap().iterations);
+    }
+    let mut ws2 = Workspace::new(&model);
+    ws2.restore_memory(&model, &mem).unwrap();
+    let mut s2 = saved.clone();
+    let mut b = Vec::new();
+    for _ in 0..20 {
+        b.push(palpate_core::integrate::step_with_potential(&model, &mut s2, &mut ws2, 1e-3, &pot).unwrap().iterations);
+    }
+    assert_eq!(a, b);
+    assert_eq!(bits(&s.x), bits(&s2.x), "positions differ after the restore");
+    // A memory that dropped the held blocks remakes another factor: the steps differ.
+    let mut ws3 = Workspace::new(&model);
+    ws3.restore_memory(&model, &palpate_core::StepMemory { refreshed_stiffness: Vec::new(), ..mem.clone() }).unwrap();
+    let mut s3 = saved;
+    for _ in 0..20 {
+        palpate_core::integrate::step_with_potential(&model, &mut s3, &mut ws3, 1e-3, &pot).unwrap();
+    }
+    assert_ne!(bits(&s.x), bits(&s3.x), "the held blocks should matter");
+    // Out-of-range nodes and non-finite blocks are refused.
+    let bad = palpate_core::StepMemory { refreshed_stiffness: vec![(model.n_nodes(), 0, palpate_core::Mat3::identity())], ..mem.clone() };
+    assert!(Workspace::new(&model).restore_memory(&model, &bad).is_err());
+    let bad = palpate_core::StepMemory { refreshed_stiffness: vec![(0, 0, palpate_core::Mat3::identity() * f64::NAN)], ..mem };
+    assert!(Workspace::new(&model).restore_memory(&model, &bad).is_err());
+}

@@ -208,6 +208,7 @@ impl ModelBuilder {
             gravity,
             integrator,
             free_nodes,
+            node_to_free,
             pattern,
             tet_blocks,
             k0,
@@ -239,6 +240,8 @@ pub struct Model {
     pub(crate) gravity: Vec3,
     pub(crate) integrator: Integrator,
     pub(crate) free_nodes: Vec<usize>,
+    /// Node -> its index among the free nodes, or NONE if fixed (inverse of `free_nodes`).
+    pub(crate) node_to_free: Vec<usize>,
     /// Block pattern over the free nodes.
     pub(crate) pattern: BlockPattern,
     /// Per tet, the pattern block of node pair (a, c) at `4a + c`, or NONE if either is fixed.

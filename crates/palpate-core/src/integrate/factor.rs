@@ -8,7 +8,7 @@ use crate::error::StepError;
 use crate::fem::model::NONE;
 use crate::fem::tangent;
 use crate::fem::{Model, Workspace};
-use crate::integrate::Integrator;
+use crate::integrate::{CorePotential, Integrator};
 use crate::linalg::Ldl;
 use crate::math::{Mat3, Vec3};
 
@@ -125,6 +125,10 @@ pub(crate) fn restore(model: &Model, ws: &mut Workspace, mem: &crate::fem::StepM
     } else if !(dt > 0.0 && dt.is_finite()) {
         return Err(StepError::BadTimeStep(dt));
     } else if let Some(x) = &mem.refreshed_at {
+        clear_held(ws);
+        for (a, b, blk) in &mem.refreshed_stiffness {
+            hold(model, ws, *a, *b, blk);
+        }
         refresh(model, ws, x, dt)?;
     } else {
         if ws.refreshed {
@@ -153,16 +157,47 @@ pub(crate) fn apply_inverse(model: &Model, ws: &mut Workspace, v: &[Vec3], out: 
 /// Count `surplus` work units (iterations beyond what the step needed with an exact Hessian) and,
 /// once they have cost a factorisation and this step `struggled`, refactorise at `x` with the
 /// definite tangent (ski rental: a refresh never costs more than the work it replaces).
-pub(crate) fn refresh_if_paid(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64, surplus: usize, struggled: bool) -> Result<(), StepError> {
+/// The caller's potential (`external`, if any) is held in the new factor with its stiffness at
+/// `x` ([`CorePotential::add_stiffness`]).
+pub(crate) fn refresh_if_paid(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64, surplus: usize, struggled: bool, external: Option<&dyn CorePotential>) -> Result<(), StepError> {
     ws.excess_iterations = ws.excess_iterations.saturating_add(surplus);
     if struggled && ws.excess_iterations as f64 >= model.refresh_cost {
+        clear_held(ws);
+        if let Some(p) = external {
+            p.add_stiffness(x, &mut |a, b, blk| hold(model, ws, a, b, blk));
+        }
         refresh(model, ws, x, dt)?;
     }
     Ok(())
 }
 
-/// Refactorise `ws.ldl` with `M - dt D0 - dt^2 K~(x)`, `K~` the definite tangent approximation at
-/// `x` (`fem/tangent.rs`); on failure, the rest matrix again.
+/// Forget the caller's stiffness held for the next refresh.
+fn clear_held(ws: &mut Workspace) {
+    for &(_, _, bi) in &ws.extra_entries {
+        ws.extra_k[bi] = Mat3::zeros();
+        ws.extra_mark[bi] = false;
+    }
+    ws.extra_entries.clear();
+}
+
+/// Add the block `blk` of the node pair `(a, b)` to the caller's stiffness held for the next
+/// refresh (dropped if either node is fixed or the pair shares no tet).
+fn hold(model: &Model, ws: &mut Workspace, a: usize, b: usize, blk: &Mat3) {
+    let (Some(&fa), Some(&fb)) = (model.node_to_free.get(a), model.node_to_free.get(b)) else { return };
+    if fa == NONE || fb == NONE {
+        return;
+    }
+    let Some(bi) = model.pattern.find(fa, fb) else { return };
+    if !ws.extra_mark[bi] {
+        ws.extra_mark[bi] = true;
+        ws.extra_entries.push((a, b, bi));
+    }
+    ws.extra_k[bi] += blk;
+}
+
+/// Refactorise `ws.ldl` with `M - dt D0 - dt^2 (K~(x) - S)`, `K~` the definite tangent
+/// approximation at `x` (`fem/tangent.rs`) and `S` the caller's stiffness held (`hold`); on
+/// failure, the rest matrix again.
 fn refresh(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<(), StepError> {
     let mut k = std::mem::take(&mut ws.k);
     k.iter_mut().for_each(|b| *b = Mat3::zeros());
@@ -173,6 +208,10 @@ fn refresh(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<(),
                 k[tb[e]] += ke[e / 4][e % 4];
             }
         }
+    }
+    // `k` is the forces' Jacobian: a potential's stiffness enters with a minus sign.
+    for &(_, _, bi) in &ws.extra_entries {
+        k[bi] -= ws.extra_k[bi];
     }
     model.system_values(1.0, -dt, -dt * dt, &k, &model.d0, &mut ws.a_values);
     ws.k = k;

@@ -34,7 +34,7 @@ pub use indent::{indent, indent_with, IndentOptions, IndentPoint, Indenter};
 
 use crate::error::StepError;
 use crate::fem::{Model, State, Workspace};
-use crate::math::{is_finite3, Vec3};
+use crate::math::{is_finite3, Mat3, Vec3};
 
 /// The filter of the paper's semi-implicit scheme (eq. 34).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -184,6 +184,14 @@ pub trait CorePotential {
     /// sum to zero): the step then keeps a free body's linear momentum exact, as without it.
     /// Default false (a tool's contact pushes the body).
     fn translation_invariant(&self) -> bool { false }
+    /// Its stiffness for the integrator's factorised matrix: blocks `d^2 U / dx_a dx_b` \[N/m\]
+    /// of a positive semidefinite approximation of its Hessian at `x` `(n_nodes)`, given to `add`
+    /// as `(a, b, block)` with both orders of a pair (pairs that share no tet, and fixed nodes,
+    /// are dropped). The minimising integrators hold them in the matrix they factorise when they
+    /// refresh it (`integrate/factor.rs`), so a potential stiff against the nodes' inertia (the
+    /// hybrid shell's coupling springs) stops costing iterations once a refresh has paid for
+    /// itself. Default: none.
+    fn add_stiffness(&self, _x: &[Vec3], _add: &mut dyn FnMut(usize, usize, &Mat3)) {}
 }
 
 /// Advance `state` by `dt` \[s\] with the model's integrator.

@@ -353,7 +353,7 @@ pub(crate) fn minimise(
     ws.x_save = x_n;
     ws.v_save = v_n;
     ws.x_trial = x_trial;
-    factor::refresh_if_paid(model, ws, &state.x, dt, surplus, struggled)?;
+    factor::refresh_if_paid(model, ws, &state.x, dt, surplus, struggled, external)?;
     Ok(pr.report())
 }
 

@@ -26,11 +26,14 @@
 //! translation of the core (its forces sum to zero), so a free body's linear momentum stays exact.
 //! The springs' damping stays explicit (it is below the stiffness's `k dt` at the 1 ms tick).
 //!
-//! Its cost, and why it is not the default yet: the core's step is preconditioned by its own
-//! matrix, which does not hold these springs (8x a node's inertia on Rodero), so the step that was
-//! one quasi-Newton iteration takes 2.6, and Rodero's tick (200 active) went from 0.48 to 0.86 ms
-//! mean, p99 0.59 to 1.70 ms, past the 1 kHz budget. Holding the springs in the factorised matrix
-//! (refactorised as the active set changes) is the next step.
+//! Its cost. The core's step is preconditioned by its factorised matrix; the springs (8x a node's
+//! inertia on Rodero) are offered to it ([`CorePotential::add_stiffness`]: `k w_j w_l` between a
+//! tie's nodes, the mean's dense part left out), and the quasi-Newton integrator holds them once a
+//! refresh of its factor pays (`integrate/factor.rs`). Without that, the step that was one
+//! iteration took 2.6, and the refreshes, which then held only the tangent, recurred without
+//! helping: Rodero's tick (200 active, `examples/tick_profile.rs`) 0.65 ms mean, p99 1.57 ms;
+//! with it 0.45 ms, p99 0.61 ms, two iterations a touched tick (the held set ages as particles
+//! come and go, and the mean's part is missing).
 //!
 //! The added inertia is `k min(dt, INERTIA_TIME)^2` a spring: the full implicit share at the
 //! haptic 1 kHz tick and faster, a fixed inertia at slower ticks. With the full share at a 4 ms
@@ -43,7 +46,7 @@
 
 use super::sim::Sim;
 use crate::integrate::CorePotential;
-use crate::math::Vec3;
+use crate::math::{Mat3, Vec3};
 
 /// The tick \[s\] up to which the springs' implicit share is whole (module docs).
 pub const INERTIA_TIME: f64 = 1e-3;
@@ -112,6 +115,21 @@ impl CorePotential for ShellReaction<'_> {
     }
 
     fn translation_invariant(&self) -> bool { true }
+
+    /// The springs' part of the Hessian, `k w_j w_l I` between the nodes of each coupled active
+    /// particle's face; the mean's dense part (rank three, `k / M` small) is left out: the
+    /// factor only needs to be near the Hessian.
+    fn add_stiffness(&self, _x: &[Vec3], add: &mut dyn FnMut(usize, usize, &Mat3)) {
+        let k = self.sim.coupling.stiffness * self.share;
+        for &p in self.active.iter().filter(|&&p| self.sim.coupled[p]) {
+            let (n, w) = self.sim.particle_tie.tie(p);
+            for j in 0..3 {
+                for l in 0..3 {
+                    add(n[j] as usize, n[l] as usize, &Mat3::from_diagonal_element(k * w[j] * w[l]));
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -167,3 +185,4 @@ mod tests {
         assert!(worst < 1e-6, "finite differences differ by {worst:e} of the largest force");
     }
 }
+
