@@ -212,8 +212,8 @@ class HybridSimState(TypedDict):
     factored_dt: float
     refreshed_at: Optional[_FloatArray]
     excess_iterations: int
-    refreshed_stiffness_pairs: _IntArray
-    refreshed_stiffness_blocks: _FloatArray
+    factor_base_terms: _FloatArray
+    factor_term_updates: _FloatArray
     particle_positions: _FloatArray
     particle_velocities: _FloatArray
     tool: Optional[_FloatArray]

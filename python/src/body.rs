@@ -594,8 +594,9 @@ impl PyBody {
             factored_dt: conv::arg(&item(&state, "factored_dt")?)?,
             refreshed_at: if refreshed.is_none() { None } else { Some(conv::vec3s(&refreshed, "refreshed_at", n, true)?) },
             excess_iterations: conv::arg(&item(&state, "excess_iterations")?)?,
-            // A body is stepped with no potential of the caller's: its refreshes hold none.
-            refreshed_stiffness: Vec::new(),
+            // A body is stepped with no potential of the caller's: its factor holds no terms.
+            base_terms: Vec::new(),
+            term_updates: Vec::new(),
         };
         let (model, ws) = (&self.model, &mut self.ws);
         errors::guard("Body.set_state", || py.detach(|| ws.restore_memory(model, &mem)).map_err(|e| errors::step_error(e, "in set_state")))?;

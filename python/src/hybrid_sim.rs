@@ -4,6 +4,7 @@
 use numpy::{PyArray1, PyArray2};
 use palpate_core::parallel::Serial;
 use palpate_core::runtime::{finish_tick, scale, tick, tick_force_with, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, SkinSweep, TickReport, ToolOptions};
+use palpate_core::integrate::StiffnessTerm;
 use palpate_core::{StepMemory, Vec3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -384,9 +385,10 @@ impl PyHybridSim {
     /// The state as a dict of copies, everything a tick carries to the next: ``time`` [s],
     /// ``ticks``; ``core_positions`` [m] and ``core_velocities`` [m/s] (n_core, 3) with the core
     /// integrator's memory (``factored_dt`` [s], ``refreshed_at`` [m] or None,
-    /// ``excess_iterations``: as ``Body.get_state``; ``refreshed_stiffness_pairs`` (k, 2) and
-    /// ``refreshed_stiffness_blocks`` [N/m] (k, 3, 3): the shell's coupling stiffness held in that
-    /// refreshed factor, node pairs and 3x3 blocks); ``particle_positions`` [m] and
+    /// ``excess_iterations``: as ``Body.get_state``; ``factor_base_terms`` and
+    /// ``factor_term_updates`` (k, 8): the shell's coupling springs the factor holds, as held when
+    /// it was made and the rank updates since, rows ``[id, node0, node1, node2, w0, w1, w2,
+    /// stiffness]``, the stiffness [N/m] negative for a spring removed); ``particle_positions`` [m] and
     /// ``particle_velocities`` [m/s] (n_particles, 3) (the inactive ones where the last tick left
     /// them); ``tool`` [m] (3,) or None; the activation's hysteresis, ``region_last_touched``
     /// (per region the tick of its last contact, -1: never) and ``active_regions`` (in the
@@ -414,11 +416,11 @@ impl PyHybridSim {
         d.set_item("factored_dt", s.core_memory.factored_dt)?;
         d.set_item("refreshed_at", s.core_memory.refreshed_at.as_ref().map(|x| conv::vec3s_to_py(py, x)))?;
         d.set_item("excess_iterations", s.core_memory.excess_iterations)?;
-        let held = &s.core_memory.refreshed_stiffness;
-        let pairs: Vec<[usize; 2]> = held.iter().map(|&(a, b, _)| [a, b]).collect();
-        let blocks: Vec<f64> = held.iter().flat_map(|(_, _, m)| (0..9).map(move |k| m[(k / 3, k % 3)])).collect();
-        d.set_item("refreshed_stiffness_pairs", conv::index_rows_to_py(py, &pairs))?;
-        d.set_item("refreshed_stiffness_blocks", conv::f64s_nd_to_py(py, blocks, &[held.len(), 3, 3]))?;
+        let row = |t: &StiffnessTerm, sign: f64| [t.id as f64, t.nodes[0] as f64, t.nodes[1] as f64, t.nodes[2] as f64, t.weights[0], t.weights[1], t.weights[2], sign * t.stiffness];
+        let base: Vec<[f64; 8]> = s.core_memory.base_terms.iter().map(|t| row(t, 1.0)).collect();
+        let updates: Vec<[f64; 8]> = s.core_memory.term_updates.iter().map(|(t, added)| row(t, if *added { 1.0 } else { -1.0 })).collect();
+        d.set_item("factor_base_terms", conv::f64_rows_to_py(py, &base))?;
+        d.set_item("factor_term_updates", conv::f64_rows_to_py(py, &updates))?;
         d.set_item("particle_positions", conv::vec3s_to_py(py, &s.particle_x))?;
         d.set_item("particle_velocities", conv::vec3s_to_py(py, &s.particle_v))?;
         d.set_item("tool", s.tool.map(|c| conv::vec3_to_py(py, c)))?;
@@ -476,7 +478,8 @@ impl PyHybridSim {
                 factored_dt: conv::arg(&item("factored_dt")?)?,
                 refreshed_at: opt("refreshed_at")?.map(|x| conv::vec3s(&x, "refreshed_at", n_core, true)).transpose()?,
                 excess_iterations: conv::arg(&item("excess_iterations")?)?,
-                refreshed_stiffness: held_stiffness(opt("refreshed_stiffness_pairs")?, opt("refreshed_stiffness_blocks")?, n_core)?,
+                base_terms: terms(opt("factor_base_terms")?, "factor_base_terms", n_core)?.into_iter().map(|(t, _)| t).collect(),
+                term_updates: terms(opt("factor_term_updates")?, "factor_term_updates", n_core)?,
             },
             particle_x: conv::vec3s(&item("particle_positions")?, "particle_positions", n_p, true)?,
             particle_v: conv::vec3s(&item("particle_velocities")?, "particle_velocities", n_p, true)?,
@@ -581,27 +584,33 @@ impl PyHybridSim {
     }
 }
 
-/// The core's stiffness held in a refreshed factor, from a state's ``refreshed_stiffness_pairs``
-/// (k, 2) and ``refreshed_stiffness_blocks`` (k, 3, 3) [N/m] (both absent from states saved before
-/// they were kept: none).
-fn held_stiffness(pairs: Option<Bound<'_, PyAny>>, blocks: Option<Bound<'_, PyAny>>, n_core: usize) -> PyResult<Vec<(usize, usize, palpate_core::Mat3)>> {
-    let (Some(pairs), Some(blocks)) = (pairs, blocks) else { return Ok(Vec::new()) };
-    let pairs = conv::index_rows::<2>(&pairs, "refreshed_stiffness_pairs")?;
-    let (values, shape) = conv::reals_nd(&blocks, "refreshed_stiffness_blocks")?;
-    let k = pairs.len();
-    if !(shape == [k, 3, 3] || (k == 0 && values.is_empty())) {
-        return Err(errors::param_error_from(format!("refreshed_stiffness_blocks must have shape ({k}, 3, 3), one block per pair, got {shape:?}")));
+/// The stiffness terms of a state's ``factor_base_terms`` or ``factor_term_updates`` (k, 8): rows
+/// ``[id, node0, node1, node2, w0, w1, w2, stiffness]``, the stiffness [N/m] signed (negative: a
+/// term removed); absent from states saved before they were kept: none.
+fn terms(rows: Option<Bound<'_, PyAny>>, what: &str, n_core: usize) -> PyResult<Vec<(StiffnessTerm, bool)>> {
+    let Some(rows) = rows else { return Ok(Vec::new()) };
+    let (v, shape) = conv::reals_nd(&rows, what)?;
+    if v.is_empty() {
+        return Ok(Vec::new());
     }
-    if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-        return Err(errors::param_error_from(format!("refreshed_stiffness_blocks[{}] is not finite ({})", i / 9, values[i])));
+    if shape.len() != 2 || shape[1] != 8 {
+        return Err(errors::param_error_from(format!("{what} must have shape (k, 8), got {shape:?}")));
     }
-    let node = |i: i64| usize::try_from(i).ok().filter(|&i| i < n_core);
-    pairs
-        .iter()
+    let index = |x: f64, limit: usize| (x >= 0.0 && x.fract() == 0.0 && x < limit as f64).then_some(x as usize);
+    v.chunks_exact(8)
         .enumerate()
-        .map(|(j, &[a, b])| match (node(a), node(b)) {
-            (Some(a), Some(b)) => Ok((a, b, palpate_core::Mat3::from_fn(|r, c| values[9 * j + 3 * r + c]))),
-            _ => Err(errors::param_error_from(format!("refreshed_stiffness_pairs[{j}] = ({a}, {b}): a node out of range for {n_core} core nodes"))),
+        .map(|(j, r)| {
+            let bad = |why: &str| errors::param_error_from(format!("{what}[{j}] = {r:?}: {why}"));
+            let id = index(r[0], u32::MAX as usize).ok_or_else(|| bad("the id must be a non-negative integer"))? as u32;
+            let mut nodes = [0usize; 3];
+            for (k, n) in nodes.iter_mut().enumerate() {
+                *n = index(r[1 + k], n_core).ok_or_else(|| bad(&format!("nodes must be integers below {n_core}")))?;
+            }
+            let (weights, k) = ([r[4], r[5], r[6]], r[7]);
+            if !(weights.iter().all(|w| w.is_finite()) && k.is_finite() && k != 0.0) {
+                return Err(bad("weights and a non-zero stiffness must be finite"));
+            }
+            Ok((StiffnessTerm { id, nodes, weights, stiffness: k.abs() }, k > 0.0))
         })
         .collect()
 }

@@ -251,8 +251,8 @@ def test_hybrid_sim_state_round_trip_is_bit_identical(at, implicit):
         sim.step(c)
     saved = sim.get_state()
     assert saved["tool"] is not None and len(saved["active_regions"]) > 0 and saved["skin_live"] is not None
-    assert (len(saved["refreshed_stiffness_pairs"]) > 0) == implicit
-    assert saved["refreshed_stiffness_blocks"].shape == (len(saved["refreshed_stiffness_pairs"]), 3, 3)
+    held = len(saved["factor_base_terms"]) + len(saved["factor_term_updates"])
+    assert (held > 0) == implicit, held
     # Restored into a simulation with another history (its own active regions, skin lists,
     # integrator memory and workspace marks): nothing of that may leak into the ticks after.
     other, _ = ellipsoids_sim(implicit_exchange=implicit)
@@ -326,16 +326,19 @@ def test_hybrid_sim_set_state_refuses_what_does_not_fit():
         sim.set_state(dict(saved, region_last_touched=np.full_like(saved["region_last_touched"], -1)))
     with pytest.raises(palpate.StepError, match="region"):
         sim.set_state(dict(saved, active_regions=np.array([10 ** 6])))
-    # The stiffness held in the core's factor: a node out of range, a non-finite or misshapen block.
-    one = dict(saved, refreshed_stiffness_pairs=np.array([[0, 0]]), refreshed_stiffness_blocks=np.eye(3)[None])
+    # The springs held in the core's factor: a node out of range, a non-finite value, a misshapen row.
+    term = np.array([[3, 0, 1, 2, 0.5, 0.3, 0.2, 40.0]])
+    one = dict(saved, factor_term_updates=term)
     sim.set_state(one)
     sim.set_state(saved)
-    with pytest.raises(ValueError, match="refreshed_stiffness_pairs"):
-        sim.set_state(dict(one, refreshed_stiffness_pairs=np.array([[0, 10 ** 6]])))
-    with pytest.raises(ValueError, match="refreshed_stiffness_blocks"):
-        sim.set_state(dict(one, refreshed_stiffness_blocks=np.full((1, 3, 3), np.nan)))
-    with pytest.raises(ValueError, match="refreshed_stiffness_blocks"):
-        sim.set_state(dict(one, refreshed_stiffness_blocks=np.eye(3)))
+    with pytest.raises(ValueError, match="factor_term_updates"):
+        sim.set_state(dict(one, factor_term_updates=term * [1, 1, 1, 10 ** 6, 1, 1, 1, 1]))
+    with pytest.raises(ValueError, match="factor_term_updates"):
+        sim.set_state(dict(one, factor_term_updates=term * [1, 1, 1, 1, np.nan, 1, 1, 1]))
+    with pytest.raises(ValueError, match="factor_base_terms"):
+        sim.set_state(dict(one, factor_base_terms=term[:, :7]))
+    with pytest.raises(palpate.StepError, match="twice"):       # removed, never added
+        sim.set_state(dict(one, factor_term_updates=term * [1, 1, 1, 1, 1, 1, 1, -1]))
     assert same_state(sim.get_state(), before)                 # a refused state changes nothing
     # The state of another model: the sizes differ.
     inner, outer = (palpate.ellipsoid_surface(a, 3) for a in ((0.02, 0.02, 0.03), (0.03, 0.03, 0.04)))

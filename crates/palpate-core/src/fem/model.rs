@@ -218,6 +218,7 @@ impl ModelBuilder {
             node_pos,
             order,
             refresh_cost: crate::integrate::ITERATIONS_PER_FACTOR_RATIO * ldl.factor_to_solve_ratio(),
+            update_cost: ldl.update_to_factor_ratio(),
             position_noise2,
             tet_stiffness,
             mass_position2,
@@ -270,6 +271,8 @@ pub struct Model {
     pub(crate) mass_position2: f64,
     /// A factorisation's cost in quasi-Newton iterations (when to refresh its initial Hessian).
     pub(crate) refresh_cost: f64,
+    /// A rank update's cost in factorisations (when to remake the factor rather than update it).
+    pub(crate) update_cost: f64,
     /// Factor of the semi-implicit filter blocks (1: the paper's; see `integrate::Filter`).
     pub(crate) filter_alpha: f64,
 }

@@ -3,7 +3,7 @@
 use super::model::Model;
 use crate::error::StepError;
 use crate::integrate::factor::{self, DtCache};
-use crate::integrate::{CgWorkspace, Integrator, Lbfgs, PotentialWorkspace};
+use crate::integrate::{CgWorkspace, Integrator, Lbfgs, PotentialWorkspace, StiffnessTerm};
 use crate::linalg::Ldl;
 use crate::math::{Mat3, Vec3};
 
@@ -62,11 +62,12 @@ pub struct StepMemory {
     pub refreshed_at: Option<Vec<Vec3>>,
     /// Surplus iterations since the last factorisation (the refresh rule's count).
     pub excess_iterations: usize,
-    /// The caller's stiffness held in the refreshed factor besides the tangent
-    /// ([`crate::integrate::CorePotential::add_stiffness`] at the refresh): `(a, b, block)`, node
-    /// pairs sharing a tet, both orders, blocks \[N/m\] summed per pair. Empty with
-    /// `refreshed_at = None`, and when the step that refreshed had no such potential.
-    pub refreshed_stiffness: Vec<(usize, usize, Mat3)>,
+    /// The stiffness terms of the caller's potential ([`crate::integrate::CorePotential::stiffness_terms`])
+    /// held in the factor when it was made (a refresh; empty for a rest factor), by increasing
+    /// id, and the rank updates applied to it since, in order (`true`: the term added, `false`:
+    /// removed). The terms the factor holds now are the first list changed by the second.
+    pub base_terms: Vec<StiffnessTerm>,
+    pub term_updates: Vec<(StiffnessTerm, bool)>,
 }
 
 /// Scratch space of [`crate::step`]: buffers and numeric factorisations, sized once for a model
@@ -94,12 +95,13 @@ pub struct Workspace {
     pub(crate) refreshed: bool,
     /// Positions of the last refresh, `(n_nodes)`: a saved state remakes that factor from them.
     pub(crate) refresh_x: Vec<Vec3>,
-    /// The caller's stiffness held in the refreshed factor (`integrate/factor.rs`): blocks on the
-    /// free pattern (zero where unused), the `(node a, node b, pattern entry)` triples set, and
-    /// a mark per entry. Sized once, so that a refresh allocates nothing.
-    pub(crate) extra_k: Vec<Mat3>,
-    pub(crate) extra_entries: Vec<(usize, usize, usize)>,
-    pub(crate) extra_mark: Vec<bool>,
+    /// The caller's stiffness terms the factor holds (`integrate/factor.rs`): now (by increasing
+    /// id), when it was made, and the rank updates since (see [`StepMemory::base_terms`]); and a
+    /// scratch list for the terms of the step being taken.
+    pub(crate) held_terms: Vec<StiffnessTerm>,
+    pub(crate) base_terms: Vec<StiffnessTerm>,
+    pub(crate) term_updates: Vec<(StiffnessTerm, bool)>,
+    pub(crate) step_terms: Vec<StiffnessTerm>,
     /// Rest factors of recently used `dt` (`integrate/factor.rs`).
     pub(crate) dt_cache: DtCache,
     /// Semi-implicit scheme: per-node `(I - dt/m D_ii - dt^2/m J_ii)^-1`.
@@ -132,9 +134,10 @@ impl Workspace {
             factor_count: 0,
             refreshed: false,
             refresh_x: vec![Vec3::zeros(); n],
-            extra_k: vec![Mat3::zeros(); model.pattern.nnz()],
-            extra_entries: Vec::with_capacity(model.pattern.nnz()),
-            extra_mark: vec![false; model.pattern.nnz()],
+            held_terms: Vec::new(),
+            base_terms: Vec::new(),
+            term_updates: Vec::with_capacity(crate::integrate::factor::MAX_TERM_UPDATES),
+            step_terms: Vec::new(),
             dt_cache: DtCache::new(),
             node_inv: vec![Mat3::identity(); n],
             potential: PotentialWorkspace::new(n, nf),
@@ -151,19 +154,16 @@ impl Workspace {
             factored_dt: self.factored_dt,
             refreshed_at: (self.refreshed && self.factored_dt.is_finite()).then(|| self.refresh_x.clone()),
             excess_iterations: self.excess_iterations,
-            refreshed_stiffness: if self.refreshed && self.factored_dt.is_finite() {
-                self.extra_entries.iter().map(|&(a, b, bi)| (a, b, self.extra_k[bi])).collect()
-            } else {
-                Vec::new()
-            },
+            base_terms: if self.factored_dt.is_finite() { self.base_terms.clone() } else { Vec::new() },
+            term_updates: if self.factored_dt.is_finite() { self.term_updates.clone() } else { Vec::new() },
         }
     }
 
     /// Bring the workspace to `mem` (from [`Workspace::memory`] of a workspace of the same
     /// `model`): remakes the factor it records (one factorisation, unless it is in use or
     /// cached), so that stepping from the matching [`State`] repeats the original steps bit for
-    /// bit. Errors: `refreshed_at` not `(n_nodes)`, a `refreshed_stiffness` node out of range or
-    /// block not finite, a non-positive `factored_dt`, a failed factorisation.
+    /// bit. Errors: `refreshed_at` not `(n_nodes)`, a stiffness term with a node out of range or a
+    /// non-finite or non-positive value, a non-positive `factored_dt`, a failed factorisation.
     pub fn restore_memory(&mut self, model: &Model, mem: &StepMemory) -> Result<(), StepError> {
         if let Some(x) = &mem.refreshed_at {
             let n = model.n_nodes();
@@ -172,12 +172,12 @@ impl Workspace {
             }
         }
         let n = model.n_nodes();
-        for (a, b, blk) in &mem.refreshed_stiffness {
-            if *a >= n || *b >= n {
-                return Err(StepError::Snapshot(format!("refreshed stiffness: node pair ({a}, {b}) out of range for {n} nodes")));
+        for t in mem.base_terms.iter().chain(mem.term_updates.iter().map(|(t, _)| t)) {
+            if let Some(a) = t.nodes.iter().find(|&&a| a >= n) {
+                return Err(StepError::Snapshot(format!("stiffness term {}: node {a} out of range for {n} nodes", t.id)));
             }
-            if !blk.iter().all(|v| v.is_finite()) {
-                return Err(StepError::Snapshot(format!("refreshed stiffness: a non-finite block for the node pair ({a}, {b})")));
+            if !(t.stiffness > 0.0 && t.stiffness.is_finite() && t.weights.iter().all(|w| w.is_finite())) {
+                return Err(StepError::Snapshot(format!("stiffness term {}: stiffness {} and weights {:?} must be finite, the stiffness positive", t.id, t.stiffness, t.weights)));
             }
         }
         factor::restore(model, self, mem)

@@ -8,7 +8,7 @@ use crate::error::StepError;
 use crate::fem::model::NONE;
 use crate::fem::tangent;
 use crate::fem::{Model, Workspace};
-use crate::integrate::{CorePotential, Integrator};
+use crate::integrate::{CorePotential, Integrator, StiffnessTerm};
 use crate::linalg::Ldl;
 use crate::math::{Mat3, Vec3};
 
@@ -69,10 +69,12 @@ pub(crate) fn ensure(model: &Model, ws: &mut Workspace, dt: f64) -> Result<(), S
     if ws.factored_dt == dt {
         return Ok(());
     }
-    let leaving = (ws.factored_dt.is_finite() && !ws.refreshed).then_some(ws.factored_dt);
+    // A rest factor changed by rank updates is not the rest factor any more: not kept.
+    let leaving = (ws.factored_dt.is_finite() && !ws.refreshed && ws.term_updates.is_empty()).then_some(ws.factored_dt);
     ws.factored_dt = f64::NAN;
     ws.refreshed = false;
     ws.excess_iterations = 0;
+    clear_terms(ws);
     let hit = ws.dt_cache.take(dt);
     let cached = hit.is_some();
     let next = match (hit, leaving) {
@@ -125,17 +127,16 @@ pub(crate) fn restore(model: &Model, ws: &mut Workspace, mem: &crate::fem::StepM
     } else if !(dt > 0.0 && dt.is_finite()) {
         return Err(StepError::BadTimeStep(dt));
     } else if let Some(x) = &mem.refreshed_at {
-        clear_held(ws);
-        for (a, b, blk) in &mem.refreshed_stiffness {
-            hold(model, ws, *a, *b, blk);
-        }
+        ws.base_terms.clone_from(&mem.base_terms);
         refresh(model, ws, x, dt)?;
+        replay(model, ws, &mem.term_updates, dt)?;
     } else {
-        if ws.refreshed {
+        if ws.refreshed || !ws.term_updates.is_empty() {
             ws.factored_dt = f64::NAN;
             ws.refreshed = false;
         }
         ensure(model, ws, dt)?;
+        replay(model, ws, &mem.term_updates, dt)?;
     }
     ws.excess_iterations = mem.excess_iterations;
     ws.potential.invalidate();
@@ -157,47 +158,157 @@ pub(crate) fn apply_inverse(model: &Model, ws: &mut Workspace, v: &[Vec3], out: 
 /// Count `surplus` work units (iterations beyond what the step needed with an exact Hessian) and,
 /// once they have cost a factorisation and this step `struggled`, refactorise at `x` with the
 /// definite tangent (ski rental: a refresh never costs more than the work it replaces).
-/// The caller's potential (`external`, if any) is held in the new factor with its stiffness at
-/// `x` ([`CorePotential::add_stiffness`]).
-pub(crate) fn refresh_if_paid(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64, surplus: usize, struggled: bool, external: Option<&dyn CorePotential>) -> Result<(), StepError> {
+/// The new factor holds the stiffness terms the step held (`sync_terms`).
+pub(crate) fn refresh_if_paid(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64, surplus: usize, struggled: bool) -> Result<(), StepError> {
     ws.excess_iterations = ws.excess_iterations.saturating_add(surplus);
     if struggled && ws.excess_iterations as f64 >= model.refresh_cost {
-        clear_held(ws);
-        if let Some(p) = external {
-            p.add_stiffness(x, &mut |a, b, blk| hold(model, ws, a, b, blk));
-        }
+        let Workspace { base_terms, held_terms, .. } = ws;
+        base_terms.clone_from(held_terms);
         refresh(model, ws, x, dt)?;
     }
     Ok(())
 }
 
-/// Forget the caller's stiffness held for the next refresh.
-fn clear_held(ws: &mut Workspace) {
-    for &(_, _, bi) in &ws.extra_entries {
-        ws.extra_k[bi] = Mat3::zeros();
-        ws.extra_mark[bi] = false;
+/// Rank updates a factor takes before it is remade instead (a refresh at the step's start): the
+/// bound of [`crate::fem::StepMemory::term_updates`], whose replay a restore pays.
+pub(crate) const MAX_TERM_UPDATES: usize = 256;
+
+/// Make the factor hold the stiffness terms of the step's potential `external`
+/// ([`CorePotential::stiffness_terms`]; none without one): a rank update per term added or
+/// removed since the last step (`Ldl::update`), logged for the memory. If the updates would pass
+/// [`MAX_TERM_UPDATES`] or cost more than a factorisation, or one fails (a downdate that lost
+/// definiteness to round-off), the factor is remade at `x` (the step's start) holding them.
+pub(crate) fn sync_terms(model: &Model, ws: &mut Workspace, external: Option<&dyn CorePotential>, x: &[Vec3], dt: f64) -> Result<(), StepError> {
+    let mut now = std::mem::take(&mut ws.step_terms);
+    now.clear();
+    if let Some(p) = external {
+        p.stiffness_terms(&mut |t| now.push(t));
     }
-    ws.extra_entries.clear();
+    now.sort_unstable_by_key(|t| t.id);
+    if now == ws.held_terms {
+        ws.step_terms = now;
+        return Ok(());
+    }
+    // The changes: removed (or changed) terms, then added (or changed) ones.
+    let (mut i, mut j, mut changes) = (0, 0, 0);
+    let held_len = ws.held_terms.len();
+    while i < held_len || j < now.len() {
+        let (h, n) = (ws.held_terms.get(i), now.get(j));
+        match (h, n) {
+            (Some(h), Some(n)) if h.id == n.id => {
+                changes += 2 * (h != n) as usize;
+                i += 1;
+                j += 1;
+            }
+            (Some(h), Some(n)) if h.id < n.id => {
+                changes += 1;
+                i += 1;
+            }
+            (Some(_), None) => {
+                changes += 1;
+                i += 1;
+            }
+            _ => {
+                changes += 1;
+                j += 1;
+            }
+        }
+    }
+    let affordable = ws.term_updates.len() + changes <= MAX_TERM_UPDATES && (changes as f64) * model.update_cost <= 1.0;
+    let mut ok = affordable;
+    if ok {
+        let (mut i, mut j) = (0, 0);
+        let held = std::mem::take(&mut ws.held_terms);
+        while ok && (i < held.len() || j < now.len()) {
+            let (h, n) = (held.get(i).copied(), now.get(j).copied());
+            let (remove, add) = match (h, n) {
+                (Some(h), Some(n)) if h.id == n.id => {
+                    i += 1;
+                    j += 1;
+                    if h == n { (None, None) } else { (Some(h), Some(n)) }
+                }
+                (Some(h), Some(n)) if h.id < n.id => {
+                    i += 1;
+                    (Some(h), None)
+                }
+                (Some(h), None) => {
+                    i += 1;
+                    (Some(h), None)
+                }
+                (_, n) => {
+                    j += 1;
+                    (None, n)
+                }
+            };
+            for (t, added) in remove.map(|t| (t, false)).into_iter().chain(add.map(|t| (t, true))) {
+                ok = apply_term(model, ws, &t, added, dt).is_ok();
+                if !ok {
+                    break;
+                }
+                ws.term_updates.push((t, added));
+            }
+        }
+        ws.held_terms = held;
+    }
+    if ok {
+        // The factor holds `now`.
+        ws.held_terms.clone_from(&now);
+        ws.step_terms = now;
+        return Ok(());
+    }
+    ws.base_terms.clone_from(&now);
+    ws.step_terms = now;
+    refresh(model, ws, x, dt)
 }
 
-/// Add the block `blk` of the node pair `(a, b)` to the caller's stiffness held for the next
-/// refresh (dropped if either node is fixed or the pair shares no tet).
-fn hold(model: &Model, ws: &mut Workspace, a: usize, b: usize, blk: &Mat3) {
-    let (Some(&fa), Some(&fb)) = (model.node_to_free.get(a), model.node_to_free.get(b)) else { return };
-    if fa == NONE || fb == NONE {
-        return;
+/// Apply the logged rank updates `updates` to the factor in use (a restore), as `sync_terms`
+/// did, keeping the held terms in step.
+fn replay(model: &Model, ws: &mut Workspace, updates: &[(StiffnessTerm, bool)], dt: f64) -> Result<(), StepError> {
+    for (t, added) in updates {
+        if apply_term(model, ws, t, *added, dt).is_err() {
+            return Err(StepError::Snapshot(format!("the factor's rank update for stiffness term {} failed on replay", t.id)));
+        }
+        ws.term_updates.push((*t, *added));
+        match (ws.held_terms.binary_search_by_key(&t.id, |h| h.id), added) {
+            (Ok(k), false) => {
+                ws.held_terms.remove(k);
+            }
+            (Err(k), true) => ws.held_terms.insert(k, *t),
+            _ => return Err(StepError::Snapshot(format!("stiffness term {} {} twice in a row", t.id, if *added { "added" } else { "removed" }))),
+        }
     }
-    let Some(bi) = model.pattern.find(fa, fb) else { return };
-    if !ws.extra_mark[bi] {
-        ws.extra_mark[bi] = true;
-        ws.extra_entries.push((a, b, bi));
+    Ok(())
+}
+
+/// Add (`added`) or remove the term `t` from the factor: `A += -+ dt^2 k (w (x) I)(w (x) I)^T`
+/// over its free nodes (`H0 = A / dt^2` gains or loses the term's stiffness).
+fn apply_term(model: &Model, ws: &mut Workspace, t: &StiffnessTerm, added: bool, dt: f64) -> Result<(), crate::linalg::LdlError> {
+    let (mut rows, mut w, mut m) = ([0usize; 3], [0.0; 3], 0);
+    for (&a, &wa) in t.nodes.iter().zip(&t.weights) {
+        let f = model.node_to_free[a];
+        if f != NONE && wa != 0.0 {
+            rows[m] = model.node_pos[f];
+            w[m] = wa;
+            m += 1;
+        }
     }
-    ws.extra_k[bi] += blk;
+    if m == 0 {
+        return Ok(());
+    }
+    let sign = if added { 1.0 } else { -1.0 };
+    ws.ldl.update(&rows[..m], &w[..m], sign * t.stiffness * dt * dt)
+}
+
+/// The factor holds no terms (a rest factor, made or taken from the cache).
+fn clear_terms(ws: &mut Workspace) {
+    ws.held_terms.clear();
+    ws.base_terms.clear();
+    ws.term_updates.clear();
 }
 
 /// Refactorise `ws.ldl` with `M - dt D0 - dt^2 (K~(x) - S)`, `K~` the definite tangent
-/// approximation at `x` (`fem/tangent.rs`) and `S` the caller's stiffness held (`hold`); on
-/// failure, the rest matrix again.
+/// approximation at `x` (`fem/tangent.rs`) and `S` the stiffness terms `ws.base_terms`, which it
+/// then holds; on failure, the rest matrix again.
 fn refresh(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<(), StepError> {
     let mut k = std::mem::take(&mut ws.k);
     k.iter_mut().for_each(|b| *b = Mat3::zeros());
@@ -210,8 +321,15 @@ fn refresh(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<(),
         }
     }
     // `k` is the forces' Jacobian: a potential's stiffness enters with a minus sign.
-    for &(_, _, bi) in &ws.extra_entries {
-        k[bi] -= ws.extra_k[bi];
+    for t in &ws.base_terms {
+        for (&a, &wa) in t.nodes.iter().zip(&t.weights) {
+            for (&b, &wb) in t.nodes.iter().zip(&t.weights) {
+                let (fa, fb) = (model.node_to_free[a], model.node_to_free[b]);
+                if let Some(bi) = (fa != NONE && fb != NONE).then(|| model.pattern.find(fa, fb)).flatten() {
+                    k[bi] -= Mat3::from_diagonal_element(t.stiffness * wa * wb);
+                }
+            }
+        }
     }
     model.system_values(1.0, -dt, -dt * dt, &k, &model.d0, &mut ws.a_values);
     ws.k = k;
@@ -224,6 +342,9 @@ fn refresh(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<(),
         // Remembered so that a saved state can remake this factor (`restore`).
         ws.refresh_x.copy_from_slice(x);
         ws.refreshed = true;
+        let Workspace { base_terms, held_terms, term_updates, .. } = ws;
+        held_terms.clone_from(base_terms);
+        term_updates.clear();
         return Ok(());
     }
     ensure(model, ws, dt)

@@ -34,7 +34,7 @@ pub use indent::{indent, indent_with, IndentOptions, IndentPoint, Indenter};
 
 use crate::error::StepError;
 use crate::fem::{Model, State, Workspace};
-use crate::math::{is_finite3, Mat3, Vec3};
+use crate::math::{is_finite3, Vec3};
 
 /// The filter of the paper's semi-implicit scheme (eq. 34).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -173,6 +173,19 @@ pub struct StepReport {
     pub potential_change: f64,
 }
 
+/// A rank-one term of a potential's stiffness: `stiffness (w (x) I)(w (x) I)^T` \[N/m\], `w` the
+/// node vector with `weights[j]` at `nodes[j]` (a spring from the point `sum_j w_j x_j` to a
+/// target). The nodes must share a tet (the factor's pattern holds their pairs); terms on fixed
+/// nodes drop those nodes. `id` tells the term from step to step ([`CorePotential::stiffness_terms`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StiffnessTerm {
+    pub id: u32,
+    pub nodes: [usize; 3],
+    pub weights: [f64; 3],
+    /// \[N/m\], positive.
+    pub stiffness: f64,
+}
+
 /// A conservative force field of the caller's on the nodes (a tool's penalty contact), to be
 /// taken implicitly: [`step_with_potential`] adds its energy to the incremental potential that
 /// the minimising integrators minimise, so its stiffness needs no time-step bound (an explicit
@@ -184,14 +197,13 @@ pub trait CorePotential {
     /// sum to zero): the step then keeps a free body's linear momentum exact, as without it.
     /// Default false (a tool's contact pushes the body).
     fn translation_invariant(&self) -> bool { false }
-    /// Its stiffness for the integrator's factorised matrix: blocks `d^2 U / dx_a dx_b` \[N/m\]
-    /// of a positive semidefinite approximation of its Hessian at `x` `(n_nodes)`, given to `add`
-    /// as `(a, b, block)` with both orders of a pair (pairs that share no tet, and fixed nodes,
-    /// are dropped). The minimising integrators hold them in the matrix they factorise when they
-    /// refresh it (`integrate/factor.rs`), so a potential stiff against the nodes' inertia (the
-    /// hybrid shell's coupling springs) stops costing iterations once a refresh has paid for
-    /// itself. Default: none.
-    fn add_stiffness(&self, _x: &[Vec3], _add: &mut dyn FnMut(usize, usize, &Mat3)) {}
+    /// The part of its stiffness made of rank-one terms ([`StiffnessTerm`]), each under an id
+    /// stable from step to step, given to `emit` (any order, each id once). The minimising
+    /// integrators hold them in the matrix they factorise, and keep it current as terms come and
+    /// go with a rank update of the factor per term (`linalg/ldl.rs`, `integrate/factor.rs`): a
+    /// potential stiff against the nodes' inertia (the hybrid shell's coupling springs, 8x a core
+    /// node's on Rodero) then costs the step no extra iterations. Default: none.
+    fn stiffness_terms(&self, _emit: &mut dyn FnMut(StiffnessTerm)) {}
 }
 
 /// Advance `state` by `dt` \[s\] with the model's integrator.

@@ -341,6 +341,7 @@ pub(crate) fn minimise(
     iterate: impl FnOnce(&StepProblem, &mut [Vec3], &mut [Vec3], &mut Workspace, &mut Progress) -> (usize, bool),
 ) -> Result<crate::StepReport, StepError> {
     factor::ensure(model, ws, dt)?;
+    factor::sync_terms(model, ws, external, &state.x, dt)?;
     // The iterate lives in state.x.
     let (x_n, v_n) = (std::mem::take(&mut ws.x_save), std::mem::take(&mut ws.v_save));
     let mut x_trial = std::mem::take(&mut ws.x_trial);
@@ -353,7 +354,7 @@ pub(crate) fn minimise(
     ws.x_save = x_n;
     ws.v_save = v_n;
     ws.x_trial = x_trial;
-    factor::refresh_if_paid(model, ws, &state.x, dt, surplus, struggled, external)?;
+    factor::refresh_if_paid(model, ws, &state.x, dt, surplus, struggled)?;
     Ok(pr.report())
 }
 

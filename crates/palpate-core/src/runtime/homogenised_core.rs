@@ -108,9 +108,9 @@ impl CorePotential for Sum<'_> {
 
     fn translation_invariant(&self) -> bool { self.0.translation_invariant() && self.1.translation_invariant() }
 
-    fn add_stiffness(&self, x: &[Vec3], add: &mut dyn FnMut(usize, usize, &crate::math::Mat3)) {
-        self.0.add_stiffness(x, add);
-        self.1.add_stiffness(x, add);
+    fn stiffness_terms(&self, emit: &mut dyn FnMut(crate::integrate::StiffnessTerm)) {
+        self.0.stiffness_terms(emit);
+        self.1.stiffness_terms(emit);
     }
 }
 
