@@ -572,7 +572,7 @@ class HybridSim:
         shell_fallback: bool = True,
         shell_pause: Optional[int] = None,
         homogenise: bool = True,
-        implicit_exchange: bool = False,
+        implicit_exchange: bool = True,
         strict_units: bool = False,
     ) -> HybridSim: ...
     def step(self, tool_centre: _Vec3, dt: float = 1e-3, *, finish: bool = True) -> _FloatArray: ...

@@ -213,15 +213,16 @@ def _stats_ms(times: List[float], what: str = "tick") -> Dict[str, Optional[floa
 
 def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] = None,
         name: Optional[str] = None, mass_scaling: Optional[float] = None,
-        tool_area_stiffness: Optional[float] = None) -> Dict[str, Any]:
+        tool_area_stiffness: Optional[float] = None, implicit_exchange: bool = True) -> Dict[str, Any]:
     """Calibrate the tool radius for about ``active`` particles (unless ``radius`` [m] is given),
     then time the scripted press and slide; returns the report (see ``palpate bench hybrid
     --help`` and the module docs). ``model_spec``: a shape name, a model file path or a
     :class:`palpate.HybridModel` (named ``name``); ``mass_scaling``: the shell's mass-scaling
     quantile (``HybridSim``'s default if ``None``; 1.0 scales nothing); ``tool_area_stiffness``:
     the contact's penalty per unit of skin area [N/m^3] (``HybridSim``'s default, ``12 E*/min(R, 4h)``,
-    if ``None``). Raises
-    :class:`palpate.ParameterError` (a ``ValueError``) for bad arguments."""
+    if ``None``); ``implicit_exchange``: ``HybridSim``'s option (False: the shell's springs
+    capped, for comparison; the calibration runs with the default either way, so both time the
+    same tool). Raises :class:`palpate.ParameterError` (a ``ValueError``) for bad arguments."""
     if isinstance(active, bool) or not isinstance(active, (int, np.integer)) or active <= 0:
         raise _p.ParameterError(f"active must be a positive number of particles, got {active}")
     if radius is not None and not (radius > 0 and math.isfinite(radius)):
@@ -246,7 +247,8 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
     cal_s = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    sim = _p.HybridSim(model, mat, tool_radius=radius, mass_scaling=mass_scaling, tool_area_stiffness=tool_area_stiffness)
+    sim = _p.HybridSim(model, mat, tool_radius=radius, mass_scaling=mass_scaling, tool_area_stiffness=tool_area_stiffness,
+                       implicit_exchange=implicit_exchange)
     setup_s = time.perf_counter() - t0
     times: List[float] = []
     to_force: List[float] = []
@@ -281,6 +283,7 @@ def run(model_spec, active: int, ticks: int = TICKS, *, radius: Optional[float] 
         "model": name, "core_tets": info["core_tets"], "particles": info["particles"], "regions": info["regions"],
         "active_target": int(active), "tool_radius_m": radius, "activation_margin_m": sim.options["activation_margin"],
         "tool_area_stiffness": sim.options["tool_area_stiffness"],
+        "implicit_exchange": sim.options["implicit_exchange"], "coupling_stiffness": sim.options["coupling_stiffness"],
         "active_particles_calibrated": calibrated,
         "active_particles_mean": float(np.mean(act)) if act else None,
         "active_particles_max": max(act) if act else None,

@@ -481,11 +481,12 @@ def hybrid_hold_z(sim: _palpate.HybridSim) -> float:
 
 
 def hybrid_curve(model: _palpate.HybridModel, case: IndentCase, *, ramp_s: float = 0.5, hold_s: float = 0.5,
-                 dt: float = 1e-3, verbose: bool = False, implicit_exchange: bool = False) -> Dict[str, Any]:
+                 dt: float = 1e-3, verbose: bool = False, implicit_exchange: bool = True) -> Dict[str, Any]:
     """The hybrid model pressed quasi-statically to the case's travels: per depth a ramp of
     ``ramp_s`` then a hold of ``hold_s`` at ``1/dt`` Hz, force and penetration averaged over the
     hold's second half (settled: its standard deviation is reported). ``implicit_exchange``: the
-    ``HybridSim`` option (the shell's springs at the tissue's stiffness)."""
+    ``HybridSim`` option (the shell's springs at the tissue's stiffness; False: capped, for
+    comparison)."""
     sim = _palpate.HybridSim(model, case.material(), tool_radius=case.tool_radius, implicit_exchange=implicit_exchange)
     hold_z = hybrid_hold_z(sim)  # at rest, where the runtime chose its held nodes
     p, n = np.asarray(case.point, dtype=float), np.asarray(case.direction, dtype=float)
@@ -593,7 +594,7 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
                     coarse: Optional[Tuple[int, int]] = None, young: float = 30e3, poisson: float = 0.4,
                     law: str = "neo-hookean", out_dir: Optional[str] = None, model: Optional[_palpate.HybridModel] = None,
                     reference: Optional[str] = None, verbose: bool = True,
-                    implicit_exchange: bool = False) -> Dict[str, Any]:
+                    implicit_exchange: bool = True) -> Dict[str, Any]:
     """The hybrid's force and dent against the converged FEM of its wall, and the coarse FEM.
 
     ``levels``: the reference meshes (default :func:`default_levels`); ``coarse``: the level of
@@ -607,7 +608,8 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
     (:func:`load_reference`), and ``levels`` and ``coarse`` are then its own.
 
     ``implicit_exchange``: the hybrid with the shell's springs at the tissue's stiffness (the
-    ``HybridSim`` option; recorded in the result).
+    ``HybridSim`` option, default True; False: the springs capped as the explicit exchange's
+    stability asks; recorded in the result).
     """
     from .hybrid import SHAPES, build_shape
 

@@ -23,7 +23,7 @@ use crate::material::PyMaterial;
 ///
 /// ``HybridSim(model, material, *, tool_radius=0.005, tool_area_stiffness=None,
 /// core_contact_stiffness=None, hold=True, activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None,
-/// mass_scaling=None, shell_fallback=True, shell_pause=None, homogenise=True, implicit_exchange=False,
+/// mass_scaling=None, shell_fallback=True, shell_pause=None, homogenise=True, implicit_exchange=True,
 /// strict_units=False)``
 ///
 /// Parameters
@@ -77,10 +77,10 @@ use crate::material::PyMaterial;
 /// implicit_exchange : bool, optional
 ///     The springs that tie the shell to the core at the tissue's stiffness ``E h``, their
 ///     reactions taken inside the core's step (``palpate_core::runtime::exchange``): the force
-///     proportional to E and Hertz's ``sqrt(R)`` on a thick slab, at 1.8x the tick's cost on
-///     Rodero. Default False: the springs capped by the explicit exchange's stability (2.9 N/m on
-///     Rodero against ``E h`` = 49), within the 1 kHz budget, the force 1.7x for twice E
-///     (VALIDATION.md).
+///     proportional to E and Hertz's ``sqrt(R)`` on a thick slab (default True). False: the
+///     springs capped by the explicit exchange's stability (2.9 N/m on Rodero against ``E h`` =
+///     49), the force 1.7x for twice E, the slab 10-23% too soft (VALIDATION.md); a few percent
+///     cheaper a tick. Kept for comparison.
 /// strict_units : bool, optional
 ///     Values most likely in the wrong unit (a Young's modulus outside soft tissue's 100 Pa to
 ///     10 MPa, a tool radius over 5 cm, a tool target more than 1 m from the organ's bounding
@@ -106,7 +106,7 @@ pub struct PyHybridSim {
 #[pymethods]
 impl PyHybridSim {
     #[new]
-    #[pyo3(signature = (model, material, *, tool_radius = None, tool_area_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None, homogenise = true, implicit_exchange = false, strict_units = false))]
+    #[pyo3(signature = (model, material, *, tool_radius = None, tool_area_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None, homogenise = true, implicit_exchange = true, strict_units = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,

@@ -36,6 +36,7 @@ KEYS = {
     "cpu_count": int, "python_version": str, "palpate_version": str, "date": str,
     "active_particles_calibrated": int, "ticks_per_s": float, "calibration": list,
     "force_ms_mean": float, "force_ms_p50": float, "force_ms_p99": float, "force_ms_max": float,
+    "implicit_exchange": bool, "coupling_stiffness": float,
 }
 
 
@@ -148,6 +149,13 @@ def test_cli_json_with_a_given_radius(tmp_path, ellipsoids):
     r = _cli(path, "--active", 200, "--radius", 3e-3, "--ticks", bh.MIN_TICKS, "--json", "--tool-area-stiffness", 2e7)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["tool_area_stiffness"] == 2e7
+    # The exchange: implicit by default (the springs at E h), capped with --explicit-exchange.
+    assert row["implicit_exchange"] is True
+    assert row["coupling_stiffness"] == pytest.approx(bh.material().young * h, rel=1e-12)
+    r = _cli(path, "--active", 200, "--radius", 3e-3, "--ticks", bh.MIN_TICKS, "--json", "--explicit-exchange")
+    assert r.returncode == 0, r.stderr
+    capped = json.loads(r.stdout)
+    assert capped["implicit_exchange"] is False and capped["coupling_stiffness"] < 0.5 * row["coupling_stiffness"]
 
 
 def test_demo_hybrid_rows_reduced(ellipsoids, capsys):

@@ -124,18 +124,19 @@ def test_ticks_release_the_gil(ventricle, material):
 
 
 def test_the_implicit_exchange_keeps_the_shell_springs_at_the_tissues_stiffness(ventricle, material):
-    """``implicit_exchange=True``: the springs tying the shell to the core are ``E h`` (the
-    default caps them by the explicit exchange's stability, far below it); a press with it pushes
-    back, harder than with the capped springs, and the option survives a pickle."""
+    """``implicit_exchange=True`` (the default): the springs tying the shell to the core are ``E h``
+    (with False they are capped by the explicit exchange's stability, far below it); a press with
+    it pushes back, harder than with the capped springs, and the option survives a pickle."""
     import pickle
 
-    capped = palpate.HybridSim(ventricle, material)
-    full = palpate.HybridSim(ventricle, material, implicit_exchange=True)
+    capped = palpate.HybridSim(ventricle, material, implicit_exchange=False)
+    full = palpate.HybridSim(ventricle, material)
     assert capped.options["implicit_exchange"] is False and full.options["implicit_exchange"] is True
     e_h = material.young * ventricle.spacing
     assert full.options["coupling_stiffness"] == pytest.approx(e_h, rel=1e-12)
     assert capped.options["coupling_stiffness"] < 0.5 * e_h
     assert pickle.loads(pickle.dumps(full)).options["implicit_exchange"] is True
+    assert pickle.loads(pickle.dumps(capped)).options["implicit_exchange"] is False
     p, n = _press_point(full)
     forces = []
     for sim in (capped, full):

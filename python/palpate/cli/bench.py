@@ -80,6 +80,9 @@ def add_parser(sub) -> None:
                    help="the shell's mass-scaling quantile in (0, 1] (default: HybridSim's, 0.95; 1 scales nothing)")
     h.add_argument("--tool-area-stiffness", type=float, default=None, metavar="K",
                    help="the contact's penalty per unit of skin area [N/m^3] (default: HybridSim's, 12 E*/min(R, 4h) with h the lattice spacing)")
+    h.add_argument("--explicit-exchange", action="store_true",
+                   help="the shell's springs capped by the explicit exchange's stability (HybridSim(implicit_exchange=False), "
+                        "for comparison)")
     h.add_argument("--json", action="store_true", help="one JSON object")
     add_quiet(h)
     h.set_defaults(func=cmd_bench_hybrid)
@@ -385,7 +388,7 @@ def cmd_bench_hybrid(a) -> int:
     try:
         with _progress.task(f"bench hybrid {name}: calibrating and timing", quiet=a.json):
             r = bh.run(model, a.active, a.ticks, radius=a.radius, name=name, mass_scaling=a.mass_scaling,
-                       tool_area_stiffness=a.tool_area_stiffness)
+                       tool_area_stiffness=a.tool_area_stiffness, implicit_exchange=not a.explicit_exchange)
     except ValueError as e:
         raise Fail(f"palpate bench hybrid: {e}") from None
     except palpate_errors() as e:
@@ -399,6 +402,8 @@ def cmd_bench_hybrid(a) -> int:
               f"{r['ticks_planned']} ticks of {bh.DT * 1e3:g} ms: press {bh.DEPTH * 1e3:g} mm, hold, slide "
               f"{bh.SLIDE * 1e3:g} mm, release; one thread")
         print(f"  {r['cpu_count']} CPUs ({r['cpu_model']}), python {r['python_version']}, {r['date']}")
+        exchange = "implicit exchange" if r["implicit_exchange"] else "explicit exchange, capped"
+        print(f"  the shell's coupling springs {r['coupling_stiffness']:.3g} N/m ({exchange})")
         cal = ", ".join(f"{rr * 1e3:.3f} mm: {cc}" for rr, cc in r["calibration"])
         print(f"  calibration ({r['calibration_s']:.1f} s; tool radius: active at the held press): {cal}")
         print(f"{'target':>7}{'radius mm':>10}{'at press':>9}{'mean':>8}{'max':>6}{'ticks':>7}{'mean ms':>9}"

@@ -64,9 +64,10 @@ def add_parser(sub) -> None:
     i.add_argument("--reference", metavar="JSON", help="reuse the reference and coarse curves of an earlier run's "
                    "indentation.json (the same wall, material, law, tool and held height; --levels and --coarse are "
                    "then its own): minutes instead of half an hour when only the hybrid changed")
-    i.add_argument("--implicit-exchange", action="store_true",
-                   help="the hybrid with the shell's springs at the tissue's stiffness (HybridSim's implicit_exchange: "
-                        "force proportional to E, 1.8x the tick's cost; VALIDATION.md)")
+    i.add_argument("--explicit-exchange", action="store_true",
+                   help="the hybrid with the shell's springs capped by the explicit exchange's stability "
+                        "(HybridSim(implicit_exchange=False), for comparison: softer, force not proportional to E; "
+                        "VALIDATION.md)")
     i.add_argument("--out", default="out/validate", metavar="DIR", help="output folder (default out/validate)")
     i.add_argument("--quiet", action="store_true", help="print the table only")
     i.set_defaults(func=cmd_indentation)
@@ -91,7 +92,7 @@ def cmd_indentation(a) -> int:
         result = validate.run_indentation(a.shape, tool_radius=a.tool_radius, depths=depths, levels=levels,
                                           coarse=coarse, young=a.young, poisson=a.poisson, law=a.law,
                                           out_dir=a.out, model=model, reference=a.reference, verbose=not a.quiet,
-                                          implicit_exchange=a.implicit_exchange)
+                                          implicit_exchange=not a.explicit_exchange)
     except validate.ReferenceMismatch as e:
         raise Fail(f"palpate validate indentation: --reference {e}") from None
     except _p.SolveError as e:

@@ -4,13 +4,14 @@
 //! springs' reactions are then applied to the core over its 1 ms step. Taken explicitly, that
 //! exchange is a spring of stiffness `k sum_p w_p^2` on a core node of mass `m` integrated with
 //! forward forces, and it diverges, alternating tick by tick, once `k sum_p w_p dt^2` passes about
-//! `m / 2` (measured on a thick slab: the alternation grew 4.4x a tick, VALIDATION.md). By default
-//! the springs are capped at that bound, 10-20x below the tissue's `E h` on every shipped wall
-//! (Rodero 2.9 N/m against 49), and the shell hangs on the core by springs far softer than the
-//! tissue: its force grows 1.7x, not 2x, for twice the Young's modulus.
+//! `m / 2` (measured on a thick slab: the alternation grew 4.4x a tick, VALIDATION.md). Capped at
+//! that bound ([`super::SimOptions::implicit_exchange`] false), the springs are 10-20x below the
+//! tissue's `E h` on every shipped wall (Rodero 2.9 N/m against 49), and the shell hangs on the
+//! core by springs far softer than the tissue: its force grows 1.7x, not 2x, for twice the Young's
+//! modulus.
 //!
-//! With [`super::SimOptions::implicit_exchange`] the springs keep the tissue's stiffness and the
-//! core's step takes, as a potential,
+//! By default ([`super::SimOptions::implicit_exchange`] true) the springs keep the tissue's
+//! stiffness and the core's step takes, as a potential,
 //!
 //! ```text
 //! U(x) = 1/2 k sum_{p coupled, active} | sum_j w_pj (x_j - x*_j) - c(x) |^2,
@@ -73,9 +74,11 @@ pub(crate) struct ShellReaction<'a> {
 }
 
 impl<'a> ShellReaction<'a> {
-    /// The reaction of the coupled particles in `active` on a core at `x`, `v`, stepped by `dt`;
-    /// `predicted` is filled with `x + dt v`.
+    /// The reaction of the coupled particles in `active` on a core at `x`, `v`, stepped by `dt`
+    /// (none with the exchange explicit: `SimOptions::implicit_exchange` false); `predicted` is
+    /// filled with `x + dt v`.
     pub fn new(sim: &'a Sim, active: &'a [usize], x: &[Vec3], v: &[Vec3], dt: f64, predicted: &'a mut [Vec3]) -> Self {
+        let active = if sim.options.implicit_exchange { active } else { &[] };
         for ((o, x), v) in predicted.iter_mut().zip(x).zip(v) {
             *o = x + dt * v;
         }

@@ -17,7 +17,8 @@ use crate::spatial::csr::Buckets;
 use crate::meshfree::{ParticleModel, ParticleModelBuilder};
 use crate::Integrator;
 
-/// The haptic tick the capped coupling stiffness is chosen for \[s\] ([`SimOptions::implicit_exchange`]).
+/// The haptic tick the capped coupling stiffness is chosen for \[s\] ([`SimOptions::implicit_exchange`]
+/// false).
 pub const TICK: f64 = 1e-3;
 
 /// Options of [`Sim::new`]. Lengths in metres; `Default` gives the values documented per field.
@@ -91,12 +92,13 @@ pub struct SimOptions {
     /// soft under a large tool on the paper's ellipsoids (VALIDATION.md).
     pub homogenise: bool,
     /// The shell's coupling springs at the tissue's stiffness `E h`, their reactions taken by the
-    /// core with their implicit share (`runtime/exchange.rs`): the force proportional to E, Hertz's
-    /// `sqrt(R)` on a thick slab (VALIDATION.md), at 1.8x the tick's cost on Rodero (the core's
-    /// step takes 2.6 iterations, not 1). Default false: the springs capped by the explicit
-    /// exchange's stability (`k sum_p w_p <= m / (2 dt^2)` on every core node at the 1 ms tick:
-    /// 2.9 N/m on Rodero against `E h` = 49), which keeps the tick within its real-time target
-    /// but makes the force grow 1.7x, not 2x, with twice E.
+    /// core with their implicit share (`runtime/exchange.rs`; the springs held in the core's
+    /// factor, so its step still takes one iteration): the force proportional to E and Hertz's
+    /// `sqrt(R)` on a thick slab (VALIDATION.md). Default true. False: the springs capped by the
+    /// explicit exchange's stability (`k sum_p w_p <= m / (2 dt^2)` on every core node at the 1 ms
+    /// tick: 2.9 N/m on Rodero against `E h` = 49), which makes the force grow 1.7x, not 2x, with
+    /// twice E and the wall 10-23% too soft on the slab; about 5-8% cheaper a tick (fewer
+    /// particle sub-steps: BENCHMARKS.md). Kept for comparison.
     pub implicit_exchange: bool,
 }
 
@@ -118,7 +120,7 @@ impl Default for SimOptions {
             core_contact_stiffness: super::core_contact::CORE_CONTACT_STIFFNESS,
             hold: true,
             homogenise: true,
-            implicit_exchange: false,
+            implicit_exchange: true,
         }
     }
 }

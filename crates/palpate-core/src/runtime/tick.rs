@@ -473,9 +473,7 @@ pub fn tick_force_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, t
     if touched {
         let momentum_before = if sim.core.is_free_body() { Some(sim.core.momentum(&core.v)) } else { None };
         let softening = Softening { sim, tets: &ws.soft_tets };
-        let no_one: &[usize] = &[];
-        let coupled_active = if sim.options.implicit_exchange { &particles.active[..] } else { no_one };
-        let reaction = ShellReaction::new(sim, coupled_active, &core.x, &core.v, dt, &mut ws.predicted);
+        let reaction = ShellReaction::new(sim, &particles.active, &core.x, &core.v, dt, &mut ws.predicted);
         let inner = Sum(&softening, &reaction);
         let both = Sum(&contact, &inner);
         let potential: &dyn CorePotential = &both;
@@ -543,9 +541,7 @@ pub fn finish_tick(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace) -> Re
         ws.epoch += 1;
         homogenised_core::softened_tets(sim, &state.particles.active, &mut ws.node_marks, &mut ws.tet_marks, ws.epoch, &mut ws.soft_tets);
         // The shell's reactions (in `f_ext`) with their implicit share (super::exchange).
-        let no_one: &[usize] = &[];
-        let coupled_active = if sim.options.implicit_exchange { &state.particles.active[..] } else { no_one };
-        let reaction = ShellReaction::new(sim, coupled_active, &state.core.x, &state.core.v, dt, &mut ws.predicted);
+        let reaction = ShellReaction::new(sim, &state.particles.active, &state.core.x, &state.core.v, dt, &mut ws.predicted);
         let stepped = match (ws.soft_tets.is_empty(), reaction.is_empty()) {
             (true, true) => step(&sim.core, &mut state.core, &mut ws.core, dt),
             (false, true) => step_with_potential(&sim.core, &mut state.core, &mut ws.core, dt, &Softening { sim, tets: &ws.soft_tets }),
