@@ -589,6 +589,41 @@ def test_haptic_with_a_vendor_device_starts_its_adapter_beside_the_loop(tmp_path
         missing.stdout + missing.stderr
 
 
+def test_haptic_stops_when_the_vendor_adapter_dies_mid_session(tmp_path):
+    # The device's driver crashes one second in (the adapter process exits with an error): the
+    # loop stops with it at once, says so, prints its summary and fails the run (exit 3) rather
+    # than rendering to a device that is gone for the rest of --seconds.
+    fake = tmp_path / "vendor" / "pyOpenHaptics"
+    fake.mkdir(parents=True)
+    crashing = dict(FAKE_TOUCH)
+    crashing["hd_device.py"] = textwrap.dedent("""\
+        import os, threading, time
+        class HapticDevice:
+            def __init__(self, device_name, callback):
+                callback()
+                def serve():
+                    t0 = time.monotonic()
+                    while time.monotonic() - t0 < 1.0:
+                        callback()
+                        time.sleep(0.001)
+                    os._exit(5)              # the driver dies with the process
+                threading.Thread(target=serve, daemon=True).start()
+            def close(self):
+                pass
+        """)
+    for name, text in crashing.items():
+        (fake / name).write_text(text)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path / "vendor")] + [p for p in [os.environ.get("PYTHONPATH")] if p])}
+    t0 = time.monotonic()
+    out = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ellipsoids", "--device", "touch", "--seconds", "30",
+                          "--quiet"], capture_output=True, text=True, timeout=300, cwd=ROOT, env=env)
+    wall = time.monotonic() - t0
+    assert out.returncode == 3, out.stdout + out.stderr
+    assert "palpate device touch stopped (exit code 5)" in out.stderr and "the loop stopped with it" in out.stderr, out.stderr
+    assert " ticks in " in out.stdout, out.stdout                 # the summary still comes
+    assert wall < 25, f"the loop ran on for {wall:.1f} s after the adapter died"
+
+
 # ------------------------------------------------------------------------------- vendor adapters
 
 VENDOR_MODULES = ("pyOpenHaptics", "forcedimension_core", "HaplyHardwareAPI", "haptic_master")

@@ -277,9 +277,13 @@ def _run(a, loop, name: str, child) -> int:
 
     until = (lambda: child.poll() is not None) if child is not None else None
     r = haptics.run_live(loop, a.seconds, show, on_event=event, until=until)
+    # The vendor's adapter ended before the loop did: the loop stopped with it (the device no
+    # longer sends, and no force reaches it); a failed adapter fails the run.
+    adapter_failed = False
     if child is not None and child.poll() is not None and not r["interrupted"]:
-        print(f"palpate haptic: palpate device {a.device} stopped (exit code {child.returncode}): the loop stopped "
-              "with it", file=sys.stderr)
+        adapter_failed = child.returncode != 0
+        print(f"palpate haptic: palpate device {a.device} stopped (exit code {child.returncode}) after "
+              f"{r['elapsed_s']:.2f} s: the loop stopped with it", file=sys.stderr)
     if tty and not a.quiet:
         print()
     if r["interrupted"]:
@@ -322,4 +326,4 @@ def _run(a, loop, name: str, child) -> int:
                   file=sys.stderr)
     if r["interrupted"]:
         return INTERRUPTED
-    return FAILED if r["n_faults"] else 0
+    return FAILED if r["n_faults"] or adapter_failed else 0
