@@ -223,3 +223,32 @@ fn a_potentials_stiffness_terms_are_held_in_the_factor_and_in_the_memory() {
     let bad = palpate_core::StepMemory { term_updates: vec![(term, false)], ..mem };
     assert!(Workspace::new(&model).restore_memory(&model, &bad).is_err());
 }
+
+/// Many terms at once (every free node anchored, as a first touch activates a region): the rest
+/// matrix is remade holding them rather than updated term by term (the updates would cost more
+/// than a factorisation), with no tangent to compute; the memory says so (`refreshed_at` none,
+/// the terms as its base), and a restore repeats the steps bit for bit.
+#[test]
+fn many_terms_at_once_remake_the_rest_factor_and_restore_bit_for_bit() {
+    let model = clamped_wall(Integrator::quasi_newton());
+    let pts = model.mesh().points();
+    let nodes: Vec<usize> = (0..model.n_nodes()).filter(|&i| !model.fixed()[i]).collect();
+    let k = 10.0 * nodes.iter().map(|&i| model.masses()[i]).fold(f64::MAX, f64::min) / 1e-6;
+    let pot = Anchors { nodes: nodes.clone(), targets: nodes.iter().map(|&i| pts[i] + Vec3::new(0.0, 0.0, -1e-5)).collect(), k, offer: true };
+    let mut s = State::rest(&model);
+    let mut ws = Workspace::new(&model);
+    let first = palpate_core::integrate::step_with_potential(&model, &mut s, &mut ws, 1e-3, &pot).unwrap();
+    let mem = ws.memory();
+    assert!(mem.refreshed_at.is_none() && mem.base_terms.len() == nodes.len() && mem.term_updates.is_empty(), "{mem:?}");
+    assert_eq!(first.factorizations, 2, "the rest factor, then the rest matrix with the terms");
+    assert_eq!(first.iterations, 1);
+    let saved = s.clone();
+    let steps = |s: &mut State, ws: &mut Workspace| (0..10).map(|_| palpate_core::integrate::step_with_potential(&model, s, ws, 1e-3, &pot).unwrap().iterations).collect::<Vec<_>>();
+    let a = steps(&mut s, &mut ws);
+    assert!(a.iter().all(|&i| i == 1), "{a:?}");
+    let mut ws2 = Workspace::new(&model);
+    ws2.restore_memory(&model, &mem).unwrap();
+    let mut s2 = saved;
+    assert_eq!(steps(&mut s2, &mut ws2), a);
+    assert_eq!(bits(&s.x), bits(&s2.x));
+}

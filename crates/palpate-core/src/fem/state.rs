@@ -63,8 +63,9 @@ pub struct StepMemory {
     /// Surplus iterations since the last factorisation (the refresh rule's count).
     pub excess_iterations: usize,
     /// The stiffness terms of the caller's potential ([`crate::integrate::CorePotential::stiffness_terms`])
-    /// held in the factor when it was made (a refresh; empty for a rest factor), by increasing
-    /// id, and the rank updates applied to it since, in order (`true`: the term added, `false`:
+    /// held in the factor when it was made (a refresh at `refreshed_at`, or, with it `None`, the
+    /// rest matrix remade with them; empty for the rest factor as made), by increasing id, and
+    /// the rank updates applied to it since, in order (`true`: the term added, `false`:
     /// removed). The terms the factor holds now are the first list changed by the second.
     pub base_terms: Vec<StiffnessTerm>,
     pub term_updates: Vec<(StiffnessTerm, bool)>,
@@ -181,6 +182,15 @@ impl Workspace {
             }
         }
         factor::restore(model, self, mem)
+    }
+
+    /// Room for `n` stiffness terms of a caller's potential
+    /// ([`crate::integrate::CorePotential::stiffness_terms`]): with it, steps whose potentials offer
+    /// at most `n` terms allocate nothing (without it the term lists grow on first use).
+    pub fn reserve_stiffness_terms(&mut self, n: usize) {
+        for v in [&mut self.held_terms, &mut self.base_terms, &mut self.step_terms] {
+            v.reserve(n.saturating_sub(v.len()));
+        }
     }
 
     /// Factorise the rest matrix for `dt` \[s\] ahead of the first step at that `dt` and keep it

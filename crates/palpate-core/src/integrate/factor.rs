@@ -69,8 +69,8 @@ pub(crate) fn ensure(model: &Model, ws: &mut Workspace, dt: f64) -> Result<(), S
     if ws.factored_dt == dt {
         return Ok(());
     }
-    // A rest factor changed by rank updates is not the rest factor any more: not kept.
-    let leaving = (ws.factored_dt.is_finite() && !ws.refreshed && ws.term_updates.is_empty()).then_some(ws.factored_dt);
+    // A rest factor that holds terms is not the rest factor: not kept.
+    let leaving = (ws.factored_dt.is_finite() && pristine(ws)).then_some(ws.factored_dt);
     ws.factored_dt = f64::NAN;
     ws.refreshed = false;
     ws.excess_iterations = 0;
@@ -104,7 +104,7 @@ pub(crate) fn prepare(model: &Model, ws: &mut Workspace, dt: f64) -> Result<bool
     if !(dt > 0.0 && dt.is_finite()) {
         return Err(StepError::BadTimeStep(dt));
     }
-    if (ws.factored_dt == dt && !ws.refreshed) || ws.dt_cache.contains(dt) {
+    if (ws.factored_dt == dt && pristine(ws)) || ws.dt_cache.contains(dt) {
         return Ok(false);
     }
     let mut ldl = ws.dt_cache.spare(model);
@@ -131,11 +131,15 @@ pub(crate) fn restore(model: &Model, ws: &mut Workspace, mem: &crate::fem::StepM
         refresh(model, ws, x, dt)?;
         replay(model, ws, &mem.term_updates, dt)?;
     } else {
-        if ws.refreshed || !ws.term_updates.is_empty() {
+        if !pristine(ws) {
             ws.factored_dt = f64::NAN;
             ws.refreshed = false;
         }
         ensure(model, ws, dt)?;
+        if !mem.base_terms.is_empty() {
+            ws.base_terms.clone_from(&mem.base_terms);
+            remake_rest(model, ws, dt)?;
+        }
         replay(model, ws, &mem.term_updates, dt)?;
     }
     ws.excess_iterations = mem.excess_iterations;
@@ -177,7 +181,8 @@ pub(crate) const MAX_TERM_UPDATES: usize = 256;
 /// ([`CorePotential::stiffness_terms`]; none without one): a rank update per term added or
 /// removed since the last step (`Ldl::update`), logged for the memory. If the updates would pass
 /// [`MAX_TERM_UPDATES`] or cost more than a factorisation, or one fails (a downdate that lost
-/// definiteness to round-off), the factor is remade at `x` (the step's start) holding them.
+/// definiteness to round-off), the factor is remade holding them: refreshed at `x` (the step's
+/// start) if it was a refreshed one, else the rest matrix (no tangent to compute).
 pub(crate) fn sync_terms(model: &Model, ws: &mut Workspace, external: Option<&dyn CorePotential>, x: &[Vec3], dt: f64) -> Result<(), StepError> {
     let mut now = std::mem::take(&mut ws.step_terms);
     now.clear();
@@ -258,7 +263,54 @@ pub(crate) fn sync_terms(model: &Model, ws: &mut Workspace, external: Option<&dy
     }
     ws.base_terms.clone_from(&now);
     ws.step_terms = now;
-    refresh(model, ws, x, dt)
+    if ws.refreshed {
+        refresh(model, ws, x, dt)
+    } else {
+        // The rest matrix with the terms: no tangent to compute (the first touch's case).
+        remake_rest(model, ws, dt)
+    }
+}
+
+/// Whether `ws.ldl` is a rest factor as made (or none): no refresh, no terms held.
+fn pristine(ws: &Workspace) -> bool {
+    !ws.refreshed && ws.term_updates.is_empty() && ws.base_terms.is_empty()
+}
+
+/// Refactorise `ws.ldl` with the rest matrix and the stiffness terms `ws.base_terms`,
+/// `M - dt D0 - dt^2 (K0 - S)`, which it then holds (`StepMemory::refreshed_at` stays `None`:
+/// a restore remakes it from the rest matrix and the base terms); on failure, the rest matrix.
+fn remake_rest(model: &Model, ws: &mut Workspace, dt: f64) -> Result<(), StepError> {
+    let mut k = std::mem::take(&mut ws.k);
+    k.copy_from_slice(&model.k0);
+    subtract_terms(model, &ws.base_terms, &mut k);
+    model.system_values(1.0, -dt, -dt * dt, &k, &model.d0, &mut ws.a_values);
+    ws.k = k;
+    ws.factored_dt = f64::NAN;
+    ws.refreshed = false;
+    ws.factor_count += 1;
+    if model.factor(&mut ws.ldl, &ws.a_values).is_ok() {
+        ws.factored_dt = dt;
+        let Workspace { base_terms, held_terms, term_updates, .. } = ws;
+        held_terms.clone_from(base_terms);
+        term_updates.clear();
+        return Ok(());
+    }
+    clear_terms(ws);
+    ensure(model, ws, dt)
+}
+
+/// `k -= S`, `S` the stiffness of `terms` on the free pattern (`k` is the forces' Jacobian).
+fn subtract_terms(model: &Model, terms: &[StiffnessTerm], k: &mut [Mat3]) {
+    for t in terms {
+        for (&a, &wa) in t.nodes.iter().zip(&t.weights) {
+            for (&b, &wb) in t.nodes.iter().zip(&t.weights) {
+                let (fa, fb) = (model.node_to_free[a], model.node_to_free[b]);
+                if let Some(bi) = (fa != NONE && fb != NONE).then(|| model.pattern.find(fa, fb)).flatten() {
+                    k[bi] -= Mat3::from_diagonal_element(t.stiffness * wa * wb);
+                }
+            }
+        }
+    }
 }
 
 /// Apply the logged rank updates `updates` to the factor in use (a restore), as `sync_terms`
@@ -321,16 +373,7 @@ fn refresh(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<(),
         }
     }
     // `k` is the forces' Jacobian: a potential's stiffness enters with a minus sign.
-    for t in &ws.base_terms {
-        for (&a, &wa) in t.nodes.iter().zip(&t.weights) {
-            for (&b, &wb) in t.nodes.iter().zip(&t.weights) {
-                let (fa, fb) = (model.node_to_free[a], model.node_to_free[b]);
-                if let Some(bi) = (fa != NONE && fb != NONE).then(|| model.pattern.find(fa, fb)).flatten() {
-                    k[bi] -= Mat3::from_diagonal_element(t.stiffness * wa * wb);
-                }
-            }
-        }
-    }
+    subtract_terms(model, &ws.base_terms, &mut k);
     model.system_values(1.0, -dt, -dt * dt, &k, &model.d0, &mut ws.a_values);
     ws.k = k;
     ws.excess_iterations = 0;

@@ -610,7 +610,13 @@ impl SimWorkspace {
         let mut particles = ParticleWorkspace::new(&sim.particles);
         particles.set_ring_forces(true); // the ring's reactions go to the core (momentum)
         SimWorkspace {
-            core: Workspace::new(&sim.core),
+            core: {
+                // The shell's coupling springs, offered to the core's factor as terms
+                // (super::exchange): room for all of them, so that the tick allocates nothing.
+                let mut w = Workspace::new(&sim.core);
+                w.reserve_stiffness_terms(sim.coupled.iter().filter(|&&c| c).count());
+                w
+            },
             particles,
             f_core: vec![Vec3::zeros(); sim.core.n_nodes()],
             anchors: vec![Vec3::zeros(); n],
