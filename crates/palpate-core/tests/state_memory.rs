@@ -224,12 +224,13 @@ fn a_potentials_stiffness_terms_are_held_in_the_factor_and_in_the_memory() {
     assert!(Workspace::new(&model).restore_memory(&model, &bad).is_err());
 }
 
-/// Many terms at once (every free node anchored, as a first touch activates a region): the rest
-/// matrix is remade holding them rather than updated term by term (the updates would cost more
-/// than a factorisation), with no tangent to compute; the memory says so (`refreshed_at` none,
-/// the terms as its base), and a restore repeats the steps bit for bit.
+/// Many terms at once (every free node anchored, as a first touch activates a region): the factor
+/// is remade holding them (a refresh) rather than updated term by term, which would cost more
+/// than a factorisation; the memory says so (the terms as its base, no update), and a restore
+/// repeats the steps bit for bit. A memory that gives base terms without `refreshed_at` is the
+/// rest matrix with them, remade so.
 #[test]
-fn many_terms_at_once_remake_the_rest_factor_and_restore_bit_for_bit() {
+fn many_terms_at_once_remake_the_factor_and_restore_bit_for_bit() {
     let model = clamped_wall(Integrator::quasi_newton());
     let pts = model.mesh().points();
     let nodes: Vec<usize> = (0..model.n_nodes()).filter(|&i| !model.fixed()[i]).collect();
@@ -239,8 +240,8 @@ fn many_terms_at_once_remake_the_rest_factor_and_restore_bit_for_bit() {
     let mut ws = Workspace::new(&model);
     let first = palpate_core::integrate::step_with_potential(&model, &mut s, &mut ws, 1e-3, &pot).unwrap();
     let mem = ws.memory();
-    assert!(mem.refreshed_at.is_none() && mem.base_terms.len() == nodes.len() && mem.term_updates.is_empty(), "{mem:?}");
-    assert_eq!(first.factorizations, 2, "the rest factor, then the rest matrix with the terms");
+    assert!(mem.refreshed_at.is_some() && mem.base_terms.len() == nodes.len() && mem.term_updates.is_empty(), "{mem:?}");
+    assert_eq!(first.factorizations, 2, "the rest factor, then the factor with the terms");
     assert_eq!(first.iterations, 1);
     let saved = s.clone();
     let steps = |s: &mut State, ws: &mut Workspace| (0..10).map(|_| palpate_core::integrate::step_with_potential(&model, s, ws, 1e-3, &pot).unwrap().iterations).collect::<Vec<_>>();
@@ -248,7 +249,14 @@ fn many_terms_at_once_remake_the_rest_factor_and_restore_bit_for_bit() {
     assert!(a.iter().all(|&i| i == 1), "{a:?}");
     let mut ws2 = Workspace::new(&model);
     ws2.restore_memory(&model, &mem).unwrap();
-    let mut s2 = saved;
+    let mut s2 = saved.clone();
     assert_eq!(steps(&mut s2, &mut ws2), a);
     assert_eq!(bits(&s.x), bits(&s2.x));
+    // The rest matrix with the terms, from a memory that says so: the steps take one iteration
+    // (it holds the terms) and differ from the refreshed factor's.
+    let mut ws3 = Workspace::new(&model);
+    ws3.restore_memory(&model, &palpate_core::StepMemory { refreshed_at: None, ..mem }).unwrap();
+    let mut s3 = saved;
+    assert!(steps(&mut s3, &mut ws3).iter().all(|&i| i == 1));
+    assert_ne!(bits(&s.x), bits(&s3.x));
 }

@@ -181,8 +181,10 @@ pub(crate) const MAX_TERM_UPDATES: usize = 256;
 /// ([`CorePotential::stiffness_terms`]; none without one): a rank update per term added or
 /// removed since the last step (`Ldl::update`), logged for the memory. If the updates would pass
 /// [`MAX_TERM_UPDATES`] or cost more than a factorisation, or one fails (a downdate that lost
-/// definiteness to round-off), the factor is remade holding them: refreshed at `x` (the step's
-/// start) if it was a refreshed one, else the rest matrix (no tangent to compute).
+/// definiteness to round-off), the factor is remade holding them, refreshed at `x` (the step's
+/// start). (Remaking a rest factor as the rest matrix with the terms, without the tangent's
+/// eigen decompositions, was tried: under the 2 N press driven through the ventricle's wall,
+/// `tests/runtime_hand.rs`, the shell then failed at 19.8 mm.)
 pub(crate) fn sync_terms(model: &Model, ws: &mut Workspace, external: Option<&dyn CorePotential>, x: &[Vec3], dt: f64) -> Result<(), StepError> {
     let mut now = std::mem::take(&mut ws.step_terms);
     now.clear();
@@ -263,12 +265,7 @@ pub(crate) fn sync_terms(model: &Model, ws: &mut Workspace, external: Option<&dy
     }
     ws.base_terms.clone_from(&now);
     ws.step_terms = now;
-    if ws.refreshed {
-        refresh(model, ws, x, dt)
-    } else {
-        // The rest matrix with the terms: no tangent to compute (the first touch's case).
-        remake_rest(model, ws, dt)
-    }
+    refresh(model, ws, x, dt)
 }
 
 /// Whether `ws.ldl` is a rest factor as made (or none): no refresh, no terms held.
@@ -277,8 +274,9 @@ fn pristine(ws: &Workspace) -> bool {
 }
 
 /// Refactorise `ws.ldl` with the rest matrix and the stiffness terms `ws.base_terms`,
-/// `M - dt D0 - dt^2 (K0 - S)`, which it then holds (`StepMemory::refreshed_at` stays `None`:
-/// a restore remakes it from the rest matrix and the base terms); on failure, the rest matrix.
+/// `M - dt D0 - dt^2 (K0 - S)`, which it then holds: what a memory with base terms and no
+/// `refreshed_at` describes (the steps themselves remake a factor as a refresh); on failure,
+/// the rest matrix.
 fn remake_rest(model: &Model, ws: &mut Workspace, dt: f64) -> Result<(), StepError> {
     let mut k = std::mem::take(&mut ws.k);
     k.copy_from_slice(&model.k0);
