@@ -36,10 +36,10 @@ fn main() {
     if let Some(h) = env("SUPPORT") {
         o.support_spacings = h;
     }
-    // IMPLICIT: the shell's springs at the tissue's stiffness, their reaction implicit
-    // (SimOptions::implicit_exchange).
-    if std::env::var("IMPLICIT").is_ok() {
-        o.implicit_exchange = true;
+    // EXPLICIT: the shell's springs capped by the explicit exchange's stability
+    // (SimOptions::implicit_exchange false; the default takes them implicitly).
+    if std::env::var("EXPLICIT").is_ok() {
+        o.implicit_exchange = false;
     }
     if std::env::var("MS").ok().as_deref() == Some("off") {
         o.mass_scaling = None;

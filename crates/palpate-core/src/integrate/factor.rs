@@ -196,67 +196,22 @@ pub(crate) fn sync_terms(model: &Model, ws: &mut Workspace, external: Option<&dy
         ws.step_terms = now;
         return Ok(());
     }
-    // The changes: removed (or changed) terms, then added (or changed) ones.
-    let (mut i, mut j, mut changes) = (0, 0, 0);
-    let held_len = ws.held_terms.len();
-    while i < held_len || j < now.len() {
-        let (h, n) = (ws.held_terms.get(i), now.get(j));
-        match (h, n) {
-            (Some(h), Some(n)) if h.id == n.id => {
-                changes += 2 * (h != n) as usize;
-                i += 1;
-                j += 1;
-            }
-            (Some(h), Some(n)) if h.id < n.id => {
-                changes += 1;
-                i += 1;
-            }
-            (Some(_), None) => {
-                changes += 1;
-                i += 1;
-            }
-            _ => {
-                changes += 1;
-                j += 1;
-            }
-        }
-    }
-    let affordable = ws.term_updates.len() + changes <= MAX_TERM_UPDATES && (changes as f64) * model.update_cost <= 1.0;
-    let mut ok = affordable;
-    if ok {
-        let (mut i, mut j) = (0, 0);
-        let held = std::mem::take(&mut ws.held_terms);
-        while ok && (i < held.len() || j < now.len()) {
-            let (h, n) = (held.get(i).copied(), now.get(j).copied());
-            let (remove, add) = match (h, n) {
-                (Some(h), Some(n)) if h.id == n.id => {
-                    i += 1;
-                    j += 1;
-                    if h == n { (None, None) } else { (Some(h), Some(n)) }
-                }
-                (Some(h), Some(n)) if h.id < n.id => {
-                    i += 1;
-                    (Some(h), None)
-                }
-                (Some(h), None) => {
-                    i += 1;
-                    (Some(h), None)
-                }
-                (_, n) => {
-                    j += 1;
-                    (None, n)
-                }
-            };
-            for (t, added) in remove.map(|t| (t, false)).into_iter().chain(add.map(|t| (t, true))) {
-                ok = apply_term(model, ws, &t, added, dt).is_ok();
-                if !ok {
-                    break;
-                }
+    let mut count = 0;
+    changes(&ws.held_terms, &now, |_, _| {
+        count += 1;
+        true
+    });
+    let affordable = ws.term_updates.len() + count <= MAX_TERM_UPDATES && (count as f64) * model.update_cost <= 1.0;
+    let held = std::mem::take(&mut ws.held_terms);
+    let ok = affordable
+        && changes(&held, &now, |t, added| {
+            let ok = apply_term(model, ws, &t, added, dt).is_ok();
+            if ok {
                 ws.term_updates.push((t, added));
             }
-        }
-        ws.held_terms = held;
-    }
+            ok
+        });
+    ws.held_terms = held;
     if ok {
         // The factor holds `now`.
         ws.held_terms.clone_from(&now);
@@ -266,6 +221,39 @@ pub(crate) fn sync_terms(model: &Model, ws: &mut Workspace, external: Option<&dy
     ws.base_terms.clone_from(&now);
     ws.step_terms = now;
     refresh(model, ws, x, dt)
+}
+
+/// Walk two term lists sorted by id: `each(term, added)` for every term only in `held` (removed)
+/// or only in `now` (added), a changed term removed then added, in id order, until `each`
+/// returns false; returns whether it went through.
+fn changes(held: &[StiffnessTerm], now: &[StiffnessTerm], mut each: impl FnMut(StiffnessTerm, bool) -> bool) -> bool {
+    let (mut i, mut j) = (0, 0);
+    loop {
+        let (remove, add) = match (held.get(i), now.get(j)) {
+            (None, None) => return true,
+            (Some(h), Some(n)) if h.id == n.id => {
+                i += 1;
+                j += 1;
+                if h == n {
+                    continue;
+                }
+                (Some(*h), Some(*n))
+            }
+            (Some(h), n) if n.is_none_or(|n| h.id < n.id) => {
+                i += 1;
+                (Some(*h), None)
+            }
+            (_, n) => {
+                j += 1;
+                (None, n.copied())
+            }
+        };
+        for (t, added) in remove.map(|t| (t, false)).into_iter().chain(add.map(|t| (t, true))) {
+            if !each(t, added) {
+                return false;
+            }
+        }
+    }
 }
 
 /// Whether `ws.ldl` is a rest factor as made (or none): no refresh, no terms held.
