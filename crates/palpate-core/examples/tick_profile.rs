@@ -93,7 +93,10 @@ fn main() {
         }
         if let Some(t) = trace.as_mut() {
             use std::io::Write;
-            writeln!(t, "{k},{ms:.4},{},{},{},{},{},{:.6e},{},{},{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.force.norm(), rep.skin_refreshed, rep.core.evaluations, rep.confined).unwrap();
+            // The force's components exactly (shortest round-trip), so that two traces compare bit
+            // for bit after the time column is dropped (`cut -d, -f1,3-`), then the contacts.
+            let f = rep.force;
+            writeln!(t, "{k},{ms:.4},{},{},{},{},{},{:?},{:?},{:?},{},{},{},{},{},{},{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, f.x, f.y, f.z, rep.skin_refreshed, rep.core.evaluations, rep.confined, rep.skin_contacts, rep.core_contacts, rep.particle_contacts, rep.shell_failed).unwrap();
         }
         subs += rep.substeps;
         if k == press + hold - 1 {
@@ -107,6 +110,15 @@ fn main() {
             sim.skin_positions(&st, &mut out);
         }
         println!("whole fresh skin ({} vertices): {:.3} ms", out.len(), t0.elapsed().as_secs_f64() * 1e3 / 20.0);
+    }
+    if let Some(t) = trace.as_mut() {
+        // The final state's digest: every coordinate's bits, summed (a move that changes one bit
+        // anywhere changes it).
+        use std::io::Write;
+        let bits = |xs: &[Vec3]| xs.iter().flat_map(|x| x.iter().map(|c| c.to_bits())).fold(0u64, u64::wrapping_add);
+        let mut skin = vec![Vec3::zeros(); sim.hybrid.outer_points.len()];
+        sim.skin_positions(&st, &mut skin);
+        writeln!(t, "digest core {:x} particles {:x} velocities {:x} skin {:x}", bits(&st.core.x), bits(&st.particles.x), bits(&st.particles.v), bits(&skin)).unwrap();
     }
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);

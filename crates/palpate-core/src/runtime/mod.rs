@@ -13,10 +13,14 @@
 //! - [`coupling`]: damped springs between the first-layer active particles and their core faces,
 //!   momentum-exact (where and why this departs from the paper: see the module);
 //! - [`stability`]: how many particle sub-steps a tick needs (stretch, springs, contact);
+//! - [`skin`]: the outer surface the tool meets and the user sees: its update (the tick's last
+//!   stage), the sub-steps' view of it near the tool, and a shed shell's skin fading back;
 //! - [`sim`], [`state`]: the compiled simulation, its state and workspace, and the state as
 //!   plain values to save and restore ([`SimSnapshot`]);
-//! - [`tick`](mod@tick): the one ordered tick, tool in, force out; [`tick_with`] the same with
-//!   the particle passes split over a caller's threads ([`crate::parallel`]), bitwise equal.
+//! - [`tick`](mod@tick): the one ordered tick, tool in, force out, orchestrating its stages (a
+//!   file each under `tick/`: activation and the ring, the shell's sub-steps with shedding, the
+//!   core's contact and step); [`tick_with`] the same with the particle passes split over a
+//!   caller's threads ([`crate::parallel`]), bitwise equal.
 //!
 //! **Status (issue 12).** Each exchange is exact: the tick conserves linear momentum to
 //! round-off with the tool away and changes it by the tool's impulse with the tool
@@ -52,6 +56,7 @@ pub(crate) mod homogenised_core;
 pub mod scale;
 pub mod sim;
 pub mod stability;
+pub mod skin;
 pub mod state;
 pub mod tick;
 pub mod tool;
@@ -63,6 +68,7 @@ pub use coupling::Coupling;
 pub use embed::Embedding;
 pub use sim::{Sim, SimOptions};
 pub use stability::Shell;
-pub use state::{SimSnapshot, SimState, SimWorkspace, SkinSweep, SHED_FADE_TICKS};
+pub use skin::SHED_FADE_TICKS;
+pub use state::{SimSnapshot, SimState, SimWorkspace, SkinSweep};
 pub use tick::{finish_tick, tick, tick_force_with, tick_with, Finished, TickReport};
 pub use tool::{AreaTool, ContactSum, PointContact, Tool, ToolOptions};

@@ -73,7 +73,7 @@ pub struct SimOptions {
     /// shell stays off for `n` ticks and until the tool has let go of the organ (no contact)
     /// before regions may enter again ([`super::TickReport`]'s `shell_failed`, `shell_off`); the
     /// hand keeps feeling the organ: the skin the particles carried fades back to its ties over
-    /// [`super::state::SHED_FADE_TICKS`] (or the pause, if shorter), and the tool meets the core
+    /// [`super::skin::SHED_FADE_TICKS`] (or the pause, if shorter), and the tool meets the core
     /// inside its implicit step ([`super::core_contact`]). `None`: the tick fails
     /// with the error, the state as it was (studies of the shell's own stability).
     pub shell_fallback: Option<u64>,
@@ -346,7 +346,7 @@ impl Sim {
     pub fn skin_positions(&self, state: &SimState, out: &mut [Vec3]) {
         let x = &state.core.x;
         for (i, o) in out.iter_mut().enumerate() {
-            let carried = if super::tick::over_active(self, &state.activation, i) { super::tick::skin_over_particles(self, &state.activation, i, &state.particles.x, x, None) } else { None };
+            let carried = if super::skin::over_active(self, &state.activation, i) { super::skin::over_particles(self, &state.activation, i, &state.particles.x, x, None) } else { None };
             *o = carried.unwrap_or_else(|| self.skin.position(i, x));
         }
     }

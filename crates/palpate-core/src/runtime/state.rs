@@ -4,6 +4,7 @@
 
 use super::activation::Activation;
 use super::sim::Sim;
+use super::skin::{shed_fade_ticks, LiveSkin, SkinLift};
 use crate::error::StepError;
 use crate::fem::{State, StepMemory, Workspace};
 use crate::math::Vec3;
@@ -22,7 +23,7 @@ pub struct SimState {
     /// [`Sim::particle_positions`] for all of them.
     pub particles: ParticleState,
     /// The outer surface's vertices (the skin) \[m\]: after the last tick near the tool (within
-    /// [`super::tick::SKIN_LIVE_MARGIN`] of its reach) and over active particles, elsewhere
+    /// [`super::skin::SKIN_LIVE_MARGIN`] of its reach) and over active particles, elsewhere
     /// within that margin of their place (see `LiveSkin`); [`super::Sim::skin_positions`]
     /// gives the whole skin fresh.
     pub skin: Vec<Vec3>,
@@ -49,48 +50,6 @@ pub struct SimState {
     /// in `core.f_ext` (owed when the tool had no contact with the core or its skin: the force
     /// did not depend on the step).
     pub(crate) core_owed: Option<f64>,
-}
-
-/// Where a shed shell left the skin (see [`super::tick`], step 3): when the shell is shed, the
-/// skin vertices the particles carried sit off their ties by `offset` (the press the particles
-/// took), and put back at once the tool's force jumped (measured 0.09-1.4 N in one tick on the
-/// synthetic ventricle, `examples/press_sweep.rs`). Instead each stays lifted off its tie by
-/// `offset` scaled down linearly from 1 at the shed tick to 0 [`SHED_FADE_TICKS`] later (or at the
-/// end of a shorter pause), in the contact and in the drawn skin. The offsets are constant: the
-/// contact's forces stay the gradient of its energy.
-#[derive(Debug, Clone)]
-pub(crate) struct SkinLift {
-    /// Per skin vertex \[m\] (zero unless listed).
-    pub offset: Vec<Vec3>,
-    /// The lifted vertices.
-    pub list: Vec<u32>,
-    /// The shed tick, and the ticks the fade takes.
-    pub start: u64,
-    pub ticks: u64,
-}
-
-/// Ticks over which a shed shell's skin returns to its ties (`SkinLift` in this module): 50 ms, so that the
-/// largest step measured (1.4 N) reaches the hand as ~0.03 N a tick.
-pub const SHED_FADE_TICKS: u64 = 50;
-
-impl SkinLift {
-    fn new(n_skin: usize) -> SkinLift {
-        SkinLift { offset: vec![Vec3::zeros(); n_skin], list: Vec::with_capacity(n_skin), start: 0, ticks: 1 }
-    }
-    /// The scale of the offsets at tick `t` (0 when nothing is lifted).
-    pub fn scale(&self, t: u64) -> f64 {
-        if self.list.is_empty() {
-            return 0.0;
-        }
-        (1.0 - t.saturating_sub(self.start) as f64 / self.ticks as f64).max(0.0)
-    }
-    /// Nothing lifted.
-    pub fn clear(&mut self) {
-        for &v in &self.list {
-            self.offset[v as usize] = Vec3::zeros();
-        }
-        self.list.clear();
-    }
 }
 
 impl Clone for SimState {
@@ -127,187 +86,6 @@ impl Clone for SimState {
         lift.offset.clone_from(&s.lift.offset);
         lift.list.clone_from(&s.lift.list);
         (lift.start, lift.ticks) = (s.lift.start, s.lift.ticks);
-    }
-}
-
-/// The skin vertices a tick may need to look at (contact, activation, the skin's update near the
-/// tool), and how stale the others may be.
-///
-/// Every stored skin vertex is within [`super::tick::SKIN_LIVE_MARGIN`] of where the core (or the
-/// particles under it) puts it: the tick bounds how far the core's faces have moved since the
-/// last update of the whole skin (`ref_x`, `ref_frames`, [`super::Sim::skin_face_reach`]),
-/// plus `slack`, and sweeps the whole skin, a sixteenth a tick, from a quarter of the margin
-/// (a vertex the sweep placed at tick `u` is within the travel from the sweep's start to now plus
-/// the travel from the start to `u`: hence the slack); only when the bound reaches half the
-/// margin anyway (the skin moving over ~0.08 m/s) is the whole skin updated in one tick (1.2 ms
-/// on the Rodero ventricle's 31,788 vertices, which the sweep spreads into ~80 us slices). A
-/// vertex that stops being
-/// carried by particles is put back at its tie at once (`carried`). The list holds the vertices
-/// within `r_live + margin + step` of the tool when it was last rebuilt (`ref_tool`; rebuilt
-/// once the tool has travelled a margin), plus every vertex moved since. A vertex outside it
-/// therefore cannot be within the tool's reach before the next rebuild, and those within the
-/// live radius are updated every tick: scanning the list instead of the whole skin changes no
-/// contact or activation (the list is kept in index order, so even sums come out in the same
-/// order), and costs a tick on the Rodero model's 31,788 skin vertices a few hundred instead
-/// of ~32,000 distance tests per scan, with no periodic whole update (a 1 ms spike there).
-#[derive(Debug)]
-pub(crate) struct LiveSkin {
-    /// Vertex indices, ascending.
-    pub(crate) list: Vec<u32>,
-    /// Per outer vertex: in `list`?
-    pub(crate) member: Vec<bool>,
-    /// Per outer vertex: its stored place is where the particles under it carried it (not its
-    /// tie)?
-    pub(crate) carried: Vec<bool>,
-    /// `false` until the list is first built (at the start of the first tick after rest, or by
-    /// the first whole update): until then every vertex is looked at.
-    pub(crate) valid: bool,
-    /// `list` gained vertices out of order this tick (sorted before the next use).
-    pub(crate) unsorted: bool,
-    /// The core's positions \[m\] and face frames at the last whole update of the skin.
-    pub(crate) ref_x: Vec<Vec3>,
-    pub(crate) ref_frames: Vec<Option<crate::math::Mat3>>,
-    /// The tool's centre when the list was last rebuilt \[m\].
-    pub(crate) ref_tool: Vec3,
-    /// The bound on the skin's travel since the last whole update, as of the last tick \[m\].
-    pub(crate) travel: f64,
-    /// What the references leave out \[m\]: 0 after a whole update; after a sweep (below), the
-    /// most the skin travelled from the sweep's reference while the sweep went on (a vertex the
-    /// sweep placed late is that much nearer the reference's successor than the reference says).
-    /// Every stored vertex is within `travel + slack` of its place.
-    pub(crate) slack: f64,
-    /// The sweep of the whole skin in progress, spread over [`super::tick::SKIN_SWEEP_TICKS`]
-    /// ticks instead of one (a whole update of the Rodero ventricle's 31,788 vertices takes
-    /// 1.2 ms, more than a haptic tick): the next vertex it places (`None`: no sweep), the core's
-    /// positions and face frames when it began, and its own slack so far.
-    pub(crate) sweep_next: Option<usize>,
-    pub(crate) sweep_ref_x: Vec<Vec3>,
-    pub(crate) sweep_ref_frames: Vec<Option<crate::math::Mat3>>,
-    pub(crate) sweep_slack: f64,
-}
-
-/// [`LiveSkin::iter`]: the list, or every vertex before it is first built.
-pub(crate) enum LiveIter<'a> {
-    All(std::ops::Range<usize>),
-    List(std::slice::Iter<'a, u32>),
-}
-
-impl Iterator for LiveIter<'_> {
-    type Item = usize;
-    fn next(&mut self) -> Option<usize> {
-        match self {
-            LiveIter::All(r) => r.next(),
-            LiveIter::List(l) => l.next().map(|&v| v as usize),
-        }
-    }
-}
-
-impl Clone for LiveSkin {
-    fn clone(&self) -> Self {
-        LiveSkin {
-            list: self.list.clone(),
-            member: self.member.clone(),
-            carried: self.carried.clone(),
-            valid: self.valid,
-            unsorted: self.unsorted,
-            ref_x: self.ref_x.clone(),
-            ref_frames: self.ref_frames.clone(),
-            ref_tool: self.ref_tool,
-            travel: self.travel,
-            slack: self.slack,
-            sweep_next: self.sweep_next,
-            sweep_ref_x: self.sweep_ref_x.clone(),
-            sweep_ref_frames: self.sweep_ref_frames.clone(),
-            sweep_slack: self.sweep_slack,
-        }
-    }
-    fn clone_from(&mut self, s: &Self) {
-        let LiveSkin { list, member, carried, valid, unsorted, ref_x, ref_frames, ref_tool, travel, slack, sweep_next, sweep_ref_x, sweep_ref_frames, sweep_slack } = self;
-        list.clone_from(&s.list);
-        member.clone_from(&s.member);
-        carried.clone_from(&s.carried);
-        *valid = s.valid;
-        *unsorted = s.unsorted;
-        ref_x.clone_from(&s.ref_x);
-        ref_frames.clone_from(&s.ref_frames);
-        *ref_tool = s.ref_tool;
-        *travel = s.travel;
-        *slack = s.slack;
-        *sweep_next = s.sweep_next;
-        sweep_ref_x.clone_from(&s.sweep_ref_x);
-        sweep_ref_frames.clone_from(&s.sweep_ref_frames);
-        *sweep_slack = s.sweep_slack;
-    }
-}
-
-impl LiveSkin {
-    /// At rest: every vertex at its place (the model's outer points, where its tie puts it at
-    /// rest), the references the core's rest positions and face frames, the travel since 0. The
-    /// first tick then only builds the list around its tool, at its start, instead of placing
-    /// the whole skin and looking at every vertex: on the Rodero ventricle that made the first
-    /// tick 1.4 ms (now 0.2 ms warm, 0.7 ms in a fresh process), an overrun at the start of
-    /// every haptic run (2026-11-27).
-    pub(crate) fn at_rest(sim: &super::Sim) -> LiveSkin {
-        let (n_outer, n_faces) = (sim.hybrid.outer_points.len(), sim.hybrid.core_faces.len());
-        let rest = sim.core.mesh().points();
-        let mut ref_frames = vec![None; n_faces];
-        super::embed::face_frames(rest, &sim.hybrid.core_faces, &mut ref_frames);
-        LiveSkin {
-            list: Vec::with_capacity(n_outer),
-            member: vec![false; n_outer],
-            carried: vec![false; n_outer],
-            valid: false,
-            unsorted: false,
-            ref_x: rest.to_vec(),
-            ref_frames,
-            ref_tool: Vec3::zeros(),
-            travel: 0.0,
-            slack: 0.0,
-            sweep_next: None,
-            sweep_ref_x: vec![Vec3::zeros(); rest.len()],
-            sweep_ref_frames: vec![None; n_faces],
-            sweep_slack: 0.0,
-        }
-    }
-
-    /// The vertices to look at, in index order.
-    pub(crate) fn iter(&self) -> LiveIter<'_> {
-        if self.valid { LiveIter::List(self.list.iter()) } else { LiveIter::All(0..self.member.len()) }
-    }
-
-    /// Add vertex `v` (it moved).
-    pub(crate) fn add(&mut self, v: usize) {
-        if self.valid && !self.member[v] {
-            self.member[v] = true;
-            self.unsorted |= self.list.last().is_some_and(|&l| l as usize > v);
-            self.list.push(v as u32);
-        }
-    }
-
-    /// Restore index order after [`LiveSkin::add`]s (allocation-free: an unstable sort in place).
-    pub(crate) fn sort(&mut self) {
-        if self.unsorted {
-            self.list.sort_unstable();
-            self.unsorted = false;
-        }
-    }
-
-    /// Rebuild from the whole skin: the vertices within `radius` of `centre`, and those carried
-    /// by particles (they must be put back at their ties when their triangles turn inactive).
-    pub(crate) fn rebuild(&mut self, skin: &[Vec3], centre: &Vec3, radius: f64) {
-        for &v in &self.list {
-            self.member[v as usize] = false;
-        }
-        self.list.clear();
-        for (v, x) in skin.iter().enumerate() {
-            if self.carried[v] || (x - centre).norm_squared() <= radius * radius {
-                self.member[v] = true;
-                self.list.push(v as u32);
-            }
-        }
-        self.ref_tool = *centre;
-        self.valid = true;
-        self.unsorted = false;
     }
 }
 
@@ -519,12 +297,6 @@ pub struct SimSnapshot {
     /// The last tick's core step too, when owed: its `dt` \[s\] and the core's external forces
     /// \[N\] (`(n_core)`, world frame: the shell's reactions it steps under).
     pub core_owed: Option<(f64, Vec<Vec3>)>,
-}
-
-/// The ticks a shed shell's skin takes back to its ties: [`SHED_FADE_TICKS`], or the shell's
-/// pause if shorter.
-pub(crate) fn shed_fade_ticks(o: &super::SimOptions) -> u64 {
-    SHED_FADE_TICKS.min(o.shell_fallback.unwrap_or(SHED_FADE_TICKS)).max(1)
 }
 
 /// A sweep of the whole skin in progress ([`SimSnapshot::sweep`]): the next vertex it places,
