@@ -1,9 +1,12 @@
-"""Small, strict ASCII readers for gmsh MSH 2.2 / 4.1 and TetGen .node/.ele files.
+"""Small, strict readers for gmsh MSH 2.2 / 4.0 / 4.1 and TetGen .node/.ele files, and the
+structure check of Medit .mesh files before meshio reads them.
 
 meshio reads these formats too, but it maps unknown gmsh node tags silently (a tag of 0 or -1 wraps
 around to the last node, in ASCII and binary files) and its TetGen reader stops at comments without saying where. These
 readers report every defect with the file, the line (or byte) and the element, which is what
-:func:`palpate.load_mesh` promises. Binary gmsh MSH 2.2 and 4.1 are read here too; MSH 4.0 goes to meshio.
+:func:`palpate.load_mesh` promises. Binary gmsh MSH 2.2, 4.0 and 4.1 are read here too. MSH 4.0
+went to meshio before, whose 4.0 reader maps node tags by index arithmetic as well (an undefined
+tag 0 becomes -1, the last node) and fails on parametric nodes.
 
 Each reader returns ``(points, blocks, node_labels)``: ``points`` a float64 ``(n, 3)`` array in
 the file's units, ``blocks`` a list of :class:`CellBlock` with 0-based node indices (int64) and, per
@@ -322,6 +325,27 @@ def gmsh_format(path: str) -> Tuple[str, bool]:
     return version, binary
 
 
+#: How to rewrite a gmsh file in a layout palpate reads (gmsh's own command line).
+GMSH_CONVERT = "gmsh IN.msh -format msh41 -save -o OUT.msh (or -format msh22)"
+
+
+def gmsh_layout(name: str, version: str) -> str:
+    """The $Nodes / $Elements layout of a gmsh file with $MeshFormat ``version``: ``"2"`` (2.x),
+    ``"4.0"`` (``4`` or ``4.0``: gmsh 4.0 writes ``4``, and gmsh reads a ``4`` file as 4.0, where
+    meshio takes it for 4.1, meshio issue 797) or ``"4.1"``; a MeshError for any other 4.x."""
+    if version.startswith("2"):
+        return "2"
+    if version.startswith("4.1"):
+        return "4.1"
+    try:
+        if float(version) == 4.0:
+            return "4.0"
+    except ValueError:
+        pass
+    raise MeshError(f"{name}: line 2: unsupported gmsh MSH version {version!r}: palpate reads MSH 2.2, 4.0 "
+                    f"and 4.1; convert with {GMSH_CONVERT}")
+
+
 def gmsh_binary_precheck(path: str) -> None:
     """A binary gmsh file's $Nodes / $Elements counts against the file's size and the budget,
     before meshio allocates them (a 200-byte file claiming 1e8 nodes made it allocate 2.4 GB)."""
@@ -397,10 +421,152 @@ def vtk_legacy_precheck(path: str, error: Type[Exception] = MeshError) -> None:
         check_budget(f"{key} of {n} entries", numbers * 8.0 * 3, name)
 
 
+# ---------------------------------------------------------------------------------------------
+# Medit (read by meshio)
+# ---------------------------------------------------------------------------------------------
+
+#: Sections of an ASCII Medit file that meshio's reader (meshio 5.3, ``medit/_medit.py``) keeps,
+#: and the numbers per entry ("d": the dimension): vertices and cells, each with its reference
+#: (the cells' references are :func:`palpate.read_mesh_sets`' ``"ref <k>"`` sets).
+_MEDIT_KEPT = {"Vertices": "d+1", "Edges": 3, "Triangles": 4, "Quadrilaterals": 5, "Tetrahedra": 5,
+               "Prisms": 7, "Pyramids": 6, "Hexahedra": 9, "Hexaedra": 9}
+
+#: Sections meshio reads past and drops: with a line on stderr ("Meshio doesn't know keyword ...
+#: Skipping.") for RequiredVertices, Ridges, Tangents and TangentAtVertices, without a word for
+#: the others. None of them holds a vertex, a cell or a reference: the tetrahedra palpate builds,
+#: and the sets, are the same with or without them, so the file is read and a MeshWarning names
+#: them (what they hold, and why palpate can do without it, by group):
+_MEDIT_DROPPED = {
+    # feature marks for a remesher (mmg, Medit): vertex and edge numbers, no coordinates;
+    # palpate does not remesh
+    "Corners": 1, "RequiredVertices": 1, "Ridges": 1,
+    # normals and tangents of the boundary: palpate computes the normals it uses (contact,
+    # palpation) from the surface triangles
+    "Normals": "d", "NormalAtVertices": 2, "Tangents": "d", "TangentAtVertices": 2,
+    # links from the mesh to a CAD geometry (FreeFem, bamg): palpate simulates the mesh alone
+    "SubDomainFromMesh": 4, "VertexOnGeometricVertex": 2, "VertexOnGeometricEdge": 3, "EdgeOnGeometricEdge": 2,
+}
+#: Of those, the ones meshio reads past by skipping ``count`` lines, not ``count`` entries: one
+#: entry a line, or it skips into (and drops) the next section without a word (a Triangles
+#: section after a RequiredVertices one written several numbers a line was lost that way).
+_MEDIT_BY_LINE = ("RequiredVertices", "Ridges", "Tangents", "TangentAtVertices")
+#: One line after the keyword that meshio skips, whatever it holds: a title, a geometry file's name.
+_MEDIT_ONE_LINE = ("Identifier", "Geometry")
+#: Any other keyword stops meshio's reader (ReadError "Unknown keyword"): solution fields
+#: (SolAtVertices, ...), RequiredEdges, RequiredTriangles, ... are refused here by name, before
+#: it runs. Binary Medit (.meshb) is not read (``load_mesh`` takes ``.mesh`` only).
+
+
+def _medit_keyword_line(line: str) -> bool:
+    """A line meshio's reader takes for a keyword: its first word is alphabetic (and not nan or inf,
+    which are numbers in a section's data)."""
+    t = line.split(None, 1)
+    if not t or not t[0].isalpha():
+        return False
+    try:
+        float(t[0])
+        return False
+    except ValueError:
+        return True
+
+
+def _n(k: int, one: str, many: str) -> str:
+    return f"{k} {one if k == 1 else many}"
+
+
+def medit_precheck(path: str) -> List[str]:
+    """Check the sections of an ASCII Medit file before meshio reads it, and name the ones it
+    would drop. Every section's count must match the numbers that follow it up to the next
+    keyword (a wrong count is refused with the line; meshio reads numbers by count across line
+    ends and would misread the rest), a keyword meshio does not know is refused by name, and the
+    sections meshio skips line by line must hold one entry a line. Returns, for the sections that
+    are read past (:data:`_MEDIT_DROPPED`, :data:`_MEDIT_ONE_LINE`), ``"<keyword> (<count>
+    entries, line <n>)"`` (the keyword's line), for the caller's MeshWarning."""
+    name = os.path.basename(path)
+    lines = read_text(path).splitlines()
+    dim: Optional[int] = None
+    skipped: List[str] = []
+    i = 0
+    while i < len(lines):
+        line = lines[i].strip()
+        i += 1
+        if not line or line.startswith("#"):
+            continue
+        tok = line.split()
+        kw = tok[0]
+        if not _medit_keyword_line(line):
+            raise MeshError(f"{name}: line {i}: expected a Medit keyword (Vertices, Tetrahedra, ...), got "
+                            f"{line[:40]!r} (a wrong count in the section before?)")
+        if kw == "End":
+            continue
+        if kw == "MeshVersionFormatted":
+            if len(tok) < 2:
+                raise MeshError(f"{name}: line {i}: expected the version on the 'MeshVersionFormatted' line")
+            continue
+        if kw == "Dimension":
+            value = tok[1] if len(tok) > 1 else (lines[i].strip() if i < len(lines) else "")
+            i += 0 if len(tok) > 1 else 1
+            try:
+                dim = int(value)
+            except ValueError:
+                raise MeshError(f"{name}: line {i}: expected the dimension after 'Dimension', "
+                                f"got {value[:40]!r}") from None
+            continue
+        if kw in _MEDIT_ONE_LINE:
+            if i < len(lines) and _medit_keyword_line(lines[i]):
+                raise MeshError(f"{name}: line {i + 1}: {kw} at line {i} has no value line: meshio skips the line "
+                                f"after it, here the keyword {lines[i].split()[0]!r} (and that section's data would "
+                                "be misread)")
+            skipped.append(f"{kw} (line {i})")
+            i += 1
+            continue
+        per = _MEDIT_KEPT.get(kw, _MEDIT_DROPPED.get(kw))
+        if per is None:
+            raise MeshError(f"{name}: line {i}: Medit keyword {kw!r} is not one palpate can read past (meshio's "
+                            f"Medit reader stops at it): palpate reads {', '.join(_MEDIT_KEPT)}, and skips with a "
+                            f"warning {', '.join(list(_MEDIT_DROPPED) + list(_MEDIT_ONE_LINE))}; remove the "
+                            f"{kw} section to load the mesh")
+        if isinstance(per, str):
+            if dim is None:
+                raise MeshError(f"{name}: line {i}: {kw} before Dimension (its entries have 'Dimension' numbers)")
+            per = dim + (1 if per == "d+1" else 0)
+        at = i
+        count_text = lines[i].strip() if i < len(lines) else ""
+        try:
+            count = int(count_text)
+        except ValueError:
+            raise MeshError(f"{name}: line {at + 1}: expected the number of {kw} entries alone on the line after "
+                            f"'{kw}', got {count_text[:40]!r}") from None
+        if count < 0:
+            raise MeshError(f"{name}: line {at + 1}: {kw}: negative count {count}")
+        i += 1
+        start, numbers = i, 0
+        while i < len(lines) and not _medit_keyword_line(lines[i]):
+            if not lines[i].lstrip().startswith("#"):
+                numbers += len(lines[i].split())
+            i += 1
+        if numbers != count * per:
+            raise MeshError(f"{name}: line {at + 1}: {kw} announces {_n(count, 'entry', 'entries')} of "
+                            f"{_n(per, 'number', 'numbers')} ({count * per}), lines {start + 1}..{i} hold {numbers} "
+                            "(a wrong count, or a truncated or malformed entry)")
+        if kw in _MEDIT_BY_LINE:
+            for k in range(start, start + count):
+                if len(lines[k].split()) != per:
+                    raise MeshError(f"{name}: line {k + 1}: {kw} entries must be one a line "
+                                    f"({_n(per, 'number', 'numbers')}), got {len(lines[k].split())}: meshio reads "
+                                    f"past {kw} by skipping {count} lines, and would skip into the next section and "
+                                    "drop it")
+        if kw in _MEDIT_DROPPED:
+            skipped.append(f"{kw} ({_n(count, 'entry', 'entries')}, line {at})")
+    return skipped
+
+
 def read_gmsh_ascii(path: str, version: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:
-    """Read an ASCII gmsh MSH 2.2 or 4.1 file (nodes and elements; other sections are skipped)."""
+    """Read an ASCII gmsh MSH 2.2, 4.0 or 4.1 file (nodes and elements; other sections are skipped)."""
     f = _Lines(path, read_text(path))
-    v4 = version.startswith("4")
+    layout = gmsh_layout(f.name, version)
+    read_nodes = {"2": _gmsh_nodes_v2, "4.0": _gmsh_nodes_v40, "4.1": _gmsh_nodes_v4}[layout]
+    read_elements = {"2": _gmsh_elements_v2, "4.0": _gmsh_elements_v40, "4.1": _gmsh_elements_v4}[layout]
     nodes: Optional[Tuple[List[int], List[List[float]]]] = None
     elements = None
     while True:
@@ -413,9 +579,9 @@ def read_gmsh_ascii(path: str, version: str) -> Tuple[np.ndarray, List[CellBlock
         section = line[1:]
         try:
             if section == "Nodes":
-                nodes = _gmsh_nodes_v4(f) if v4 else _gmsh_nodes_v2(f)
+                nodes = read_nodes(f)
             elif section == "Elements":
-                elements = _gmsh_elements_v4(f) if v4 else _gmsh_elements_v2(f)
+                elements = read_elements(f)
             else:
                 _skip_section(f, section)
                 continue
@@ -509,18 +675,24 @@ class _Bytes:
 
 
 def read_gmsh_binary(path: str, version: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:
-    """Read a binary gmsh MSH 2.2 or 4.1 file (little-endian; nodes and elements, other sections
-    skipped), every element's node tag checked against $Nodes as in the ASCII reader. meshio read
-    these before, and mapped an undefined node tag 0 (tag - 1 = -1) to the node with the largest
-    tag without a word (issue 35 item 6)."""
+    """Read a binary gmsh MSH 2.2, 4.0 or 4.1 file (little-endian; nodes and elements, other
+    sections skipped), every element's node tag checked against $Nodes as in the ASCII reader.
+    meshio read these before, and mapped an undefined node tag 0 (tag - 1 = -1) to the node with
+    the largest tag without a word (issue 35 item 6). MSH 4.0 writes its counts as C ``unsigned
+    long``: 8 bytes as gmsh writes them on 64-bit Linux and macOS, which is what is read here (a
+    file with 4-byte ones, from gmsh 4.0 on Windows or a 32-bit system, is refused at its $Nodes
+    header)."""
     check_input_file(path)
     with open(path, "rb") as fh:
         b = _Bytes(path, fh.read())
-    v4 = version.startswith("4")
+    layout = gmsh_layout(b.name, version)
     b.line("$MeshFormat")
     head = b.line("$MeshFormat").split()
-    if v4 and len(head) > 2 and head[2] != b"8":
-        raise b.error(f"data-size {head[2].decode('latin-1')!r}: palpate reads binary MSH 4.1 with 8-byte sizes")
+    if layout != "2" and len(head) > 2 and head[2] != b"8":
+        raise b.error(f"data-size {head[2].decode('latin-1')!r}: palpate reads binary MSH {layout} with 8-byte "
+                      f"sizes; convert with {GMSH_CONVERT}")
+    read_nodes = {"2": _gmsh_bin_nodes_v2, "4.0": _gmsh_bin_nodes_v40, "4.1": _gmsh_bin_nodes_v4}[layout]
+    read_elements = {"2": _gmsh_bin_elements_v2, "4.0": _gmsh_bin_elements_v40, "4.1": _gmsh_bin_elements_v4}[layout]
     one = int(b.take("<i4", 1, "the endianness check")[0])
     if one != 1:
         raise b.error(f"the endianness check reads {one}, not 1: a big-endian file (palpate reads little-endian ones)")
@@ -535,9 +707,9 @@ def read_gmsh_binary(path: str, version: str) -> Tuple[np.ndarray, List[CellBloc
             raise b.error(f"expected a section header like '$Nodes', got {line[:40]!r}", at)
         section = line[1:].decode("latin-1")
         if section == "Nodes":
-            nodes = _gmsh_bin_nodes_v4(b) if v4 else _gmsh_bin_nodes_v2(b)
+            nodes = read_nodes(b)
         elif section == "Elements":
-            elements = _gmsh_bin_elements_v4(b) if v4 else _gmsh_bin_elements_v2(b)
+            elements = read_elements(b)
         else:
             end = b.data.find(f"$End{section}".encode(), b.pos)
             if end < 0:
@@ -635,6 +807,68 @@ def _gmsh_bin_elements_v4(b: _Bytes):
     return out
 
 
+def _gmsh_bin_header_v40(b: _Bytes, section: str, what: str, per_item: int, per_block: int) -> Tuple[int, int]:
+    """An MSH 4.0 binary section header: ``numEntityBlocks numItems`` (unsigned long, 8 bytes),
+    both checked against the bytes left before anything is sized by them."""
+    at = b.pos
+    n_blocks, n_items = (int(x) for x in b.take("<u8", 2, f"the ${section} header"))
+    left = len(b.data) - b.pos
+    if n_items * per_item + n_blocks * per_block > left:
+        raise b.error(f"the ${section} header announces {n_blocks} entity blocks of {n_items} {what} in all, "
+                      f"which need at least {n_items * per_item + n_blocks * per_block} bytes; {left} are left "
+                      "(truncated, or written with 4-byte unsigned long counts, as gmsh 4.0 on Windows or a 32-bit "
+                      f"system does: palpate reads 8-byte ones; convert with {GMSH_CONVERT})", at)
+    check_budget(f"${section} of {n_items} entries", n_items * 64.0, b.name)
+    return n_blocks, n_items
+
+
+def _gmsh_bin_nodes_v40(b: _Bytes):
+    # Block: tagEntity dimEntity parametric (int) numNodes (unsigned long); then per node
+    # tag (int) x y z (double) [u [v [w]]] (double, dimEntity of them if parametric).
+    n_blocks, n_nodes = _gmsh_bin_header_v40(b, "Nodes", "nodes", 4 + 24, 20)
+    tags: List[int] = []
+    coords = []
+    for _ in range(n_blocks):
+        at = b.pos
+        _, dim, parametric = (int(x) for x in b.take("<i4", 3, "a $Nodes entity block header"))
+        count = int(b.take("<u8", 1, "a $Nodes entity block header")[0])
+        if count > n_nodes - len(tags):
+            raise b.error(f"a $Nodes block of {count} nodes after {len(tags)} of {n_nodes}", at)
+        if parametric and not 0 <= dim <= 3:
+            raise b.error(f"a $Nodes block of entity dimension {dim} with parametric coordinates", at)
+        per = 3 + (dim if parametric else 0)
+        raw = b.take("<u1", count * (4 + 8 * per), "$Nodes (node records)")
+        recs = np.frombuffer(raw.tobytes(), dtype=np.dtype([("tag", "<i4"), ("xyz", "<f8", per)]), count=count)
+        tags.extend(recs["tag"].astype(np.int64).tolist())
+        coords.append(recs["xyz"].reshape(count, per)[:, :3].astype(np.float64))
+    if len(tags) != n_nodes:
+        raise b.error(f"$Nodes header announces {n_nodes} nodes, the blocks hold {len(tags)}")
+    return tags, (np.concatenate(coords) if coords else np.zeros((0, 3)))
+
+
+def _gmsh_bin_elements_v40(b: _Bytes):
+    # Block: tagEntity dimEntity typeEle (int) numElements (unsigned long); then per element
+    # tag (int) and its node tags (int).
+    n_blocks, n_elements = _gmsh_bin_header_v40(b, "Elements", "elements", 8, 20)
+    out = []
+    for _ in range(n_blocks):
+        at = b.pos
+        _, _, etype = (int(x) for x in b.take("<i4", 3, "an $Elements entity block header"))
+        count = int(b.take("<u8", 1, "an $Elements entity block header")[0])
+        if etype not in GMSH_TYPES:
+            raise b.error(f"unknown gmsh element type {etype}", at)
+        if count > n_elements - len(out):
+            raise b.error(f"an $Elements block of {count} elements after {len(out)} of {n_elements}", at)
+        nn = GMSH_TYPES[etype][1]
+        start = b.pos
+        rows = b.take("<i4", count * (1 + nn), f"{count} gmsh elements of type {etype}").reshape(count, 1 + nn)
+        for k, row in enumerate(rows.astype(np.int64).tolist()):
+            out.append((etype, row[0], row[1:], f"byte {start + k * 4 * (1 + nn)}"))
+    if len(out) != n_elements:
+        raise b.error(f"$Elements header announces {n_elements} elements, the blocks hold {len(out)}")
+    return out
+
+
 def _skip_section(f: _Lines, section: str) -> None:
     end = f"$End{section}"
     while True:
@@ -719,6 +953,64 @@ def _gmsh_elements_v4(f: _Lines):
         etype, count = bh[2], bh[3]
         if etype not in GMSH_TYPES:
             raise f.error(f"unknown gmsh element type {etype}")
+        for _ in range(count):
+            v = f.ints(f.next("$Elements"), "an element line")
+            out.append(_element(f, etype, v[1:], v[0]))
+    if len(out) != head[1]:
+        raise f.error(f"$Elements header announces {head[1]} elements, the blocks hold {len(out)}")
+    return out
+
+
+def _gmsh_nodes_v40(f: _Lines):
+    """MSH 4.0 $Nodes: ``numEntityBlocks numNodes``; per block ``tagEntity dimEntity parametric
+    numNodes``, then one line per node, ``tag x y z`` (and ``u [v [w]]``, dimEntity of them, if
+    parametric). 4.1 adds the min / max tags to the header, puts the entity's dimension first and
+    lists the block's tags before its coordinates."""
+    head = f.ints(f.next("$Nodes"), "the $Nodes header")
+    if len(head) != 2 or min(head) < 0:
+        hint = " (4 numbers are an MSH 4.1 header, but $MeshFormat says 4.0)" if len(head) == 4 else ""
+        raise f.error(f"expected 'numEntityBlocks numNodes' (MSH 4.0), got {len(head)} numbers{hint}")
+    n_blocks, n_nodes = head
+    tags, coords = [], []
+    for _ in range(n_blocks):
+        bh = f.ints(f.next("a $Nodes entity block header"), "a $Nodes entity block header")
+        if len(bh) != 4:
+            raise f.error("expected 'tagEntity dimEntity parametric numNodes' (MSH 4.0)")
+        dim, parametric, count = bh[1], bh[2], bh[3]
+        if count < 0 or count > n_nodes - len(tags):
+            raise f.error(f"a $Nodes block of {count} nodes after {len(tags)} of {n_nodes}")
+        extra = dim if parametric else 0
+        for k in range(count):
+            tok = f.next(f"$Nodes (node {len(tags) + 1} of {n_nodes})").split()
+            if len(tok) != 4 + extra:
+                layout = "tag x y z" + ("", " u", " u v", " u v w")[extra if 0 <= extra <= 3 else 0]
+                raise f.error(f"expected '{layout}' (MSH 4.0, entity dimension {dim}, parametric {parametric}), "
+                              f"got {' '.join(tok)[:60]!r}")
+            tags.append(f.ints(tok[0], "a node tag")[0])
+            coords.append(_coords(f, tok[1:4], tags[-1]))
+    if len(tags) != n_nodes:
+        raise f.error(f"$Nodes header announces {n_nodes} nodes, the blocks hold {len(tags)}")
+    return tags, coords
+
+
+def _gmsh_elements_v40(f: _Lines):
+    """MSH 4.0 $Elements: ``numEntityBlocks numElements``; per block ``tagEntity dimEntity
+    typeEle numElements``, then ``tag node-tags...`` per element (as 4.1, whose header adds the
+    min / max tags and whose blocks put the entity's dimension first)."""
+    head = f.ints(f.next("$Elements"), "the $Elements header")
+    if len(head) != 2 or min(head) < 0:
+        hint = " (4 numbers are an MSH 4.1 header, but $MeshFormat says 4.0)" if len(head) == 4 else ""
+        raise f.error(f"expected 'numEntityBlocks numElements' (MSH 4.0), got {len(head)} numbers{hint}")
+    out = []
+    for _ in range(head[0]):
+        bh = f.ints(f.next("an $Elements entity block header"), "an $Elements entity block header")
+        if len(bh) != 4:
+            raise f.error("expected 'tagEntity dimEntity typeEle numElements' (MSH 4.0)")
+        etype, count = bh[2], bh[3]
+        if etype not in GMSH_TYPES:
+            raise f.error(f"unknown gmsh element type {etype}")
+        if count < 0 or count > head[1] - len(out):
+            raise f.error(f"an $Elements block of {count} elements after {len(out)} of {head[1]}")
         for _ in range(count):
             v = f.ints(f.next("$Elements"), "an element line")
             out.append(_element(f, etype, v[1:], v[0]))

@@ -1,7 +1,8 @@
 """Mesh files in, VTU time series out.
 
-:func:`load_mesh` reads a tetrahedral mesh from gmsh ``.msh`` (MSH 2 and 4), VTK ``.vtk``/``.vtu``
-(through meshio), TetGen ``.node``/``.ele`` and ``.npz`` (arrays ``points`` and ``tets``), scales it
+:func:`load_mesh` reads a tetrahedral mesh from gmsh ``.msh`` (MSH 2.2, 4.0, 4.1), VTK ``.vtk``/``.vtu``,
+Medit ``.mesh``, Abaqus ``.inp`` (these four through meshio), TetGen ``.node``/``.ele`` and ``.npz``
+(arrays ``points`` and ``tets``), scales it
 to metres and validates it in the Rust core. Every defect is raised as :class:`palpate.MeshError`
 naming the file, the element (as palpate counts it, 0-based among the file's tetrahedra, and as the
 file names it) and the reason.
@@ -21,7 +22,7 @@ import numpy as np
 
 from . import _readers
 from ._indices import whole_indices
-from ._palpate import MeshError, ParameterError, TetMesh
+from ._palpate import MeshError, MeshWarning, ParameterError, TetMesh
 
 if TYPE_CHECKING:
     from ._palpate import Body, HybridModel, ParticleBody
@@ -57,31 +58,47 @@ def _read_meshio(path: str, fmt: str):
     if fmt == "gmsh" and _readers.gmsh_format(path)[1]:
         _readers.gmsh_binary_precheck(path)
     # The format's own reader, not meshio.read: that one prints and calls sys.exit(1) on a ReadError.
-    reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": meshio.gmsh.read,
+    reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": _meshio_gmsh,
               "medit": meshio.medit.read, "abaqus": meshio.abaqus.read}[fmt]
     m = _meshio_read(reader, path, name, fmt)
     return _meshio_arrays(m, name, fmt)
 
 
-#: meshio's VTK readers (VTU, legacy VTK 5.1) drop what they cannot read with a line on stderr
-#: (``meshio._common.warn``, not a Python warning) and go on: cells of a type they do not know, a
-#: corrupt point data array. Such a file loaded without those cells (issue 35 item 6). While
-#: palpate reads with them, each of these modules' ``warn`` raises a MeshError instead (a swap of
-#: module attributes for the read's duration: a meshio read in another thread at the same time
-#: would see it too, and fail rather than drop, which is the promise anyway).
-_MESHIO_WARNING_MODULES = ("meshio._vtk_common", "meshio.vtu._vtu", "meshio.vtk._vtk_51", "meshio.vtk._vtk_42")
+#: meshio's readers drop what they cannot read with a line on stderr (``meshio._common.warn``, not
+#: a Python warning) and go on: VTU and legacy VTK 5.1 cells of a type they do not know, a corrupt
+#: VTU point data array, Medit sections they do not know, a gmsh section without its end. Such a
+#: file loaded without those cells (issue 35 item 6). While palpate reads with them, each of these
+#: modules' ``warn`` raises a MeshError instead (a swap of module attributes for the read's
+#: duration: a meshio read in another thread at the same time would see it too, and fail rather
+#: than drop, which is the promise anyway), but for the messages of :data:`_MESHIO_NOTES` and the
+#: Medit sections the caller has named already (``expected``).
+_MESHIO_WARNING_MODULES = ("meshio._vtk_common", "meshio.vtu._vtu", "meshio.vtk._vtk_51", "meshio.vtk._vtk_42",
+                           "meshio.medit._medit", "meshio.abaqus._abaqus", "meshio.gmsh.common",
+                           "meshio.gmsh._gmsh22", "meshio.gmsh._gmsh40", "meshio.gmsh._gmsh41", "meshio._mesh")
+
+#: meshio warnings about data that neither the mesh nor its sets use: a MeshWarning naming the
+#: file, after the read. gmsh MSH 2.2 element tags after the physical and the geometrical one
+#: (mesh partitions), which meshio's reader drops (``read_mesh_sets`` of a partitioned file).
+_MESHIO_NOTES = ("tag data that couldn't be processed",)
 
 
 @contextlib.contextmanager
-def _meshio_warnings_refused(name: str, fmt: str):
+def _meshio_warnings_refused(name: str, fmt: str, expected: Sequence[str] = (), notes: Optional[List[str]] = None):
     import importlib
 
     def refuse(message, highlight=True):
-        m = re.search(r"cannot handle \(type (-?\d+)\)", str(message))
+        text = " ".join(str(message).split())
+        m = re.search(r"cannot handle \(type (-?\d+)\)", text)
         if m:
             raise MeshError(f"{name}: VTK cell type {m.group(1)} is not one meshio reads (cells of that type would be "
                             "dropped): palpate needs linear tetrahedra (VTK type 10)")
-        raise MeshError(f"{name}: cannot read as {fmt.upper()}: {' '.join(str(message).split())}")
+        k = re.search(r"doesn't know keyword (\w+)", text)
+        if k and k.group(1) in expected:
+            return   # a Medit section medit_precheck checked and the caller's MeshWarning names
+        if notes is not None and any(n in text for n in _MESHIO_NOTES):
+            notes.append(text)
+            return
+        raise MeshError(f"{name}: cannot read as {fmt.upper()}: {text} (meshio would have dropped it and gone on)")
 
     saved = []
     for mod_name in _MESHIO_WARNING_MODULES:
@@ -99,11 +116,17 @@ def _meshio_warnings_refused(name: str, fmt: str):
             mod.warn = warn
 
 
-def _meshio_read(reader, path: str, name: str, fmt: str):
+def _meshio_read(reader, path: str, name: str, fmt: str, warn_skipped: bool = True):
+    """``reader(path)`` with meshio's stderr warnings refused (:func:`_meshio_warnings_refused`)
+    and its exceptions as MeshErrors. A Medit file's sections are checked first
+    (:func:`_readers.medit_precheck`); those meshio reads past are named in one MeshWarning
+    (``warn_skipped``) after a successful read."""
+    skipped = _readers.medit_precheck(path) if fmt == "medit" else []
+    notes: List[str] = []
     try:
-        with warnings.catch_warnings(), _meshio_warnings_refused(name, fmt):
+        with warnings.catch_warnings(), _meshio_warnings_refused(name, fmt, [s.split()[0] for s in skipped], notes):
             warnings.simplefilter("ignore")
-            return reader(path)
+            mesh = reader(path)
     except MeshError:
         raise
     except MemoryError:
@@ -114,6 +137,28 @@ def _meshio_read(reader, path: str, name: str, fmt: str):
     except (Exception, SystemExit) as e:  # ReadError, but also ValueError, KeyError, XML errors ...
         reason = str(e).strip() or "malformed or truncated file"
         raise MeshError(f"{name}: cannot read as {fmt.upper()} ({type(e).__name__}: {reason})") from None
+    if skipped and warn_skipped:
+        warnings.warn(f"{name}: Medit sections read past, not kept: {', '.join(skipped)}; they hold no vertex, cell "
+                      "or reference (feature marks, normals, tangents, geometry links), so the mesh and its sets "
+                      "are read in full", MeshWarning, stacklevel=2)
+    for note in notes:
+        warnings.warn(f"{name}: meshio: {note}", MeshWarning, stacklevel=2)
+    return mesh
+
+
+def _meshio_gmsh(path: str):
+    """meshio's gmsh reader, with a ``4`` or ``4.0`` $MeshFormat read as MSH 4.0: gmsh 4.0 writes
+    ``4`` (and reads it as 4.0), where ``meshio.gmsh.read`` takes it for 4.1."""
+    import meshio
+    from meshio.gmsh import _gmsh40, main
+
+    version, _ = _readers.gmsh_format(path)
+    if _readers.gmsh_layout(os.path.basename(path), version) != "4.0":
+        return meshio.gmsh.read(path)
+    with open(path, "rb") as f:
+        f.readline()   # $MeshFormat, the first line (gmsh_format)
+        _, data_size, is_ascii = main._read_header(f)
+        return _gmsh40.read_buffer(f, is_ascii, data_size)
 
 
 def _meshio_arrays(m, name: str, fmt: str):
@@ -179,10 +224,10 @@ def read_mesh_arrays(path: PathLike, unit: str = "m") -> Tuple[np.ndarray, np.nd
     ext = os.path.splitext(path)[1].lower()
     if ext == ".msh":
         version, binary = _readers.gmsh_format(path)
-        if not (version.startswith("2") or version.startswith("4.1")):
-            points, blocks, node_labels = _read_meshio(path, "gmsh")   # MSH 4.0
-        elif binary:
-            _readers.gmsh_binary_precheck(path)
+        layout = _readers.gmsh_layout(name, version)   # MSH 2.2, 4.0 or 4.1, each read by palpate
+        if binary:
+            if layout != "4.0":   # the 4.0 reader checks its counts itself, with the 4-byte count hint
+                _readers.gmsh_binary_precheck(path)
             points, blocks, node_labels = _readers.read_gmsh_binary(path, version)
         else:
             points, blocks, node_labels = _readers.read_gmsh_ascii(path, version)
@@ -194,7 +239,7 @@ def read_mesh_arrays(path: PathLike, unit: str = "m") -> Tuple[np.ndarray, np.nd
         points, blocks, node_labels = _read_npz(path)
     else:
         raise MeshError(f"{name}: unsupported mesh format {ext or '(no extension)'!r}; "
-                        "palpate reads .msh (gmsh 2/4), .vtk, .vtu, .mesh (Medit), .inp (Abaqus), "
+                        "palpate reads .msh (gmsh 2.2, 4.0, 4.1), .vtk, .vtu, .mesh (Medit), .inp (Abaqus), "
                         ".node/.ele (TetGen) and .npz")
     if len(points) == 0:
         raise MeshError(f"{name}: no points (empty mesh)")
@@ -227,9 +272,12 @@ def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.
 
     gmsh (``.msh``): one set per physical group, named by ``$PhysicalNames`` (``"physical <tag>"``
     if unnamed): its tets, and the nodes of all its elements (e.g. a clamped face's triangles).
-    Medit (``.mesh``): one set per element reference, ``"ref <k>"``. Abaqus (``.inp``) and any
-    format meshio gives point / cell sets for: those, by name. Raises :class:`MeshError` for an
-    unreadable file or one whose tets meshio orders differently from palpate's reader.
+    Medit (``.mesh``): one set per element reference, ``"ref <k>"`` (vertex references make no
+    set). Abaqus (``.inp``) and any format meshio gives point / cell sets for: those, by name. The
+    file is read by :func:`read_mesh_arrays` first (its errors and warnings), then by meshio for
+    the sets. Raises :class:`MeshError` for an unreadable file, one that meshio would read with a
+    loss it reports only on stderr, or one whose tets meshio orders differently from palpate's
+    reader.
     """
     import meshio
 
@@ -241,10 +289,10 @@ def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.
         raise MeshError(f"{name}: named sets are read from .msh, .vtk, .vtu, .mesh and .inp files, not {ext!r}")
     if not os.path.exists(path):
         raise MeshError(f"{name}: no such file ({path})")
-    reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": meshio.gmsh.read,
+    _, tets, _, _ = read_mesh_arrays(path)   # palpate's reader first: its errors name the element
+    reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": _meshio_gmsh,
               "medit": meshio.medit.read, "abaqus": meshio.abaqus.read}[fmt]
-    m = _meshio_read(reader, path, name, fmt)
-    _, tets, _, _ = read_mesh_arrays(path)
+    m = _meshio_read(reader, path, name, fmt, warn_skipped=False)   # read_mesh_arrays warned
     tet_blocks = [k for k, cb in enumerate(m.cells) if cb.type == "tetra"]
     mesh_tets = np.concatenate([np.asarray(m.cells[k].data, dtype=np.int64) for k in tet_blocks]) if tet_blocks \
         else np.zeros((0, 4), dtype=np.int64)
@@ -298,9 +346,15 @@ def load_mesh(path: PathLike, unit: str = "m") -> TetMesh:
     Parameters
     ----------
     path:
-        ``.msh`` (gmsh MSH 2.2 / 4.1 ASCII read by palpate; binary and MSH 4.0 by meshio), ``.vtk``,
-        ``.vtu`` (meshio), ``.node`` or ``.ele`` (TetGen; the other file must sit beside it),
-        ``.npz`` (arrays ``points`` (n, 3) and ``tets`` (m, 4)).
+        ``.msh`` (gmsh MSH 2.2, 4.0 and 4.1, ASCII or binary, read by palpate; another version is a
+        MeshError saying how to convert it), ``.vtk``, ``.vtu``, ``.mesh`` (Medit), ``.inp``
+        (Abaqus) (these four by meshio; a loss meshio reports only on stderr is a MeshError),
+        ``.node`` or ``.ele`` (TetGen; the other file must sit beside it), ``.npz`` (arrays
+        ``points`` (n, 3) and ``tets`` (m, 4)). A Medit file's sections are checked before meshio
+        reads it: a section that holds no vertex, cell or reference (Corners, Ridges,
+        RequiredVertices, Normals, Tangents, ...) is read past with a :class:`palpate.MeshWarning`
+        naming it; a keyword meshio cannot read past, or a count that does not match its data, is a
+        MeshError naming the keyword and line.
     unit:
         Length unit of the file's coordinates: ``"m"``, ``"cm"`` or ``"mm"``. Points are scaled to
         metres.
@@ -309,6 +363,11 @@ def load_mesh(path: PathLike, unit: str = "m") -> TetMesh:
     -------
     TetMesh
         Validated mesh in metres. Inverted tets are reoriented with a :class:`palpate.MeshWarning`.
+
+    Warns
+    -----
+    MeshWarning
+        Inverted tets reoriented; Medit sections read past and not kept (named with their line).
 
     Raises
     ------

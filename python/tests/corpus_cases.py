@@ -708,6 +708,17 @@ def _gmsh41_binary(nodes, tets):
     return out
 
 
+def _gmsh40_binary(nodes, tets, ulong="Q"):
+    """A binary MSH 4.0 file as gmsh 4.0 writes it (version ``4``; tags int32, counts unsigned
+    long: ``ulong`` "Q", 8 bytes, on Linux and macOS, "I", 4 bytes, on Windows)."""
+    out = b"$MeshFormat\n4 1 8\n" + struct.pack("<i", 1) + b"\n$EndMeshFormat\n"
+    out += b"$Nodes\n" + struct.pack(f"<2{ulong}", 1, len(nodes)) + struct.pack(f"<3i{ulong}", 1, 3, 0, len(nodes))
+    out += b"".join(struct.pack("<i3d", *n) for n in nodes) + b"\n$EndNodes\n"
+    out += b"$Elements\n" + struct.pack(f"<2{ulong}", 1, len(tets)) + struct.pack(f"<3i{ulong}", 1, 3, 4, len(tets))
+    out += b"".join(struct.pack("<5i", k + 1, *t) for k, t in enumerate(tets)) + b"\n$EndElements\n"
+    return out
+
+
 #: Two tets sharing a face: nodes 1..5 (node 5 beyond the face 2-3-4 from node 1).
 _TWO_TETS = [(1, 0.0, 0.0, 0.0), (2, 1.0, 0.0, 0.0), (3, 0.0, 1.0, 0.0), (4, 0.0, 0.0, 1.0), (5, 1.0, 1.0, 1.0)]
 

@@ -66,6 +66,24 @@ $Elements
 1 1 2 3 4
 $EndElements
 """
+GMSH40 = """$MeshFormat
+4 0 8
+$EndMeshFormat
+$Nodes
+2 4
+1 0 0 1
+1 0 0 0
+1 3 0 3
+2 1 0 0
+3 0 1 0
+4 0 0 1
+$EndNodes
+$Elements
+1 1
+1 3 4 1
+1 1 2 3 4
+$EndElements
+"""
 NODE = "4 3 0 0\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n"
 ELE = "1 4 0\n1 1 2 3 4\n"
 OFF = "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n"
@@ -136,18 +154,19 @@ def folder(tmp_path_factory):
 
 
 def test_gmsh_reader(folder):
-    seeds = [GMSH2.encode(), GMSH4.encode()]
+    seeds = [GMSH2.encode(), GMSH4.encode(), GMSH40.encode()]
     path = str(folder / "f.msh")
     fuzz("gmsh", lambda rng: mutated(rng, rng.choice(seeds)),
          lambda d: (open(path, "wb").write(d), palpate.load_mesh(path)))
 
 
 def test_gmsh_binary_reader(folder):
-    """palpate's binary MSH 2.2 / 4.1 reader (issue 35 item 6: meshio's wrapped node tags)."""
+    """palpate's binary MSH 2.2 / 4.0 / 4.1 reader (issue 35 item 6: meshio's wrapped node tags)."""
     import corpus_cases
 
     tets = [(1, 2, 3, 4), (5, 2, 4, 3)]
-    seeds = [corpus_cases._gmsh22_binary(corpus_cases._TWO_TETS, tets), corpus_cases._gmsh41_binary(corpus_cases._TWO_TETS, tets)]
+    seeds = [corpus_cases._gmsh22_binary(corpus_cases._TWO_TETS, tets), corpus_cases._gmsh41_binary(corpus_cases._TWO_TETS, tets),
+             corpus_cases._gmsh40_binary(corpus_cases._TWO_TETS, tets)]
     path = str(folder / "b.msh")
     fuzz("gmsh_binary", lambda rng: mutated(rng, rng.choice(seeds)),
          lambda d: (open(path, "wb").write(d), palpate.load_mesh(path)))
