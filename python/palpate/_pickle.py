@@ -47,7 +47,17 @@ def _particle_body(args: Dict[str, Any], state: Dict[str, Any]) -> Any:
     return b
 
 
+# Options of pickles made before they were times in seconds (at the 1 ms tick they counted).
+_TICK_OPTIONS = {"linger_ticks": ("linger", 1e-3), "max_tool_step": ("max_tool_speed", 1e3)}
+
+
 def _hybrid_sim(model: Any, material: Any, options: Dict[str, Any], state: Dict[str, Any]) -> Any:
+    options = dict(options)
+    if "linger_ticks" in options and options.get("shell_pause") is not None:
+        options["shell_pause"] = options["shell_pause"] * 1e-3   # ticks, in those older pickles
+    for old, (new, scale) in _TICK_OPTIONS.items():
+        if old in options:
+            options[new] = options.pop(old) * scale
     s = _ext.HybridSim(model, material, **options)
     s.set_state(state)
     return s
@@ -56,7 +66,7 @@ def _hybrid_sim(model: Any, material: Any, options: Dict[str, Any], state: Dict[
 # The constructor's keywords; the other entries of HybridSim.options are resolved from these and
 # the model (coupling, confinement), so rebuilding from these remakes the same simulation.
 _HYBRID_SIM_OPTIONS = ("tool_radius", "tool_area_stiffness", "core_contact_stiffness", "hold", "activation_margin",
-                       "max_tool_step", "linger_ticks", "max_substeps", "mass_scaling", "shell_fallback", "shell_pause",
+                       "max_tool_speed", "linger", "max_substeps", "mass_scaling", "shell_fallback", "shell_pause",
                        "homogenise", "implicit_exchange", "strict_units")
 
 

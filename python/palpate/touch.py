@@ -57,9 +57,8 @@ the tool at the script's position for the end of the tick, and writes to ``out_d
   time step per frame, four parts (0 to 3), which ParaView opens as one multiblock series. A
   frame with no active particle has no ``active`` file (meshio cannot read a VTU without points).
 
-The simulated tool follows the commanded one by at most 0.5 mm a tick (the core's
-``SimOptions::max_tool_step``, not exposed to Python): faster scripts are logged as commanded and
-noted in the summary.
+The simulated tool follows the commanded one at most at 0.5 m/s (``HybridSim``'s
+``max_tool_speed``): faster scripts are logged as commanded and noted in the summary.
 """
 from __future__ import annotations
 

@@ -22,7 +22,7 @@ use crate::material::PyMaterial;
 /// not yet at its speed target (BENCHMARKS.md).
 ///
 /// ``HybridSim(model, material, *, tool_radius=0.005, tool_area_stiffness=None,
-/// core_contact_stiffness=None, hold=True, activation_margin=None, max_tool_step=None, linger_ticks=None, max_substeps=None,
+/// core_contact_stiffness=None, hold=True, activation_margin=None, max_tool_speed=None, linger=None, max_substeps=None,
 /// mass_scaling=None, shell_fallback=True, shell_pause=None, homogenise=True, implicit_exchange=True,
 /// strict_units=False)``
 ///
@@ -48,11 +48,12 @@ use crate::material::PyMaterial;
 ///     Hold the core at its base (or, for a closed wall, its lower 30%).
 /// activation_margin : float, optional
 ///     Regions within the tool's radius plus this [m] become active (default 1 mm).
-/// max_tool_step : float, optional
-///     The most the simulated tool moves in a tick [m] (default 0.5 mm): a device that jumps is
-///     followed over several ticks (``tool_position`` says where the simulated tool is).
-/// linger_ticks : int, optional
-///     Ticks a region stays active after its last contact (default 100).
+/// max_tool_speed : float, optional
+///     The simulated tool's top speed [m/s] (default 0.5): a device that jumps is followed over
+///     several ticks (``tool_position`` says where the simulated tool is), at most
+///     ``max_tool_speed * dt`` a tick whatever the tick's length.
+/// linger : float, optional
+///     How long a region stays active after its last contact [s] (default 0.1).
 /// max_substeps : int, optional
 ///     Cap of the particle sub-steps a tick takes (default 64).
 /// mass_scaling : float, optional
@@ -66,10 +67,10 @@ use crate::material::PyMaterial;
 ///     explicit sub-steps cannot follow, e.g. beside a held base, see ``last``). True (default):
 ///     the tick goes on without the shell (every particle back at its tie, the tool meeting the
 ///     skin and the core, so the hand still feels the organ) and the shell stays off for
-///     ``shell_pause`` ticks and until the tool lets go of the organ. False: ``step`` raises
+///     ``shell_pause`` seconds and until the tool lets go of the organ. False: ``step`` raises
 ///     ``StepError`` with the state as it was.
-/// shell_pause : int, optional
-///     Ticks the shell stays off at least after a failure (default 100: 0.1 s at 1 kHz).
+/// shell_pause : float, optional
+///     How long the shell stays off at least after a failure [s] (default 0.1).
 /// homogenise : bool, optional
 ///     Stiffen the core by the model's homogenisation factor at the material's Poisson's ratio
 ///     (default True; ``HybridModel.homogenisation``), so that where no particle is active the
@@ -106,7 +107,7 @@ pub struct PyHybridSim {
 #[pymethods]
 impl PyHybridSim {
     #[new]
-    #[pyo3(signature = (model, material, *, tool_radius = None, tool_area_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_step = None, linger_ticks = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None, homogenise = true, implicit_exchange = true, strict_units = false))]
+    #[pyo3(signature = (model, material, *, tool_radius = None, tool_area_stiffness = None, core_contact_stiffness = None, hold = true, activation_margin = None, max_tool_speed = None, linger = None, max_substeps = None, mass_scaling = None, shell_fallback = true, shell_pause = None, homogenise = true, implicit_exchange = true, strict_units = false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -117,70 +118,35 @@ impl PyHybridSim {
         #[pyo3(from_py_with = conv::arg)] core_contact_stiffness: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] hold: bool,
         #[pyo3(from_py_with = conv::arg)] activation_margin: Option<f64>,
-        #[pyo3(from_py_with = conv::arg)] max_tool_step: Option<f64>,
-        linger_ticks: Option<errors::Int>,
+        #[pyo3(from_py_with = conv::arg)] max_tool_speed: Option<f64>,
+        #[pyo3(from_py_with = conv::arg)] linger: Option<f64>,
         max_substeps: Option<errors::Int>,
         #[pyo3(from_py_with = conv::arg)] mass_scaling: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] shell_fallback: bool,
-        shell_pause: Option<errors::Int>,
+        #[pyo3(from_py_with = conv::arg)] shell_pause: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] homogenise: bool,
         #[pyo3(from_py_with = conv::arg)] implicit_exchange: bool,
         #[pyo3(from_py_with = conv::arg)] strict_units: bool,
     ) -> PyResult<Self> {
-        let (linger_ticks, max_substeps) = (errors::count_opt(linger_ticks, "linger_ticks")?, errors::count_opt(max_substeps, "max_substeps")?);
-        let shell_pause = errors::count_opt(shell_pause, "shell_pause")?;
-        let mut tool = ToolOptions::default();
-        if let Some(r) = tool_radius {
-            if !(r > 0.0 && r.is_finite()) {
-                return Err(crate::errors::param_error_from(format!("tool_radius = {r} m must be positive and finite")));
-            }
-            tool.radius = r;
-        }
-        if let Some(k) = tool_area_stiffness {
-            if !(k > 0.0 && k.is_finite()) {
-                return Err(crate::errors::param_error_from(format!("tool_area_stiffness = {k} N/m^3 must be positive and finite")));
-            }
-            tool.area_stiffness = Some(k);
-        }
-        let mut options = SimOptions { tool, hold, homogenise, implicit_exchange, ..Default::default() };
-        if let Some(k) = core_contact_stiffness {
-            if !(k > 0.0 && k.is_finite()) {
-                return Err(crate::errors::param_error_from(format!("core_contact_stiffness = {k} N/m must be positive and finite")));
-            }
-            options.core_contact_stiffness = k;
-        }
-        if let Some(m) = activation_margin {
-            if !(m >= 0.0 && m.is_finite()) {
-                return Err(crate::errors::param_error_from(format!("activation_margin = {m} m must be non-negative and finite")));
-            }
-            options.activation_margin = m;
-        }
-        if let Some(d) = max_tool_step {
-            if !(d > 0.0 && d.is_finite()) {
-                return Err(crate::errors::param_error_from(format!("max_tool_step = {d} m must be positive and finite")));
-            }
-            options.max_tool_step = d;
-        }
-        if let Some(l) = linger_ticks {
-            options.linger_ticks = l as u64;
-        }
-        if let Some(k) = max_substeps {
-            if k == 0 {
-                return Err(crate::errors::param_error_from("max_substeps must be at least 1"));
-            }
-            options.max_substeps = k;
-        }
-        if let Some(q) = mass_scaling {
-            if !(q > 0.0 && q <= 1.0) {
-                return Err(crate::errors::param_error_from(format!("mass_scaling = {q} must be a quantile in (0, 1]")));
-            }
-            options.mass_scaling = Some(q);
-        }
-        options.shell_fallback = match (shell_fallback, shell_pause) {
-            (false, _) => None,
-            (true, Some(n)) => Some(n as u64),
-            (true, None) => options.shell_fallback,
+        // Keywords into the core's options, which check themselves (SimOptions::check).
+        let max_substeps = errors::count_opt(max_substeps, "max_substeps")?;
+        let defaults = SimOptions::default();
+        let tool = ToolOptions { radius: tool_radius.unwrap_or(defaults.tool.radius), area_stiffness: tool_area_stiffness.or(defaults.tool.area_stiffness), ..defaults.tool };
+        let options = SimOptions {
+            tool,
+            hold,
+            homogenise,
+            implicit_exchange,
+            core_contact_stiffness: core_contact_stiffness.unwrap_or(defaults.core_contact_stiffness),
+            activation_margin: activation_margin.unwrap_or(defaults.activation_margin),
+            max_tool_speed: max_tool_speed.unwrap_or(defaults.max_tool_speed),
+            linger: linger.unwrap_or(defaults.linger),
+            max_substeps: max_substeps.unwrap_or(defaults.max_substeps),
+            mass_scaling: mass_scaling.or(defaults.mass_scaling),
+            shell_fallback: if shell_fallback { shell_pause.or(defaults.shell_fallback) } else { None },
+            ..defaults
         };
+        options.check().map_err(|e| errors::param_error_from(format!("HybridSim: {e}")))?;
         let (hm, mat) = (model.model.clone(), material.inner);
         for w in scale::parameter_warnings(&mat, options.tool.radius) {
             errors::unit_check(py, format!("HybridSim: {w}"), strict_units)?;
@@ -325,7 +291,7 @@ impl PyHybridSim {
     }
 
     /// Where the simulated tool's centre is [m] (3,), or ``None`` before the first tick: it
-    /// follows the device's ``tool_centre`` by at most ``max_tool_step`` a tick.
+    /// follows the device's ``tool_centre`` at most at ``max_tool_speed``.
     #[getter]
     fn tool_position<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray1<f64>>> {
         self.state.tool.map(|c| conv::vec3_to_py(py, c))
@@ -334,8 +300,8 @@ impl PyHybridSim {
     /// The options the simulation was made with: ``tool_radius`` [m], ``tool_area_stiffness``
     /// [N/m^3] and ``tool_area_damping`` [N s/m^3] (resolved: per unit of skin area),
     /// ``core_contact_stiffness`` [N/m] (the tool against the core's
-    /// surface), ``activation_margin`` [m], ``max_tool_step`` [m],
-    /// ``linger_ticks``, ``max_substeps``, ``hold``, ``implicit_exchange``, ``strict_units``, ``mass_scaling`` (the quantile), the resolved
+    /// surface), ``activation_margin`` [m], ``max_tool_speed`` [m/s],
+    /// ``linger`` [s], ``max_substeps``, ``hold``, ``implicit_exchange``, ``strict_units``, ``mass_scaling`` (the quantile), the resolved
     /// ``coupling_stiffness`` [N/m], ``coupling_damping`` [N s/m] and ``confinement_stiffness``
     /// [N/m], and what the mass scaling did: ``mass_scaling_applied``, ``added_mass_fraction``
     /// (of the shell's mass), ``scaled_particles``, ``omega_max`` [rad/s] of the shell at rest.
@@ -348,8 +314,8 @@ impl PyHybridSim {
         d.set_item("tool_area_damping", self.sim.tool.damping)?;
         d.set_item("core_contact_stiffness", o.core_contact_stiffness)?;
         d.set_item("activation_margin", o.activation_margin)?;
-        d.set_item("max_tool_step", o.max_tool_step)?;
-        d.set_item("linger_ticks", o.linger_ticks)?;
+        d.set_item("max_tool_speed", o.max_tool_speed)?;
+        d.set_item("linger", o.linger)?;
         d.set_item("max_substeps", o.max_substeps)?;
         d.set_item("hold", o.hold)?;
         d.set_item("strict_units", self.target_check.strict)?;
@@ -444,6 +410,7 @@ impl PyHybridSim {
         d.set_item("owed_skin", s.skin_owed)?;
         d.set_item("owed_core_dt", s.core_owed.as_ref().map(|(dt, _)| *dt))?;
         d.set_item("owed_core_forces", s.core_owed.as_ref().map(|(_, f)| conv::vec3s_to_py(py, f)))?;
+        d.set_item("dt", s.dt)?;
         Ok(d)
     }
 
@@ -526,6 +493,11 @@ impl PyHybridSim {
                     let forces = opt("owed_core_forces")?.ok_or_else(|| errors::param_error_from("owed_core_forces: None beside an owed_core_dt"))?;
                     Some((conv::arg(&dt)?, conv::vec3s(&forces, "owed_core_forces", n_core, true)?))
                 }
+            },
+            // The last tick's length (absent from older states: the 1 ms tick).
+            dt: match opt("dt")? {
+                None => palpate_core::runtime::sim::TICK,
+                Some(dt) => conv::arg(&dt)?,
             },
         };
         // The skin's lift after a shed shell (absent from older states: none).

@@ -482,7 +482,7 @@ def _body_cases(c: Corpus):
         ("tetmesh_index_huge", "panic", "p = np.zeros((4, 3)); palpate.TetMesh(p, [[0, 1, 2, 2**62]])", ["error"]),
         ("trisurface_index_negative", "panic", "p = np.eye(3); palpate.TriSurface(p, [[0, 1, -2]])", ["error"]),
         ("hybrid_sim_nan_tool", "silent",
-         "m = palpate.build_shape('ellipsoids', particles=400, field_voxels=20000); s = palpate.HybridSim(m, palpate.Material.myocardium()); s.step((float('nan'), 0, 0))", ["error"]),
+         "m = palpate.build_shape('ellipsoids', particles=400, field_voxels=20000, homogenise=False); s = palpate.HybridSim(m, palpate.Material.myocardium()); s.step((float('nan'), 0, 0))", ["error"]),
     ]
     for entry in cases:
         name, klass, code, expect = entry[:4]
@@ -512,7 +512,7 @@ def _body_cases(c: Corpus):
           "b.set_positions(p + np.random.default_rng(1).uniform(-1e-9, 1e-9, p.shape) * free[:, None])\n"
           "for k in range(300):\n" + diverging, ["error"], ["StepError"], contains="diverging")
     c.api("hybrid_sim_under_stepped_diverging", "silent",
-          "m = palpate.build_shape('ellipsoids', particles=400, field_voxels=20000)\n"
+          "m = palpate.build_shape('ellipsoids', particles=400, field_voxels=20000, homogenise=False)\n"
           "s = palpate.HybridSim(m, palpate.Material.myocardium(), max_substeps=1, shell_fallback=False)\n"
           "o = s.surface; p = o[np.argmax(o[:, 0])]; r = s.tool_radius\n"
           "for k in range(500):\n"
@@ -553,7 +553,7 @@ def _binding_cases(c: Corpus):
         ("neg_backward_euler_iterations", "palpate.BackwardEuler(max_iterations=-1)"),
         ("neg_backward_euler_history", "palpate.BackwardEuler(history=-1)"),
         ("neg_hybrid_sim_substeps", _MODEL + "palpate.HybridSim(m, palpate.Material.myocardium(), max_substeps=-1)"),
-        ("neg_hybrid_sim_linger", _MODEL + "palpate.HybridSim(m, palpate.Material.myocardium(), linger_ticks=-1)"),
+        ("neg_hybrid_sim_linger", _MODEL + "palpate.HybridSim(m, palpate.Material.myocardium(), linger=-1.0)"),
         ("neg_region_particles", _MODEL + "m.region_particles(-1)"),
         ("neg_region_field", _MODEL + "m.region_field(-2)"),
         ("neg_region_curve", _MODEL + "m.region_curve(-(2**62))"),

@@ -160,30 +160,35 @@ def test_core_contact_stiffness_and_the_shell_options_survive_a_pickle(ventricle
     back = pickle.loads(pickle.dumps(sim))
     for k in ("core_contact_stiffness", "shell_fallback", "shell_pause", "tool_area_stiffness"):
         assert back.options[k] == sim.options[k], k
-    paused = pickle.loads(pickle.dumps(palpate.HybridSim(ventricle, material, shell_pause=7)))
-    assert paused.options["shell_fallback"] is True and paused.options["shell_pause"] == 7
+    paused = pickle.loads(pickle.dumps(palpate.HybridSim(ventricle, material, shell_pause=0.007)))
+    assert paused.options["shell_fallback"] is True and paused.options["shell_pause"] == 0.007
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(palpate.ParameterError, match="core_contact_stiffness"):
             palpate.HybridSim(ventricle, material, core_contact_stiffness=bad)
 
 
 def test_options_tool_position_and_reset(ventricle, material):
-    sim = palpate.HybridSim(ventricle, material, tool_radius=0.004, activation_margin=5e-4, max_tool_step=2e-4,
-                            linger_ticks=10, max_substeps=40)
+    sim = palpate.HybridSim(ventricle, material, tool_radius=0.004, activation_margin=5e-4, max_tool_speed=0.2,
+                            linger=0.01, max_substeps=40)
     o = sim.options
-    assert (o["tool_radius"], o["activation_margin"], o["max_tool_step"], o["linger_ticks"], o["max_substeps"]) == \
-        (0.004, 5e-4, 2e-4, 10, 40)
+    assert (o["tool_radius"], o["activation_margin"], o["max_tool_speed"], o["linger"], o["max_substeps"]) == \
+        (0.004, 5e-4, 0.2, 0.01, 40)
     assert o["coupling_stiffness"] > 0 and o["confinement_stiffness"] > 0 and sim.tool_radius == 0.004
     assert sim.tool_position is None
     far = np.array([1.0, 1.0, 1.0])
     sim.step(far)
-    # The device jumps 10 mm: the simulated tool follows at most max_tool_step a tick.
+    # The device jumps 10 mm: the simulated tool follows at most at max_tool_speed, whatever the
+    # tick's length (0.2 mm in 1 ms, 0.8 mm more in 4 ms).
     sim.step(far + [0.01, 0.0, 0.0])
     assert np.linalg.norm(sim.tool_position - far) == pytest.approx(2e-4)
+    sim.step(far + [0.01, 0.0, 0.0], dt=4e-3)
+    assert np.linalg.norm(sim.tool_position - far) == pytest.approx(1e-3)
     sim.reset()
     assert sim.ticks == 0 and sim.time == 0.0 and sim.tool_position is None and len(sim.active) == 0
-    for bad in [dict(activation_margin=-1e-3), dict(max_tool_step=0.0), dict(max_substeps=0)]:
-        with pytest.raises(ValueError):
+    for bad in [dict(activation_margin=-1e-3), dict(max_tool_speed=0.0), dict(max_substeps=0), dict(linger=-0.1),
+                dict(linger=float("nan")), dict(shell_pause=-1.0)]:
+        key = next(iter(bad))
+        with pytest.raises(ValueError, match=key):
             palpate.HybridSim(ventricle, material, **bad)
 
 
@@ -303,7 +308,7 @@ def test_a_press_toward_5_n_on_rodero_meets_the_core_as_a_wall(lv_path, material
 def test_a_failed_shell_is_shed_and_the_press_goes_on(ventricle, material):
     """``shell_fallback`` (default True): a shell under-stepped by its cap (3 sub-steps a tick
     where it needs ~12) diverges under a 3 mm press; the tick goes on with the core and the skin
-    (``last["shell_failed"]``), the shell stays off ``shell_pause`` ticks (``shell_off``), the
+    (``last["shell_failed"]``), the shell stays off ``shell_pause`` seconds (``shell_off``), the
     force stays finite and pushes back. With ``shell_fallback=False`` the same press raises
     ``StepError`` with the core as it was. The contact is softer than the default (1e7 N/m^3,
     26 N/m on this skin's 2.6 mm^2 a vertex): with the default (8.6e7), or with 2.3e7, the
@@ -312,10 +317,10 @@ def test_a_failed_shell_is_shed_and_the_press_goes_on(ventricle, material):
     under the tool, so the tick right after a failure at a shallow press may touch nothing: the
     force never pulls, and pushes back whenever the skin is touched."""
     p, n = None, None
-    soft = dict(max_substeps=3, shell_pause=20, tool_area_stiffness=1e7)
+    soft = dict(max_substeps=3, shell_pause=0.02, tool_area_stiffness=1e7)
     for fallback in (True, False):
         sim = palpate.HybridSim(ventricle, material, shell_fallback=fallback, **soft)
-        assert sim.options["shell_fallback"] is fallback and sim.options["shell_pause"] == (20 if fallback else None)
+        assert sim.options["shell_fallback"] is fallback and sim.options["shell_pause"] == (0.02 if fallback else None)
         p, n = _press_point(sim)
         failed, off, raised, pushed = [], 0, False, 0
         copy, compared = None, False

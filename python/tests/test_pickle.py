@@ -92,13 +92,13 @@ def test_bodies_cross_processes():
 
 
 def test_hybrid_sim_pickles_and_ticks_on_bit_identically():
-    sim, path = ellipsoids_sim(tool_area_stiffness=1e8, max_tool_step=4e-4, mass_scaling=0.9)
+    sim, path = ellipsoids_sim(tool_area_stiffness=1e8, max_tool_speed=0.4, mass_scaling=0.9)
     for c in path[:56]:
         sim.step(c)
     back = pickle.loads(pickle.dumps(sim))
     # Rebuilt from its model, material and constructor options, then its state restored.
     assert back.model.to_bytes() == sim.model.to_bytes() and back.material == sim.material
-    assert back.options == sim.options and back.options["max_tool_step"] == 4e-4 and back.options["mass_scaling"] == 0.9
+    assert back.options == sim.options and back.options["max_tool_speed"] == 0.4 and back.options["mass_scaling"] == 0.9
     assert same_state(back.get_state(), sim.get_state())
     for c in path[56:]:
         assert np.array_equal(back.step(c), sim.step(c))

@@ -205,7 +205,7 @@ def test_hybrid_sim_copy_repeats_the_ticks():
 
 def ellipsoids_sim(**kw):
     """A HybridSim of the concentric ellipsoids (semi-axes 20/20/30 and 30/30/40 mm; coarse: it
-    builds in tens of ms), E = 10 kPa, tool radius 8 mm, regions lingering 5 ticks; and a path
+    builds in tens of ms), E = 10 kPa, tool radius 8 mm, regions lingering 5 ms (5 ticks); and a path
     of tool centres [m]: a press from 1 mm above the top to 12 mm deep (26 ticks; from the 10th
     the tool meets the core's surface, a stiff wall), then the device jumps 20 mm above the top and
     stays (40 ticks; the simulated tool follows at 0.5 mm a tick: contact ends at tick 35, and the
@@ -214,7 +214,7 @@ def ellipsoids_sim(**kw):
     inner, outer = (palpate.ellipsoid_surface(a, 2) for a in ((0.02, 0.02, 0.03), (0.03, 0.03, 0.04)))
     model = palpate.HybridModel.build_nested(inner, outer, particles=1000, field_voxels=3000)
     sim = palpate.HybridSim(model, palpate.Material(young=1e4, poisson=0.4, density=1060.0),
-                            **dict(dict(tool_radius=0.008, linger_ticks=5), **kw))
+                            **dict(dict(tool_radius=0.008, linger=0.005), **kw))
     top = outer.points[np.argmax(outer.points[:, 2])]
     path = [top + (0, 0, 0.001 - 0.0005 * k) for k in range(26)] + [top + (0, 0, 0.02)] * 40
     return sim, path

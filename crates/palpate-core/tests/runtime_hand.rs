@@ -342,13 +342,13 @@ fn an_under_stepped_shell_is_reported_diverging_when_it_starts() {
 /// The fallback (`SimOptions::shell_fallback`, default): the same under-stepped shell's failed
 /// step does not fail the tick. The tick sheds the shell (no particle active, every one at its
 /// tie), the tool meets the skin and the core (the hand still feels the press), the shell stays
-/// off for the pause (100 ticks) and, past it, while the tool still presses; once the tool is
+/// off for the pause (0.1 s, 100 ticks) and, past it, while the tool still presses; once the tool is
 /// lifted clear of the skin (within the activation margin) its regions enter again. Every value
 /// stays finite.
 #[test]
 fn a_failed_shell_step_is_shed_and_the_tick_goes_on_with_the_core() {
     let options = SimOptions { max_substeps: 9, ..SimOptions::default() };
-    let pause = options.shell_fallback.unwrap();
+    let pause = (options.shell_fallback.unwrap() / 1e-3).round() as u64;
     let sim = Sim::new(ventricle().clone(), tissue(), options).unwrap();
     let (p, n) = probe(&sim, 0.02);
     let r = sim.options.tool.radius;

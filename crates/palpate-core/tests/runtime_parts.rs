@@ -270,10 +270,10 @@ fn the_contact_is_per_unit_of_skin_area() {
     assert!((small.tool.stiffness * 1e-3 / (12.0 * e_star) - 1.0).abs() < 1e-12);
     assert_eq!(with(ToolOptions { area_stiffness: Some(1e7), ..ToolOptions::default() }).unwrap().tool.stiffness, 1e7);
     for (tool, name) in [
-        (ToolOptions { area_stiffness: Some(f64::NAN), ..ToolOptions::default() }, "tool area stiffness [N/m^3]"),
-        (ToolOptions { area_stiffness: Some(-1.0), ..ToolOptions::default() }, "tool area stiffness [N/m^3]"),
-        (ToolOptions { radius: 0.0, ..ToolOptions::default() }, "tool radius [m]"),
-        (ToolOptions { area_damping: f64::INFINITY, ..ToolOptions::default() }, "tool area damping [N s/m^3]"),
+        (ToolOptions { area_stiffness: Some(f64::NAN), ..ToolOptions::default() }, "tool_area_stiffness [N/m^3]"),
+        (ToolOptions { area_stiffness: Some(-1.0), ..ToolOptions::default() }, "tool_area_stiffness [N/m^3]"),
+        (ToolOptions { radius: 0.0, ..ToolOptions::default() }, "tool_radius [m]"),
+        (ToolOptions { area_damping: f64::INFINITY, ..ToolOptions::default() }, "tool_area_damping [N s/m^3]"),
     ] {
         assert!(matches!(with(tool), Err(ModelError::Parameter { name: n, .. }) if n == name), "{tool:?}");
     }

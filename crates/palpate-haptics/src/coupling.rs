@@ -23,8 +23,8 @@
 //! N/m) at the device's rate: a stiff contact is then active (Colgate: passive only if the
 //! device's own damping exceeds `K T / 2`), and the device buzzes. The coupling caps `K` at `k`.
 //!
-//! The proxy's speed is capped at the simulation's tool step per tick (the runtime's
-//! `max_tool_step`), so proxy and simulated tool are one point; a device faster than that feels
+//! The proxy's speed is capped at the simulated tool's top speed (the runtime's
+//! `max_tool_speed`), so proxy and simulated tool are one point; a device faster than that feels
 //! the coupling stretch (a drag) rather than the simulation jump.
 
 use palpate_core::{Mat3, Vec3};
@@ -106,9 +106,9 @@ impl VirtualCoupling {
 
     /// Advances the proxy by `dt` \[s\] under the tissue's force `tissue` \[N\] (on the proxy at its
     /// current position) and the coupling to the device at `device` \[m\]; the proxy's speed is
-    /// capped at `max_step / dt`. Returns the force to render.
-    pub fn step(&mut self, device: &Vec3, tissue: &Vec3, dt: f64, max_step: f64) -> CouplingOut {
-        self.advance(device, tissue, None, dt, max_step / dt)
+    /// capped at `max_speed` \[m/s\]. Returns the force to render.
+    pub fn step(&mut self, device: &Vec3, tissue: &Vec3, dt: f64, max_speed: f64) -> CouplingOut {
+        self.advance(device, tissue, None, dt, max_speed)
     }
 
     /// The proxy's implicit step (both loops): the tissue's force `tissue` at the proxy's
@@ -164,9 +164,9 @@ mod tests {
     fn static_contact_renders_the_tissue_force() {
         let mut c = VirtualCoupling::new(CouplingParams::default(), Vec3::zeros());
         let tissue = Vec3::new(0.0, 0.0, 1.5);
-        let mut out = c.step(&Vec3::zeros(), &tissue, 1e-3, 1.0);
+        let mut out = c.step(&Vec3::zeros(), &tissue, 1e-3, 1e3);
         for _ in 0..5000 {
-            out = c.step(&Vec3::zeros(), &tissue, 1e-3, 1.0);
+            out = c.step(&Vec3::zeros(), &tissue, 1e-3, 1e3);
         }
         assert!((out.force - tissue).norm() < 1e-9, "{:?}", out.force);
         assert!((c.proxy.z - 1.5 / 300.0).abs() < 1e-9);
@@ -178,7 +178,7 @@ mod tests {
         let mut c = VirtualCoupling::new(CouplingParams::default(), Vec3::zeros());
         let d = Vec3::new(0.01, 0.0, 0.0);
         for _ in 0..2000 {
-            c.step(&d, &Vec3::zeros(), 1e-3, 1.0);
+            c.step(&d, &Vec3::zeros(), 1e-3, 1e3);
         }
         assert!((c.proxy - d).norm() < 1e-9);
     }

@@ -322,7 +322,7 @@ impl PhysicsLoop {
     }
     /// The proxy's largest speed \[m/s\] that keeps it one point with the simulated tool.
     pub fn tool_speed(&self) -> f64 {
-        self.physics.max_tool_step() / self.dt
+        self.physics.max_tool_speed()
     }
 }
 

@@ -41,9 +41,9 @@ pub trait Physics: Send {
     }
     /// Where the simulated tool is \[m\] (`None` before the first tick).
     fn tool(&self) -> Option<Vec3>;
-    /// The most the simulated tool moves in a tick \[m\] (the coupling's proxy is held to it, so
-    /// proxy and simulated tool stay one point).
-    fn max_tool_step(&self) -> f64 {
+    /// The simulated tool's top speed \[m/s\] (the coupling's proxy is held to it, so proxy and
+    /// simulated tool stay one point, whatever the tick's length).
+    fn max_tool_speed(&self) -> f64 {
         f64::INFINITY
     }
     /// Keeps the current state as the last good one.
@@ -170,8 +170,8 @@ impl Physics for HybridPhysics {
     fn tool(&self) -> Option<Vec3> {
         self.state.tool
     }
-    fn max_tool_step(&self) -> f64 {
-        self.sim.options.max_tool_step
+    fn max_tool_speed(&self) -> f64 {
+        self.sim.options.max_tool_speed
     }
     fn checkpoint(&mut self) {
         self.good.clone_from(&self.state);
@@ -228,8 +228,8 @@ pub struct FemOptions {
     /// The most approach damping per unit area \[N s/m^3\] (infinite: ratio
     /// [`FEM_CONTACT_DAMPING_RATIO`] of critical at the stability bound, the default).
     pub area_damping: f64,
-    /// The most the simulated tool moves in a tick \[m\] (the hybrid runtime's default).
-    pub max_tool_step: f64,
+    /// The simulated tool's top speed \[m/s\] (the hybrid runtime's default).
+    pub max_tool_speed: f64,
 }
 
 impl Default for FemOptions {
@@ -238,7 +238,7 @@ impl Default for FemOptions {
             radius: palpate_core::runtime::tool::DEFAULT_RADIUS,
             area_stiffness: None,
             area_damping: f64::INFINITY,
-            max_tool_step: SimOptions::default().max_tool_step,
+            max_tool_speed: SimOptions::default().max_tool_speed,
         }
     }
 }
@@ -348,7 +348,7 @@ impl FemPhysics {
             ("tool radius", o.radius, o.radius > 0.0 && o.radius.is_finite(), "must be positive and finite [m]"),
             ("tool area stiffness", k, k > 0.0 && !k.is_nan(), "must be positive [N/m^3] (infinite: the stability bound)"),
             ("tool area damping", o.area_damping, o.area_damping >= 0.0, "must be >= 0 [N s/m^3] (infinite: the stability bound's)"),
-            ("max tool step", o.max_tool_step, o.max_tool_step > 0.0, "must be positive [m]"),
+            ("max tool speed", o.max_tool_speed, o.max_tool_speed > 0.0, "must be positive [m/s]"),
         ] {
             if !ok {
                 return Err(ModelError::Parameter { name, value, reason });
@@ -457,8 +457,8 @@ impl Physics for FemPhysics {
             return Err(StepError::NonFiniteTool);
         }
         let prev = self.tool.unwrap_or(*tool);
-        // The simulated tool follows the device at most `max_tool_step` a tick (as the hybrid's).
-        let at = prev + (tool - prev).cap_magnitude(self.options.max_tool_step);
+        // The simulated tool follows the device at most at `max_tool_speed` (as the hybrid's).
+        let at = prev + (tool - prev).cap_magnitude(self.options.max_tool_speed * dt);
         let tool_v = (at - prev) / dt;
         self.forces.iter_mut().for_each(|f| *f = Vec3::zeros());
         let contact = self.tick_contact(&at, dt);
@@ -478,8 +478,8 @@ impl Physics for FemPhysics {
     fn tool(&self) -> Option<Vec3> {
         self.tool
     }
-    fn max_tool_step(&self) -> f64 {
-        self.options.max_tool_step
+    fn max_tool_speed(&self) -> f64 {
+        self.options.max_tool_speed
     }
     fn checkpoint(&mut self) {
         self.good.clone_from(&self.state);
@@ -526,15 +526,15 @@ pub struct Wall {
     pub normal: Vec3,
     pub stiffness: f64,
     pub damping: f64,
-    /// The most the tool moves in a tick \[m\] (as the runtime's `max_tool_step`).
-    pub max_step: f64,
+    /// The tool's top speed \[m/s\] (as the runtime's `max_tool_speed`).
+    pub max_speed: f64,
     tool: Option<Vec3>,
     good: Option<Vec3>,
 }
 
 impl Wall {
     pub fn new(point: Vec3, normal: Vec3, stiffness: f64, damping: f64) -> Wall {
-        Wall { point, normal: normal.normalize(), stiffness, damping, max_step: SimOptions::default().max_tool_step, tool: None, good: None }
+        Wall { point, normal: normal.normalize(), stiffness, damping, max_speed: SimOptions::default().max_tool_speed, tool: None, good: None }
     }
 }
 
@@ -547,7 +547,7 @@ impl Physics for Wall {
             return Err(StepError::NonFiniteTool);
         }
         let prev = self.tool.unwrap_or(*tool);
-        let x = prev + (tool - prev).cap_magnitude(self.max_step);
+        let x = prev + (tool - prev).cap_magnitude(self.max_speed * dt);
         let depth = -(x - self.point).dot(&self.normal);
         let approach = -(x - prev).dot(&self.normal) / dt;
         self.tool = Some(x);
@@ -556,8 +556,8 @@ impl Physics for Wall {
     fn tool(&self) -> Option<Vec3> {
         self.tool
     }
-    fn max_tool_step(&self) -> f64 {
-        self.max_step
+    fn max_tool_speed(&self) -> f64 {
+        self.max_speed
     }
     fn checkpoint(&mut self) {
         self.good = self.tool;
@@ -569,7 +569,7 @@ impl Physics for Wall {
         self.tool.is_none_or(|t| t.iter().all(|c| c.is_finite()))
     }
     fn identity(&self) -> Identity {
-        let d = format!("wall {:?} {:?} k {} c {} step {}", self.point, self.normal, self.stiffness, self.damping, self.max_step);
+        let d = format!("wall {:?} {:?} k {} c {} speed {}", self.point, self.normal, self.stiffness, self.damping, self.max_speed);
         Identity { digest: file::checksum(d.as_bytes()), description: d }
     }
 }

@@ -346,7 +346,7 @@ impl HapticCore {
             Ok(f) if !f.iter().all(|c| c.is_finite()) => Some(Fault::NonFinite),
             Ok(f) => {
                 self.tissue = f;
-                let c = self.coupling.step(&input.position, &f, self.dt, self.physics.max_tool_step());
+                let c = self.coupling.step(&input.position, &f, self.dt, self.physics.max_tool_speed());
                 if c.force.iter().all(|x| x.is_finite()) && self.coupling.proxy.iter().all(|x| x.is_finite()) {
                     out.raw_force = c.force;
                     let w = self.silence_weight();

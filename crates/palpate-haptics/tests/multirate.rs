@@ -410,10 +410,11 @@ fn a_hard_press_and_a_fast_slide_through_the_multirate_loop() {
         if pr >= 1000.0 {
             assert!((slide - slide0).abs() < 0.1 * slide0, "through the slide {slide} N against the single-rate loop's {slide0} N");
         } else {
-            // The simulated tool follows at most `max_tool_step` (0.5 mm) a physics tick: at
-            // 250 Hz, 0.125 m/s, under the slide's 0.2 m/s peak, and the coupling drags the hand
-            // (a limit of the hybrid's per-tick step, not of the servo): more force, never less.
-            assert!(slide > slide0, "through the slide {slide} N against the single-rate loop's {slide0} N");
+            // The simulated tool's top speed is a speed (SimOptions::max_tool_speed, 0.5 m/s), so
+            // a 250 Hz physics follows the slide's 0.2 m/s peak too: measured 0.52 N against
+            // 0.44 (+18%, the 4 ms tick's lag behind the proxy). When it was a step of 0.5 mm a
+            // tick (0.125 m/s at 250 Hz) the coupling dragged the hand: 1.10 N, 2.03 N at most.
+            assert!((slide - slide0).abs() < 0.25 * slide0, "through the slide {slide} N against the single-rate loop's {slide0} N");
         }
         assert!(e <= 0.0, "the device put {e} J into the user");
     }

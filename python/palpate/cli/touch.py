@@ -117,16 +117,16 @@ def cmd_touch(a) -> int:
         with _progress.task(f"palpate touch: {what}"):
             s = run_touch(sim, traj, a.out, dt=a.dt, every=a.every, title=f"palpate touch: {what}, {a.script}")
     except TouchFailed as e:
-        _report(e.summary, sim.options["max_tool_step"])
+        _report(e.summary, sim.options["max_tool_speed"] * a.dt)
         raise Fail(f"{a.script}: simulation failed at tick {e.tick} (t = {e.summary['t_failed_s']:.4f} s): "
                    f"{e.reason}; wrote the {e.summary['ticks']} ticks before it", cause=e) from None
     except OSError as e:
         raise RunFailed(f"palpate touch: cannot write the output: {e}") from None
-    _report(s, sim.options["max_tool_step"])
+    _report(s, sim.options["max_tool_speed"] * a.dt)
     return 0
 
 
-def _report(s, max_tool_step: float) -> None:
+def _report(s, max_step: float) -> None:
     if s["ticks"]:
         print(f"  {s['ticks']} ticks in {s['wall_s']:.3f} s of stepping: {s['ticks_per_s']:.1f} ticks/s; tick median "
               f"{s['tick_ms_median']:.3f} ms, p99 {s['tick_ms_p99']:.3f} ms, max {s['tick_ms_max']:.3f} ms")
@@ -135,7 +135,8 @@ def _report(s, max_tool_step: float) -> None:
     if s.get("shell_shed"):
         print(f"  note: the shell's step failed {s['shell_shed']} time(s) and was shed (the core and the skin answered "
               f"for {s['shell_off_ticks']} ticks while it was off): a press the particles could not follow")
-    if s["max_step_m"] > max_tool_step * (1 + 1e-9):
+    if s["max_step_m"] > max_step * (1 + 1e-9):
         print(f"  note: the script moves the tool up to {fmt_mm(s['max_step_m'])} mm a tick; the simulated tool follows "
-              f"at most {fmt_mm(max_tool_step)} mm a tick (force.csv logs the commanded position)")
+              f"at most {fmt_mm(max_step)} mm a tick (its top speed, max_tool_speed; force.csv logs the commanded "
+              f"position)")
     print(f"  wrote {s['csv']}" + (f", {s['png']}" if s["png"] else "") + f", {s['frames']} frames: {s['pvd']}")

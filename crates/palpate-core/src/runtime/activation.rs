@@ -221,6 +221,10 @@ impl Activation {
     /// Ticks a region stays active after its last contact.
     pub fn linger(&self) -> u64 { self.linger }
 
+    /// Regions now linger `ticks` ticks after their last contact (the runtime sets it each tick
+    /// from [`crate::runtime::SimOptions::linger`] and the tick's length).
+    pub fn set_linger(&mut self, ticks: u64) { self.linger = ticks; }
+
     /// Mean edge length of the outer surface \[m\]: a margin for [`Activation::touch_sphere`] that
     /// catches the vertices of the triangles a sphere presses between vertices.
     pub fn mean_edge(&self) -> f64 { self.mean_edge }

@@ -68,7 +68,7 @@ pub use coupling::Coupling;
 pub use embed::Embedding;
 pub use sim::{Sim, SimOptions};
 pub use stability::Shell;
-pub use skin::SHED_FADE_TICKS;
+pub use skin::SHED_FADE;
 pub use state::{SimSnapshot, SimState, SimWorkspace, SkinSweep};
 pub use tick::{finish_tick, tick, tick_force_with, tick_with, Finished, TickReport};
 pub use tool::{AreaTool, ContactSum, PointContact, Tool, ToolOptions};

@@ -21,6 +21,12 @@ use crate::Integrator;
 /// false).
 pub const TICK: f64 = 1e-3;
 
+/// A duration \[s\] in ticks of `dt` \[s\], rounded (the caller checked both: finite, `dt`
+/// positive, `seconds` non-negative).
+pub(crate) fn ticks_in(seconds: f64, dt: f64) -> u64 {
+    (seconds / dt).round() as u64
+}
+
 /// Options of [`Sim::new`]. Lengths in metres; `Default` gives the values documented per field.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimOptions {
@@ -34,9 +40,9 @@ pub struct SimOptions {
     /// The tool (default: a 5 mm sphere, its penalty per unit of skin area `12 E* / min(R, 4 h)`, see
     /// [`super::tool`]).
     pub tool: ToolOptions,
-    /// Ticks a region stays active after its last contact (default 100: 0.1 s at 1 kHz, so a
-    /// slide does not toggle particles every tick).
-    pub linger_ticks: u64,
+    /// How long a region stays active after its last contact \[s\] (default 0.1 s, so a slide
+    /// does not toggle particles every tick): `linger / dt` ticks, rounded, at a tick of `dt`.
+    pub linger: f64,
     /// Regions within the tool's radius plus this \[m\] become active (default 1 mm: a region
     /// enters before the tool reaches it for slides up to 1 m/s at 1 kHz, above a hand's usual
     /// 0.5 m/s; a wider margin activates more particles: 5 mm doubled them on the ventricle).
@@ -48,11 +54,14 @@ pub struct SimOptions {
     /// neighbours, `E * spacing` (a wall as soft as the coupling springs, whose stiffness the
     /// core's node masses cap, let particles drift a voxel out of their regions under a press).
     pub confinement_stiffness: Option<f64>,
-    /// The most the simulated tool moves in one tick \[m\] (default 0.5 mm: 0.5 m/s at 1 kHz). A
+    /// The simulated tool's top speed \[m/s\] (default 0.5 m/s, above a hand's usual palpation):
+    /// in a tick of `dt` it moves at most `max_tool_speed * dt` toward the device's position. A
     /// device that jumps (a dropped packet, a stall and a resume, a jab) is followed over several
     /// ticks by the simulated tool, whose force the device renders: the shell's explicit
-    /// sub-steps cannot take a sphere appearing millimetres deep in one tick.
-    pub max_tool_step: f64,
+    /// sub-steps cannot take a sphere appearing millimetres deep in one tick. A speed, not a
+    /// step a tick, so that a physics ticking at 250 Hz follows the same hand as one at 1 kHz
+    /// (a step of 0.5 mm a tick dragged a hand sliding faster than 0.125 m/s there).
+    pub max_tool_speed: f64,
     /// The most particle sub-steps a tick takes (default 64; [`super::stability`] sets the count
     /// from the shell's stretch and springs, ~12 at rest on the ventricle: a tick that needs more
     /// runs late rather than diverge).
@@ -68,15 +77,15 @@ pub struct SimOptions {
     /// core carries the shell's physical mass.
     pub mass_scaling: Option<f64>,
     /// What a failed shell step does (diverging past the speed bound of [`crate::divergence`],
-    /// or non-finite). `Some(n)` (default `Some(100)`: 0.1 s at 1 kHz): the tick goes on without
+    /// or non-finite). `Some(pause)` \[s\] (default `Some(0.1)`): the tick goes on without
     /// the shell (every particle back at its tie, the tool meeting the skin and the core) and the
-    /// shell stays off for `n` ticks and until the tool has let go of the organ (no contact)
+    /// shell stays off for `pause` (rounded to ticks) and until the tool has let go of the organ (no contact)
     /// before regions may enter again ([`super::TickReport`]'s `shell_failed`, `shell_off`); the
     /// hand keeps feeling the organ: the skin the particles carried fades back to its ties over
-    /// [`super::skin::SHED_FADE_TICKS`] (or the pause, if shorter), and the tool meets the core
+    /// [`super::skin::SHED_FADE`] (or the pause, if shorter), and the tool meets the core
     /// inside its implicit step ([`super::core_contact`]). `None`: the tick fails
     /// with the error, the state as it was (studies of the shell's own stability).
-    pub shell_fallback: Option<u64>,
+    pub shell_fallback: Option<f64>,
     /// The tool's penalty stiffness against the core's surface \[N/m\] (default
     /// [`super::core_contact::CORE_CONTACT_STIFFNESS`], 2000 N/m): taken inside the core's implicit
     /// step, at the surface's point nearest the tool's centre, so that a hard press cannot pass
@@ -102,6 +111,48 @@ pub struct SimOptions {
     pub implicit_exchange: bool,
 }
 
+impl SimOptions {
+    /// Every option in its range, or [`ModelError::Parameter`] naming the first that is not (with
+    /// its unit and the range): what [`Sim::new`] checks before it builds anything, and what a
+    /// binding or a loop description calls to refuse a bad option early. The tick then assumes
+    /// them valid.
+    pub fn check(&self) -> Result<(), ModelError> {
+        let bad = |name, value, reason| Err(ModelError::Parameter { name, value, reason });
+        let positive = |name, value: f64| if value > 0.0 && value.is_finite() { Ok(()) } else { bad(name, value, "must be positive and finite") };
+        let non_negative = |name, value: f64| if value >= 0.0 && value.is_finite() { Ok(()) } else { bad(name, value, "must be non-negative and finite") };
+        positive("support_spacings [lattice spacings]", self.support_spacings)?;
+        non_negative("coupling_depth_spacings [lattice spacings]", self.coupling_depth_spacings)?;
+        positive("tool_radius [m]", self.tool.radius)?;
+        if let Some(k) = self.tool.area_stiffness {
+            positive("tool_area_stiffness [N/m^3]", k)?;
+        }
+        non_negative("tool_area_damping [N s/m^3]", self.tool.area_damping)?;
+        non_negative("linger [s]", self.linger)?;
+        non_negative("activation_margin [m]", self.activation_margin)?;
+        if let Some(c) = self.coupling {
+            non_negative("coupling stiffness [N/m]", c.stiffness)?;
+            non_negative("coupling damping [N s/m]", c.damping)?;
+        }
+        if let Some(k) = self.confinement_stiffness {
+            non_negative("confinement_stiffness [N/m]", k)?;
+        }
+        positive("max_tool_speed [m/s]", self.max_tool_speed)?;
+        if self.max_substeps == 0 {
+            return bad("max_substeps", 0.0, "must be at least 1");
+        }
+        if let Some(q) = self.mass_scaling {
+            if !(q > 0.0 && q <= 1.0) {
+                return bad("mass_scaling quantile", q, "must be in (0, 1]");
+            }
+        }
+        if let Some(pause) = self.shell_fallback {
+            non_negative("shell_pause (shell_fallback) [s]", pause)?;
+        }
+        positive("core_contact_stiffness [N/m]", self.core_contact_stiffness)?;
+        Ok(())
+    }
+}
+
 impl Default for SimOptions {
     fn default() -> Self {
         SimOptions {
@@ -109,14 +160,14 @@ impl Default for SimOptions {
             coupling_depth_spacings: 1.5,
             integrator: Integrator::quasi_newton(),
             tool: ToolOptions::default(),
-            linger_ticks: 100,
+            linger: 0.1,
             activation_margin: 1e-3,
             coupling: None,
             confinement_stiffness: None,
-            max_tool_step: 5e-4,
+            max_tool_speed: 0.5,
             max_substeps: 64,
             mass_scaling: Some(0.95),
-            shell_fallback: Some(100),
+            shell_fallback: Some(0.1),
             core_contact_stiffness: super::core_contact::CORE_CONTACT_STIFFNESS,
             hold: true,
             homogenise: true,
@@ -256,12 +307,11 @@ impl Sim {
     /// within 30% of the core's height from its lowest point, so that a press cannot push the
     /// organ away.
     pub fn new(hybrid: HybridModel, material: Material, options: SimOptions) -> Result<Sim, ModelError> {
+        options.check()?;
         let tool = options.tool.resolve(&material, hybrid.spacing);
-        let positive = |name, value: f64| if value > 0.0 && value.is_finite() { Ok(()) } else { Err(ModelError::Parameter { name, value, reason: "must be positive and finite" }) };
-        positive("tool radius [m]", tool.radius)?;
-        positive("tool area stiffness [N/m^3]", tool.stiffness)?;
-        if !(tool.damping >= 0.0 && tool.damping.is_finite()) {
-            return Err(ModelError::Parameter { name: "tool area damping [N s/m^3]", value: tool.damping, reason: "must be non-negative and finite" });
+        if !(tool.stiffness > 0.0 && tool.stiffness.is_finite()) {
+            // The default of a material with a nonsense modulus (the material's own check refuses it).
+            return Err(ModelError::Parameter { name: "tool area stiffness [N/m^3]", value: tool.stiffness, reason: "must be positive and finite" });
         }
         let skin_area = skin_areas(&hybrid.outer_points, &hybrid.outer_tris, SKIN_AREA_CAP_SPACINGS2 * hybrid.spacing * hybrid.spacing);
         let pts: Vec<[f64; 3]> = hybrid.core_points.iter().map(|p| [p.x, p.y, p.z]).collect();

@@ -18,7 +18,7 @@ use crate::meshfree;
 /// skin vertices the particles carried sit off their ties by `offset` (the press the particles
 /// took), and put back at once the tool's force jumped (measured 0.09-1.4 N in one tick on the
 /// synthetic ventricle, `examples/press_sweep.rs`). Instead each stays lifted off its tie by
-/// `offset` scaled down linearly from 1 at the shed tick to 0 [`SHED_FADE_TICKS`] later (or at the
+/// `offset` scaled down linearly from 1 at the shed tick to 0 [`SHED_FADE`] later (or at the
 /// end of a shorter pause), in the contact and in the drawn skin. The offsets are constant: the
 /// contact's forces stay the gradient of its energy.
 #[derive(Debug, Clone)]
@@ -33,8 +33,8 @@ pub(crate) struct SkinLift {
 }
 
 /// Ticks over which a shed shell's skin returns to its ties (`SkinLift` in this module): 50 ms, so that the
-/// largest step measured (1.4 N) reaches the hand as ~0.03 N a tick.
-pub const SHED_FADE_TICKS: u64 = 50;
+/// largest step measured (1.4 N) reaches the hand as ~0.03 N a millisecond.
+pub const SHED_FADE: f64 = 0.05;
 
 impl SkinLift {
     pub(crate) fn new(n_skin: usize) -> SkinLift {
@@ -56,10 +56,10 @@ impl SkinLift {
     }
 }
 
-/// The ticks a shed shell's skin takes back to its ties: [`SHED_FADE_TICKS`], or the shell's
-/// pause if shorter.
-pub(crate) fn shed_fade_ticks(o: &super::SimOptions) -> u64 {
-    SHED_FADE_TICKS.min(o.shell_fallback.unwrap_or(SHED_FADE_TICKS)).max(1)
+/// The ticks of `dt` \[s\] a shed shell's skin takes back to its ties: [`SHED_FADE`], or the
+/// shell's pause if shorter; at least one.
+pub(crate) fn shed_fade_ticks(o: &super::SimOptions, dt: f64) -> u64 {
+    super::sim::ticks_in(SHED_FADE.min(o.shell_fallback.unwrap_or(SHED_FADE)), dt).max(1)
 }
 
 /// The skin vertices a tick may need to look at (contact, activation, the skin's update near the
@@ -354,14 +354,14 @@ pub const SKIN_SWEEP_TICKS: usize = 16;
 /// The radius \[m\] within which the skin is updated every tick: the tool's reach, two of its
 /// steps (it moves before the next tick's contact) and [`SKIN_LIVE_MARGIN`] (a stale vertex is
 /// no farther than that from its place).
-pub(super) fn live_radius(o: &super::SimOptions) -> f64 {
-    o.tool.radius + o.activation_margin + 2.0 * o.max_tool_step + SKIN_LIVE_MARGIN
+pub(super) fn live_radius(o: &super::SimOptions, dt: f64) -> f64 {
+    o.tool.radius + o.activation_margin + 2.0 * o.max_tool_speed * dt + SKIN_LIVE_MARGIN
 }
 
 /// The radius \[m\] of the list of skin vertices a tick looks at (see `LiveSkin`): the live
 /// radius, a margin (the list is rebuilt once the tool has travelled that far) and a tool's step.
-pub(super) fn list_radius(o: &super::SimOptions) -> f64 {
-    live_radius(o) + SKIN_LIVE_MARGIN + o.max_tool_step
+pub(super) fn list_radius(o: &super::SimOptions, dt: f64) -> f64 {
+    live_radius(o, dt) + SKIN_LIVE_MARGIN + o.max_tool_speed * dt
 }
 
 /// How far \[m\] the skin's ties may have moved since the core was at `ref_x` with face frames
@@ -393,7 +393,7 @@ fn skin_travel(sim: &Sim, core_x: &[Vec3], frames: &[Option<Mat3>], ref_x: &[Vec
 /// the whole skin's update a third of its tick); the list is rebuilt when the tool has moved
 /// [`SKIN_LIVE_MARGIN`] since it last was. Every vertex moved here joins `live`.
 #[allow(clippy::too_many_arguments)]
-fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, tool: Vec3, live: &mut LiveSkin, skin: &mut [Vec3]) -> usize {
+fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, tool: Vec3, dt: f64, live: &mut LiveSkin, skin: &mut [Vec3]) -> usize {
     embed::face_frames(core_x, &sim.hybrid.core_faces, frames);
     let frames = &*frames;
     let place = |v: usize, over: bool| {
@@ -411,8 +411,8 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
         }
     }
     live.sort();
-    let r_live = live_radius(&sim.options);
-    let r_list = list_radius(&sim.options);
+    let r_live = live_radius(&sim.options, dt);
+    let r_list = list_radius(&sim.options, dt);
     live.travel = skin_travel(sim, core_x, frames, &live.ref_x, &live.ref_frames);
     // A sweep's vertices were placed from the core at or after its start: within its reference's
     // travel plus what the skin travelled from it while the sweep went on.
@@ -488,14 +488,14 @@ fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::Particl
 /// lifted off its ties. Returns the vertices refreshed away from the tool (0 when nothing was
 /// owed).
 pub(super) fn update(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace) -> usize {
-    let SimState { core, particles, skin, tool, activation, ticks, live, lift, skin_owed, .. } = state;
+    let SimState { core, particles, skin, tool, activation, ticks, live, lift, skin_owed, dt, .. } = state;
     let Some(tool) = *tool else { return 0 };
     if !std::mem::replace(skin_owed, false) {
         return 0;
     }
     // Marks of this update (the workspace's count, as the tick's own).
     ws.epoch += 1;
-    let refreshed = update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, ws.epoch, tool, live, skin);
+    let refreshed = update_skin(sim, activation, particles, &core.x, &mut ws.frames, &mut ws.over, ws.epoch, tool, *dt, live, skin);
     // A shed shell's skin, lifted off its ties as the next tick's contact will see it (the tick
     // is already counted: its successor's scale).
     if !lift.list.is_empty() {

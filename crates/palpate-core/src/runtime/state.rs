@@ -3,7 +3,7 @@
 //! [`crate::Workspace`] for the FEM body).
 
 use super::activation::Activation;
-use super::sim::Sim;
+use super::sim::{ticks_in, Sim, TICK};
 use super::skin::{shed_fade_ticks, LiveSkin, SkinLift};
 use crate::error::StepError;
 use crate::fem::{State, StepMemory, Workspace};
@@ -28,7 +28,7 @@ pub struct SimState {
     /// gives the whole skin fresh.
     pub skin: Vec<Vec3>,
     /// The simulated tool's centre after the last tick \[m\] (`None` before the first): the
-    /// device's position, followed at a bounded speed ([`super::SimOptions::max_tool_step`]).
+    /// device's position, followed at a bounded speed ([`super::SimOptions::max_tool_speed`]).
     pub tool: Option<Vec3>,
     /// The active regions, with their hysteresis.
     pub activation: Activation,
@@ -50,6 +50,9 @@ pub struct SimState {
     /// in `core.f_ext` (owed when the tool had no contact with the core or its skin: the force
     /// did not depend on the step).
     pub(crate) core_owed: Option<f64>,
+    /// The last tick's length \[s\] ([`super::sim::TICK`] before the first): the tool's step bound
+    /// for the skin's lists, and the ticks of a shed shell's fade.
+    pub(crate) dt: f64,
 }
 
 impl Clone for SimState {
@@ -67,11 +70,12 @@ impl Clone for SimState {
             lift: self.lift.clone(),
             skin_owed: self.skin_owed,
             core_owed: self.core_owed,
+            dt: self.dt,
         }
     }
     fn clone_from(&mut self, s: &Self) {
         // Exhaustive: a new field is a compile error here until it is copied.
-        let SimState { core, particles, skin, tool, activation, ticks, is_active, live, shell_off_until, lift, skin_owed, core_owed } = self;
+        let SimState { core, particles, skin, tool, activation, ticks, is_active, live, shell_off_until, lift, skin_owed, core_owed, dt } = self;
         core.clone_from(&s.core);
         particles.clone_from(&s.particles);
         skin.clone_from(&s.skin);
@@ -83,6 +87,7 @@ impl Clone for SimState {
         *shell_off_until = s.shell_off_until;
         *skin_owed = s.skin_owed;
         *core_owed = s.core_owed;
+        *dt = s.dt;
         lift.offset.clone_from(&s.lift.offset);
         lift.list.clone_from(&s.lift.list);
         (lift.start, lift.ticks) = (s.lift.start, s.lift.ticks);
@@ -99,7 +104,7 @@ impl SimState {
             particles,
             skin: sim.hybrid.outer_points.clone(),
             tool: None,
-            activation: Activation::new(&sim.hybrid, sim.options.linger_ticks),
+            activation: Activation::new(&sim.hybrid, ticks_in(sim.options.linger, TICK)),
             ticks: 0,
             is_active: vec![false; sim.n_particles()],
             shell_off_until: 0,
@@ -107,6 +112,7 @@ impl SimState {
             live: LiveSkin::at_rest(sim),
             skin_owed: false,
             core_owed: None,
+            dt: TICK,
         }
     }
 
@@ -142,6 +148,7 @@ impl SimState {
             skin_lift_start: self.lift.start,
             skin_owed: self.skin_owed,
             core_owed: self.core_owed.map(|dt| (dt, self.core.f_ext.clone())),
+            dt: self.dt,
         }
     }
 
@@ -216,7 +223,11 @@ impl SimState {
             state.core_owed = Some(*dt);
         }
         state.lift.start = snap.skin_lift_start;
-        state.lift.ticks = shed_fade_ticks(&sim.options);
+        if !(snap.dt > 0.0 && snap.dt.is_finite()) {
+            return Err(bad(format!("tick length {} s (must be positive and finite)", snap.dt)));
+        }
+        state.dt = snap.dt;
+        state.lift.ticks = shed_fade_ticks(&sim.options, snap.dt);
         for &(v, d) in &snap.skin_lift {
             if state.lift.offset[v as usize] == Vec3::zeros() && d != Vec3::zeros() {
                 state.lift.list.push(v);
@@ -297,6 +308,10 @@ pub struct SimSnapshot {
     /// The last tick's core step too, when owed: its `dt` \[s\] and the core's external forces
     /// \[N\] (`(n_core)`, world frame: the shell's reactions it steps under).
     pub core_owed: Option<(f64, Vec<Vec3>)>,
+    /// The last tick's length \[s\] ([`super::sim::TICK`] before the first; a state of a loop
+    /// ticking at 250 Hz has 4 ms): the time-valued options ([`super::SimOptions::linger`], the
+    /// shed shell's fade) count ticks of it.
+    pub dt: f64,
 }
 
 /// A sweep of the whole skin in progress ([`SimSnapshot::sweep`]): the next vertex it places,

@@ -90,7 +90,7 @@ pub struct TickReport {
 
 /// Advance the hybrid model by one tick of `dt` \[s\] with the device's tool centre at `tool`
 /// \[m\] (world frame; the simulated tool moves toward it by at most
-/// [`super::SimOptions::max_tool_step`], and [`SimState::tool`] says where it is). Allocates nothing. A bad `dt` or tool position changes nothing. A failed,
+/// [`super::SimOptions::max_tool_speed`], and [`SimState::tool`] says where it is). Allocates nothing. A bad `dt` or tool position changes nothing. A failed,
 /// non-finite or diverging (past the speed bound of [`crate::divergence`]) particle step sheds
 /// the shell and the tick goes on ([`TickReport::shell_failed`]; with
 /// [`super::SimOptions::shell_fallback`] `None` it fails instead). A failed core step (or a
@@ -167,14 +167,15 @@ pub fn tick_force_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, t
     if !is_finite3(&tool) {
         return Err(StepError::NonFiniteTool);
     }
+    state.dt = dt;
     // The shell's clock is the core's (it advances only while particles are active).
     state.particles.t = state.core.t;
     // The core's face frames and their rates, once: every tie on a face shares them.
     embed::face_frames_and_rates(&state.core.x, &state.core.v, &sim.hybrid.core_faces, &mut ws.frames, &mut ws.rates);
     let o = &sim.options;
     let prev = state.tool.unwrap_or(tool);
-    // The simulated tool follows the device at most `max_tool_step` a tick (SimOptions).
-    let tool = prev + (tool - prev).cap_magnitude(o.max_tool_step);
+    // The simulated tool follows the device at most at `max_tool_speed` (SimOptions).
+    let tool = prev + (tool - prev).cap_magnitude(o.max_tool_speed * dt);
     let tool_v = (tool - prev) / dt;
     let mut report = TickReport { shell_off: state.ticks < state.shell_off_until, ..TickReport::default() };
     if !report.shell_off && !state.lift.list.is_empty() {
@@ -184,7 +185,7 @@ pub fn tick_force_with(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, t
     // At rest the skin is placed and its references set (LiveSkin::at_rest): the first tick
     // builds the list around its tool here, and looks at that list only, not at every vertex.
     if !state.live.valid {
-        state.live.rebuild(&state.skin, &tool, skin::list_radius(o));
+        state.live.rebuild(&state.skin, &tool, skin::list_radius(o, dt));
     }
 
     activate::activate(sim, state, ws, tool, &mut report);

@@ -112,8 +112,8 @@ impl<P: Physics> Physics for Faulty<P> {
     fn tool(&self) -> Option<Vec3> {
         self.inner.tool()
     }
-    fn max_tool_step(&self) -> f64 {
-        self.inner.max_tool_step()
+    fn max_tool_speed(&self) -> f64 {
+        self.inner.max_tool_speed()
     }
     fn finish(&mut self) -> Result<(), StepError> {
         if let Some(f) = &mut self.on_finish {

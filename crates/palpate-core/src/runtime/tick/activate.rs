@@ -16,9 +16,10 @@ use crate::math::Vec3;
 /// Then the core under the active shell is brought back to the tissue's stiffness
 /// ([`homogenised_core`]).
 pub(super) fn activate(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, report: &mut TickReport) {
-    let SimState { core, particles, skin, activation, ticks, is_active, live, .. } = state;
+    let SimState { core, particles, skin, activation, ticks, is_active, live, dt, .. } = state;
     let (frames, rates) = (&ws.frames, &ws.rates);
     let (tie, o) = (&sim.particle_tie, &sim.options);
+    activation.set_linger(crate::runtime::sim::ticks_in(o.linger, *dt));
     if !report.shell_off {
         activation.touch_sphere_among(&tool, o.tool.radius, o.activation_margin, skin, live.iter());
     }

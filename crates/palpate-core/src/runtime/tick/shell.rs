@@ -80,7 +80,8 @@ pub(super) fn step(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, prev:
             for &v in &ws.near {
                 ws.skin_to_core[v] = Vec3::zeros();
             }
-            let Some(off_ticks) = sim.options.shell_fallback else { return Err(e) };
+            let Some(pause) = sim.options.shell_fallback else { return Err(e) };
+            let off_ticks = crate::runtime::sim::ticks_in(pause, dt);
             shed(sim, state, ws, off_ticks, report);
             Ok(Vec3::zeros())
         }
@@ -207,8 +208,8 @@ impl SubStepForces<'_, '_> {
 /// carried stays where they left it and fades back to its ties (`skin::SkinLift`): put back
 /// at once, the force jumped.
 fn shed(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, off_ticks: u64, report: &mut TickReport) {
-    let SimState { core, particles, skin, activation, ticks, is_active, live, shell_off_until, lift, .. } = state;
-    let tie = &sim.particle_tie;
+    let SimState { core, particles, skin, activation, ticks, is_active, live, shell_off_until, lift, dt: state_dt, .. } = state;
+    let (tie, state_dt) = (&sim.particle_tie, *state_dt);
     for &p in &particles.active {
         is_active[p] = false;
         particles.x[p] = tie.position_framed(p, &core.x, &ws.frames);
@@ -216,7 +217,7 @@ fn shed(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, off_ticks: u64, 
     }
     report.left += particles.active.len();
     lift.clear();
-    (lift.start, lift.ticks) = (*ticks, skin::shed_fade_ticks(&sim.options));
+    (lift.start, lift.ticks) = (*ticks, skin::shed_fade_ticks(&sim.options, state_dt));
     for v in live.iter() {
         if live.carried[v] {
             let d = skin[v] - sim.skin.position_framed(v, &core.x, &ws.frames);
