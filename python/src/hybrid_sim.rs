@@ -371,7 +371,9 @@ impl PyHybridSim {
     /// ``skin_lift_offsets`` [m] (k, 3), ``skin_lift_start`` (the shed tick); what a tick stepped
     /// with ``finish=False`` still owes: ``owed_skin`` (bool), ``owed_core_dt`` [s] (None: the
     /// core's step is not owed) and ``owed_core_forces`` [N] (n_core, 3) or None (the forces it
-    /// steps under). Positions world frame. Plain Python and numpy values: it pickles.
+    /// steps under); ``dt`` [s], the last tick's length (the time-valued options count ticks of
+    /// it; absent from older states: 1 ms). Positions world frame. Plain Python and numpy values:
+    /// it pickles.
     fn get_state<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let s = self.state.snapshot(&self.ws);
         let d = PyDict::new(py);
@@ -495,7 +497,7 @@ impl PyHybridSim {
                 }
             },
             // The last tick's length (absent from older states: the 1 ms tick).
-            dt: match opt("dt")? {
+            dt: match state.get_item("dt")?.filter(|v| !v.is_none()) {
                 None => palpate_core::runtime::sim::TICK,
                 Some(dt) => conv::arg(&dt)?,
             },

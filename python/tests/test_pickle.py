@@ -118,3 +118,23 @@ def test_hybrid_sims_cross_processes():
         forces, x = pool.apply(_tick_on, (sim, path[20:]))
     here, y = _tick_on(sim, path[20:])
     assert np.abs(here).max() > 0 and np.array_equal(forces, here) and np.array_equal(x, y)
+
+
+def test_a_pickle_of_the_tick_counted_options_loads_in_seconds():
+    """Pickles made when the options counted 1 ms ticks (``linger_ticks``, ``max_tool_step`` [m a
+    tick], ``shell_pause`` [ticks]) and whose states have no ``dt`` load with those options in
+    seconds, and tick on as the same simulation made with them."""
+    from palpate import _pickle
+
+    sim, path = ellipsoids_sim(max_tool_speed=0.4, linger=0.01, shell_pause=0.02)
+    for c in path[:20]:
+        sim.step(c)
+    state = sim.get_state()
+    del state["dt"]
+    old = {k: sim.options[k] for k in _pickle._HYBRID_SIM_OPTIONS if k not in ("max_tool_speed", "linger", "shell_pause")}
+    old.update(max_tool_step=4e-4, linger_ticks=10, shell_pause=20)
+    back = _pickle._hybrid_sim(sim.model, sim.material, old, state)
+    assert back.options["max_tool_speed"] == pytest.approx(0.4) and back.options["linger"] == pytest.approx(0.01)
+    assert back.options["shell_pause"] == pytest.approx(0.02)
+    for c in path[20:40]:
+        assert np.array_equal(back.step(c), sim.step(c))
