@@ -202,11 +202,12 @@ fn kind_of(name: &str) -> PyResult<DeviceKind> {
     Ok(match name {
         "simulated" => DeviceKind::Simulated,
         "bridge" => DeviceKind::Bridge,
-        "touch" => DeviceKind::Touch,
+        // `touch`: the former name, still accepted.
+        "geomagic" | "touch" => DeviceKind::Touch,
         "forcedimension" => DeviceKind::ForceDimension,
         "haply" => DeviceKind::Haply,
         "hapticmaster" => DeviceKind::HapticMaster,
-        _ => return Err(errors::param_error_from(format!("kind = {name:?}: expected simulated, bridge, touch, forcedimension, haply or hapticmaster"))),
+        _ => return Err(errors::param_error_from(format!("kind = {name:?}: expected simulated, bridge, geomagic, forcedimension, haply or hapticmaster"))),
     })
 }
 

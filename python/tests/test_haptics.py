@@ -561,8 +561,8 @@ FAKE_TOUCH = {
 
 
 def test_haptic_with_a_vendor_device_starts_its_adapter_beside_the_loop(tmp_path):
-    # `palpate haptic MODEL --device touch`: one command for the common case. The loop binds a
-    # free loopback port with a fresh key and starts `palpate device touch` on it; the adapter's
+    # `palpate haptic MODEL --device geomagic`: one command for the common case. The loop binds a
+    # free loopback port with a fresh key and starts `palpate device geomagic` on it; the adapter's
     # states reach the loop signed (none refused), the child is stopped with the loop, and the
     # key's file is gone afterwards. Without the vendor's package: exit 3 and what to install,
     # before any loop starts.
@@ -575,10 +575,10 @@ def test_haptic_with_a_vendor_device_starts_its_adapter_beside_the_loop(tmp_path
         (fake / name).write_text(text)
     keys_before = set(glob.glob(os.path.join(tempfile.gettempdir(), "palpate-bridge-*")))
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path / "vendor")] + [p for p in [os.environ.get("PYTHONPATH")] if p])}
-    out = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ellipsoids", "--device", "touch", "--seconds", "3",
+    out = subprocess.run([sys.executable, "-m", "palpate", "haptic", "ellipsoids", "--device", "geomagic", "--seconds", "3",
                           "--quiet"], capture_output=True, text=True, timeout=300, cwd=ROOT, env=env)
     assert out.returncode == 0, out.stdout + out.stderr
-    assert "starting palpate device touch on port" in out.stdout, out.stdout
+    assert "starting palpate device geomagic on port" in out.stdout, out.stdout
     bridge = next(line for line in out.stdout.splitlines() if line.strip().startswith("bridge:"))
     stats = dict(item.strip().rsplit(" ", 1) for item in bridge.split(":", 1)[1].split(","))
     assert int(stats["accepted"]) > 500 and int(stats["bad_tag"]) == 0 and int(stats["sessions"]) == 1, bridge
@@ -619,7 +619,7 @@ def test_haptic_stops_when_the_vendor_adapter_dies_mid_session(tmp_path):
                           "--quiet"], capture_output=True, text=True, timeout=300, cwd=ROOT, env=env)
     wall = time.monotonic() - t0
     assert out.returncode == 3, out.stdout + out.stderr
-    assert "palpate device touch stopped (exit code 5)" in out.stderr and "the loop stopped with it" in out.stderr, out.stderr
+    assert "palpate device geomagic stopped (exit code 5)" in out.stderr and "the loop stopped with it" in out.stderr, out.stderr
     assert " ticks in " in out.stdout, out.stdout                 # the summary still comes
     assert wall < 25, f"the loop ran on for {wall:.1f} s after the adapter died"
 
@@ -630,7 +630,8 @@ VENDOR_MODULES = ("pyOpenHaptics", "forcedimension_core", "HaplyHardwareAPI", "h
 
 
 def test_adapters_are_import_free_when_unused():
-    code = ("import sys, palpate, palpate.devices, palpate.devices.bridge, palpate.devices.touch, "
+    code = ("import sys, palpate, palpate.devices, palpate.devices.bridge, palpate.devices.geomagic_touch, "
+            "palpate.devices.touch, "
             "palpate.devices.forcedimension, palpate.devices.haply, palpate.devices.hapticmaster, palpate.cli; "
             f"print([m for m in {VENDOR_MODULES!r} if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60,
@@ -639,7 +640,7 @@ def test_adapters_are_import_free_when_unused():
     assert out.stdout.strip() == "[]"
 
 
-@pytest.mark.parametrize("name,package", [("touch", "pyopenhaptics"), ("forcedimension", "forcedimension-core"),
+@pytest.mark.parametrize("name,package", [("geomagic", "pyopenhaptics"), ("touch", "pyopenhaptics"), ("forcedimension", "forcedimension-core"),
                                           ("haply", "HaplyHardwareAPI"), ("hapticmaster", "haptic-master")])
 def test_device_command_without_the_vendor_says_what_to_install(name, package, monkeypatch, capsys):
     from palpate.cli import main
@@ -680,7 +681,7 @@ def _fake_touch(monkeypatch, transform, buttons=1):
 
 def test_touch_adapter_maps_millimetres_and_axes(monkeypatch):
     from palpate.devices.bridge import Placement
-    from palpate.devices.touch import TouchAdapter
+    from palpate.devices.geomagic_touch import TouchAdapter
 
     # Stylus at (10, 20, 30) mm in the device frame (x right, y up, z toward the user), a
     # rotation of 90 degrees about the device's y (up) axis; OpenHaptics' column-major transform.
@@ -1039,9 +1040,12 @@ def test_limits_beyond_the_device_rating_are_refused_unless_asked(model):
     t, k = cycle(model)
     m = haptics.material()
     with pytest.raises(_p.ParameterError, match="rated 3.3 N"):
-        _p.HapticLoop(model, m, "scripted", times=t, knots=k, kind="touch", max_force=50.0)
+        _p.HapticLoop(model, m, "scripted", times=t, knots=k, kind="geomagic", max_force=50.0)
     with pytest.raises(_p.ParameterError, match="rated 1020 N/m"):
-        _p.HapticLoop(model, m, "scripted", times=t, knots=k, kind="touch", coupling_stiffness=5000.0)
+        _p.HapticLoop(model, m, "scripted", times=t, knots=k, kind="geomagic", coupling_stiffness=5000.0)
+    # `touch`, the Geomagic Touch's former name, is the same make.
+    with pytest.raises(_p.ParameterError, match="rated 3.3 N"):
+        _p.HapticLoop(model, m, "scripted", times=t, knots=k, kind="touch", max_force=50.0)
     with pytest.raises(_p.ParameterError, match="stall_timeout"):
         _p.HapticLoop(model, m, "scripted", times=t, knots=k, stall_timeout=100.0)
     with pytest.raises(_p.ParameterError, match="silence"):
@@ -1108,5 +1112,5 @@ def test_devices_command_lists_every_device_and_how_to_run_it(capsys, monkeypatc
     monkeypatch.setattr(importlib.util, "find_spec", lambda m, *a: found if m == "pyOpenHaptics" else real(m, *a))
     assert main(["devices"]) == 0
     out = capsys.readouterr().out
-    assert "touch (vendor): 3D Systems / Geomagic Touch (OpenHaptics)  [package installed]" in out
+    assert "geomagic (vendor): 3D Systems / Geomagic Touch (OpenHaptics; formerly `touch`)  [package installed]" in out
     assert "pyOpenHaptics" not in sys.modules or sys.modules["pyOpenHaptics"] is None

@@ -626,7 +626,7 @@ def test_the_view_takes_the_devices_make(model):
     with pytest.raises(_p.ParameterError, match="kind"):
         Viewer(model, port=0, kind="falcon")
     assert main(["view", "ventricle", "--kind", "falcon"]) == 2          # usage: not a make palpate knows
-    v = Viewer(model, "ventricle", port=0, device="bridge", bridge_port=0, kind="touch", max_force=5.0)
+    v = Viewer(model, "ventricle", port=0, device="bridge", bridge_port=0, kind="geomagic", max_force=5.0)
     try:
         assert v.loop is None and "max_force" in (v.loop_error or ""), v.loop_error
     finally:
@@ -634,6 +634,6 @@ def test_the_view_takes_the_devices_make(model):
     v = Viewer(model, "ventricle", port=0, device="bridge", bridge_port=0, kind="touch", max_force=3.0)
     try:
         assert v.loop is not None and v.loop_error is None, v.loop_error
-        assert v.settings["kind"] == "touch"
+        assert v.settings["kind"] == "geomagic"        # `touch`: the make's former name
     finally:
         v.close()

@@ -129,7 +129,7 @@ impl DeviceKind {
         match self {
             DeviceKind::Simulated => "simulated",
             DeviceKind::Bridge => "bridge",
-            DeviceKind::Touch => "touch",
+            DeviceKind::Touch => "geomagic",
             DeviceKind::ForceDimension => "forcedimension",
             DeviceKind::Haply => "haply",
             DeviceKind::HapticMaster => "hapticmaster",

@@ -26,7 +26,7 @@
     palpate soak MODEL --minutes N [--rate HZ] [--seed S] [--json]
     palpate bench haptic MODEL [--seconds S] [--rate HZ] [--no-idle] [--json]
     palpate bench view [MODEL] [--seconds S] [--rate HZ] [--fps HZ] [--json]
-    palpate device touch|forcedimension|haply|hapticmaster [--port P] [--host IP] [--scale S] [--offset X Y Z]
+    palpate device geomagic|forcedimension|haply|hapticmaster [--port P] [--host IP] [--scale S] [--offset X Y Z]
         (a vendor device as a bridge client; each vendor SDK an optional extra)
     palpate devices [--json]
         (every device palpate can drive, what it needs, whether it is installed, its command)

@@ -1,4 +1,4 @@
-"""``palpate device touch|forcedimension|haply|hapticmaster``: a vendor device as a separate
+"""``palpate device geomagic|forcedimension|haply|hapticmaster``: a vendor device as a separate
 process that speaks the bridge protocol to ``palpate haptic MODEL --device bridge:PORT`` (so a
 vendor SDK never runs in the servo thread, and its crash cannot take the simulation down). Each
 vendor package is an optional extra, imported only here; without it, the command says what to
@@ -9,14 +9,18 @@ import math
 
 from ._common import RunFailed, Usage
 
-ADAPTERS = ("touch", "forcedimension", "haply", "hapticmaster")
+ADAPTERS = ("geomagic", "forcedimension", "haply", "hapticmaster")
+# `touch` was the Geomagic Touch's name: still accepted, not offered (it named two things).
+ADAPTER_ALIASES = {"touch": "geomagic"}
 
 
 def add_parser(sub) -> None:
     d = sub.add_parser("device", help="connect a vendor haptic device to a running palpate haptic (bridge) loop",
                        description="Run a vendor device's adapter as a bridge client of `palpate haptic MODEL "
                                    "--device bridge:PORT` (protocol: crates/palpate-haptics/PROTOCOL.md).")
-    d.add_argument("adapter", choices=ADAPTERS)
+    d.add_argument("adapter", type=lambda s: ADAPTER_ALIASES.get(s, s), choices=ADAPTERS,
+                   help="the device: geomagic (3D Systems / Geomagic Touch, formerly `touch`), forcedimension, haply, "
+                        "hapticmaster")
     d.add_argument("--port", type=int, default=5005, help="the loop's bridge port (default 5005)")
     d.add_argument("--host", default="127.0.0.1", help="the loop's address (default 127.0.0.1)")
     d.add_argument("--key-file", default=None, metavar="FILE",
@@ -38,8 +42,8 @@ def make_adapter(a):
         place = bridge.Placement(a.scale, a.offset)
     except ValueError as e:
         raise Usage(f"palpate device: {e}") from None
-    if a.adapter == "touch":
-        from ..devices.touch import TouchAdapter
+    if a.adapter == "geomagic":
+        from ..devices.geomagic_touch import TouchAdapter
         return TouchAdapter(place)
     if a.adapter == "forcedimension":
         from ..devices.forcedimension import ForceDimensionAdapter

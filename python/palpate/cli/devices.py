@@ -24,7 +24,7 @@ BUILT_IN = (
 
 #: The vendor adapters of ``palpate device NAME`` (see :data:`palpate.devices.VENDORS`): the devices each drives.
 VENDOR_DEVICES = {
-    "touch": "3D Systems / Geomagic Touch (OpenHaptics)",
+    "geomagic": "3D Systems / Geomagic Touch (OpenHaptics; formerly `touch`)",
     "forcedimension": "Force Dimension omega / delta / sigma, Novint Falcon (Force Dimension SDK)",
     "haply": "Haply Inverse3 (serial port)",
     "hapticmaster": "Moog HapticMaster (TCP)",

@@ -3,7 +3,7 @@ loop (a native servo thread, :class:`palpate.HapticLoop`) on a hybrid model, hea
 live status line (rate, period, force, overruns). ``--record FILE`` writes the interaction for
 ``--device replay:FILE``, which gives the same forces bit for bit.
 
-``--device touch|forcedimension|haply|hapticmaster`` is the common case in one command: the loop
+``--device geomagic|forcedimension|haply|hapticmaster`` is the common case in one command: the loop
 opens a bridge on a free loopback port with a fresh random key, and starts ``palpate device
 VENDOR`` as a child process on it (the vendor SDK never runs in the servo's process); the loop
 stops when the child does, and the child when the loop does. The two-process form (``--device
@@ -23,11 +23,11 @@ import subprocess
 import sys
 import tempfile
 
-from ..haptics import DEVICE_KINDS
+from ..haptics import DEVICE_KINDS, device_kind
 from .device import ADAPTERS as VENDOR_ADAPTERS
 from ._common import FAILED, INTERRUPTED, Fail, RunFailed, Usage, add_physics_rate, load_hybrid_model, palpate_errors, physics_rate
 
-DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand, touch|forcedimension|haply|hapticmaster"
+DEVICES = "scripted:SCRIPT.toml|SCRIPT.csv, replay:FILE, bridge:PORT, hand, geomagic|forcedimension|haply|hapticmaster"
 #: The recording buffer without ``--seconds`` [ticks]: 5 min at 1 kHz, 75 s at 4 kHz (43 MB).
 DEFAULT_RECORD_TICKS = 300_000
 #: The fastest a loop (and so a recording to replay) runs [Hz].
@@ -54,7 +54,7 @@ def add_parser(sub) -> None:
     h.add_argument("--key-file", default=None, metavar="FILE",
                    help="bridge: a shared key (at least 16 bytes) that signs every packet (HMAC-SHA256, PROTOCOL.md); "
                         "the device process gives the same file to `palpate device --key-file`")
-    h.add_argument("--kind", choices=DEVICE_KINDS, default=None, help="the device's make, for the coupling and safety defaults "
+    h.add_argument("--kind", type=device_kind, choices=DEVICE_KINDS, default=None, help="the device's make, for the coupling and safety defaults "
                    "(a vendor --device sets its own)")
     h.add_argument("--scale", type=float, default=1.0,
                    help="a vendor --device: world = scale * device + offset (default 1, as palpate device)")
@@ -64,7 +64,7 @@ def add_parser(sub) -> None:
     h.add_argument("--address", default=None, help="a vendor --device: hapticmaster's IP, haply's serial port (as palpate device)")
     h.add_argument("--max-force", type=float, default=None, metavar="N", help="force limit [N] (default 3)")
     h.add_argument("--unsafe-limits", action="store_true",
-                   help="allow a --max-force above the device class's rated force (touch 3.3 N, forcedimension 12 N, "
+                   help="allow a --max-force above the device class's rated force (geomagic 3.3 N, forcedimension 12 N, "
                         "hapticmaster 250 N), logged; refused otherwise")
     h.add_argument("--tool-radius", type=float, default=0.005, metavar="M", help="tool sphere radius [m] (default 0.005)")
     h.add_argument("--realtime", action="store_true",
@@ -226,6 +226,8 @@ def stop_vendor(a, child) -> int:
 
 def cmd_haptic(a) -> int:
     from .. import haptics
+
+    a.device = device_kind(a.device)   # `touch`, the Geomagic Touch's former name
 
     if not 250 <= a.rate <= 4000:
         raise Usage(f"palpate haptic: --rate must be within 250 to 4000 Hz, got {a.rate}")

@@ -25,7 +25,7 @@ import time
 
 from ._common import Fail, RunFailed, Usage, add_physics_rate, load_view_model, num, physics_rate
 from .._extras import install_hint
-from ..haptics import DEVICE_KINDS
+from ..haptics import DEVICE_KINDS, device_kind
 
 #: Status lines on stdout every this many seconds (unless --quiet).
 STATUS_EVERY_S = 1.0
@@ -60,7 +60,7 @@ def add_parser(sub) -> None:
     v.add_argument("--device", choices=DEVICES, default="hand",
                    help="hand: the page moves a simulated hand (default); bridge: a real device over UDP")
     v.add_argument("--bridge-port", type=int, default=0, metavar="P", help="UDP port of the bridge (default 0: a free one)")
-    v.add_argument("--kind", choices=DEVICE_KINDS, default=None,
+    v.add_argument("--kind", type=device_kind, choices=DEVICE_KINDS, default=None,
                    help="the device's make, for the coupling and safety defaults (as palpate haptic --kind)")
     v.add_argument("--key-file", default=None, metavar="FILE",
                    help="bridge: a shared key (at least 16 bytes) that signs every packet (HMAC-SHA256); required "

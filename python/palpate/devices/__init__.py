@@ -23,12 +23,22 @@ from typing import Any, Optional
 
 #: Adapter name -> (module, the PyPI package, the pip extra of palpate, what else to install).
 VENDORS = {
-    "touch": ("pyOpenHaptics", "pyopenhaptics", "touch", "the OpenHaptics SDK and the Touch device driver"),
+    "geomagic": ("pyOpenHaptics", "pyopenhaptics", "geomagic", "the OpenHaptics SDK and the Touch device driver"),
     "forcedimension": ("forcedimension_core", "forcedimension-core", "forcedimension",
                        "the Force Dimension SDK (also drives the Novint Falcon) and its udev rules"),
     "haply": ("HaplyHardwareAPI", "HaplyHardwareAPI", "haply", "the Inverse3 on a serial port you may open"),
     "hapticmaster": ("haptic_master", "haptic-master", "hapticmaster", "a HapticMaster reachable over TCP"),
 }
+
+
+#: Former adapter names, still accepted: ``touch`` for the Geomagic Touch (``touch`` now names only
+#: ``palpate touch``, the scripted touches).
+ALIASES = {"touch": "geomagic"}
+
+
+def canonical(name: str) -> str:
+    """The adapter's name for ``name`` (itself, or what a former name became)."""
+    return ALIASES.get(name, name)
 
 
 class MissingVendor(ImportError):
@@ -38,6 +48,7 @@ class MissingVendor(ImportError):
 def missing_vendor(name: str) -> Optional[str]:
     """What to install for adapter ``name``, or None when its vendor module is found (looked up,
     not imported: an SDK may touch the hardware when imported)."""
+    name = canonical(name)
     module, package, extra, other = VENDORS[name]
     try:
         found = importlib.util.find_spec(module) is not None
@@ -52,6 +63,7 @@ def missing_vendor(name: str) -> Optional[str]:
 def import_vendor(name: str) -> Any:
     """Imports the vendor module of adapter ``name`` (only now: adapters are import-free until
     used), or raises :class:`MissingVendor` naming what to install."""
+    name = canonical(name)
     module, package, extra, other = VENDORS[name]
     try:
         return importlib.import_module(module)

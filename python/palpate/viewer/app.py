@@ -24,7 +24,7 @@ from typing import Any, Callable, Deque, Dict, Optional, Tuple
 import numpy as np
 
 from .. import _palpate as _p
-from ..haptics import DEVICE_KINDS
+from ..haptics import DEVICE_KINDS, device_kind
 from . import colors
 from .fem import FemModel, loop_model
 from .guard import STATS, TargetGuard, finite_number, install_message_bounds
@@ -130,6 +130,7 @@ class Viewer:
             raise _p.ParameterError(f"preset {preset!r}: expected one of {', '.join(presets)}")
         if device not in DEVICES:
             raise _p.ParameterError(f"device {device!r}: expected one of {', '.join(DEVICES)}")
+        kind = None if kind is None else device_kind(kind)
         if kind is not None and kind not in DEVICE_KINDS:
             raise _p.ParameterError(f"kind {kind!r}: expected one of {', '.join(DEVICE_KINDS)}")
         lo, hi = TOOL_RADIUS_RANGE
