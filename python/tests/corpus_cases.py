@@ -242,7 +242,7 @@ def _model_file_cases(c: Corpus, rng):
           "palpate.HybridModel.build_tagged(v, t, part, particles=400, field_voxels=20000)", ["error"], ["ModelError"])
     c.api("build_tagged_correct", "seed",
           "v, t, part = palpate.ventricle_surface(48, 12)\n"
-          "palpate.HybridModel.build_tagged(v, t, part, particles=400, field_voxels=20000)", ["ok"])
+          "palpate.HybridModel.build_tagged(v, t, part, particles=400, field_voxels=20000, homogenise=False)", ["ok"])
     # Swapped surfaces (inner given as outer): detected.
     c.api("build_swapped_surfaces", "silent",
           "a = palpate.ellipsoid_surface((0.02, 0.02, 0.035), 3); b = palpate.ellipsoid_surface((0.026, 0.026, 0.042), 3)\n"

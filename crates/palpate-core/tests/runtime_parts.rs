@@ -813,3 +813,30 @@ fn the_per_tick_parts_allocate_nothing() {
 }
 
 
+
+/// Every option is checked once, by name and unit (`SimOptions::check`, which `Sim::new` and the
+/// binding call), and a long pause or linger is a count of ticks, not an overflow.
+#[test]
+fn options_are_checked_by_name() {
+    let d = SimOptions::default();
+    assert!(d.check().is_ok());
+    let bad = [
+        (SimOptions { max_tool_speed: 0.0, ..d }, "max_tool_speed [m/s]"),
+        (SimOptions { max_tool_speed: f64::NAN, ..d }, "max_tool_speed [m/s]"),
+        (SimOptions { linger: -0.1, ..d }, "linger [s]"),
+        (SimOptions { linger: f64::INFINITY, ..d }, "linger [s]"),
+        (SimOptions { shell_fallback: Some(f64::NAN), ..d }, "shell_pause (shell_fallback) [s]"),
+        (SimOptions { activation_margin: -1e-3, ..d }, "activation_margin [m]"),
+        (SimOptions { max_substeps: 0, ..d }, "max_substeps"),
+        (SimOptions { mass_scaling: Some(1.5), ..d }, "mass_scaling quantile"),
+        (SimOptions { core_contact_stiffness: 0.0, ..d }, "core_contact_stiffness [N/m]"),
+        (SimOptions { support_spacings: 0.0, ..d }, "support_spacings [lattice spacings]"),
+        (SimOptions { tool: ToolOptions { radius: -1.0, ..d.tool }, ..d }, "tool_radius [m]"),
+    ];
+    for (o, name) in bad {
+        assert!(matches!(o.check(), Err(ModelError::Parameter { name: n, .. }) if n == name), "{name}: {:?}", o.check());
+        assert!(matches!(Sim::new(ventricle().clone(), Material::myocardium(), o), Err(ModelError::Parameter { name: n, .. }) if n == name), "{name}");
+    }
+    // Finite but past any tick count: accepted (the counts saturate).
+    assert!(SimOptions { linger: 1e300, shell_fallback: Some(1e300), ..d }.check().is_ok());
+}

@@ -22,7 +22,8 @@ use crate::Integrator;
 pub const TICK: f64 = 1e-3;
 
 /// A duration \[s\] in ticks of `dt` \[s\], rounded (the caller checked both: finite, `dt`
-/// positive, `seconds` non-negative).
+/// positive, `seconds` non-negative); a duration past `u64::MAX` ticks is `u64::MAX` (`as`
+/// saturates), and the counts it feeds add saturating.
 pub(crate) fn ticks_in(seconds: f64, dt: f64) -> u64 {
     (seconds / dt).round() as u64
 }

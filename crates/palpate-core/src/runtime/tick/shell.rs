@@ -230,7 +230,8 @@ fn shed(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, off_ticks: u64, 
     particles.active.clear();
     activation.clear();
     ws.near.clear();
-    *shell_off_until = *ticks + 1 + off_ticks;
+    // Saturating: a pause of any finite length (SimOptions::check) is a count of ticks.
+    *shell_off_until = ticks.saturating_add(1).saturating_add(off_ticks);
     (report.shell_failed, report.active, report.particle_contacts, report.confined) = (true, 0, 0, 0);
 }
 
