@@ -788,6 +788,14 @@ def _gmsh_bin_nodes_v4(b: _Bytes):
 def _gmsh_bin_elements_v4(b: _Bytes):
     n_blocks, n_elements, _, _ = (int(x) for x in b.take("<u8", 4, "the $Elements header"))
     check_budget(f"$Elements of {n_elements} entries", n_elements * 64.0, b.name)
+    return _gmsh_bin_element_blocks(b, n_blocks, n_elements, "<u8")
+
+
+def _gmsh_bin_element_blocks(b: _Bytes, n_blocks: int, n_elements: int, tag_type: str):
+    """The $Elements entity blocks of binary MSH 4.x after the section header: per block
+    tagEntity dimEntity typeEle (int) numElements (unsigned long), then per element its tag and
+    node tags, each ``tag_type`` (``"<u8"`` in 4.1, ``"<i4"`` in 4.0)."""
+    width = np.dtype(tag_type).itemsize
     out = []
     for _ in range(n_blocks):
         at = b.pos
@@ -799,9 +807,9 @@ def _gmsh_bin_elements_v4(b: _Bytes):
             raise b.error(f"an $Elements block of {count} elements after {len(out)} of {n_elements}", at)
         nn = GMSH_TYPES[etype][1]
         start = b.pos
-        rows = b.take("<u8", count * (1 + nn), f"{count} gmsh elements of type {etype}").reshape(count, 1 + nn)
+        rows = b.take(tag_type, count * (1 + nn), f"{count} gmsh elements of type {etype}").reshape(count, 1 + nn)
         for k, row in enumerate(rows.astype(np.int64).tolist()):
-            out.append((etype, row[0], row[1:], f"byte {start + k * 8 * (1 + nn)}"))
+            out.append((etype, row[0], row[1:], f"byte {start + k * width * (1 + nn)}"))
     if len(out) != n_elements:
         raise b.error(f"$Elements header announces {n_elements} elements, the blocks hold {len(out)}")
     return out
@@ -847,26 +855,9 @@ def _gmsh_bin_nodes_v40(b: _Bytes):
 
 
 def _gmsh_bin_elements_v40(b: _Bytes):
-    # Block: tagEntity dimEntity typeEle (int) numElements (unsigned long); then per element
-    # tag (int) and its node tags (int).
+    # The header's counts are unsigned long; the element and node tags int.
     n_blocks, n_elements = _gmsh_bin_header_v40(b, "Elements", "elements", 8, 20)
-    out = []
-    for _ in range(n_blocks):
-        at = b.pos
-        _, _, etype = (int(x) for x in b.take("<i4", 3, "an $Elements entity block header"))
-        count = int(b.take("<u8", 1, "an $Elements entity block header")[0])
-        if etype not in GMSH_TYPES:
-            raise b.error(f"unknown gmsh element type {etype}", at)
-        if count > n_elements - len(out):
-            raise b.error(f"an $Elements block of {count} elements after {len(out)} of {n_elements}", at)
-        nn = GMSH_TYPES[etype][1]
-        start = b.pos
-        rows = b.take("<i4", count * (1 + nn), f"{count} gmsh elements of type {etype}").reshape(count, 1 + nn)
-        for k, row in enumerate(rows.astype(np.int64).tolist()):
-            out.append((etype, row[0], row[1:], f"byte {start + k * 4 * (1 + nn)}"))
-    if len(out) != n_elements:
-        raise b.error(f"$Elements header announces {n_elements} elements, the blocks hold {len(out)}")
-    return out
+    return _gmsh_bin_element_blocks(b, n_blocks, n_elements, "<i4")
 
 
 def _skip_section(f: _Lines, section: str) -> None:

@@ -19,6 +19,7 @@ import numpy as np
 
 from . import _palpate as _p
 from . import defaults as _defaults
+from .devices import canonical as device_kind  # former device names (``touch``) to today's
 
 #: The material of ``palpate haptic``, the haptic benchmark and the soak [Pa, -, kg/m^3, Pa s]:
 #: the default tissue (:data:`palpate.defaults.tissue`) with the paper's damping.
@@ -136,15 +137,9 @@ def status_line(s: Optional[Dict[str, Any]], rate_hz: float) -> str:
 
 #: The device makes :class:`palpate.HapticLoop` knows (its ``kind``): each sets the coupling's and
 #: the safety's defaults and the limits a user may ask without ``unsafe_limits``. ``geomagic`` is the
-#: 3D Systems / Geomagic Touch (formerly ``touch``, still accepted: :data:`KIND_ALIASES`).
+#: 3D Systems / Geomagic Touch (formerly ``touch``, still accepted: ``device_kind``,
+#: the adapters' :data:`palpate.devices.ALIASES`).
 DEVICE_KINDS = ("simulated", "bridge", "geomagic", "forcedimension", "haply", "hapticmaster")
-#: Former device names, still accepted (``touch`` now names only ``palpate touch``'s scripted touches).
-KIND_ALIASES = {"touch": "geomagic"}
-
-
-def device_kind(name: str) -> str:
-    """The device make for ``name`` (itself, or what a former name became)."""
-    return KIND_ALIASES.get(name, name)
 
 
 def loop_rates(physics_rate: Optional[float]) -> Dict[str, Any]:

@@ -7,18 +7,18 @@ from __future__ import annotations
 
 import math
 
+from ..devices import canonical
 from ._common import RunFailed, Usage
 
 ADAPTERS = ("geomagic", "forcedimension", "haply", "hapticmaster")
-# `touch` was the Geomagic Touch's name: still accepted, not offered (it named two things).
-ADAPTER_ALIASES = {"touch": "geomagic"}
 
 
 def add_parser(sub) -> None:
     d = sub.add_parser("device", help="connect a vendor haptic device to a running palpate haptic (bridge) loop",
                        description="Run a vendor device's adapter as a bridge client of `palpate haptic MODEL "
                                    "--device bridge:PORT` (protocol: crates/palpate-haptics/PROTOCOL.md).")
-    d.add_argument("adapter", type=lambda s: ADAPTER_ALIASES.get(s, s), choices=ADAPTERS,
+    # `touch`, the Geomagic Touch's former name: still accepted (devices.canonical), not offered.
+    d.add_argument("adapter", type=canonical, choices=ADAPTERS,
                    help="the device: geomagic (3D Systems / Geomagic Touch, formerly `touch`), forcedimension, haply, "
                         "hapticmaster")
     d.add_argument("--port", type=int, default=5005, help="the loop's bridge port (default 5005)")

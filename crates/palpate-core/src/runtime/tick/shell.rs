@@ -82,7 +82,7 @@ pub(super) fn step(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, prev:
             }
             let Some(pause) = sim.options.shell_fallback else { return Err(e) };
             let off_ticks = crate::runtime::sim::ticks_in(pause, dt);
-            shed(sim, state, ws, off_ticks, report);
+            shed(sim, state, ws, off_ticks, dt, report);
             Ok(Vec3::zeros())
         }
         Ok(_) => {
@@ -203,13 +203,13 @@ impl SubStepForces<'_, '_> {
 }
 
 /// The shell shed after a failed step: every particle back at its tie, no region active, the
-/// shell off `off_ticks` ticks; the tick goes on with the core and the skin, so the hand still
+/// shell off `off_ticks` ticks (of `dt` \[s\], which also counts the skin's fade); the tick goes on with the core and the skin, so the hand still
 /// feels the organ (the skin contact of stage 4) rather than nothing. The skin the particles
 /// carried stays where they left it and fades back to its ties (`skin::SkinLift`): put back
 /// at once, the force jumped.
-fn shed(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, off_ticks: u64, report: &mut TickReport) {
-    let SimState { core, particles, skin, activation, ticks, is_active, live, shell_off_until, lift, dt: state_dt, .. } = state;
-    let (tie, state_dt) = (&sim.particle_tie, *state_dt);
+fn shed(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, off_ticks: u64, dt: f64, report: &mut TickReport) {
+    let SimState { core, particles, skin, activation, ticks, is_active, live, shell_off_until, lift, .. } = state;
+    let tie = &sim.particle_tie;
     for &p in &particles.active {
         is_active[p] = false;
         particles.x[p] = tie.position_framed(p, &core.x, &ws.frames);
@@ -217,7 +217,7 @@ fn shed(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, off_ticks: u64, 
     }
     report.left += particles.active.len();
     lift.clear();
-    (lift.start, lift.ticks) = (*ticks, skin::shed_fade_ticks(&sim.options, state_dt));
+    (lift.start, lift.ticks) = (*ticks, skin::shed_fade_ticks(&sim.options, dt));
     for v in live.iter() {
         if live.carried[v] {
             let d = skin[v] - sim.skin.position_framed(v, &core.x, &ws.frames);
