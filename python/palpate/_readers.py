@@ -474,18 +474,61 @@ def _n(k: int, one: str, many: str) -> str:
     return f"{k} {one if k == 1 else many}"
 
 
-def medit_precheck(path: str) -> List[str]:
+@dataclass
+class MeditCheck:
+    """What :func:`medit_precheck` found: ``skipped``, the sections read past (``"<keyword>
+    (<count> entries, line <n>)"``, for the caller's MeshWarning); ``vertices``, the Vertices
+    section's coordinates ``(n, dim)`` parsed from the text in double precision, and
+    ``vertex_refs``, their references ``(n,)`` int64 (both None without a Vertices section)."""
+    skipped: List[str]
+    vertices: Optional[np.ndarray] = None
+    vertex_refs: Optional[np.ndarray] = None
+
+
+def _medit_vertices(name: str, lines: List[str], start: int, end: int, count: int, dim: int):
+    """The Vertices entries of ``lines[start:end]`` (comment lines left out; their count checked
+    already), as float64 coordinates ``(count, dim)`` and int64 references ``(count,)``. meshio
+    reads them as float32 under ``MeshVersionFormatted 0`` or ``1`` (the version says how a binary
+    .meshb stores its reals, not how many digits an ASCII file holds): 0.1234567891 came back as
+    0.12345679104328156, and a reference over 2**24 was rounded to an even one."""
+    tokens: List[str] = []
+    for k in range(start, end):
+        if not lines[k].lstrip().startswith("#"):
+            tokens.extend(lines[k].split())
+    try:
+        values = np.array(tokens, dtype=np.float64).reshape(count, dim + 1)
+    except ValueError:
+        for k in range(start, end):
+            for t in lines[k].split() if not lines[k].lstrip().startswith("#") else []:
+                try:
+                    float(t)
+                except ValueError:
+                    raise MeshError(f"{name}: line {k + 1}: expected numbers in Vertices, got {t[:40]!r}") from None
+        raise
+    coords, refs = values[:, :dim].copy(), values[:, dim]
+    bad = np.flatnonzero(~np.isfinite(refs) | (refs != np.round(refs)) | (np.abs(refs) >= 2.0 ** 53))
+    if len(bad):
+        raise MeshError(f"{name}: Vertices: vertex {bad[0] + 1} (as Medit numbers them, from 1) has reference "
+                        f"{tokens[bad[0] * (dim + 1) + dim]!r}: a reference is a whole number ({len(bad)} such "
+                        f"vertex{'' if len(bad) == 1 else 'es'})")
+    return coords, refs.astype(np.int64)
+
+
+def medit_precheck(path: str) -> MeditCheck:
     """Check the sections of an ASCII Medit file before meshio reads it, and name the ones it
     would drop. Every section's count must match the numbers that follow it up to the next
     keyword (a wrong count is refused with the line; meshio reads numbers by count across line
     ends and would misread the rest), a keyword meshio does not know is refused by name, and the
-    sections meshio skips line by line must hold one entry a line. Returns, for the sections that
-    are read past (:data:`_MEDIT_DROPPED`, :data:`_MEDIT_ONE_LINE`), ``"<keyword> (<count>
-    entries, line <n>)"`` (the keyword's line), for the caller's MeshWarning."""
+    sections meshio skips line by line must hold one entry a line. Returns a :class:`MeditCheck`:
+    for the sections that are read past (:data:`_MEDIT_DROPPED`, :data:`_MEDIT_ONE_LINE`),
+    ``"<keyword> (<count> entries, line <n>)"`` (the keyword's line), for the caller's
+    MeshWarning, and the vertices and their references as the text gives them (the caller puts
+    them in place of meshio's, which may be float32: :func:`_medit_vertices`)."""
     name = os.path.basename(path)
     lines = read_text(path).splitlines()
     dim: Optional[int] = None
     skipped: List[str] = []
+    out = MeditCheck(skipped)
     i = 0
     while i < len(lines):
         line = lines[i].strip()
@@ -549,6 +592,8 @@ def medit_precheck(path: str) -> List[str]:
             raise MeshError(f"{name}: line {at + 1}: {kw} announces {_n(count, 'entry', 'entries')} of "
                             f"{_n(per, 'number', 'numbers')} ({count * per}), lines {start + 1}..{i} hold {numbers} "
                             "(a wrong count, or a truncated or malformed entry)")
+        if kw == "Vertices":
+            out.vertices, out.vertex_refs = _medit_vertices(name, lines, start, i, count, per - 1)
         if kw in _MEDIT_BY_LINE:
             for k in range(start, start + count):
                 if len(lines[k].split()) != per:
@@ -558,7 +603,161 @@ def medit_precheck(path: str) -> List[str]:
                                     "drop it")
         if kw in _MEDIT_DROPPED:
             skipped.append(f"{kw} ({_n(count, 'entry', 'entries')}, line {at})")
-    return skipped
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Abaqus (read by meshio)
+# ---------------------------------------------------------------------------------------------
+
+#: Keywords meshio's Abaqus reader (meshio 5.3, ``abaqus/_abaqus.py``) reads: the mesh and its sets.
+_ABAQUS_READ = ("NODE", "ELEMENT", "NSET", "ELSET")
+
+#: Keywords that neither make, copy nor move a node or an element: the model's other definitions,
+#: which palpate does not take from an .inp file (a scene gives the material, the fixed nodes and
+#: the loads). meshio reads past them, and so does palpate, without a word. Compared without
+#: blanks (``*SOLID SECTION`` and ``*SOLIDSECTION`` alike). *TRANSFORM turns the directions of a
+#: node's degrees of freedom (for boundary conditions and loads), not its coordinates; *ORIENTATION
+#: the material's axes. *INSTANCE is checked apart (:func:`abaqus_precheck`).
+_ABAQUS_IGNORED = frozenset(k.replace(" ", "") for k in (
+    # the file, the model's structure
+    "HEADING", "PREPRINT", "PHYSICAL CONSTANTS", "RESTART", "FILE FORMAT", "PART", "END PART", "ASSEMBLY",
+    "END ASSEMBLY", "END INSTANCE", "ORIENTATION", "TRANSFORM",
+    # materials and sections
+    "MATERIAL", "ELASTIC", "HYPERELASTIC", "HYPERFOAM", "VISCOELASTIC", "PLASTIC", "DENSITY", "DAMPING",
+    "EXPANSION", "CONDUCTIVITY", "SPECIFIC HEAT", "USER MATERIAL", "DEPVAR", "SOLID SECTION", "SHELL SECTION",
+    "MEMBRANE SECTION", "BEAM SECTION", "SECTION CONTROLS",
+    # surfaces, constraints and contact
+    "SURFACE", "SURFACE INTERACTION", "SURFACE BEHAVIOR", "FRICTION", "CONTACT", "CONTACT PAIR",
+    "CONTACT INCLUSIONS", "CONTACT PROPERTY ASSIGNMENT", "TIE", "COUPLING", "KINEMATIC", "DISTRIBUTING",
+    "EQUATION", "MPC", "RIGID BODY",
+    # steps, procedures, boundary conditions, loads
+    "STEP", "END STEP", "STATIC", "DYNAMIC", "VISCO", "FREQUENCY", "HEAT TRANSFER", "CONTROLS",
+    "SOLUTION TECHNIQUE", "BOUNDARY", "CLOAD", "DLOAD", "DSLOAD", "AMPLITUDE", "INITIAL CONDITIONS",
+    "TEMPERATURE", "FIELD",
+    # output
+    "OUTPUT", "NODE OUTPUT", "ELEMENT OUTPUT", "CONTACT OUTPUT", "ENERGY OUTPUT", "NODE PRINT", "EL PRINT",
+    "NODE FILE", "EL FILE", "ENERGY PRINT", "ENERGY FILE", "MONITOR", "PRINT", "DIAGNOSTICS"))
+
+#: Keywords that make, copy or move nodes or elements, or change how later lines read, which
+#: meshio skips without a word (the mesh read would not be the model's): refused, with what the
+#: keyword does and what to write instead.
+_ABAQUS_REFUSED = {
+    "NGEN": ("generates nodes along a line or curve", "write the nodes it makes as *NODE lines"),
+    "NFILL": ("fills a region with nodes between two node sets", "write the nodes it makes as *NODE lines"),
+    "NCOPY": ("copies nodes (and may shift, rotate or reflect them)", "write the nodes it makes as *NODE lines"),
+    "NMAP": ("maps (moves) nodes from another coordinate system", "write the nodes' final coordinates"),
+    "SYSTEM": ("sets a local coordinate system in which the *NODE lines after it are given",
+               "write the nodes' global coordinates"),
+    "ELGEN": ("generates elements from a master element", "write the elements it makes as *ELEMENT lines"),
+    "ELCOPY": ("copies elements", "write the elements it makes as *ELEMENT lines"),
+    "INCLUDE": ("reads lines from another file", "paste the included lines in its place"),
+    "PARAMETER": ("defines parameters that later lines use in place of numbers", "write the numbers out"),
+    "IMPORT": ("imports the mesh of an earlier analysis", "export the mesh itself"),
+}
+
+
+def _abaqus_params(line: str) -> Dict[str, str]:
+    """A keyword line's parameters, ``{"NAME": value}`` (uppercase names; ``""`` for a flag)."""
+    out: Dict[str, str] = {}
+    for part in line.split(",")[1:]:
+        key, _, value = part.partition("=")
+        if key.strip():
+            out[key.strip().upper().replace(" ", "")] = value.strip()
+    return out
+
+
+def abaqus_precheck(path: str) -> Tuple[str, List[str]]:
+    """Check the keywords of an Abaqus .inp file before meshio reads it; meshio's reader reads
+    *NODE, *ELEMENT, *NSET and *ELSET and skips every other line without a word. The rule:
+
+    - a keyword of :data:`_ABAQUS_IGNORED` (materials, sections, steps, boundary conditions,
+      loads, output, parts and assembly) is read past, as meshio does;
+    - a keyword that makes, copies or moves nodes or elements, or changes how later lines read
+      (:data:`_ABAQUS_REFUSED`: *NGEN, *NFILL, *NCOPY, *NMAP, *SYSTEM, *ELGEN, *ELCOPY, *INCLUDE,
+      *PARAMETER, *IMPORT), any keyword with an ``INPUT=`` file, *NODE with ``SYSTEM=C`` or
+      ``S``, a second *NODE block (meshio's reader replaces the nodes at each *NODE, and the
+      elements read before would point at the new ones), more than one *INSTANCE (the part
+      placed several times, meshio reads it once), an *INSTANCE with a translation or rotation,
+      a keyword meshio reads written in a way it does not recognise (``* NODE``), and a data line
+      meshio takes for a keyword (a set named ``NODE`` on a *BOUNDARY line) are a MeshError
+      naming the file, the line and the keyword;
+    - any other keyword is read past, and named in the caller's MeshWarning.
+
+    Returns ``(text, unknown)``: the file's text with its comment lines (``**``) blanked, for
+    meshio (its reader ends a *NODE or *ELEMENT block at a comment line and skipped the lines
+    after it as unknown keywords: the rest of the block was lost), and ``"*<keyword> (line
+    <n>)"`` for each keyword not known here."""
+    name = os.path.basename(path)
+    lines = read_text(path).splitlines()
+    unknown: List[str] = []
+    current: Optional[str] = None   # the keyword whose data lines follow
+    node_line = instance_line = 0
+
+    def refuse(i: int, shown: str, why: str) -> MeshError:
+        return MeshError(f"{name}: line {i}: Abaqus keyword *{shown} {why}")
+
+    for i, raw in enumerate(lines, 1):
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("**"):
+            lines[i - 1] = ""
+            continue
+        head = line.partition(",")[0]
+        meshio_kw = head.strip().replace("*", "").upper()   # what meshio's reader compares
+        if not line.startswith("*"):
+            if current == "INSTANCE":
+                try:
+                    moved = any(float(t) != 0.0 for t in line.split(",") if t.strip())
+                except ValueError:
+                    moved = True
+                if moved:
+                    raise refuse(instance_line, "INSTANCE", f"moves its part by a translation or rotation (line {i}: "
+                                 f"{line[:60]!r}), which meshio's reader skips: the nodes would be read where the "
+                                 "part defines them; write the part's nodes where the instance puts them")
+            elif current not in _ABAQUS_READ and meshio_kw in _ABAQUS_READ + ("INCLUDE",):
+                raise MeshError(f"{name}: line {i}: the data line {line[:60]!r} of *{current or '(none)'} begins "
+                                f"with {head.strip()!r}, which meshio's Abaqus reader takes for the keyword "
+                                f"*{meshio_kw} (it does not look for the '*'): rename the set")
+            continue
+        shown = " ".join(head[1:].split()).upper()
+        kw = shown.replace(" ", "")
+        params = _abaqus_params(line)
+        current = kw
+        if kw in _ABAQUS_REFUSED:
+            what, fix = _ABAQUS_REFUSED[kw]
+            meshio_does = ("follows its own way (it merges that file's nodes without their numbers, and opens it "
+                           "without palpate's checks on an input file)" if kw == "INCLUDE" else "skips without a word")
+            raise refuse(i, shown, f"{what}, which meshio's reader {meshio_does} (the mesh read would not be the "
+                         f"model's): palpate refuses it; {fix}")
+        if "INPUT" in params:
+            raise refuse(i, shown, f"reads its data from the file {params['INPUT']!r} (INPUT=), which meshio's "
+                         "reader does not open: palpate reads one file; paste that file's lines in its place")
+        if kw in _ABAQUS_READ + ("INCLUDE",) and meshio_kw != kw:
+            raise refuse(i, shown, f"is written {head.strip()!r}, which meshio's reader does not recognise (it "
+                         f"would skip the block): write it *{kw}")
+        if kw == "NODE":
+            if node_line:
+                raise refuse(i, shown, f"opens a second node block (the first at line {node_line}): meshio's "
+                             "reader replaces the nodes read before at each *NODE, and elements read before "
+                             "would point at the new ones; palpate reads .inp files with one *NODE block (one "
+                             "part): merge the blocks")
+            node_line = i
+            system = params.get("SYSTEM", "R").upper()
+            if system not in ("R", ""):
+                kind = {"C": "cylindrical", "S": "spherical"}.get(system, "non-rectangular")
+                raise refuse(i, shown, f"gives its nodes in {kind} coordinates (SYSTEM={params['SYSTEM']}), which "
+                             "meshio's reader takes for x, y, z: write them in rectangular coordinates")
+        elif kw == "INSTANCE":
+            if instance_line:
+                raise refuse(i, shown, f"places a second instance (the first at line {instance_line}): meshio's "
+                             "reader reads each part's nodes once, where the part defines them; palpate reads "
+                             ".inp files with one instance")
+            instance_line = i
+        elif kw not in _ABAQUS_READ and kw not in _ABAQUS_IGNORED:
+            unknown.append(f"*{shown} (line {i})")
+    return "\n".join(lines) + "\n", unknown
 
 
 def read_gmsh_ascii(path: str, version: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:

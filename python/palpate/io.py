@@ -59,7 +59,7 @@ def _read_meshio(path: str, fmt: str):
         _readers.gmsh_binary_precheck(path)
     # The format's own reader, not meshio.read: that one prints and calls sys.exit(1) on a ReadError.
     reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": _meshio_gmsh,
-              "medit": meshio.medit.read, "abaqus": meshio.abaqus.read}[fmt]
+              "medit": meshio.medit.read, "abaqus": _meshio_abaqus}[fmt]
     m = _meshio_read(reader, path, name, fmt)
     return _meshio_arrays(m, name, fmt)
 
@@ -120,13 +120,24 @@ def _meshio_read(reader, path: str, name: str, fmt: str, warn_skipped: bool = Tr
     """``reader(path)`` with meshio's stderr warnings refused (:func:`_meshio_warnings_refused`)
     and its exceptions as MeshErrors. A Medit file's sections are checked first
     (:func:`_readers.medit_precheck`); those meshio reads past are named in one MeshWarning
-    (``warn_skipped``) after a successful read."""
-    skipped = _readers.medit_precheck(path) if fmt == "medit" else []
+    (``warn_skipped``) after a successful read, and its vertices and their references are the
+    precheck's, parsed from the text in double precision (meshio's are float32 under
+    ``MeshVersionFormatted 1``). An Abaqus file's keywords are checked first
+    (:func:`_readers.abaqus_precheck`: those that would change the mesh are refused), meshio
+    reads its text without the comment lines, and the keywords not known are named in one
+    MeshWarning (``warn_skipped``)."""
+    medit = _readers.medit_precheck(path) if fmt == "medit" else None
+    skipped = medit.skipped if medit is not None else []
+    unknown: List[str] = []
+    read = reader
+    if fmt == "abaqus":
+        text, unknown = _readers.abaqus_precheck(path)
+        read = lambda _path: reader(_path, text)  # noqa: E731
     notes: List[str] = []
     try:
         with warnings.catch_warnings(), _meshio_warnings_refused(name, fmt, [s.split()[0] for s in skipped], notes):
             warnings.simplefilter("ignore")
-            mesh = reader(path)
+            mesh = read(path)
     except MeshError:
         raise
     except MemoryError:
@@ -137,6 +148,13 @@ def _meshio_read(reader, path: str, name: str, fmt: str, warn_skipped: bool = Tr
     except (Exception, SystemExit) as e:  # ReadError, but also ValueError, KeyError, XML errors ...
         reason = str(e).strip() or "malformed or truncated file"
         raise MeshError(f"{name}: cannot read as {fmt.upper()} ({type(e).__name__}: {reason})") from None
+    if medit is not None and medit.vertices is not None:
+        _medit_exact_vertices(mesh, medit, name)
+    if unknown and warn_skipped:
+        warnings.warn(f"{name}: Abaqus keywords palpate does not know, read past: {', '.join(unknown)}; palpate takes "
+                      "the mesh from *NODE, *ELEMENT, *NSET and *ELSET and reads past the model's other definitions "
+                      "(materials, sections, steps, loads, output): if one of these makes, copies or moves nodes or "
+                      "elements, the mesh read is not the model's", MeshWarning, stacklevel=2)
     if skipped and warn_skipped:
         warnings.warn(f"{name}: Medit sections read past, not kept: {', '.join(skipped)}; they hold no vertex, cell "
                       "or reference (feature marks, normals, tangents, geometry links), so the mesh and its sets "
@@ -146,19 +164,88 @@ def _meshio_read(reader, path: str, name: str, fmt: str, warn_skipped: bool = Tr
     return mesh
 
 
+def _medit_exact_vertices(mesh, medit: "_readers.MeditCheck", name: str) -> None:
+    """Put the Medit precheck's vertices (float64, from the text) and references (int64) in
+    place of meshio's: under ``MeshVersionFormatted 0`` or ``1`` meshio reads an ASCII file's
+    vertex lines as float32 (0.1234567891 came back as 0.12345679104328156, a reference over
+    2**24 rounded to an even one)."""
+    points = np.asarray(mesh.points)
+    if points.shape != medit.vertices.shape:
+        raise MeshError(f"{name}: meshio read vertices of shape {points.shape}, the Vertices section holds "
+                        f"{medit.vertices.shape}: not read")
+    mesh.points = medit.vertices
+    mesh.point_data["medit:ref"] = medit.vertex_refs
+
+
+def _meshio_abaqus(path: str, text: str):
+    """meshio's Abaqus reader on ``text`` (:func:`_readers.abaqus_precheck`: the file with its
+    comment lines blanked, its keywords checked)."""
+    import io as _io
+
+    from meshio.abaqus import _abaqus
+
+    return _abaqus.read_buffer(_io.StringIO(text))
+
+
+def _gmsh40_read_nodes(f, is_ascii: bool):
+    """meshio's MSH 4.0 ``_read_nodes`` (meshio 5.3, ``gmsh/_gmsh40.py``), with the parametric
+    coordinates a node of a parametric entity block carries after x y z (``u [v [w]]``, the
+    entity's dimension of them) read past: meshio's own read ``tag x y z`` only and failed on
+    them (ASCII: a ValueError; binary: a record of the wrong width). Returns ``(points, tags)`` as
+    meshio's does. The file was read by palpate's strict 4.0 reader first (``read_mesh_arrays``),
+    so its counts and tags are known good here."""
+    from meshio.gmsh.common import _fast_forward_to_end_block
+
+    if is_ascii:
+        n_blocks, n_nodes = (int(k) for k in f.readline().decode().split())
+        points = np.empty((n_nodes, 3), dtype=float)
+        tags = np.empty(n_nodes, dtype=int)
+        idx = 0
+        for _ in range(n_blocks):
+            _, _, _, count = map(int, f.readline().decode().split())
+            for _ in range(count):
+                tok = f.readline().decode().split()
+                tags[idx], points[idx] = int(tok[0]), [float(x) for x in tok[1:4]]
+                idx += 1
+    else:
+        n_blocks, _ = np.fromfile(f, count=2, dtype=np.dtype("L"))
+        all_points, all_tags = [], []
+        for _ in range(int(n_blocks)):
+            _, dim, parametric = (int(x) for x in np.fromfile(f, count=3, dtype=np.dtype("i")))
+            count = int(np.fromfile(f, count=1, dtype=np.dtype("L"))[0])
+            per = 3 + (dim if parametric else 0)
+            data = np.fromfile(f, count=count, dtype=[("tag", np.dtype("i")), ("x", np.dtype("d"), (per,))])
+            all_tags.append(data["tag"])
+            all_points.append(data["x"].reshape(count, per)[:, :3])
+        tags = np.concatenate(all_tags) if all_tags else np.zeros(0, dtype=int)
+        points = np.concatenate(all_points) if all_points else np.zeros((0, 3))
+        if f.readline().decode() != "\n":
+            raise ValueError("no newline after the binary $Nodes records")
+    _fast_forward_to_end_block(f, "Nodes")
+    return points, tags
+
+
 def _meshio_gmsh(path: str):
     """meshio's gmsh reader, with a ``4`` or ``4.0`` $MeshFormat read as MSH 4.0: gmsh 4.0 writes
-    ``4`` (and reads it as 4.0), where ``meshio.gmsh.read`` takes it for 4.1."""
+    ``4`` (and reads it as 4.0), where ``meshio.gmsh.read`` takes it for 4.1. Its 4.0 reader runs
+    with :func:`_gmsh40_read_nodes` in place of its node reader, which failed on parametric nodes
+    (the physical groups of such a file were not read): a swap of the module's attribute for the
+    read's duration, as :func:`_meshio_warnings_refused` swaps ``warn``."""
     import meshio
     from meshio.gmsh import _gmsh40, main
 
     version, _ = _readers.gmsh_format(path)
     if _readers.gmsh_layout(os.path.basename(path), version) != "4.0":
         return meshio.gmsh.read(path)
-    with open(path, "rb") as f:
-        f.readline()   # $MeshFormat, the first line (gmsh_format)
-        _, data_size, is_ascii = main._read_header(f)
-        return _gmsh40.read_buffer(f, is_ascii, data_size)
+    saved = _gmsh40._read_nodes
+    _gmsh40._read_nodes = _gmsh40_read_nodes
+    try:
+        with open(path, "rb") as f:
+            f.readline()   # $MeshFormat, the first line (gmsh_format)
+            _, data_size, is_ascii = main._read_header(f)
+            return _gmsh40.read_buffer(f, is_ascii, data_size)
+    finally:
+        _gmsh40._read_nodes = saved
 
 
 def _meshio_arrays(m, name: str, fmt: str):
@@ -272,12 +359,12 @@ def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.
 
     gmsh (``.msh``): one set per physical group, named by ``$PhysicalNames`` (``"physical <tag>"``
     if unnamed): its tets, and the nodes of all its elements (e.g. a clamped face's triangles).
-    Medit (``.mesh``): one set per element reference, ``"ref <k>"`` (vertex references make no
-    set). Abaqus (``.inp``) and any format meshio gives point / cell sets for: those, by name. The
-    file is read by :func:`read_mesh_arrays` first (its errors and warnings), then by meshio for
-    the sets. Raises :class:`MeshError` for an unreadable file, one that meshio would read with a
-    loss it reports only on stderr, or one whose tets meshio orders differently from palpate's
-    reader.
+    Medit (``.mesh``): one set per element reference, ``"ref <k>"``, and one node set per non-zero
+    vertex reference, ``"vertex ref <k>"``. Abaqus (``.inp``) and any format meshio gives point /
+    cell sets for: those, by name. The file is read by :func:`read_mesh_arrays` first (its errors
+    and warnings), then by meshio for the sets. Raises :class:`MeshError` for an unreadable file,
+    one that meshio would read with a loss it reports only on stderr, or one whose tets meshio
+    orders differently from palpate's reader.
     """
     import meshio
 
@@ -291,7 +378,7 @@ def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.
         raise MeshError(f"{name}: no such file ({path})")
     _, tets, _, _ = read_mesh_arrays(path)   # palpate's reader first: its errors name the element
     reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": _meshio_gmsh,
-              "medit": meshio.medit.read, "abaqus": meshio.abaqus.read}[fmt]
+              "medit": meshio.medit.read, "abaqus": _meshio_abaqus}[fmt]
     m = _meshio_read(reader, path, name, fmt, warn_skipped=False)   # read_mesh_arrays warned
     tet_blocks = [k for k, cb in enumerate(m.cells) if cb.type == "tetra"]
     mesh_tets = np.concatenate([np.asarray(m.cells[k].data, dtype=np.int64) for k in tet_blocks]) if tet_blocks \
@@ -313,6 +400,14 @@ def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.
             tet_sets.setdefault(label, []).extend((offsets[k] + rows).tolist())
 
     tags = {"gmsh": "gmsh:physical", "medit": "medit:ref"}.get(fmt)
+    if fmt == "medit":
+        # Vertex references (the Vertices section's last column; 0 is "none"), as the precheck
+        # parsed them: node sets of their own, "vertex ref <k>", apart from the element
+        # references' "ref <k>" (a Medit file numbers the two independently: mmg keeps a boundary
+        # vertex's reference, which need not be its faces').
+        refs = np.asarray(m.point_data.get("medit:ref", np.zeros(0)), dtype=np.int64)
+        for ref in np.unique(refs[refs != 0]):
+            node_sets[f"vertex ref {int(ref)}"] = set(np.flatnonzero(refs == ref).tolist())
     if tags and tags in m.cell_data:
         names = {int(v[0]): n for n, v in (m.field_data or {}).items()}
         for k, values in enumerate(m.cell_data[tags]):
@@ -354,7 +449,12 @@ def load_mesh(path: PathLike, unit: str = "m") -> TetMesh:
         reads it: a section that holds no vertex, cell or reference (Corners, Ridges,
         RequiredVertices, Normals, Tangents, ...) is read past with a :class:`palpate.MeshWarning`
         naming it; a keyword meshio cannot read past, or a count that does not match its data, is a
-        MeshError naming the keyword and line.
+        MeshError naming the keyword and line; the vertices are read in double precision whatever
+        the file's MeshVersionFormatted. An Abaqus file's keywords are checked before meshio reads
+        it: the mesh is taken from *NODE, *ELEMENT, *NSET and *ELSET; one that makes, copies or
+        moves nodes or elements, which meshio would skip (*NGEN, *ELGEN, *NCOPY, *NFILL, *INCLUDE,
+        *PARAMETER, *SYSTEM, a second *NODE block, a placed *INSTANCE, ...), is a MeshError naming
+        the keyword and line; a keyword palpate does not know is read past with a MeshWarning.
     unit:
         Length unit of the file's coordinates: ``"m"``, ``"cm"`` or ``"mm"``. Points are scaled to
         metres.
@@ -367,7 +467,8 @@ def load_mesh(path: PathLike, unit: str = "m") -> TetMesh:
     Warns
     -----
     MeshWarning
-        Inverted tets reoriented; Medit sections read past and not kept (named with their line).
+        Inverted tets reoriented; Medit sections read past and not kept (named with their line);
+        Abaqus keywords palpate does not know (named with their line).
 
     Raises
     ------

@@ -4,6 +4,7 @@ Abaqus sets come back as named node / tet sets matching load_mesh's numbering; .
 What a wrong implementation would do: drop the groups, number the sets in meshio's block order
 instead of palpate's tet order, or leave out the nodes of a group's lower-dimensional elements (a
 clamped face given as triangles): each is compared against the sets written here."""
+import struct
 import warnings
 
 import meshio
@@ -183,3 +184,210 @@ def test_gmsh22_partition_tags_warn_in_read_mesh_sets(tmp_path, capfd):
         nodes, tets = palpate.read_mesh_sets(tmp_path / "part.msh")
     np.testing.assert_array_equal(tets["physical 7"], [0])
     assert "tag data" not in capfd.readouterr().err
+
+
+
+# The reader leftovers of issue 35: Medit vertices in double precision and their references as node
+# sets, the physical groups of an MSH 4.0 file with parametric nodes, and the Abaqus keywords
+# meshio skips without a word.
+
+def test_medit_version_1_vertices_keep_double_precision(tmp_path):
+    """MeshVersionFormatted 1 (as mmg and TetGen write): meshio reads the vertex lines as float32,
+    0.1234567891 came back as 0.12345679104328156 (7 digits) and a reference 16777217 as
+    16777216. palpate parses them from the text in double precision, whatever the version."""
+    xyz = ["0.1234567891 0.0000000001 0", "1.0000000003 0 0", "0 0.9876543219 0", "0 0 1.2345678912345"]
+    text = ("MeshVersionFormatted 1\nDimension 3\nVertices\n4\n" + "".join(f"{v} {r}\n" for v, r in zip(
+        xyz, (0, 16777217, 0, 0))) + "Tetrahedra\n1\n1 2 3 4 1\nEnd\n")
+    want = np.array([[float(t) for t in v.split()] for v in xyz])
+    for version in ("1", "2"):
+        path = tmp_path / f"v{version}.mesh"
+        path.write_text(text.replace("MeshVersionFormatted 1", f"MeshVersionFormatted {version}"))
+        np.testing.assert_array_equal(palpate.load_mesh(path).points, want, err_msg=version)
+        np.testing.assert_array_equal(palpate.io.read_mesh_arrays(path)[0], want)
+        nodes, _ = palpate.read_mesh_sets(path)
+        np.testing.assert_array_equal(nodes["vertex ref 16777217"], [1])
+
+
+def test_medit_vertex_references_make_node_sets(tmp_path):
+    """The Vertices section's references (its last column) are node sets "vertex ref <k>", apart
+    from the element references' "ref <k>" (Medit numbers the two independently); 0 is no
+    reference. They made no set before."""
+    path = _medit(tmp_path, "v.mesh")   # vertex references 1 1 1 1 2; triangle ref 4, tets 7 and 8
+    nodes, tets = palpate.read_mesh_sets(path)
+    assert set(nodes) == {"vertex ref 1", "vertex ref 2", "ref 4", "ref 7", "ref 8"}
+    np.testing.assert_array_equal(nodes["vertex ref 1"], [0, 1, 2, 3])
+    np.testing.assert_array_equal(nodes["vertex ref 2"], [4])
+    np.testing.assert_array_equal(nodes["ref 4"], [0, 1, 2])   # the triangle's, as before
+    assert set(tets) == {"ref 7", "ref 8"}
+    zero = tmp_path / "zero.mesh"
+    zero.write_text(path.read_text().replace("0 0 0 1\n", "0 0 0 0\n"))
+    np.testing.assert_array_equal(palpate.read_mesh_sets(zero)[0]["vertex ref 1"], [1, 2, 3])
+    bad = tmp_path / "frac.mesh"
+    bad.write_text(path.read_text().replace("1 1 1 2\n", "1 1 1 2.5\n"))
+    with pytest.raises(palpate.MeshError, match=r"frac.mesh: Vertices: vertex 5 \(as Medit numbers them, from 1\) has "
+                       r"reference '2.5': a reference is a whole number"):
+        palpate.load_mesh(bad)
+
+
+# An MSH 4.0 mesh (gmsh 4.0 writes its version "4") whose boundary triangle's nodes lie on a
+# parametric surface (u v after x y z), with its physical groups: "clamp" (the triangle, on
+# surface 5) and "body" (the two tets, in volume 1).
+_MSH40_PARAMETRIC = """$MeshFormat
+4 0 8
+$EndMeshFormat
+$PhysicalNames
+2
+2 1 "clamp"
+3 2 "body"
+$EndPhysicalNames
+$Entities
+0 0 1 1
+5 0 0 0 1 1 0 1 1 0
+1 0 0 0 1 1 1 1 2 1 5
+$EndEntities
+$Nodes
+2 5
+5 2 1 3
+10 0 0 0 0 0
+20 1 0 0 1 0
+30 0 1 0 0 1
+1 3 0 2
+40 0 0 1
+50 1 1 1
+$EndNodes
+$Elements
+2 3
+5 2 2 1
+1 10 20 30
+1 3 4 2
+11 10 20 30 40
+12 50 20 40 30
+$EndElements
+"""
+
+
+def _msh40_parametric_binary():
+    """The same file in binary MSH 4.0 (counts unsigned long, tags int, the surface's nodes with u v)."""
+    out = b"$MeshFormat\n4 1 8\n" + struct.pack("<i", 1) + b"\n$EndMeshFormat\n"
+    out += b'$PhysicalNames\n2\n2 1 "clamp"\n3 2 "body"\n$EndPhysicalNames\n'
+    out += b"$Entities\n" + struct.pack("<4Q", 0, 0, 1, 1)
+    out += struct.pack("<i6dQiQ", 5, 0, 0, 0, 1, 1, 0, 1, 1, 0)
+    out += struct.pack("<i6dQiQi", 1, 0, 0, 0, 1, 1, 1, 1, 2, 1, 5)
+    out += b"\n$EndEntities\n$Nodes\n" + struct.pack("<2Q", 2, 5) + struct.pack("<3iQ", 5, 2, 1, 3)
+    for tag, xyz, uv in ((10, (0, 0, 0), (0, 0)), (20, (1, 0, 0), (1, 0)), (30, (0, 1, 0), (0, 1))):
+        out += struct.pack("<i5d", tag, *xyz, *uv)
+    out += struct.pack("<3iQ", 1, 3, 0, 2) + struct.pack("<i3d", 40, 0, 0, 1) + struct.pack("<i3d", 50, 1, 1, 1)
+    out += b"\n$EndNodes\n$Elements\n" + struct.pack("<2Q", 2, 3)
+    out += struct.pack("<3iQ", 5, 2, 2, 1) + struct.pack("<4i", 1, 10, 20, 30)
+    out += struct.pack("<3iQ", 1, 3, 4, 2) + struct.pack("<5i", 11, 10, 20, 30, 40)
+    out += struct.pack("<5i", 12, 50, 20, 40, 30)
+    return out + b"\n$EndElements\n"
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_gmsh40_parametric_nodes_sets_are_read(tmp_path, binary):
+    """load_mesh read such a file; its sets were a MeshError (meshio's 4.0 node reader expects
+    'tag x y z' and failed on the u v)."""
+    path = tmp_path / "param.msh"
+    path.write_bytes(_msh40_parametric_binary() if binary else _MSH40_PARAMETRIC.encode())
+    np.testing.assert_array_equal(palpate.load_mesh(path).tets, [[0, 1, 2, 3], [4, 1, 3, 2]])
+    nodes, tets = palpate.read_mesh_sets(path)
+    assert set(nodes) == {"clamp", "body"} and set(tets) == {"body"}
+    np.testing.assert_array_equal(nodes["clamp"], [0, 1, 2])
+    np.testing.assert_array_equal(nodes["body"], [0, 1, 2, 3, 4])
+    np.testing.assert_array_equal(tets["body"], [0, 1])
+
+
+# Abaqus: meshio's reader takes *NODE, *ELEMENT, *NSET and *ELSET and skips every other line
+# without a word, whatever it does to the mesh.
+_INP_NODES = "".join(f"{i + 1}, {x}, {y}, {z}\n" for i, (x, y, z) in enumerate(
+    [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1)]))
+_INP_MESH = "*NODE\n" + _INP_NODES + "*ELEMENT, TYPE=C3D4, ELSET=ALL\n1, 1, 2, 3, 4\n2, 5, 2, 4, 3\n"
+
+
+def _inp(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_abaqus_model_definitions_are_read_past_quietly(tmp_path):
+    """What an exported model holds besides its mesh (heading, parts and one unplaced instance,
+    materials, sections, steps, boundary conditions, loads, output, comments): no error, no
+    warning, the mesh and its sets as written."""
+    text = ("*HEADING\nA bar\n** exported\n*PART, NAME=P\n" + _INP_MESH + "*NSET, NSET=BASE\n1, 2, 3\n"
+            "*SOLID SECTION, ELSET=ALL, MATERIAL=M\n,\n*END PART\n*ASSEMBLY, NAME=A\n*INSTANCE, NAME=I, PART=P\n"
+            "*END INSTANCE\n*END ASSEMBLY\n*MATERIAL, NAME=M\n*DENSITY\n1000.\n*ELASTIC\n3e4, 0.4\n"
+            "*TRANSFORM, NSET=BASE\n1., 0., 0., 0., 1., 0.\n*STEP\n*STATIC\n*BOUNDARY\nBASE, 1, 3\n"
+            "*CLOAD\n5, 3, -0.1\n*OUTPUT, FIELD\n*NODE OUTPUT\nU\n*END STEP\n")
+    path = _inp(tmp_path, "model.inp", text)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = palpate.load_mesh(path)
+        nodes, tets = palpate.read_mesh_sets(path)
+    np.testing.assert_array_equal(m.tets, [[0, 1, 2, 3], [4, 1, 3, 2]])
+    np.testing.assert_array_equal(nodes["BASE"], [0, 1, 2])
+    np.testing.assert_array_equal(tets["ALL"], [0, 1])
+
+
+def test_abaqus_comment_inside_a_block_keeps_the_rest(tmp_path, bar):
+    """meshio's reader ended an *ELEMENT block at a comment line and skipped the lines after it as
+    unknown keywords: the tets after the comment were lost (the mesh loaded smaller, or failed on
+    a node no tet used). Comment lines are blanked before meshio reads."""
+    pts, tets, _, _ = bar
+    lines = [f"{k + 1}, " + ", ".join(str(i + 1) for i in t) for k, t in enumerate(tets)]
+    lines.insert(len(lines) - 3, "** the last three")
+    text = ("*NODE\n" + "".join(f"{i + 1}, {x!r}, {y!r}, {z!r}\n" for i, (x, y, z) in enumerate(pts.tolist()))
+            + "*ELEMENT, TYPE=C3D4\n" + "\n".join(lines) + "\n")
+    m = palpate.load_mesh(_inp(tmp_path, "c.inp", text))
+    np.testing.assert_array_equal(m.tets, tets)
+
+
+@pytest.mark.parametrize("text, message", [
+    (_INP_MESH + "*ELGEN, ELSET=ALL\n1, 3, 1, 1\n",
+     r"g.inp: line 10: Abaqus keyword \*ELGEN generates elements from a master element, which meshio's reader skips "
+     r"without a word \(the mesh read would not be the model's\): palpate refuses it; write the elements it makes"),
+    ("*NODE\n" + _INP_NODES + "*NGEN\n1, 5, 1\n*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n2, 5, 2, 4, 3\n",
+     r"g.inp: line 7: Abaqus keyword \*NGEN generates nodes along a line or curve, which meshio's reader skips"),
+    (_INP_MESH + "*NCOPY, OLD SET=A, NEW SET=B, CHANGE NUMBER=10, SHIFT\n0, 0, 1\n",
+     r"line 10: .*\*NCOPY copies nodes"),
+    (_INP_MESH + "*NFILL\nA, B, 4, 1\n", r"line 10: .*\*NFILL fills a region with nodes"),
+    ("*SYSTEM\n0, 0, 0, 1, 0, 0\n" + _INP_MESH, r"line 1: .*\*SYSTEM sets a local coordinate system"),
+    ("*PARAMETER\nx = 1.0\n" + _INP_MESH, r"line 1: .*\*PARAMETER defines parameters that later lines use"),
+    (_INP_MESH + "*INCLUDE, INPUT=more.inp\n",
+     r"line 10: Abaqus keyword \*INCLUDE reads lines from another file, which meshio's reader follows its own way"),
+    (_INP_MESH.replace("*NODE\n", "*NODE, SYSTEM=C\n"),
+     r"line 1: Abaqus keyword \*NODE gives its nodes in cylindrical coordinates \(SYSTEM=C\)"),
+    (_INP_MESH.replace("*NODE\n", "*NODE, INPUT=nodes.txt\n"),
+     r"line 1: Abaqus keyword \*NODE reads its data from the file 'nodes.txt' \(INPUT=\)"),
+    ("*NODE\n1, 0, 0, 0\n2, 1, 0, 0\n3, 0, 1, 0\n4, 0, 0, 1\n*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n*NODE\n5, 1, 1, 1\n",
+     r"line 8: Abaqus keyword \*NODE opens a second node block \(the first at line 1\): meshio's reader replaces"),
+    ("*PART, NAME=P\n" + _INP_MESH + "*END PART\n*ASSEMBLY, NAME=A\n*INSTANCE, NAME=I, PART=P\n0.5, 0., 0.\n"
+     "*END INSTANCE\n*END ASSEMBLY\n",
+     r"line 13: Abaqus keyword \*INSTANCE moves its part by a translation or rotation \(line 14: '0.5, 0., 0.'\)"),
+    ("*PART, NAME=P\n" + _INP_MESH + "*END PART\n*ASSEMBLY, NAME=A\n*INSTANCE, NAME=I, PART=P\n*END INSTANCE\n"
+     "*INSTANCE, NAME=J, PART=P\n*END INSTANCE\n*END ASSEMBLY\n",
+     r"line 15: Abaqus keyword \*INSTANCE places a second instance \(the first at line 13\)"),
+    (_INP_MESH + "*NSET, NSET=NODE\n1\n*BOUNDARY\nNODE, 1, 3\n",
+     r"line 13: the data line 'NODE, 1, 3' of \*BOUNDARY begins with 'NODE', which meshio's Abaqus reader takes for "
+     r"the keyword \*NODE"),
+    (_INP_MESH.replace("*NODE\n", "* NODE\n"), r"line 1: Abaqus keyword \*NODE is written '\* NODE', which meshio's"),
+])
+def test_abaqus_keywords_that_change_the_mesh_are_refused(tmp_path, text, message):
+    """Each of these loaded (or failed on an unrelated symptom) with meshio skipping the keyword:
+    elements or nodes generated, copied or moved, a local or cylindrical coordinate system,
+    parameters, an included file, a second node block that replaced the first, an instance moved
+    or placed twice. Each is now a MeshError naming the file, the line and the keyword."""
+    path = _inp(tmp_path, "g.inp", text)
+    for call in (palpate.load_mesh, palpate.read_mesh_sets):
+        with pytest.raises(palpate.MeshError, match=message):
+            call(path)
+
+
+def test_abaqus_unknown_keyword_is_named_in_a_warning(tmp_path):
+    path = _inp(tmp_path, "u.inp", "*HEADING\nbar\n" + _INP_MESH + "*HOURGLASS STIFFNESS\n1.0\n*FOO, BAR=1\n")
+    with pytest.warns(palpate.MeshWarning, match=r"u.inp: Abaqus keywords palpate does not know, read past: "
+                      r"\*HOURGLASS STIFFNESS \(line 12\), \*FOO \(line 14\); palpate takes the mesh from \*NODE, "
+                      r"\*ELEMENT, \*NSET and \*ELSET") as rec:
+        m = palpate.load_mesh(path)
+    assert len(rec) == 1 and m.n_tets == 2
