@@ -52,4 +52,4 @@ pub use integrate::{step, Integrator, StepReport};
 pub use material::{Law, Material};
 pub use math::{Mat3, Real, Vec3};
 pub use mesh::TetMesh;
-pub use fem::{Model, ModelBuilder, State, StepMemory, Workspace};
+pub use fem::{Model, ModelBuilder, Order, State, StepMemory, Workspace};

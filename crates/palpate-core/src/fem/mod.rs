@@ -9,9 +9,11 @@ pub(crate) mod model;
 pub mod small_strain;
 mod state;
 pub mod tangent;
+pub mod tet10;
 pub mod tet4;
 pub mod viscous;
 
 pub use model::{ElementFields, Model, ModelBuilder};
+pub use small_strain::Order;
 pub use state::{State, StepMemory, Workspace};
 pub use tet4::TetRest;

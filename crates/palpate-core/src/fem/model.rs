@@ -1,6 +1,8 @@
 //! The immutable compiled model of a tetrahedral body.
 
 use crate::error::{ModelError, SolveError};
+use crate::fem::small_strain::Order;
+use crate::fem::tet10::{self, Tet10Rest, TET10_EDGES};
 use crate::fem::tet4::{self, TetRest};
 use crate::integrate::{Filter, Integrator};
 use crate::linalg::{ordering, BlockPattern, Ldl};
@@ -19,15 +21,25 @@ pub struct ModelBuilder {
     gravity: Vec3,
     integrator: Integrator,
     attached: Vec<f64>,
+    order: Order,
 }
 
 impl ModelBuilder {
     /// A body of `mesh` (positions in \[m\]) made of `material`; no fixed nodes, no gravity,
     /// the default integrator (quasi-Newton backward Euler).
     pub fn new(mesh: TetMesh, material: Material) -> ModelBuilder {
-        ModelBuilder { mesh, material, fixed: Vec::new(), gravity: Vec3::zeros(), integrator: Integrator::default(), attached: Vec::new() }
+        ModelBuilder { mesh, material, fixed: Vec::new(), gravity: Vec3::zeros(), integrator: Integrator::default(), attached: Vec::new(), order: Order::Linear }
     }
-    /// Nodes held at their rest position (indices into the mesh's nodes).
+    /// The element order (default linear): [`Order::Quadratic`] makes each tet a 10-node element
+    /// (`fem/tet10.rs`) whose edge nodes follow the mesh's vertices in the body's node arrays, one
+    /// per edge in the order of [`Model::edges`], at the edges' midpoints at rest. Quadratic tets
+    /// bend where linear ones lock (a wall one element across); each costs about ten linear ones.
+    pub fn order(mut self, order: Order) -> Self {
+        self.order = order;
+        self
+    }
+    /// Nodes held at their rest position (indices into the body's nodes: with quadratic elements
+    /// an edge node is held too when both its vertices are).
     pub fn fixed_nodes(mut self, nodes: Vec<usize>) -> Self {
         self.fixed = nodes;
         self
@@ -53,8 +65,22 @@ impl ModelBuilder {
     /// pattern over the free nodes, the rest Jacobians, a fill-reducing order and the symbolic
     /// factorisation used by the implicit integrators and the static solve.
     pub fn build(self) -> Result<Model, ModelError> {
-        let ModelBuilder { mesh, material, fixed, gravity, integrator, attached } = self;
-        let n = mesh.n_nodes();
+        let ModelBuilder { mesh, material, fixed, gravity, integrator, attached, order } = self;
+        if order == Order::Quadratic && matches!(integrator, Integrator::SemiImplicit { .. }) {
+            return Err(ModelError::Parameter {
+                name: "integrator",
+                value: f64::NAN,
+                reason: "the paper's semi-implicit scheme is for linear tets (its per-node filter is not stable on quadratic ones): use a backward Euler integrator",
+            });
+        }
+        let (rest_x, quadratic) = match order {
+            Order::Linear => (mesh.points().to_vec(), None),
+            Order::Quadratic => {
+                let (x, q) = Quadratic::new(&mesh);
+                (x, Some(q))
+            }
+        };
+        let n = rest_x.len();
         if !is_finite3(&gravity) {
             return Err(ModelError::Gravity(gravity.x, gravity.y, gravity.z));
         }
@@ -66,14 +92,29 @@ impl ModelBuilder {
             }
             is_fixed[i] = true;
         }
+        if let Some(q) = &quadratic {
+            let nv = mesh.n_nodes();
+            for (k, [a, b]) in q.edges.iter().enumerate() {
+                is_fixed[nv + k] |= is_fixed[*a] && is_fixed[*b];
+            }
+        }
 
-        // Element rest data and lumped masses: each tet gives a quarter of rho V to each node.
-        let pts = mesh.points();
-        let rest: Vec<TetRest> = mesh.tets().iter().map(|t| TetRest::new(&t.map(|i| pts[i]))).collect();
+        // Element rest data and lumped masses: each linear tet gives a quarter of rho V to each
+        // node, a quadratic one its HRZ shares (`fem/tet10.rs`).
+        let pts = &rest_x;
+        let rest: Vec<TetRest> = if quadratic.is_some() { Vec::new() } else { mesh.tets().iter().map(|t| TetRest::new(&t.map(|i| pts[i]))).collect() };
         let mut mass = vec![0.0; n];
         for (t, r) in mesh.tets().iter().zip(&rest) {
             for &i in t {
                 mass[i] += 0.25 * material.density() * r.volume;
+            }
+        }
+        if let Some(q) = &quadratic {
+            for (e, r) in q.elements.iter().zip(&q.rest) {
+                let m = material.density() * r.volume();
+                for (a, &i) in e.iter().enumerate() {
+                    mass[i] += m * if a < 4 { tet10::VERTEX_MASS } else { tet10::EDGE_MASS };
+                }
             }
         }
         if !attached.is_empty() {
@@ -97,7 +138,11 @@ impl ModelBuilder {
         }
         let nf = free_nodes.len();
         let mut adj: Vec<Vec<usize>> = vec![Vec::new(); nf];
-        for t in mesh.tets() {
+        let element_nodes: Box<dyn Iterator<Item = &[usize]>> = match &quadratic {
+            None => Box::new(mesh.tets().iter().map(|t| &t[..])),
+            Some(q) => Box::new(q.elements.iter().map(|e| &e[..])),
+        };
+        for t in element_nodes {
             for &a in t {
                 for &b in t {
                     let (fa, fb) = (node_to_free[a], node_to_free[b]);
@@ -112,23 +157,15 @@ impl ModelBuilder {
             a.dedup();
         }
         let pattern = BlockPattern::from_adjacency(&adj);
-        let tet_blocks: Vec<[usize; 16]> = mesh
-            .tets()
+        let mut quadratic = quadratic;
+        if let Some(q) = quadratic.as_mut() {
+            q.blocks = q.elements.iter().map(|e| element_blocks(e, &node_to_free, &pattern)).collect();
+        }
+        let tet_blocks: Vec<[usize; 16]> = rest
             .iter()
-            .map(|t| {
-                let mut b = [NONE; 16];
-                for a in 0..4 {
-                    for c in 0..4 {
-                        let (fa, fc) = (node_to_free[t[a]], node_to_free[t[c]]);
-                        if fa != NONE && fc != NONE {
-                            b[4 * a + c] = pattern.find(fa, fc).expect("pattern holds every tet pair");
-                        }
-                    }
-                }
-                b
-            })
+            .zip(mesh.tets())
+            .map(|(_, t)| element_blocks(t, &node_to_free, &pattern))
             .collect();
-
         // Rest Jacobians: K0 = df/dx and D0 = df/dv at rest, on the free pattern, and every
         // node's diagonal block (the paper's per-node J_F of eq. 34, "neighbours fixed").
         let mut k0 = vec![Mat3::zeros(); pattern.nnz()];
@@ -136,22 +173,13 @@ impl ModelBuilder {
         let mut node_k0 = vec![Mat3::zeros(); n];
         let mut node_d0 = vec![Mat3::zeros(); n];
         for ((t, r), blocks) in mesh.tets().iter().zip(&rest).zip(&tet_blocks) {
-            let x = t.map(|i| pts[i]);
-            let (k, d) = tet4::jacobians(&x, r, &material);
-            for a in 0..4 {
-                node_k0[t[a]] += k[a][a];
-                if let Some(d) = &d {
-                    node_d0[t[a]] += d[a][a];
-                }
-                for c in 0..4 {
-                    let bi = blocks[4 * a + c];
-                    if bi != NONE {
-                        k0[bi] += k[a][c];
-                        if let Some(d) = &d {
-                            d0[bi] += d[a][c];
-                        }
-                    }
-                }
+            let (k, d) = tet4::jacobians(&t.map(|i| pts[i]), r, &material);
+            add_rest_jacobians(t, blocks, |a, c| k[a][c], d.as_ref().map(|d| move |a: usize, c: usize| d[a][c]), [&mut k0, &mut d0, &mut node_k0, &mut node_d0]);
+        }
+        if let Some(q) = &quadratic {
+            for ((e, r), blocks) in q.elements.iter().zip(&q.rest).zip(&q.blocks) {
+                let (k, d) = tet10::jacobians(&e.map(|i| pts[i]), r, &material);
+                add_rest_jacobians(e, blocks, |a, c| k[a][c], d.as_ref().map(|d| move |a: usize, c: usize| d[a][c]), [&mut k0, &mut d0, &mut node_k0, &mut node_d0]);
             }
         }
 
@@ -189,9 +217,18 @@ impl ModelBuilder {
         // an element force error of V (lambda + 2 mu) |Dm^-1|^2 eps |x| (the static solve's floor).
         let xmax = pts.iter().map(|p| p.norm()).fold(0.0, f64::max);
         let modulus = material.lambda() + 2.0 * material.mu();
-        let position_noise2: f64 = rest.iter().map(|r| (r.volume * modulus * r.dm_inv.norm_squared() * xmax).powi(2)).sum();
+        // (A quadratic tet: `sum_q w_q sum_a |g_qa|^2` for `V |Dm^-1|^2`.)
+        let (position_noise2, tet_stiffness): (f64, Vec<f64>) = match &quadratic {
+            None => (
+                rest.iter().map(|r| (r.volume * modulus * r.dm_inv.norm_squared() * xmax).powi(2)).sum(),
+                rest.iter().map(|r| 2.0 * r.volume * modulus * r.dm_inv.norm_squared()).collect(),
+            ),
+            Some(q) => (
+                q.rest.iter().map(|r| (modulus * r.gradient_scale() * xmax).powi(2)).sum(),
+                q.rest.iter().map(|r| 2.0 * modulus * r.gradient_scale()).collect(),
+            ),
+        };
         let mass_position2: f64 = (0..n).filter(|&i| !is_fixed[i]).map(|i| mass[i] * mass[i] * pts[i].norm_squared()).sum();
-        let tet_stiffness: Vec<f64> = rest.iter().map(|r| 2.0 * r.volume * modulus * r.dm_inv.norm_squared()).collect();
         let filter_alpha = match integrator {
             Integrator::SemiImplicit { filter: Filter::Stable } => {
                 crate::integrate::stable_filter_factor(&pattern, &k0, &d0, !material.is_undamped())
@@ -201,6 +238,8 @@ impl ModelBuilder {
 
         Ok(Model {
             mesh,
+            rest_x,
+            quadratic,
             material,
             rest,
             mass,
@@ -234,6 +273,10 @@ impl ModelBuilder {
 #[derive(Debug, Clone)]
 pub struct Model {
     pub(crate) mesh: TetMesh,
+    /// Every node's rest position \[m\]: the mesh's vertices, then (quadratic) the edge nodes.
+    pub(crate) rest_x: Vec<Vec3>,
+    /// The quadratic elements, or `None` for linear tets (then in `rest` and `tet_blocks`).
+    pub(crate) quadratic: Option<Quadratic>,
     pub(crate) material: Material,
     pub(crate) rest: Vec<TetRest>,
     pub(crate) mass: Vec<f64>,
@@ -278,10 +321,25 @@ pub struct Model {
 }
 
 impl Model {
-    /// The validated mesh (rest positions \[m\]).
+    /// The validated mesh (rest positions \[m\] of the vertices, and the tets' vertices).
     pub fn mesh(&self) -> &TetMesh { &self.mesh }
-    /// Number of nodes.
-    pub fn n_nodes(&self) -> usize { self.mesh.n_nodes() }
+    /// Number of nodes: the mesh's vertices, and with quadratic elements one per edge after them.
+    pub fn n_nodes(&self) -> usize { self.rest_x.len() }
+    /// Rest positions \[m\] of every node `(n_nodes)`.
+    pub fn rest_positions(&self) -> &[Vec3] { &self.rest_x }
+    /// The element order.
+    pub fn order(&self) -> Order { if self.quadratic.is_some() { Order::Quadratic } else { Order::Linear } }
+    /// With quadratic elements, the two vertices of each edge node `(n_nodes - n_vertices)`, in
+    /// node order (edge node `k` is node `n_vertices + k`); empty for linear tets.
+    pub fn edges(&self) -> &[[usize; 2]] { self.quadratic.as_ref().map_or(&[], |q| &q.edges[..]) }
+    /// Each element's nodes: a linear tet's four or a quadratic tet's ten (vertices, then the
+    /// edge nodes in the order of [`TET10_EDGES`]).
+    pub fn element_nodes(&self, e: usize) -> &[usize] {
+        match &self.quadratic {
+            None => &self.mesh.tets()[e],
+            Some(q) => &q.elements[e],
+        }
+    }
     /// `true` when no node is fixed (linear momentum is then conserved).
     pub fn is_free_body(&self) -> bool { self.free_nodes.len() == self.n_nodes() }
     /// Number of tets.
@@ -313,6 +371,9 @@ impl Model {
 
     /// Total strain energy \[J\] at positions `x` `(n_nodes)` \[m\].
     pub fn strain_energy(&self, x: &[Vec3]) -> f64 {
+        if let Some(q) = &self.quadratic {
+            return q.elements.iter().zip(&q.rest).map(|(e, r)| tet10::strain_energy(&e.map(|i| x[i]), r, &self.material)).sum();
+        }
         self.mesh.tets().iter().zip(&self.rest).map(|(t, r)| tet4::strain_energy(&t.map(|i| x[i]), r, &self.material)).sum()
     }
 
@@ -321,10 +382,20 @@ impl Model {
     pub fn element_fields(&self, x: &[Vec3]) -> ElementFields {
         let n = self.n_tets();
         let mut out = ElementFields { von_mises: Vec::with_capacity(n), energy_density: Vec::with_capacity(n), det_f: Vec::with_capacity(n) };
-        for (t, r) in self.mesh.tets().iter().zip(&self.rest) {
-            let xe = t.map(|i| x[i]);
-            let f = tet4::deformation_gradient(&xe, r);
-            let (p, psi) = tet4::elastic_stress(&xe, r, &self.material);
+        for e in 0..n {
+            // A quadratic tet reports the means over its quadrature points.
+            let (f, p, psi) = match &self.quadratic {
+                None => {
+                    let (t, r) = (self.mesh.tets()[e], &self.rest[e]);
+                    let xe = t.map(|i| x[i]);
+                    let (p, psi) = tet4::elastic_stress(&xe, r, &self.material);
+                    (tet4::deformation_gradient(&xe, r), p, psi)
+                }
+                Some(q) => {
+                    let (p, psi, f) = tet10::mean_stress(&q.elements[e].map(|i| x[i]), &q.rest[e], &self.material);
+                    (f, p, psi)
+                }
+            };
             let j = f.determinant();
             // Cauchy stress sigma = P F^T / J; an inverted element (J <= 0) reports the Kirchhoff
             // stress P F^T instead (finite, and flagged by det_f).
@@ -351,6 +422,16 @@ impl Model {
     pub fn internal_forces(&self, x: &[Vec3], v: Option<&[Vec3]>, out: &mut [Vec3]) {
         out.iter_mut().for_each(|f| *f = Vec3::zeros());
         let damped = !self.material.is_undamped();
+        if let Some(q) = &self.quadratic {
+            for (e, r) in q.elements.iter().zip(&q.rest) {
+                let ve = v.filter(|_| damped).map(|v| e.map(|i| v[i]));
+                let f = tet10::forces(&e.map(|i| x[i]), ve.as_ref(), r, &self.material);
+                for a in 0..10 {
+                    out[e[a]] += f[a];
+                }
+            }
+            return;
+        }
         for (t, r) in self.mesh.tets().iter().zip(&self.rest) {
             let xe = t.map(|i| x[i]);
             let ve = match v {
@@ -375,6 +456,20 @@ impl Model {
     pub(crate) fn assemble_jacobians(&self, x: &[Vec3], k: &mut [Mat3], d: &mut [Mat3]) {
         k.iter_mut().for_each(|b| *b = Mat3::zeros());
         d.iter_mut().for_each(|b| *b = Mat3::zeros());
+        if let Some(q) = &self.quadratic {
+            for ((e, r), blocks) in q.elements.iter().zip(&q.rest).zip(&q.blocks) {
+                let (ke, de) = tet10::jacobians(&e.map(|i| x[i]), r, &self.material);
+                for (j, &bi) in blocks.iter().enumerate() {
+                    if bi != NONE {
+                        k[bi] += ke[j / 10][j % 10];
+                        if let Some(de) = &de {
+                            d[bi] += de[j / 10][j % 10];
+                        }
+                    }
+                }
+            }
+            return;
+        }
         for ((t, r), blocks) in self.mesh.tets().iter().zip(&self.rest).zip(&self.tet_blocks) {
             let (ke, de) = tet4::jacobians(&t.map(|i| x[i]), r, &self.material);
             for e in 0..16 {
@@ -422,6 +517,88 @@ impl Model {
     pub(crate) fn gather_free(&self, per_node: &[Vec3], b: &mut [Vec3]) {
         for (fi, &node) in self.free_nodes.iter().enumerate() {
             b[self.node_pos[fi]] = per_node[node];
+        }
+    }
+}
+
+/// The quadratic elements of a body (`fem/tet10.rs`).
+#[derive(Debug, Clone)]
+pub(crate) struct Quadratic {
+    /// Each element's ten nodes: its vertices, then its edge nodes in the order of [`TET10_EDGES`].
+    pub(crate) elements: Vec<[usize; 10]>,
+    pub(crate) rest: Vec<Tet10Rest>,
+    /// Per element, the pattern block of node pair (a, c) at `10 a + c`, or NONE.
+    pub(crate) blocks: Vec<[usize; 100]>,
+    /// The two vertices of each edge node (node `n_vertices + k`), lower index first.
+    pub(crate) edges: Vec<[usize; 2]>,
+}
+
+impl Quadratic {
+    /// The straight quadratic elements of `mesh`: every node's rest position (the vertices, then
+    /// the edges' midpoints in order of first appearance) and the elements (blocks left empty).
+    fn new(mesh: &TetMesh) -> (Vec<Vec3>, Quadratic) {
+        let pts = mesh.points();
+        let mut x = pts.to_vec();
+        let mut edges = Vec::new();
+        let mut node_of: std::collections::HashMap<(usize, usize), usize> = std::collections::HashMap::new();
+        let mut elements = Vec::with_capacity(mesh.n_tets());
+        let mut rest = Vec::with_capacity(mesh.n_tets());
+        for t in mesh.tets() {
+            let mut e = [0usize; 10];
+            e[..4].copy_from_slice(t);
+            for (k, [i, j]) in TET10_EDGES.iter().enumerate() {
+                let key = (t[*i].min(t[*j]), t[*i].max(t[*j]));
+                e[4 + k] = *node_of.entry(key).or_insert_with(|| {
+                    x.push((pts[key.0] + pts[key.1]) * 0.5);
+                    edges.push([key.0, key.1]);
+                    x.len() - 1
+                });
+            }
+            // A validated mesh's tets have positive volume, so their straight map is valid.
+            rest.push(Tet10Rest::new(&e.map(|i| x[i])).expect("a positive tet's straight quadratic map is valid"));
+            elements.push(e);
+        }
+        (x, Quadratic { elements, rest, blocks: Vec::new(), edges })
+    }
+}
+
+/// Per element of nodes `e` (N of them), the pattern block of each node pair `(a, c)` at
+/// `N a + c`, or NONE when either is fixed.
+fn element_blocks<const N: usize, const NN: usize>(e: &[usize; N], node_to_free: &[usize], pattern: &BlockPattern) -> [usize; NN] {
+    let mut b = [NONE; NN];
+    for a in 0..N {
+        for c in 0..N {
+            let (fa, fc) = (node_to_free[e[a]], node_to_free[e[c]]);
+            if fa != NONE && fc != NONE {
+                b[N * a + c] = pattern.find(fa, fc).expect("pattern holds every element pair");
+            }
+        }
+    }
+    b
+}
+
+/// Adds one element's rest Jacobians (`k(a, c)`, and `d(a, c)` if damped) into the free
+/// pattern's `k0`, `d0` and the nodes' diagonal blocks `node_k0`, `node_d0`.
+fn add_rest_jacobians<const N: usize, const NN: usize>(
+    e: &[usize; N],
+    blocks: &[usize; NN],
+    k: impl Fn(usize, usize) -> Mat3,
+    d: Option<impl Fn(usize, usize) -> Mat3>,
+    [k0, d0, node_k0, node_d0]: [&mut Vec<Mat3>; 4],
+) {
+    for a in 0..N {
+        node_k0[e[a]] += k(a, a);
+        if let Some(d) = &d {
+            node_d0[e[a]] += d(a, a);
+        }
+        for c in 0..N {
+            let bi = blocks[N * a + c];
+            if bi != NONE {
+                k0[bi] += k(a, c);
+                if let Some(d) = &d {
+                    d0[bi] += d(a, c);
+                }
+            }
         }
     }
 }

@@ -28,8 +28,7 @@ pub enum Order {
     Quadratic,
 }
 
-/// Local P2 edges, in the order of the nodes 4..9.
-pub const TET10_EDGES: [[usize; 2]; 6] = [[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]];
+pub use super::tet10::TET10_EDGES;
 
 /// A factorised small-strain stiffness over the free nodes of a tet mesh.
 #[derive(Debug, Clone)]

@@ -39,12 +39,12 @@ impl State {
     /// The body at rest: rest positions, zero velocity, zero time and no external force.
     pub fn rest(model: &Model) -> State {
         let n = model.n_nodes();
-        State { x: model.mesh().points().to_vec(), v: vec![Vec3::zeros(); n], t: 0.0, f_ext: vec![Vec3::zeros(); n] }
+        State { x: model.rest_positions().to_vec(), v: vec![Vec3::zeros(); n], t: 0.0, f_ext: vec![Vec3::zeros(); n] }
     }
 
     /// Displacements from the rest positions \[m\].
     pub fn displacements(&self, model: &Model) -> Vec<Vec3> {
-        self.x.iter().zip(model.mesh().points()).map(|(x, x0)| x - x0).collect()
+        self.x.iter().zip(model.rest_positions()).map(|(x, x0)| x - x0).collect()
     }
 }
 

@@ -232,13 +232,19 @@ pub fn jacobians(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> ([[Mat3; 4]; 4]
 /// `(l, m)`; the viscous Jacobian with `S = 0` and the viscosities `(phi, psi)`; the step's
 /// dissipation Hessian (`viscous.rs`) and the definite tangent (`tangent.rs`) use it too.
 pub fn svk_form_blocks(f: &Mat3, s: &Mat3, l: f64, m: f64, rest: &TetRest, c: f64) -> [[Mat3; 4]; 4] {
-    let g = rest.grads();
-    let fg: [Vec3; 4] = [f * g[0], f * g[1], f * g[2], f * g[3]];
-    let sg: [Vec3; 4] = [s * g[0], s * g[1], s * g[2], s * g[3]];
+    svk_blocks(f, s, l, m, &rest.grads(), c)
+}
+
+/// [`svk_form_blocks`] for any element's shape-function gradients `g` at one point (`c` its
+/// weight or minus it): the linear tet's with its four, a quadrature point of the quadratic
+/// tet's (`fem/tet10.rs`) with its ten.
+pub fn svk_blocks<const N: usize>(f: &Mat3, s: &Mat3, l: f64, m: f64, g: &[Vec3; N], c: f64) -> [[Mat3; N]; N] {
+    let fg: [Vec3; N] = std::array::from_fn(|a| f * g[a]);
+    let sg: [Vec3; N] = std::array::from_fn(|a| s * g[a]);
     let fft = f * f.transpose();
-    let mut out = [[Mat3::zeros(); 4]; 4];
-    for a in 0..4 {
-        for b in 0..4 {
+    let mut out = [[Mat3::zeros(); N]; N];
+    for a in 0..N {
+        for b in 0..N {
             let gg = g[a].dot(&g[b]);
             out[a][b] = c
                 * (Mat3::from_diagonal_element(g[a].dot(&sg[b])) + l * fg[a] * fg[b].transpose() + (m * gg) * fft + m * fg[b] * fg[a].transpose());

@@ -6,7 +6,7 @@
 
 use crate::error::StepError;
 use crate::fem::model::NONE;
-use crate::fem::tangent;
+use crate::fem::{tangent, tet10};
 use crate::fem::{Model, Workspace};
 use crate::integrate::{CorePotential, Integrator, StiffnessTerm};
 use crate::linalg::Ldl;
@@ -350,6 +350,16 @@ fn clear_terms(ws: &mut Workspace) {
 fn refresh(model: &Model, ws: &mut Workspace, x: &[Vec3], dt: f64) -> Result<(), StepError> {
     let mut k = std::mem::take(&mut ws.k);
     k.iter_mut().for_each(|b| *b = Mat3::zeros());
+    if let Some(q) = &model.quadratic {
+        for ((e, r), tb) in q.elements.iter().zip(&q.rest).zip(&q.blocks) {
+            let ke = tet10::definite_jacobian(&e.map(|i| x[i]), r, &model.material);
+            for (j, &bi) in tb.iter().enumerate() {
+                if bi != NONE {
+                    k[bi] += ke[j / 10][j % 10];
+                }
+            }
+        }
+    }
     for ((t, r), tb) in model.mesh.tets().iter().zip(&model.rest).zip(&model.tet_blocks) {
         let ke = tangent::definite_jacobian(&t.map(|i| x[i]), r, &model.material);
         for e in 0..16 {

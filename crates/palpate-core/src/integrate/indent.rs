@@ -93,16 +93,50 @@ pub struct IndentPoint {
 
 /// A sample point of a boundary triangle.
 struct Sample {
-    nodes: [usize; 3],
-    bary: [f64; 3],
+    /// The triangle's nodes: its three vertices, and on quadratic elements its three edge
+    /// nodes (of edges `(0, 1)`, `(1, 2)`, `(0, 2)`), with the shape functions' values at the
+    /// sample; `n` of them (3 or 6).
+    nodes: [usize; 6],
+    bary: [f64; 6],
+    n: usize,
     area: f64,
+}
+
+impl Sample {
+    /// The sample's position at node positions `x`.
+    #[inline]
+    fn point(&self, x: &[Vec3]) -> Vec3 {
+        let mut p = self.bary[0] * x[self.nodes[0]] + self.bary[1] * x[self.nodes[1]] + self.bary[2] * x[self.nodes[2]];
+        for a in 3..self.n {
+            p += self.bary[a] * x[self.nodes[a]];
+        }
+        p
+    }
+}
+
+/// The sample at barycentric `l` of boundary triangle `f`: its vertices' weights, or on
+/// quadratic elements the six quadratic shape functions' (the edge nodes from `edge_node`).
+fn sample_at(f: [usize; 3], l: [f64; 3], area: f64, edge_node: &std::collections::HashMap<(usize, usize), usize>) -> Sample {
+    if edge_node.is_empty() {
+        return Sample { nodes: [f[0], f[1], f[2], 0, 0, 0], bary: [l[0], l[1], l[2], 0.0, 0.0, 0.0], n: 3, area };
+    }
+    let e = |i: usize, j: usize| edge_node[&(f[i].min(f[j]), f[i].max(f[j]))];
+    let v = |i: usize| l[i] * (2.0 * l[i] - 1.0);
+    Sample {
+        nodes: [f[0], f[1], f[2], e(0, 1), e(1, 2), e(0, 2)],
+        bary: [v(0), v(1), v(2), 4.0 * l[0] * l[1], 4.0 * l[1] * l[2], 4.0 * l[0] * l[2]],
+        n: 6,
+        area,
+    }
 }
 
 /// Samples of the boundary triangles within `reach` of the sphere's path: each triangle cut into
 /// `n^2` equal sub-triangles (`n` its longest edge over `spacing`, rounded up), sampled at their
 /// centroids with a sub-triangle's area each.
 fn samples(model: &Model, ind: &Indenter, spacing: f64, reach: f64, travel_max: f64) -> Vec<Sample> {
-    let x = model.mesh.points();
+    let x = model.rest_positions();
+    let nv = model.mesh.n_nodes();
+    let edge_node: std::collections::HashMap<(usize, usize), usize> = model.edges().iter().enumerate().map(|(k, &[a, b])| ((a, b), nv + k)).collect();
     let mut out = Vec::new();
     let seg = |p: &Vec3| {
         // distance from the centre's path, the segment start .. start + travel_max d
@@ -124,9 +158,9 @@ fn samples(model: &Model, ind: &Indenter, spacing: f64, reach: f64, travel_max: 
             for j in 0..n - i {
                 let mut push = |u: f64, v: f64| {
                     let bary = [1.0 - u - v, u, v];
-                    let p = bary[0] * a + bary[1] * b + bary[2] * c;
-                    if seg(&p) <= reach {
-                        out.push(Sample { nodes: f, bary, area: share });
+                    let s = sample_at(f, bary, share, &edge_node);
+                    if seg(&s.point(x)) <= reach {
+                        out.push(s);
                     }
                 };
                 let (fi, fj, nf) = (i as f64, j as f64, n as f64);
@@ -145,7 +179,7 @@ fn samples(model: &Model, ind: &Indenter, spacing: f64, reach: f64, travel_max: 
 fn contact(samples: &[Sample], k: f64, r: f64, c: &Vec3, x: &[Vec3], f: &mut [Vec3]) -> (f64, f64, usize, f64) {
     let (mut u, mut deepest, mut count, mut area) = (0.0, 0.0f64, 0, 0.0);
     for s in samples {
-        let p = s.bary[0] * x[s.nodes[0]] + s.bary[1] * x[s.nodes[1]] + s.bary[2] * x[s.nodes[2]];
+        let p = s.point(x);
         let e = p - c;
         let dist = e.norm();
         let d = r - dist;
@@ -158,7 +192,7 @@ fn contact(samples: &[Sample], k: f64, r: f64, c: &Vec3, x: &[Vec3], f: &mut [Ve
         count += 1;
         area += s.area;
         let push = (ka * d / dist) * e;
-        for a in 0..3 {
+        for a in 0..s.n {
             f[s.nodes[a]] += s.bary[a] * push;
         }
     }
@@ -169,7 +203,7 @@ fn contact(samples: &[Sample], k: f64, r: f64, c: &Vec3, x: &[Vec3], f: &mut [Ve
 fn first_contact(samples: &[Sample], ind: &Indenter, x: &[Vec3]) -> Option<f64> {
     let mut best: Option<f64> = None;
     for s in samples {
-        let p = s.bary[0] * x[s.nodes[0]] + s.bary[1] * x[s.nodes[1]] + s.bary[2] * x[s.nodes[2]];
+        let p = s.point(x);
         // |p - start - t d| = R: t^2 - 2 t (q.d) + |q|^2 - R^2 = 0, q = p - start; first root.
         let q = p - ind.start;
         let b = q.dot(&ind.direction);
@@ -217,7 +251,7 @@ pub fn indent_with(model: &Model, ind: &Indenter, travels: &[f64], opts: &Indent
         return bad("stiffness, increment, sample spacing and tolerance must be positive and finite".into());
     }
     let travel_max = travels.last().copied().unwrap_or(0.0);
-    let x0 = model.mesh.points();
+    let x0 = model.rest_positions();
     // Reach: a sample farther than R from every centre of the path cannot touch at rest; the
     // body's sideways bulge under the sphere is bounded by the travel.
     let reach = r + travel_max + 2.0 * spacing;
@@ -240,15 +274,15 @@ pub fn indent_with(model: &Model, ind: &Indenter, travels: &[f64], opts: &Indent
         free_index[node] = fi;
     }
     // Pattern blocks of each sample's node pairs (NONE where a node is fixed).
-    let blocks: Vec<[usize; 9]> = samples
+    let blocks: Vec<[usize; 36]> = samples
         .iter()
         .map(|s| {
-            let mut b = [NONE; 9];
-            for a in 0..3 {
-                for c in 0..3 {
+            let mut b = [NONE; 36];
+            for a in 0..s.n {
+                for c in 0..s.n {
                     let (i, j) = (free_index[s.nodes[a]], free_index[s.nodes[c]]);
                     if i != NONE && j != NONE {
-                        b[3 * a + c] = model.pattern.find(i, j).unwrap_or(NONE);
+                        b[6 * a + c] = model.pattern.find(i, j).unwrap_or(NONE);
                     }
                 }
             }
@@ -414,7 +448,10 @@ pub fn indent_with(model: &Model, ind: &Indenter, travels: &[f64], opts: &Indent
 fn round_off(model: &Model, x: &[Vec3]) -> f64 {
     let xmax = x.iter().map(|p| p.norm()).fold(0.0, f64::max);
     let modulus = model.material.lambda() + 2.0 * model.material.mu();
-    let worst = model.rest.iter().map(|r| r.volume * modulus * r.dm_inv.norm_squared()).fold(0.0, f64::max);
+    let worst = match &model.quadratic {
+        None => model.rest.iter().map(|r| r.volume * modulus * r.dm_inv.norm_squared()).fold(0.0, f64::max),
+        Some(q) => q.rest.iter().map(|r| modulus * r.gradient_scale()).fold(0.0, f64::max),
+    };
     64.0 * f64::EPSILON * worst * xmax
 }
 
@@ -428,10 +465,10 @@ const PCG_REFACTOR: usize = 40;
 /// Newton's system at `x` on the free pattern: `op = -K(x) + H_c`, `H_c` the contact's
 /// Gauss-Newton Hessian `sum_s k_a A_s (b_s b_s^T) (x) (n_s n_s^T)`; `ws.k` keeps `-op`.
 #[allow(clippy::too_many_arguments)]
-fn assemble_system(model: &Model, samples: &[Sample], blocks: &[[usize; 9]], k: f64, r: f64, c: &Vec3, x: &[Vec3], ws: &mut crate::fem::Workspace, op: &mut [Mat3]) {
+fn assemble_system(model: &Model, samples: &[Sample], blocks: &[[usize; 36]], k: f64, r: f64, c: &Vec3, x: &[Vec3], ws: &mut crate::fem::Workspace, op: &mut [Mat3]) {
     model.assemble_jacobians(x, &mut ws.k, &mut ws.d);
     for (s, b) in samples.iter().zip(blocks) {
-        let p = s.bary[0] * x[s.nodes[0]] + s.bary[1] * x[s.nodes[1]] + s.bary[2] * x[s.nodes[2]];
+        let p = s.point(x);
         let e = p - c;
         let dist = e.norm();
         if dist >= r || dist == 0.0 {
@@ -439,9 +476,9 @@ fn assemble_system(model: &Model, samples: &[Sample], blocks: &[[usize; 9]], k: 
         }
         let n = e / dist;
         let nn = n * n.transpose() * (k * s.area);
-        for a in 0..3 {
-            for cc in 0..3 {
-                let bi = b[3 * a + cc];
+        for a in 0..s.n {
+            for cc in 0..s.n {
+                let bi = b[6 * a + cc];
                 if bi != NONE {
                     ws.k[bi] -= nn * (s.bary[a] * s.bary[cc]);
                 }

@@ -18,7 +18,7 @@ use super::factor;
 use super::potential::{self, dot, Progress, StepProblem};
 use crate::linalg::cg::{self, CgStop, CgWork};
 use crate::fem::model::NONE;
-use crate::fem::{tet4, viscous, Model, Workspace};
+use crate::fem::{tet10, tet4, viscous, Model, Workspace};
 use crate::math::{Mat3, Vec3};
 
 /// Conjugate-gradient iterations per Newton iteration, at most.
@@ -45,6 +45,21 @@ fn assemble_hessian(p: &StepProblem, x: &[Vec3], blocks: &mut [Mat3]) {
     let model = p.model;
     blocks.iter_mut().for_each(|b| *b = Mat3::zeros());
     let damped = !model.material.is_undamped();
+    if let Some(q) = &model.quadratic {
+        for ((e, r), tb) in q.elements.iter().zip(&q.rest).zip(&q.blocks) {
+            let xe = e.map(|i| x[i]);
+            let (k, _) = tet10::jacobians(&xe, r, &model.material);
+            let dh = damped.then(|| tet10::step_dissipation_hessian(&xe, &e.map(|i| p.x_n[i]), r, &model.material, p.h));
+            for (j, &bi) in tb.iter().enumerate() {
+                if bi != NONE {
+                    blocks[bi] -= k[j / 10][j % 10];
+                    if let Some(dh) = &dh {
+                        blocks[bi] += dh[j / 10][j % 10];
+                    }
+                }
+            }
+        }
+    }
     for ((t, r), tb) in model.mesh.tets().iter().zip(&model.rest).zip(&model.tet_blocks) {
         let xe = t.map(|i| x[i]);
         let (k, _) = tet4::jacobians(&xe, r, &model.material);

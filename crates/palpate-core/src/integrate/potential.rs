@@ -24,7 +24,7 @@
 use super::factor;
 use crate::error::StepError;
 use crate::fem::lanes::ElementLoop;
-use crate::fem::{tet4, viscous, Model, State, Workspace};
+use crate::fem::{tet10, tet4, viscous, Model, State, Workspace};
 use crate::material::linear::Svk;
 use crate::material::Law;
 use crate::math::Vec3;
@@ -139,7 +139,28 @@ fn evaluate(p: &StepProblem, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3],
     }
     // Squared magnitude of the element's nodal forces, estimated from its energy as for a linear
     // spring (|f|^2 ~ 2 W k): one multiply-add instead of four norms.
-    let (w, d, f2, inverted) = if model.material.law() == Law::StVenantKirchhoff {
+    let (w, d, f2, inverted) = if let Some(q) = &model.quadratic {
+        // Quadratic tets (fem/tet10.rs), one at a time.
+        let (mut w, mut d, mut f2, mut inverted) = (0.0, 0.0, 0.0, 0);
+        for ((e, r), &k) in q.elements.iter().zip(&q.rest).zip(&model.tet_stiffness) {
+            let xe = e.map(|i| x[i]);
+            let (en, f, det) = tet10::elastic_energy_forces(&xe, r, &model.material);
+            w += en;
+            f2 += en * k;
+            inverted += (det <= 0.0) as usize;
+            for a in 0..10 {
+                f_el[e[a]] += f[a];
+            }
+            if damped {
+                let (dis, fv) = tet10::step_dissipation(&xe, &e.map(|i| p.x_n[i]), r, &model.material, p.h);
+                d += dis;
+                for a in 0..10 {
+                    f_visc[e[a]] += fv[a];
+                }
+            }
+        }
+        (w, d, f2, inverted)
+    } else if model.material.law() == Law::StVenantKirchhoff {
         // Four elements at a time in SIMD lanes (fem/lanes.rs).
         let dm = model.material.damping();
         let lp = ElementLoop {

@@ -4,7 +4,7 @@
 //! increments for large loads. Used to validate the dynamic schemes and as a reference.
 
 use crate::error::SolveError;
-use crate::fem::tet4;
+use crate::fem::{tet10, tet4};
 use crate::fem::{Model, Workspace};
 use crate::math::{is_finite3, Vec3};
 
@@ -45,6 +45,17 @@ pub struct StaticSolution {
 fn round_off_floor(model: &Model, x: &[Vec3], per_node: &mut [f64]) -> f64 {
     per_node.iter_mut().for_each(|v| *v = 0.0);
     let modulus = model.material.lambda() + 2.0 * model.material.mu();
+    if let Some(q) = &model.quadratic {
+        for (e, r) in q.elements.iter().zip(&q.rest) {
+            let xe = e.map(|i| x[i]);
+            let f = tet10::forces(&xe, None, r, &model.material);
+            let xmax = xe.iter().map(|p| p.norm()).fold(0.0, f64::max);
+            let strain_noise = modulus * r.gradient_scale() * xmax;
+            for a in 0..10 {
+                per_node[e[a]] += f[a].norm() + strain_noise;
+            }
+        }
+    }
     for (t, r) in model.mesh.tets().iter().zip(&model.rest) {
         let xe = t.map(|i| x[i]);
         let f = tet4::forces(&xe, None, r, &model.material);
@@ -98,7 +109,7 @@ pub fn static_solve_with(model: &Model, f_ext: &[Vec3], opts: &StaticOptions, in
     let applied: Vec<Vec3> = (0..n).map(|i| f_ext[i] + model.mass[i] * model.gravity).collect();
     let scale = model.free_nodes.iter().map(|&i| applied[i].norm()).fold(0.0, f64::max);
     if scale == 0.0 || model.free_nodes.is_empty() {
-        return Ok(StaticSolution { x: model.mesh.points().to_vec(), iterations: 0, residual: 0.0 });
+        return Ok(StaticSolution { x: model.rest_x.clone(), iterations: 0, residual: 0.0 });
     }
     // A load too large for one Newton solve from rest (the tangent turns indefinite on the way,
     // or Newton stalls) is retried in more increments: 4x more each time, up to 256.
@@ -114,7 +125,7 @@ pub fn static_solve_with(model: &Model, f_ext: &[Vec3], opts: &StaticOptions, in
 /// Newton from rest, the load applied in `steps` equal increments.
 fn solve_in_increments(model: &Model, applied: &[Vec3], scale: f64, opts: &StaticOptions, steps: usize, interrupted: &mut dyn FnMut() -> bool) -> Result<StaticSolution, SolveError> {
     let n = model.n_nodes();
-    let mut x = model.mesh.points().to_vec();
+    let mut x = model.rest_x.clone();
     let tol = opts.tolerance * scale;
     let mut ws = Workspace::new(model);
     let mut trial = x.clone();
