@@ -35,8 +35,9 @@ def _backward_euler(solver: Any, kwargs: Dict[str, Any]) -> Any:
     return _ext.BackwardEuler(solver, **kwargs)
 
 
-def _body(mesh: Any, material: Any, fixed: Any, gravity: Any, integrator: Any, state: Dict[str, Any]) -> Any:
-    b = _ext.Body(mesh, material, fixed=fixed, gravity=gravity, integrator=integrator)
+def _body(mesh: Any, material: Any, fixed: Any, gravity: Any, integrator: Any, state: Dict[str, Any],
+          order: int = 1) -> Any:
+    b = _ext.Body(mesh, material, fixed=fixed, gravity=gravity, integrator=integrator, order=order)
     b.set_state(state)
     return b
 
@@ -95,7 +96,8 @@ def register() -> None:
     copyreg.pickle(_ext.BackwardEuler, _reduce_backward_euler)
     copyreg.pickle(_ext.TetMesh, lambda m: (_ext.TetMesh, (m.points, m.tets)))
     copyreg.pickle(_ext.TriSurface, lambda s: (_ext.TriSurface, (s.points, s.triangles)))
-    copyreg.pickle(_ext.Body, lambda b: (_body, (b.mesh, b.material, b.fixed, b.gravity, b.integrator, b.get_state())))
+    copyreg.pickle(_ext.Body, lambda b: (_body, (b.mesh, b.material, b.fixed, b.gravity, b.integrator, b.get_state(),
+                                                 b.order)))
     copyreg.pickle(_ext.ParticleBody, _reduce_particle_body)
     copyreg.pickle(_ext.HybridModel, lambda m: (_ext.HybridModel.from_bytes, (m.to_bytes(),)))
     copyreg.pickle(_ext.HybridSim, _reduce_hybrid_sim)

@@ -438,15 +438,17 @@ def wall_mesh(shape: str, a: int, b: int, case: IndentCase, graded: bool = True
 
 def reference_curve(mesh: _palpate.TetMesh, case: IndentCase, probes: np.ndarray, *,
                     fixed: Optional[np.ndarray] = None, max_increment: Optional[float] = None,
-                    verbose: bool = False) -> Dict[str, Any]:
+                    verbose: bool = False, order: int = 1) -> Dict[str, Any]:
     """The static indentation of the full-FEM wall ``mesh`` (:meth:`palpate.Body.indent`) at the
     case's depths of *travel* (the indentation, travel minus the penalty's penetration, is
-    reported beside it): force along the press [N] and the dent profile."""
+    reported beside it): force along the press [N] and the dent profile. ``order``: the
+    elements' degree (1: linear tets, 2: quadratic; ``fixed`` indexes the mesh's vertices, and
+    the dent is read at them)."""
     if fixed is None:
         if case.hold_z is None:
             raise ValueError("the case needs hold_z (from the hybrid model's core: see hybrid_hold_z) or fixed nodes")
         fixed = held_below(mesh.points, case.hold_z)
-    body = _palpate.Body(mesh, case.material(case.reference_law), fixed=fixed)
+    body = _palpate.Body(mesh, case.material(case.reference_law), fixed=fixed, order=order)
     t = time.perf_counter()
     r = body.indent(case.start(), case.direction, case.tool_radius, _travels(case.depths, 0.2),
                     max_increment=max_increment or case.tool_radius / 10)
@@ -454,13 +456,14 @@ def reference_curve(mesh: _palpate.TetMesh, case: IndentCase, probes: np.ndarray
     faces = mesh.boundary_faces()
     # The probes lie on the outer surface: their nearest boundary triangles are outer ones.
     where = surface_weights(mesh.points, faces, probes)
-    dents = np.array([dent_profile(mesh.points, x, faces, where, case.direction, probes.shape[:2])
+    nv = mesh.n_nodes
+    dents = np.array([dent_profile(mesh.points, x[:nv], faces, where, case.direction, probes.shape[:2])
                       for x in r["positions"]])
-    out = dict(tets=mesh.n_tets, nodes=mesh.n_nodes, travel=r["travel"], force=r["force_along"],
+    out = dict(tets=mesh.n_tets, nodes=body.n_nodes, order=order, travel=r["travel"], force=r["force_along"],
                indentation=r["indentation"], penetration=r["penetration"], dent=dents,
                iterations=r["iterations"], factorisations=r["factorisations"], wall_s=wall)
     if verbose:
-        print(f"  FEM {mesh.n_tets} tets: " + ", ".join(f"{f:.4f} N" for f in out["force"]) + f" ({wall:.1f} s)",
+        print(f"  FEM {mesh.n_tets} {'quadratic ' if order == 2 else ''}tets: " + ", ".join(f"{f:.4f} N" for f in out["force"]) + f" ({wall:.1f} s)",
               flush=True)
     return out
 

@@ -7,7 +7,7 @@ use std::time::Instant;
 use numpy::{PyArray1, PyArray2};
 use palpate_core::integrate::{indent_with, static_solve_with, IndentOptions, Indenter, StaticOptions};
 use palpate_core::probe::{self, ProbeLoad, ProbeOptions, Ramp, StepClock, StepTotals};
-use palpate_core::{step, Model, ModelBuilder, State, StepMemory, Vec3, Workspace};
+use palpate_core::{step, Model, ModelBuilder, Order, State, StepMemory, Vec3, Workspace};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -19,7 +19,7 @@ use crate::mesh::PyTetMesh;
 
 /// A deformable body: mesh + material + fixed nodes + gravity + integrator, and its state.
 ///
-/// ``Body(mesh, material, fixed=None, gravity=(0, 0, 0), integrator=None)``
+/// ``Body(mesh, material, fixed=None, gravity=(0, 0, 0), integrator=None, *, order=1)``
 ///
 /// Parameters
 /// ----------
@@ -34,6 +34,15 @@ use crate::mesh::PyTetMesh;
 ///     Default ``BackwardEuler()``: quasi-Newton minimisation of the incremental potential,
 ///     stable at any press, one iteration (one solve with the rest matrix, factorised once per
 ///     dt) at small deformation.
+/// order : int, 1 or 2
+///     The elements' polynomial degree. 1 (default): linear tets, the paper's, whose nodes are
+///     the mesh's vertices. 2: quadratic (10-node) tets, whose nodes are the mesh's vertices
+///     followed by one node per edge (``edges``: node ``mesh.n_nodes + k`` sits at the midpoint
+///     of ``edges[k]`` at rest). Linear tets lock in bending: a wall one or two elements across
+///     is several times too stiff, where quadratic ones are within a few percent (VALIDATION.md);
+///     a quadratic tet costs about ten linear ones. The semi-implicit integrator is for linear
+///     tets only. ``fixed`` indexes the body's nodes; an edge node whose two vertices are fixed
+///     is fixed too.
 ///
 /// All per-node arrays are (n, 3) float64 in SI units, world frame; getters return copies.
 ///
@@ -167,15 +176,24 @@ pub(crate) fn integrator_words(i: palpate_core::Integrator) -> String {
 #[pymethods]
 impl PyBody {
     #[new]
-    #[pyo3(signature = (mesh, material, fixed = None, gravity = None, integrator = None))]
+    #[pyo3(signature = (mesh, material, fixed = None, gravity = None, integrator = None, *, order = errors::Int::Fits(1)), text_signature = "(mesh, material, fixed=None, gravity=None, integrator=None, *, order=1)")]
     fn new(
         py: Python<'_>,
         #[pyo3(from_py_with = conv::arg)] mesh: Bound<'_, PyTetMesh>,
         #[pyo3(from_py_with = conv::arg)] material: Bound<'_, PyMaterial>,
         fixed: Option<&Bound<'_, PyAny>>,
         gravity: Option<&Bound<'_, PyAny>>,
-        integrator: Option<&Bound<'_, PyAny>>) -> PyResult<Self> {
-        let n = mesh.get().inner.n_nodes();
+        integrator: Option<&Bound<'_, PyAny>>,
+        order: errors::Int) -> PyResult<Self> {
+        let order = match order {
+            errors::Int::Fits(1) => Order::Linear,
+            errors::Int::Fits(2) => Order::Quadratic,
+            other => return Err(errors::param_error_from(format!("order = {other} must be 1 (linear tets) or 2 (quadratic tets)"))),
+        };
+        let n = match order {
+            Order::Linear => mesh.get().inner.n_nodes(),
+            Order::Quadratic => mesh.get().inner.n_nodes() + mesh.get().inner.edges().len(),
+        };
         let fixed = match fixed {
             Some(f) if !f.is_none() => conv::indices(f, "fixed", n, conv::NODES, false)?,
             _ => Vec::new(),
@@ -188,7 +206,8 @@ impl PyBody {
         let builder = ModelBuilder::new(mesh.get().inner.clone(), material.get().inner)
             .fixed_nodes(fixed)
             .gravity(gravity)
-            .integrator(integrator);
+            .integrator(integrator)
+            .order(order);
         let model = errors::guard("Body", || py.detach(|| builder.build()).map_err(errors::model_error))?;
         let state = State::rest(&model);
         let ws = Workspace::new(&model);
@@ -292,6 +311,22 @@ impl PyBody {
     #[getter]
     fn n_tets(&self) -> usize {
         self.model.n_tets()
+    }
+
+    /// The elements' polynomial degree: 1 (linear tets) or 2 (quadratic).
+    #[getter]
+    fn order(&self) -> u8 {
+        match self.model.order() {
+            Order::Linear => 1,
+            Order::Quadratic => 2,
+        }
+    }
+
+    /// With quadratic tets, the two vertices of each edge node, int64 (e, 2): node
+    /// ``mesh.n_nodes + k`` is edge ``k``'s (at its midpoint at rest); (0, 2) for linear tets.
+    #[getter]
+    fn edges<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
+        conv::index_rows_to_py(py, self.model.edges())
     }
 
     /// The rest mesh.

@@ -53,7 +53,7 @@ def world(tmp_path_factory):
         "ellipsoid_wall.outer": (0.026, 0.026, 0.042), "truncated_ellipsoid_wall.inner": (0.02, 0.02, 0.035),
         "truncated_ellipsoid_wall.outer": (0.026, 0.026, 0.042), "HapticLoop.run.max_ticks": 1,
         "Body.indent.start": (0.01, 0.005, 0.03), "Body.indent.direction": (0.0, 0.0, -1.0),
-        "Body.indent.travels": [1e-4], "Body.indent.stiffness": 1e7, "Body.indent.max_increment": 1e-4,
+        "Body.indent.travels": [1e-4], "Body.order": 2, "Body.indent.stiffness": 1e7, "Body.indent.max_increment": 1e-4,
         "Body.indent.sample_spacing": 1e-3, "TriSurface.simplified.triangles": 8, "TriSurface.without_specks.min_volume_fraction": 1e-3,
         # by argument
         "tets": mesh.tets, "triangles": surf.triangles, "mesh": mesh, "material": mat, "forces": np.zeros((n, 3)),

@@ -55,3 +55,61 @@ def test_static_small_load_matches_scikit_fem_linear_elasticity(name):
     # First-order agreement, and the geometric nonlinearity shrinks with the load.
     assert errors[0] < 1e-3, errors
     assert errors[1] < errors[0] / 5, errors
+
+
+def test_quadratic_body_matches_scikit_fem_p2():
+    """``Body(order=2)`` against scikit-fem's P2 linear elasticity on a perturbed box under small
+    nodal loads on vertices and edge nodes alike: the same element, written twice (a wrong
+    quadrature weight, edge numbering or edge-node placement fails by far more)."""
+    mesh = palpate.box_mesh(size=(0.03, 0.02, 0.01), cells=(3, 2, 1))
+    rng = np.random.default_rng(4)
+    pts = mesh.points + rng.uniform(-1e-3, 1e-3, mesh.points.shape) * (mesh.points[:, [0]] > 0)
+    mesh = palpate.TetMesh(pts, mesh.tets)
+    fixed = np.flatnonzero(pts[:, 0] == 0.0)
+    body = palpate.Body(mesh, palpate.Material(young=E, poisson=NU, density=RHO), fixed=fixed, order=2)
+    nv = mesh.n_nodes
+    assert body.order == 2 and body.n_nodes == nv + len(body.edges)
+    rest = body.positions
+    np.testing.assert_allclose(rest[nv:], 0.5 * (pts[body.edges[:, 0]] + pts[body.edges[:, 1]]), atol=1e-15)
+
+    sk = skfem.MeshTet(pts.T.copy(), mesh.tets.T.astype(np.int64).copy())
+    basis = skfem.Basis(sk, skfem.ElementVector(skfem.ElementTetP2()))
+    K = skfem.asm(linear_elasticity(LAM, MU), basis)
+    # palpate's node of each skfem dof: vertices as they are, skfem's edges by their vertex pair.
+    our_edge = {tuple(e): nv + k for k, e in enumerate(body.edges)}
+    sk_edges = [our_edge[tuple(sorted(e))] for e in sk.edges.T]
+    nodes = np.concatenate([np.arange(nv), sk_edges])                 # skfem node order -> ours
+    dofs = np.concatenate([basis.nodal_dofs, basis.edge_dofs], axis=1)  # (3, nv + n_edges)
+    held = np.flatnonzero(np.isin(nodes, body.fixed))
+    forces = rng.normal(size=(body.n_nodes, 3)) * 1e-6
+    forces[body.fixed] = 0.0
+    f = np.zeros(basis.N)
+    for c in range(3):
+        f[dofs[c]] = forces[nodes, c]
+    u_ref = skfem.solve(*skfem.condense(K, f, D=dofs[:, held].ravel()))[dofs].T
+    u = (body.static_solve(forces) - rest)[nodes]
+    err = np.linalg.norm(u - u_ref) / np.linalg.norm(u_ref)
+    assert err < 1e-4, err
+
+
+def test_quadratic_body_order_is_checked_and_pickles():
+    import pickle
+    mesh = palpate.box_mesh(size=(0.02, 0.01, 0.01), cells=(2, 1, 1))
+    mat = palpate.Material(young=E, poisson=NU, density=RHO)
+    for bad in (0, 3, -1):
+        with pytest.raises(palpate.ParameterError, match="order"):
+            palpate.Body(mesh, mat, order=bad)
+    with pytest.raises(palpate.ModelError, match="semi-implicit"):
+        palpate.Body(mesh, mat, order=2, integrator=palpate.SemiImplicit())
+    fixed = np.flatnonzero(mesh.points[:, 0] == 0.0)
+    body = palpate.Body(mesh, mat, fixed=fixed, order=2, gravity=(0, 0, -9.81))
+    # Edge nodes between two fixed vertices are fixed too.
+    assert len(body.fixed) > len(fixed) and set(fixed) <= set(body.fixed)
+    body.step(5)
+    again = pickle.loads(pickle.dumps(body))
+    assert again.order == 2 and again.n_nodes == body.n_nodes
+    np.testing.assert_array_equal(again.positions, body.positions)
+    body.step(3)
+    again.step(3)
+    np.testing.assert_array_equal(again.positions, body.positions)
+    assert palpate.Body(mesh, mat).order == 1 and palpate.Body(mesh, mat).edges.shape == (0, 2)

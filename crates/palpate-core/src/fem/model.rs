@@ -535,24 +535,21 @@ pub(crate) struct Quadratic {
 
 impl Quadratic {
     /// The straight quadratic elements of `mesh`: every node's rest position (the vertices, then
-    /// the edges' midpoints in order of first appearance) and the elements (blocks left empty).
+    /// the midpoints of [`TetMesh::edges`]) and the elements (blocks left empty).
     fn new(mesh: &TetMesh) -> (Vec<Vec3>, Quadratic) {
         let pts = mesh.points();
+        let nv = pts.len();
+        let edges = mesh.edges();
+        let node_of: std::collections::HashMap<[usize; 2], usize> = edges.iter().enumerate().map(|(k, e)| (*e, nv + k)).collect();
         let mut x = pts.to_vec();
-        let mut edges = Vec::new();
-        let mut node_of: std::collections::HashMap<(usize, usize), usize> = std::collections::HashMap::new();
+        x.extend(edges.iter().map(|[a, b]| (pts[*a] + pts[*b]) * 0.5));
         let mut elements = Vec::with_capacity(mesh.n_tets());
         let mut rest = Vec::with_capacity(mesh.n_tets());
         for t in mesh.tets() {
             let mut e = [0usize; 10];
             e[..4].copy_from_slice(t);
             for (k, [i, j]) in TET10_EDGES.iter().enumerate() {
-                let key = (t[*i].min(t[*j]), t[*i].max(t[*j]));
-                e[4 + k] = *node_of.entry(key).or_insert_with(|| {
-                    x.push((pts[key.0] + pts[key.1]) * 0.5);
-                    edges.push([key.0, key.1]);
-                    x.len() - 1
-                });
+                e[4 + k] = node_of[&[t[*i].min(t[*j]), t[*i].max(t[*j])]];
             }
             // A validated mesh's tets have positive volume, so their straight map is valid.
             rest.push(Tet10Rest::new(&e.map(|i| x[i])).expect("a positive tet's straight quadratic map is valid"));

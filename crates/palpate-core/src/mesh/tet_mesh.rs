@@ -174,6 +174,22 @@ impl TetMesh {
     /// Boundary faces (triangles used by exactly one tet), oriented outward, `(n_faces, 3)`,
     /// sorted ([`boundary_faces`]).
     pub fn boundary_faces(&self) -> Vec<[usize; 3]> { boundary_faces(&self.points, &self.tets) }
+    /// Every edge once, lower vertex first, in the order of first appearance over the tets and
+    /// their local edges `(0,1) (1,2) (0,2) (0,3) (1,3) (2,3)` (the order of a quadratic body's
+    /// edge nodes, [`crate::fem::tet10::TET10_EDGES`]).
+    pub fn edges(&self) -> Vec<[usize; 2]> {
+        let mut seen = std::collections::HashSet::new();
+        let mut out = Vec::new();
+        for t in &self.tets {
+            for [i, j] in crate::fem::tet10::TET10_EDGES {
+                let e = [t[i].min(t[j]), t[i].max(t[j])];
+                if seen.insert(e) {
+                    out.push(e);
+                }
+            }
+        }
+        out
+    }
 
     /// Minimum dihedral angle over all tets \[degrees\]: a quality measure.
     pub fn min_dihedral_deg(&self) -> f64 {
