@@ -65,6 +65,7 @@ __all__ = [
     "wall_mesh",
     "gmsh_wall",
     "GMSH_LEVELS",
+    "QUADRATIC_LEVELS",
 ]
 
 #: Mesh levels of the ellipsoid wall's reference: (subdivisions of the geodesic sphere, tet layers
@@ -79,6 +80,15 @@ BUILT_LEVELS: Tuple[Tuple[int, int], ...] = ((1000, 2), (4000, 4), (16000, 8))
 #: Mesh levels of a wall meshed by gmsh (Rodero's): (triangles of the simplified closed surface,
 #: 0); each level halves the element size (measured on Rodero: 2,241, 11,228 and 68,921 tets).
 GMSH_LEVELS: Tuple[Tuple[int, int], ...] = ((1500, 0), (6000, 0), (24000, 0))
+
+#: The references' mesh levels in quadratic tets (``order=2``, the default), per kind of wall:
+#: the linear levels' a level coarser (a quadratic tet halves the element error of a linear one
+#: four to eight times its nodes: VALIDATION.md, "The reference in quadratic tets").
+QUADRATIC_LEVELS: Dict[str, Tuple[Tuple[int, int], ...]] = {
+    "ellipsoids": ((2, 1), (3, 2), (4, 4)),
+    "gmsh": ((600, 0), (1500, 0), (6000, 0)),
+    "built": ((250, 1), (1000, 2), (4000, 4)),
+}
 
 #: The walls meshed by gmsh rather than by the hybrid build's prisms.
 GMSH_SHAPES = ("rodero",)
@@ -573,10 +583,14 @@ def _richardson(h: np.ndarray, f: np.ndarray) -> Tuple[float, float]:
     return float(f[2] - c * h[2] ** p), p
 
 
-def default_levels(shape: str) -> Tuple[Tuple[int, int], ...]:
-    """The reference's mesh levels of a shipped wall: :data:`REFERENCE_LEVELS` (ellipsoids),
-    :data:`GMSH_LEVELS` (Rodero) or :data:`BUILT_LEVELS` (the others)."""
-    return REFERENCE_LEVELS if shape == "ellipsoids" else GMSH_LEVELS if shape in GMSH_SHAPES else BUILT_LEVELS
+def default_levels(shape: str, order: int = 1) -> Tuple[Tuple[int, int], ...]:
+    """The reference's mesh levels of a shipped wall in elements of ``order``: linear,
+    :data:`REFERENCE_LEVELS` (ellipsoids), :data:`GMSH_LEVELS` (Rodero) or :data:`BUILT_LEVELS`
+    (the others); quadratic, :data:`QUADRATIC_LEVELS`."""
+    kind = "ellipsoids" if shape == "ellipsoids" else "gmsh" if shape in GMSH_SHAPES else "built"
+    if order == 2:
+        return QUADRATIC_LEVELS[kind]
+    return {"ellipsoids": REFERENCE_LEVELS, "gmsh": GMSH_LEVELS, "built": BUILT_LEVELS}[kind]
 
 
 def default_coarse(shape: str) -> Tuple[int, int]:
@@ -597,7 +611,7 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
                     coarse: Optional[Tuple[int, int]] = None, young: float = 30e3, poisson: float = 0.4,
                     law: str = "neo-hookean", out_dir: Optional[str] = None, model: Optional[_palpate.HybridModel] = None,
                     reference: Optional[str] = None, verbose: bool = True,
-                    implicit_exchange: bool = True) -> Dict[str, Any]:
+                    implicit_exchange: bool = True, order: int = 2) -> Dict[str, Any]:
     """The hybrid's force and dent against the converged FEM of its wall, and the coarse FEM.
 
     ``levels``: the reference meshes (default :func:`default_levels`); ``coarse``: the level of
@@ -613,6 +627,10 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
     ``implicit_exchange``: the hybrid with the shell's springs at the tissue's stiffness (the
     ``HybridSim`` option, default True; False: the springs capped as the explicit exchange's
     stability asks; recorded in the result).
+
+    ``order``: the references' elements, 2 (default: quadratic tets, which converge where linear
+    ones lock) or 1 (linear tets, as the hybrid's core). The coarse FEM is always linear: it is
+    the full FEM of the hybrid core's size and element, the paper's comparison.
     """
     from .hybrid import SHAPES, build_shape
 
@@ -620,7 +638,9 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
         raise ValueError(f"shape must be one of {SHAPES}, got {shape!r}")
     if law not in ("neo-hookean", "svk"):
         raise ValueError(f"law must be 'neo-hookean' or 'svk', got {law!r}")
-    levels = default_levels(shape) if levels is None else levels
+    if order not in (1, 2):
+        raise ValueError(f"order must be 1 (linear tets) or 2 (quadratic), got {order!r}")
+    levels = default_levels(shape, order) if levels is None else levels
     coarse = default_coarse(shape) if coarse is None else coarse
     case = IndentCase(shape=shape, young=young, poisson=poisson, tool_radius=tool_radius, depths=tuple(depths),
                       reference_law=law)
@@ -646,7 +666,7 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
         refs = []
         for a, b in levels:
             mesh, fixed = wall_mesh(shape, a, b, case)
-            refs.append(reference_curve(mesh, case, hyb["probes"], fixed=fixed, verbose=verbose))
+            refs.append(reference_curve(mesh, case, hyb["probes"], fixed=fixed, verbose=verbose, order=order))
             refs[-1]["level"] = (a, b)
         cmesh, cfixed = wall_mesh(shape, coarse[0], coarse[1], case, graded=False)
         coarse_curve = reference_curve(cmesh, case, hyb["probes"], fixed=cfixed, verbose=verbose)
@@ -737,7 +757,10 @@ def format_table(result: Dict[str, Any]) -> str:
         lines.append(f"{r['indentation'] * 1e3:.1f} mm | {r['reference']:.4f} N | {ex:.4f} N | {r['hybrid']:.4f} N "
                      f"({100 * r['hybrid_error']:+.0f}%, {100 * hx:+.0f}%) | {r['coarse']:.4f} N "
                      f"({100 * r['coarse_error']:+.0f}%)")
-    lines.append("reference convergence (force at indentation over the levels; last change; extrapolation):")
+    orders = {int(r.get("order", 1)) for r in result["references"]}
+    kind = "quadratic" if orders == {2} else "linear" if orders == {1} else "mixed"
+    lines.append(f"reference convergence ({kind} tets; force at indentation over the levels; last change; "
+                 "extrapolation):")
     for j, cv in enumerate(result["convergence"]):
         fs = ", ".join(f"{_interp(r, np.array([cv['indentation']]))[0]:.4f}" for r in result["references"])
         verdict = "converged" if cv["last_change"] < CONVERGED else "NOT converged"

@@ -115,3 +115,25 @@ def test_step_releases_the_gil(material):
     # Holding the GIL for the whole call would leave this loop at a handful of iterations.
     rate = count / wall
     assert count > 1000 and rate > 1e4, (count, wall)
+
+
+def test_a_firm_press_does_the_same_work_every_time():
+    """Issue 38: the refactorisation and every other decision that changes the arithmetic depend
+    on the state, never on the clock: the same firm press twice gives bit-identical results and
+    the same iterations, force evaluations and factorisations (the step time may differ)."""
+    mesh = palpate.truncated_ellipsoid_wall()            # the protocol's wall, 1,440 tets
+    pts = mesh.points
+    fixed = np.flatnonzero(pts[:, 2] <= 1e-9)
+    loaded = np.argsort(np.linalg.norm(pts - (0.026, 0.0, 0.02), axis=1))[:4]
+    mat = palpate.Material(young=30e3, poisson=0.4, density=1000.0)
+    runs = []
+    for _ in range(2):
+        body = palpate.Body(mesh, mat, fixed=fixed)
+        # 2 N on four nodes: elements invert under it, the quasi-Newton refreshes its factor.
+        r = body.run_probe(loaded, (-2.0, 0.0, 0.0), 0.05, 200)
+        runs.append((r, body.positions))
+    (a, xa), (b, xb) = runs
+    assert a["factorizations"] > 1, a["factorizations"]
+    for key in ("iterations_mean", "iterations_max", "evaluations", "factorizations", "inverted_max"):
+        assert a[key] == b[key], key
+    np.testing.assert_array_equal(xa, xb)

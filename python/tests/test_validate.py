@@ -94,6 +94,9 @@ def test_validate_indentation_cli_writes_the_table_and_files(tmp_path):
     assert "finest FEM | FEM extrapolated | hybrid" in p.stdout and "last change" in p.stdout
     data = json.loads((out / "indentation.json").read_text())
     assert len(data["rows"]) == 2 and len(data["references"]) == 3
+    # The references are quadratic tets by default (they converge where linear ones lock).
+    assert "quadratic tets" in p.stdout and all(r["order"] == 2 for r in data["references"])
+    assert all(r["nodes"] > r["tets"] for r in data["references"]) and data["coarse"]["order"] == 1
     for row in data["rows"]:
         assert row["reference"] > 0 and row["hybrid"] > 0 and row["coarse"] > 0
         assert len(row["dent_hybrid"]) == len(validate.DENT_DISTANCES)
@@ -128,11 +131,12 @@ def test_validate_indentation_meshes_a_built_wall_and_checks_its_levels(tmp_path
     # wall, held at the base, as the hybrid is.
     out = tmp_path / "v"
     p = subprocess.run([sys.executable, "-m", "palpate", "validate", "indentation", "ventricle", "--levels", "100:1",
-                        "200:1", "--coarse", "60:1", "--depths", "0.001", "--out", str(out), "--quiet"],
+                        "200:1", "--coarse", "60:1", "--depths", "0.001", "--order", "1", "--out", str(out), "--quiet"],
                        capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr
     data = json.loads((out / "indentation.json").read_text())
     assert [r["tets"] for r in data["references"]] == [300, 600] and data["coarse"]["tets"] == 180
+    assert all(r["order"] == 1 for r in data["references"])
     assert data["rows"][0]["reference"] > 0
     p = subprocess.run([sys.executable, "-m", "palpate", "validate", "indentation", "ellipsoids", "--levels", "4"],
                        capture_output=True, text=True, timeout=120)

@@ -30,7 +30,7 @@ def _level(text: str, shape: str) -> Tuple[int, int]:
 
 
 def add_parser(sub) -> None:
-    from ..validate import BUILT_LEVELS, GMSH_LEVELS, REFERENCE_LEVELS
+    from ..validate import BUILT_LEVELS, GMSH_LEVELS, QUADRATIC_LEVELS, REFERENCE_LEVELS
 
     v = sub.add_parser("validate", help="the hybrid model against references palpate computes itself",
                        description="Validation against references palpate computes itself.")
@@ -50,10 +50,15 @@ def add_parser(sub) -> None:
                    help="indentations of the table [m] (default 0.002 0.004 0.006)")
     i.add_argument("--levels", nargs="+", metavar="A:L",
                    help="reference meshes, coarse to fine, each halving the last's element size: for the ellipsoids "
-                        "SUBDIVISIONS:LAYERS of the graded wall (default " + " ".join(f"{s}:{l}" for s, l in REFERENCE_LEVELS)
+                        "SUBDIVISIONS:LAYERS of the graded wall (linear tets' default " + " ".join(f"{s}:{l}" for s, l in REFERENCE_LEVELS)
                         + "), for rodero TRIANGLES of its simplified surface filled by gmsh (default "
                         + " ".join(str(s) for s, _ in GMSH_LEVELS) + "), for the ventricle TRIANGLES:LAYERS of the "
                         "build's wall mesh (default " + " ".join(f"{s}:{l}" for s, l in BUILT_LEVELS) + ")")
+    i.add_argument("--order", type=int, choices=[1, 2], default=2,
+                   help="the references' elements: 2 quadratic tets (default; they converge where linear ones "
+                        "lock, a level coarser: default levels " + ", ".join(
+                            f"{k} " + " ".join(f"{s}:{l}" if k != "gmsh" else str(s) for s, l in v)
+                            for k, v in QUADRATIC_LEVELS.items()) + "), 1 linear tets (the levels above)")
     i.add_argument("--coarse", metavar="A:L", help="the coarse full FEM, ungraded (default 2:2 for the ellipsoids: "
                    "768 tets; 600 for rodero: 880 tets; 300:1 for the ventricle: 900 tets)")
     i.add_argument("--young", type=float, default=30e3, metavar="E", help="Young's modulus [Pa] (default 30e3)")
@@ -80,7 +85,7 @@ def cmd_indentation(a) -> int:
     if not (a.tool_radius > 0 and all(d > 0 for d in a.depths)):
         raise Usage("palpate validate indentation: --tool-radius and --depths must be positive [m]")
     depths: List[float] = sorted(a.depths)
-    levels = [_level(t, a.shape) for t in a.levels] if a.levels else list(validate.default_levels(a.shape))
+    levels = [_level(t, a.shape) for t in a.levels] if a.levels else list(validate.default_levels(a.shape, a.order))
     coarse = _level(a.coarse, a.shape) if a.coarse else validate.default_coarse(a.shape)
     model = None
     if a.model:
@@ -92,7 +97,7 @@ def cmd_indentation(a) -> int:
         result = validate.run_indentation(a.shape, tool_radius=a.tool_radius, depths=depths, levels=levels,
                                           coarse=coarse, young=a.young, poisson=a.poisson, law=a.law,
                                           out_dir=a.out, model=model, reference=a.reference, verbose=not a.quiet,
-                                          implicit_exchange=not a.explicit_exchange)
+                                          implicit_exchange=not a.explicit_exchange, order=a.order)
     except validate.ReferenceMismatch as e:
         raise Fail(f"palpate validate indentation: --reference {e}") from None
     except _p.SolveError as e:
