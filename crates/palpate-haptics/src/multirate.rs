@@ -228,7 +228,10 @@ pub struct PhysicsLoop {
 impl PhysicsLoop {
     /// Ticks `physics` at `rate_hz`, a checkpoint every `checkpoint_every` ticks without a fault,
     /// recording up to `record` targets.
-    pub fn new(physics: Box<dyn Physics>, rate_hz: f64, checkpoint_every: u64, record: usize) -> PhysicsLoop {
+    pub fn new(mut physics: Box<dyn Physics>, rate_hz: f64, checkpoint_every: u64, record: usize) -> PhysicsLoop {
+        // The first tick's factorisation now, not in the loop (a failure there is the first
+        // tick's, which makes it again and counts the fault).
+        let _ = physics.prepare(1.0 / rate_hz);
         PhysicsLoop {
             physics,
             dt: 1.0 / rate_hz,

@@ -705,9 +705,17 @@ impl HapticCore {
         }
     }
 
+    /// Makes now what the physics' first tick at the servo's rate would make (its factorisation,
+    /// [`Physics::prepare`]): [`Servo::start`] and [`HapticCore::run_offline`] call it before the
+    /// first tick. Changes no result; `true` if it did work.
+    pub fn prepare(&mut self) -> bool {
+        self.physics.prepare(self.dt).unwrap_or(false)
+    }
+
     /// Runs ticks without a clock (as fast as the physics goes) until the device is finished or
     /// `max_ticks`, sending each force to the device's sink: tests and replays.
     pub fn run_offline(&mut self, device: &mut dyn Device, max_ticks: u64) -> u64 {
+        self.prepare();
         let sink = device.sink();
         let mut n = 0;
         while n < max_ticks && !device.finished(self.tick, self.dt) {
@@ -845,6 +853,11 @@ impl Servo {
     /// Starts the servo thread (and its watchdog) on `core` with `device`.
     pub fn start(mut core: HapticCore, device: Box<dyn Device>, config: &ServoConfig) -> Result<ServoHandle, String> {
         config.check()?;
+        // The first tick's factorisation before the clock starts (the multirate loop's in
+        // PhysicsLoop::new, at its own rate).
+        if config.physics_rate_hz.is_none() {
+            core.prepare();
+        }
         let physics_loop = config.physics_rate_hz.map(|hz| core.begin_multirate(hz));
         let surface_len = physics_loop.as_ref().map_or_else(|| core.physics.surface_len(), |p| p.physics().surface_len());
         let interior_cap = physics_loop.as_ref().map_or_else(|| core.physics.interior_capacity(), |p| p.physics().interior_capacity());

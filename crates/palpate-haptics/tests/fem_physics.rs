@@ -432,3 +432,31 @@ fn lv_1350_6mm_press_force_and_tick_cost() {
     // radius) sinks the sphere through the surface: the force peaks on the way, then turns.
     assert!(f.iter().all(|c| c.is_finite()) && peak > 0.05, "the press must push the tool out on the way: {peak} N");
 }
+
+/// Issue 38: the loop makes the first tick's factorisation before its clock starts
+/// (`Physics::prepare`), which changes no force: the same press with and without it is the same
+/// to the bit, and after `prepare` the first tick at that `dt` finds its factor made.
+#[test]
+fn prepare_makes_the_first_factor_and_changes_no_force() {
+    let press = |prepared: bool| {
+        let mut ph = FemPhysics::new(ellipsoid(Vec3::zeros(), Integrator::default(), true), FemOptions::default()).unwrap();
+        if prepared {
+            assert!(ph.prepare(DT).unwrap(), "the first prepare factorises");
+            assert!(!ph.prepare(DT).unwrap(), "the second finds it made");
+        }
+        let (p, n) = probe(&ph);
+        let r = FemOptions::default().radius;
+        let forces: Vec<Vec3> = (0..500).map(|k| ph.tick(&path(p, n, r, 0.004, 0.05, k), DT).unwrap()).collect();
+        // Ticking made no new factor for this dt (the cache holds it: prepare finds it).
+        assert!(!ph.prepare(DT).unwrap());
+        forces
+    };
+    let (with, without) = (press(true), press(false));
+    assert!(with.iter().any(|f| f.norm() > 0.01));
+    assert_eq!(with, without);
+    // The servo prepares its physics before the first tick.
+    let ph = FemPhysics::new(ellipsoid(Vec3::zeros(), Integrator::default(), true), FemOptions::default()).unwrap();
+    let mut core = HapticCore::new(Box::new(ph), 1000.0, CouplingParams::default(), SafetyParams::default(), 100, 0);
+    assert!(core.prepare());
+    assert!(!core.physics_mut().prepare(DT).unwrap());
+}

@@ -392,6 +392,14 @@ pub struct SimWorkspace {
 
 impl SimWorkspace {
     /// Scratch space for `sim`.
+    /// Factorise the core's matrix for ticks of `dt` \[s\] now, ahead of the first tick at that
+    /// `dt` (which would otherwise make it: a stall of the factorisation's time in the first
+    /// tick). Changes no result, only when the work is done; `true` if it factorised (false: the
+    /// factor was held already). See [`crate::Workspace::prepare`].
+    pub fn prepare(&mut self, sim: &Sim, dt: f64) -> Result<bool, crate::error::StepError> {
+        self.core.prepare(&sim.core, dt)
+    }
+
     pub fn new(sim: &Sim) -> SimWorkspace {
         let n = sim.n_particles();
         let mut particles = ParticleWorkspace::new(&sim.particles);
