@@ -1,5 +1,7 @@
-//! Finite elements: the linear tetrahedron of paper §3.1 (eq. 12-22), and the FEM body built of
-//! it: an immutable [`Model`] compiled by [`ModelBuilder`], the mutable [`State`] and the scratch
+//! Finite elements: the linear tetrahedron of paper §3.1 (eq. 12-22) and the quadratic (10-node)
+//! one on the same continuum (`tet10.rs`: it bends where linear tets lock, the references' and,
+//! in time, the core's element), and the FEM body built of either
+//! ([`ModelBuilder::order`]): an immutable [`Model`] compiled by [`ModelBuilder`], the mutable [`State`] and the scratch
 //! [`Workspace`] (MuJoCo's `mjModel` / `mjData` split), stepped by [`crate::step`]
 //! (`integrate/`). A model is validated once, by [`ModelBuilder::build`]; stepping then assumes
 //! validity. The particle body ([`crate::meshfree`]) has the same shape.
