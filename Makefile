@@ -2,7 +2,7 @@
 #   make demo   set up .venv, build the extension (release), run the demo
 #   make test   set up, then cargo test --release, the release wheel, pytest, make lint and make fuzz-ci
 #   make wheel  the release wheel in dist/: abi3 (CPython >= 3.9), manylinux_2_28, stripped
-#   make lint   clippy -D warnings, cargo doc -D warnings, stubtest, the fuzz targets compiled (all in make test)
+#   make lint   cargo fmt --check, clippy -D warnings, cargo doc -D warnings, stubtest, the fuzz targets compiled (all in make test)
 #   make browser  Debian's chromium for the viewer's browser test (as root with apt-get; in make test)
 # The set-up is stamp-file driven: a warm re-run is a no-op, an edit to any .rs / Cargo.toml /
 # pyproject.toml rebuilds the extension. Python sources are installed editable (maturin develop),
@@ -36,7 +36,7 @@ RUST_INPUTS := $(shell find crates python/src -name '*.rs' 2>/dev/null) \
 
 export MPLBACKEND ?= Agg
 
-.PHONY: all setup demo test cargo-test pytest wheel lint clippy rustdoc stubtest fuzz-check clean distclean browser
+.PHONY: all setup demo test cargo-test pytest wheel lint fmt clippy rustdoc stubtest fuzz-check clean distclean browser
 
 all: setup
 
@@ -102,7 +102,11 @@ $(VENV)/.lint-deps: $(VENV)/.deps
 	$(BIN)/python -m pip install -q --disable-pip-version-check $(LINT_DEPS)
 	touch $@
 
-lint: clippy rustdoc stubtest fuzz-check
+lint: fmt clippy rustdoc stubtest fuzz-check
+
+# The Rust sources in the house style (rustfmt.toml).
+fmt:
+	cargo fmt --all -- --check
 
 clippy:
 	cargo clippy --workspace --all-targets -- -D warnings

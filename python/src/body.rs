@@ -101,7 +101,15 @@ fn py_load(n: usize, nodes: Vec<usize>, total_force: &Bound<'_, PyAny>, ramp_tim
 
 impl PyBody {
     /// `probe::run_probe` timed by a wall clock, GIL released; its result as a dict.
-    fn run_timed<'py>(&mut self, py: Python<'py>, loads: &[ProbeLoad], steps: usize, dt: f64, stable_limit: f64, max_wall_s: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+    fn run_timed<'py>(
+        &mut self,
+        py: Python<'py>,
+        loads: &[ProbeLoad],
+        steps: usize,
+        dt: f64,
+        stable_limit: f64,
+        max_wall_s: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         if steps == 0 {
             return Err(crate::errors::param_error_from("steps must be at least 1"));
         }
@@ -184,7 +192,8 @@ impl PyBody {
         fixed: Option<&Bound<'_, PyAny>>,
         gravity: Option<&Bound<'_, PyAny>>,
         integrator: Option<&Bound<'_, PyAny>>,
-        order: errors::Int) -> PyResult<Self> {
+        order: errors::Int,
+    ) -> PyResult<Self> {
         let order = match order {
             errors::Int::Fits(1) => Order::Linear,
             errors::Int::Fits(2) => Order::Quadratic,
@@ -232,12 +241,7 @@ impl PyBody {
     /// Other Python threads run meanwhile; they cannot use this body until the call returns
     /// (doing so raises ``RuntimeError: Already borrowed``).
     #[pyo3(signature = (n = errors::Int::Fits(1), dt = 1e-3), text_signature = "($self, n=1, dt=1e-3)")]
-    fn step<'py>(
-        mut slf: PyRefMut<'py, Self>,
-        py: Python<'py>,
-        n: errors::Int,
-        #[pyo3(from_py_with = conv::arg)] dt: f64,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: errors::Int, #[pyo3(from_py_with = conv::arg)] dt: f64) -> PyResult<Bound<'py, PyDict>> {
         let n = errors::count(n, "n")?;
         let this = &mut *slf;
         let mut ctrl_c = errors::CtrlC::new();
@@ -409,7 +413,8 @@ impl PyBody {
         forces: Option<&Bound<'py, PyAny>>,
         max_iterations: Option<errors::Int>,
         #[pyo3(from_py_with = conv::arg)] tolerance: Option<f64>,
-        load_steps: Option<errors::Int>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        load_steps: Option<errors::Int>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let (max_iterations, load_steps) = (errors::count_opt(max_iterations, "max_iterations")?, errors::count_opt(load_steps, "load_steps")?);
         let d = StaticOptions::default();
         let (max_iterations, tolerance, load_steps) =
@@ -423,13 +428,16 @@ impl PyBody {
         }
         // 0 increments was taken as 1 without a word (issue 35 item 6).
         if load_steps == 0 {
-            return Err(crate::errors::param_error_from("load_steps = 0: the load is applied in at least 1 increment (give 1 or more, or None for the default)"));
+            return Err(crate::errors::param_error_from(
+                "load_steps = 0: the load is applied in at least 1 increment (give 1 or more, or None for the default)",
+            ));
         }
         let opts = StaticOptions { max_iterations, tolerance, load_steps };
         let model = &self.model;
         let mut ctrl_c = errors::CtrlC::new();
         let sol = errors::guard("Body.static_solve", || {
-            py.detach(|| static_solve_with(model, &f, &opts, &mut || ctrl_c.poll())).map_err(|e| ctrl_c.finish(e, errors::solve_error))
+            py.detach(|| static_solve_with(model, &f, &opts, &mut || ctrl_c.poll()))
+                .map_err(|e| ctrl_c.finish(e, errors::solve_error))
         })?;
         Ok(conv::vec3s_to_py(py, &sol.x))
     }
@@ -466,7 +474,8 @@ impl PyBody {
         #[pyo3(from_py_with = conv::arg)] stiffness: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] max_increment: Option<f64>,
         #[pyo3(from_py_with = conv::arg)] sample_spacing: Option<f64>,
-        #[pyo3(from_py_with = conv::arg)] tolerance: Option<f64>) -> PyResult<Bound<'py, PyDict>> {
+        #[pyo3(from_py_with = conv::arg)] tolerance: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let start = conv::vec3(start, "start")?;
         let direction = conv::vec3(direction, "direction")?;
         let norm = direction.norm();
@@ -493,7 +502,8 @@ impl PyBody {
         let model = &self.model;
         let mut ctrl_c = errors::CtrlC::new();
         let pts = errors::guard("Body.indent", || {
-            py.detach(|| indent_with(model, &ind, &travels, &opts, &mut || ctrl_c.poll())).map_err(|e| ctrl_c.finish(e, errors::solve_error))
+            py.detach(|| indent_with(model, &ind, &travels, &opts, &mut || ctrl_c.poll()))
+                .map_err(|e| ctrl_c.finish(e, errors::solve_error))
         })?;
         let out = PyDict::new(py);
         let col = |f: &dyn Fn(&palpate_core::integrate::IndentPoint) -> f64| -> Vec<f64> { pts.iter().map(f).collect() };

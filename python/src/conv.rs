@@ -55,9 +55,9 @@ pub fn as_array<'py>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<Bound<'py,
     }
     let not_numbers = || crate::errors::type_error(format!("{what} must be an array-like of numbers, got {}", type_name(obj)));
     let np = obj.py().import("numpy")?;
-    let conv = np.call_method1("asarray", (obj,)).map_err(|e| {
-        crate::errors::type_error(format!("{what} must be an array-like of numbers, got {} ({e})", type_name(obj)))
-    })?;
+    let conv = np
+        .call_method1("asarray", (obj,))
+        .map_err(|e| crate::errors::type_error(format!("{what} must be an array-like of numbers, got {} ({e})", type_name(obj))))?;
     let a = conv.cast_into::<PyUntypedArray>().map_err(|_| not_numbers())?;
     if !matches!(a.dtype().kind(), b'b' | b'i' | b'u' | b'f') {
         return Err(crate::errors::type_error(format!(
@@ -197,7 +197,10 @@ fn force_error(what: &str, f: &Vec3) -> PyErr {
     crate::errors::param_error_from(format!(
         "{what}: force ({:e}, {:e}, {:e}) N of magnitude {norm:e} N is over the bound of {:e} N (the weight of 100 t; \
          a soft-tissue load is tens of newtons: check the units)",
-        f.x, f.y, f.z, palpate_core::limits::MAX_FORCE_N
+        f.x,
+        f.y,
+        f.z,
+        palpate_core::limits::MAX_FORCE_N
     ))
 }
 

@@ -32,12 +32,7 @@ create_exception!(
      attributes `tet` and `node` hold the offending 0-based tet / node index, or None."
 );
 create_exception!(palpate, MaterialError, PalpateError, "Material parameters that are not physical.");
-create_exception!(
-    palpate,
-    ModelError,
-    PalpateError,
-    "A body that cannot be built (fixed node out of range, non-finite gravity, bad integrator settings)."
-);
+create_exception!(palpate, ModelError, PalpateError, "A body that cannot be built (fixed node out of range, non-finite gravity, bad integrator settings).");
 create_exception!(palpate, SolveError, PalpateError, "A static solve that failed (no convergence, singular system).");
 create_exception!(
     palpate,
@@ -80,12 +75,7 @@ create_exception!(
      PALPATE_MAX_MEMORY (bytes, or e.g. 16G). Attributes `requested` and `budget` [bytes] hold the numbers, `budget_source` where the budget \
      came from (see `palpate.memory_budget()`)."
 );
-create_exception!(
-    palpate,
-    LoadWarning,
-    PyUserWarning,
-    "A load that the body will not carry as given (force on fixed nodes, which the solver drops)."
-);
+create_exception!(palpate, LoadWarning, PyUserWarning, "A load that the body will not carry as given (force on fixed nodes, which the solver drops).");
 create_exception!(
     palpate,
     InternalError,
@@ -103,7 +93,9 @@ create_exception!(
 pub enum Int {
     Fits(i64),
     /// Beyond 64 bits, with its sign.
-    Huge { negative: bool },
+    Huge {
+        negative: bool,
+    },
 }
 
 impl<'a, 'py> FromPyObject<'a, 'py> for Int {
@@ -265,7 +257,10 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
         pyo3::types::PyDict::new(py),
     ))?;
     io_type.setattr("__module__", "palpate")?;
-    io_type.setattr("__doc__", "A model file that cannot be opened or read (missing, a directory, not a regular file, unreadable): a ModelFileError and an OSError.")?;
+    io_type.setattr(
+        "__doc__",
+        "A model file that cannot be opened or read (missing, a directory, not a regular file, unreadable): a ModelFileError and an OSError.",
+    )?;
     m.add("ModelFileIOError", &io_type)?;
     let _ = MODEL_FILE_IO.set(py, io_type.unbind());
     // An argument palpate refuses (a negative count, a parameter out of range): a PalpateError
@@ -349,9 +344,7 @@ fn mesh_location(e: &core::MeshError) -> (Option<usize>, Option<usize>) {
         core::MeshError::IndexOutOfRange { tet, .. }
         | core::MeshError::Degenerate { tet, .. }
         | core::MeshError::DuplicateTet { tet, .. }
-        | core::MeshError::CoincidentTet { tet, .. } => {
-            (Some(*tet), None)
-        }
+        | core::MeshError::CoincidentTet { tet, .. } => (Some(*tet), None),
         core::MeshError::RepeatedNode { tet, node } => (Some(*tet), Some(*node)),
         core::MeshError::InFile { source, .. } => mesh_location(source),
         _ => (None, None),
@@ -443,11 +436,13 @@ pub fn guard<T>(what: &str, f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
         Ok(r) => r,
         Err(payload) => {
-            let msg = LAST_PANIC.with(|p| p.borrow_mut().take()).unwrap_or_else(|| match (payload.downcast_ref::<&str>(), payload.downcast_ref::<String>()) {
-                (Some(s), _) => s.to_string(),
-                (_, Some(s)) => s.clone(),
-                _ => "panic".to_string(),
-            });
+            let msg = LAST_PANIC
+                .with(|p| p.borrow_mut().take())
+                .unwrap_or_else(|| match (payload.downcast_ref::<&str>(), payload.downcast_ref::<String>()) {
+                    (Some(s), _) => s.to_string(),
+                    (_, Some(s)) => s.clone(),
+                    _ => "panic".to_string(),
+                });
             Err(InternalError::new_err(format!("{what}: internal error (a palpate bug; please report it with the input): {msg}")))
         }
     }
@@ -545,10 +540,13 @@ pub fn file_error(e: core::ModelFileError) -> PyErr {
 /// came from a file.
 pub fn warn_all<W: Display>(py: Python<'_>, source: Option<&str>, warnings: impl IntoIterator<Item = W>) -> PyResult<()> {
     for w in warnings {
-        warn(py, match source {
-            Some(s) => format!("{s}: {w}"),
-            None => w.to_string(),
-        })?;
+        warn(
+            py,
+            match source {
+                Some(s) => format!("{s}: {w}"),
+                None => w.to_string(),
+            },
+        )?;
     }
     Ok(())
 }

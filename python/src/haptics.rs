@@ -17,7 +17,10 @@ use palpate_core::{ModelBuilder, Vec3};
 use palpate_haptics::bridge::protocol::Reject;
 use palpate_haptics::bridge::{Bridge, BridgeError, BridgeOptions, BridgeStats, Key};
 use palpate_haptics::devices::{Hand, HandParams, Replay, ReplayCheck, Scripted};
-use palpate_haptics::{CouplingParams, Device, DeviceKind, FemOptions, FemPhysics, HapticCore, HybridPhysics, Idle, Physics, Realtime, Recording, SafetyParams, Servo, ServoConfig, ServoHandle, ServoReport, Snapshot, Stats, Vec3Cell};
+use palpate_haptics::{
+    CouplingParams, Device, DeviceKind, FemOptions, FemPhysics, HapticCore, HybridPhysics, Idle, Physics, Realtime, Recording, SafetyParams, Servo,
+    ServoConfig, ServoHandle, ServoReport, Snapshot, Stats, Vec3Cell,
+};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -213,7 +216,9 @@ fn kind_of(name: &str) -> PyResult<DeviceKind> {
 
 fn positive(name: &str, v: Option<f64>, zero_ok: bool) -> PyResult<()> {
     match v {
-        Some(x) if !(x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0))) => Err(errors::param_error_from(format!("{name} = {x} must be {} and finite", if zero_ok { "non-negative" } else { "positive" }))),
+        Some(x) if !(x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0))) => {
+            Err(errors::param_error_from(format!("{name} = {x} must be {} and finite", if zero_ok { "non-negative" } else { "positive" })))
+        }
         _ => Ok(()),
     }
 }
@@ -316,11 +321,14 @@ fn report_dict<'py>(py: Python<'py>, r: &ServoReport) -> PyResult<Bound<'py, PyD
         None => d.set_item("physics", py.None())?,
     }
     d.set_item("short_slice", r.short_slice)?;
-    d.set_item("realtime", match &r.realtime {
-        Realtime::Off => "off".to_string(),
-        Realtime::Granted(p) => format!("SCHED_FIFO priority {p}"),
-        Realtime::Refused(why) => format!("refused: {why}"),
-    })?;
+    d.set_item(
+        "realtime",
+        match &r.realtime {
+            Realtime::Off => "off".to_string(),
+            Realtime::Granted(p) => format!("SCHED_FIFO priority {p}"),
+            Realtime::Refused(why) => format!("refused: {why}"),
+        },
+    )?;
     Ok(d)
 }
 
@@ -376,15 +384,28 @@ impl PyHapticLoop {
             return Err(errors::param_error_from(format!("threads = {threads}: must be 1 to {}", palpate_core::parallel::MAX_WAYS)));
         }
         let port = match port {
-            Some(p) => Some(match p {
-                errors::Int::Fits(v) => u16::try_from(v).ok(),
-                errors::Int::Huge { .. } => None,
-            }
-            .ok_or_else(|| errors::param_error_from(format!("port = {p}: must be 0 to 65535")))?),
+            Some(p) => Some(
+                match p {
+                    errors::Int::Fits(v) => u16::try_from(v).ok(),
+                    errors::Int::Huge { .. } => None,
+                }
+                .ok_or_else(|| errors::param_error_from(format!("port = {p}: must be 0 to 65535")))?,
+            ),
             None => None,
         };
         errors::guard("HapticLoop", || {
-            for (n, v) in [("tool_radius", tool_radius), ("core_contact_stiffness", core_contact_stiffness), ("tool_area_stiffness", tool_area_stiffness), ("coupling_stiffness", coupling_stiffness), ("proxy_mass", proxy_mass), ("max_force", max_force), ("max_rate", max_rate), ("stall_timeout", stall_timeout), ("silence", silence), ("physics_rate", physics_rate)] {
+            for (n, v) in [
+                ("tool_radius", tool_radius),
+                ("core_contact_stiffness", core_contact_stiffness),
+                ("tool_area_stiffness", tool_area_stiffness),
+                ("coupling_stiffness", coupling_stiffness),
+                ("proxy_mass", proxy_mass),
+                ("max_force", max_force),
+                ("max_rate", max_rate),
+                ("stall_timeout", stall_timeout),
+                ("silence", silence),
+                ("physics_rate", physics_rate),
+            ] {
                 positive(n, v, false)?;
             }
             for (n, v) in [("coupling_damping", coupling_damping), ("ramp", ramp), ("spin", spin)] {
@@ -397,7 +418,11 @@ impl PyHapticLoop {
             }
             // The multirate loop by default, its physics at 1 kHz (or the servo's rate, if lower);
             // the idle loop has no physics to run.
-            let mut physics_rate = if single_rate || idle { None } else { Some(physics_rate.unwrap_or(DEFAULT_PHYSICS_RATE_HZ.min(rate_hz))) };
+            let mut physics_rate = if single_rate || idle {
+                None
+            } else {
+                Some(physics_rate.unwrap_or(DEFAULT_PHYSICS_RATE_HZ.min(rate_hz)))
+            };
             if device == "replay" {
                 let path = recording.as_ref().ok_or_else(|| errors::param_error_from("device 'replay' needs recording=PATH"))?;
                 let r = Recording::load(path).map_err(record_error)?;
@@ -413,18 +438,34 @@ impl PyHapticLoop {
             let (dc, ds) = kind.defaults();
             let coupling = match &replay {
                 Some(r) => r.coupling,
-                None => CouplingParams { stiffness: coupling_stiffness.unwrap_or(dc.stiffness), damping: coupling_damping.unwrap_or(dc.damping), proxy_mass: proxy_mass.unwrap_or(dc.proxy_mass) },
+                None => CouplingParams {
+                    stiffness: coupling_stiffness.unwrap_or(dc.stiffness),
+                    damping: coupling_damping.unwrap_or(dc.damping),
+                    proxy_mass: proxy_mass.unwrap_or(dc.proxy_mass),
+                },
             };
             let safety = match &replay {
                 Some(r) => r.safety,
-                None => SafetyParams { max_force: max_force.unwrap_or(ds.max_force), max_rate: max_rate.unwrap_or(ds.max_rate), ramp: ramp.unwrap_or(ds.ramp), stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout), silence: silence.unwrap_or(ds.silence) },
+                None => SafetyParams {
+                    max_force: max_force.unwrap_or(ds.max_force),
+                    max_rate: max_rate.unwrap_or(ds.max_rate),
+                    ramp: ramp.unwrap_or(ds.ramp),
+                    stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout),
+                    silence: silence.unwrap_or(ds.silence),
+                },
             };
             // The device class's rated limits (a replay drives no device: its recorded limits
             // stand); beyond them only with `unsafe_limits`, and then said.
-            let beyond = if replay.is_some() { None } else { palpate_haptics::safety::check_limits(kind, &coupling, &safety).err() };
+            let beyond = if replay.is_some() {
+                None
+            } else {
+                palpate_haptics::safety::check_limits(kind, &coupling, &safety).err()
+            };
             let unsafe_note = match beyond {
                 Some(why) if !unsafe_limits => {
-                    return Err(errors::param_error_from(format!("{why}: refused (unsafe_limits=True, or --unsafe-limits on the command line, allows it, at the user's risk)")));
+                    return Err(errors::param_error_from(format!(
+                        "{why}: refused (unsafe_limits=True, or --unsafe-limits on the command line, allows it, at the user's risk)"
+                    )));
                 }
                 Some(why) => {
                     let msg = std::ffi::CString::new(format!("unsafe limits: {why}")).unwrap_or_default();
@@ -434,7 +475,23 @@ impl PyHapticLoop {
                 None => None,
             };
             let defaults = ServoConfig::default();
-            let mut config = ServoConfig { rate_hz, physics_rate_hz: physics_rate, coupling: Some(coupling), safety: Some(safety), record_ticks, max_ticks, spin: spin.unwrap_or(if realtime { 0.0 } else if physics_rate.is_some() { MULTIRATE_SPIN } else { BUSY_SPIN }), realtime, ..defaults };
+            let mut config = ServoConfig {
+                rate_hz,
+                physics_rate_hz: physics_rate,
+                coupling: Some(coupling),
+                safety: Some(safety),
+                record_ticks,
+                max_ticks,
+                spin: spin.unwrap_or(if realtime {
+                    0.0
+                } else if physics_rate.is_some() {
+                    MULTIRATE_SPIN
+                } else {
+                    BUSY_SPIN
+                }),
+                realtime,
+                ..defaults
+            };
             config.check().map_err(errors::param_error_from)?;
 
             // Values most likely in the wrong unit (palpate_core::runtime::scale): warned, or
@@ -443,13 +500,17 @@ impl PyHapticLoop {
             for w in scale::parameter_warnings(&material.inner, tool_r) {
                 errors::unit_check(py, format!("HapticLoop: {w}"), strict_units)?;
             }
-            let target_check = errors::TargetCheck::new(if let Ok(hm) = model.cast::<PyHybridModel>() {
-                scale::bounding_box(&hm.borrow().model.outer_points)
-            } else if let Ok(body) = model.cast::<PyBody>() {
-                scale::bounding_box(body.borrow().model().mesh().points())
-            } else {
-                (Vec3::repeat(f64::NEG_INFINITY), Vec3::repeat(f64::INFINITY)) // refused below
-            }, strict_units);
+            let target_check = errors::TargetCheck::new(
+                if let Ok(hm) = model.cast::<PyHybridModel>() {
+                    scale::bounding_box(&hm.borrow().model.outer_points)
+                } else if let Ok(body) = model.cast::<PyBody>() {
+                    scale::bounding_box(body.borrow().model().mesh().points())
+                } else {
+                    (Vec3::repeat(f64::NEG_INFINITY), Vec3::repeat(f64::INFINITY))
+                    // refused below
+                },
+                strict_units,
+            );
             let mut hand = None;
             let mut bridge = None;
             let mut replay_check = None;
@@ -491,7 +552,9 @@ impl PyHapticLoop {
                     };
                     let b = match Bridge::open(SocketAddrV4::new(ip, port), kind, BridgeOptions { key, ..Default::default() }) {
                         Ok(b) => b,
-                        Err(e @ BridgeError::KeyRequired(_)) => return Err(errors::param_error_from(format!("{e} (bridge_key=..., or --key-file FILE on the command line)"))),
+                        Err(e @ BridgeError::KeyRequired(_)) => {
+                            return Err(errors::param_error_from(format!("{e} (bridge_key=..., or --key-file FILE on the command line)")))
+                        }
                         Err(e) => return Err(haptics_error(e.to_string())),
                     };
                     let addr = b.local_addr().map_err(haptics_error)?.to_string();
@@ -514,10 +577,16 @@ impl PyHapticLoop {
                 }
                 let (hm, mat) = (hm.borrow().model.clone(), material.inner);
                 let physics = py.detach(|| HybridPhysics::new(hm, mat, options)).map_err(errors::model_error)?;
-                Box::new(physics.with_threads(threads, realtime).map_err(|e| haptics_error(format!("cannot start {} helper threads: {e}", threads - 1)))?)
+                Box::new(
+                    physics
+                        .with_threads(threads, realtime)
+                        .map_err(|e| haptics_error(format!("cannot start {} helper threads: {e}", threads - 1)))?,
+                )
             } else if let Ok(body) = model.cast::<PyBody>() {
                 if threads > 1 {
-                    return Err(errors::param_error_from(format!("threads = {threads}: for a hybrid model only (a full-FEM body's tick runs on the servo's thread)")));
+                    return Err(errors::param_error_from(format!(
+                        "threads = {threads}: for a hybrid model only (a full-FEM body's tick runs on the servo's thread)"
+                    )));
                 }
                 if core_contact_stiffness.is_some() {
                     return Err(errors::param_error_from("core_contact_stiffness: for a hybrid model only (a full-FEM Body has no core under a shell)"));
@@ -531,7 +600,10 @@ impl PyHapticLoop {
                 let m = body.borrow();
                 let src = m.model();
                 let fixed: Vec<usize> = src.fixed().iter().enumerate().filter(|(_, &f)| f).map(|(i, _)| i).collect();
-                let builder = ModelBuilder::new(src.mesh().clone(), material.inner).fixed_nodes(fixed).gravity(src.gravity()).integrator(src.integrator());
+                let builder = ModelBuilder::new(src.mesh().clone(), material.inner)
+                    .fixed_nodes(fixed)
+                    .gravity(src.gravity())
+                    .integrator(src.integrator());
                 drop(m);
                 Box::new(py.detach(|| builder.build().and_then(|model| FemPhysics::new(model, options))).map_err(errors::model_error)?)
             } else {
@@ -554,7 +626,17 @@ impl PyHapticLoop {
             let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
             // A multirate recording replays from its own schedule (`run`), not the device's samples.
             let replay = replay.filter(|r| r.physics_rate_hz.is_some());
-            Ok(PyHapticLoop { stage: Mutex::new(Stage::Ready(core, dev)), config, hand, bridge, identity: (id.digest, id.description), replay, unsafe_note, replay_check, target_check })
+            Ok(PyHapticLoop {
+                stage: Mutex::new(Stage::Ready(core, dev)),
+                config,
+                hand,
+                bridge,
+                identity: (id.digest, id.description),
+                replay,
+                unsafe_note,
+                replay_check,
+                target_check,
+            })
         })
     }
 
@@ -758,7 +840,12 @@ impl PyHapticLoop {
             };
             let rec = rec.ok_or_else(|| haptics_error("nothing recorded (record_ticks = 0, or the loop is running)"))?;
             let col = |f: &dyn Fn(&palpate_haptics::TickRecord) -> Vec3| rec.ticks.iter().map(f).collect::<Vec<Vec3>>();
-            [("force", col(&|t| t.force)), ("tool", col(&|t| t.tool)), ("device", col(&|t| t.input.position)), ("tissue", col(&|t| t.tissue))]
+            [
+                ("force", col(&|t| t.force)),
+                ("tool", col(&|t| t.tool)),
+                ("device", col(&|t| t.input.position)),
+                ("tissue", col(&|t| t.tissue)),
+            ]
         };
         let d = PyDict::new(py);
         for (k, v) in cols {

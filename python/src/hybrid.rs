@@ -29,7 +29,9 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 fn ventricle_surface<'py>(py: Python<'py>, circumferential: errors::Int, longitudinal: errors::Int) -> PyResult<TaggedSurface<'py>> {
     let (circumferential, longitudinal) = (errors::count(circumferential, "circumferential")?, errors::count(longitudinal, "longitudinal")?);
     if !(3..=4096).contains(&circumferential) || !(1..=4096).contains(&longitudinal) {
-        return Err(crate::errors::param_error_from(format!("circumferential must be 3 to 4096 and longitudinal 1 to 4096, got {circumferential} and {longitudinal}")));
+        return Err(crate::errors::param_error_from(format!(
+            "circumferential must be 3 to 4096 and longitudinal 1 to 4096, got {circumferential} and {longitudinal}"
+        )));
     }
     let p = palpate_core::mesh::generate::TruncatedEllipsoidWall { circumferential, longitudinal, ..Default::default() };
     let wall = errors::guard("ventricle_surface", || py.detach(|| hybrid::shapes::truncated_ventricle(&p)).map_err(hybrid_error))?;
@@ -49,7 +51,6 @@ fn hybrid_error(e: HybridError) -> PyErr {
         other => errors::ModelError::new_err(other.to_string()),
     }
 }
-
 
 /// How the builder projects between the outer surface and the core.
 #[pyclass(name = "Projection", module = "palpate", eq, eq_int, hash, frozen, from_py_object)]
@@ -122,7 +123,18 @@ fn options(kw: Option<&Bound<'_, PyDict>>) -> PyResult<HybridOptions> {
 }
 
 /// The keyword arguments of the builders, in the order of the docs.
-const OPTION_NAMES: [&str; 10] = ["projection", "core_fraction", "core_triangles", "core_layers", "spacing", "particles", "density", "min_region_particles", "field_voxels", "homogenise"];
+const OPTION_NAMES: [&str; 10] = [
+    "projection",
+    "core_fraction",
+    "core_triangles",
+    "core_layers",
+    "spacing",
+    "particles",
+    "density",
+    "min_region_particles",
+    "field_voxels",
+    "homogenise",
+];
 
 /// `HybridOptions::default()` as a dict keyed as the builders' keyword arguments (`spacing` None
 /// with a particle count, `particles` None with a spacing).
@@ -192,7 +204,8 @@ impl PyHybridModel {
         points: &Bound<'_, PyAny>,
         triangles: &Bound<'_, PyAny>,
         parts: &Bound<'_, PyAny>,
-        options: Option<&Bound<'_, PyDict>>) -> PyResult<PyHybridModel> {
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<PyHybridModel> {
         let o = self::options(options)?;
         let pts = conv::points(points, "points")?;
         let tris = conv::index_rows::<3>(triangles, "triangles")?;
@@ -213,7 +226,14 @@ impl PyHybridModel {
         let (surface, _) = TriSurface::from_arrays(&pts, &tris).map_err(surface_error)?;
         let wall = Wall::tagged(surface, tags).map_err(hybrid_error)?;
         if wall.dropped_pieces > 0 {
-            errors::warn(py, format!("dropped {} closed piece(s) of the surface enclosing less than {} of the largest (specks, e.g. left by a surface repair)", wall.dropped_pieces, palpate_core::hybrid::build::MIN_PIECE_VOLUME))?;
+            errors::warn(
+                py,
+                format!(
+                    "dropped {} closed piece(s) of the surface enclosing less than {} of the largest (specks, e.g. left by a surface repair)",
+                    wall.dropped_pieces,
+                    palpate_core::hybrid::build::MIN_PIECE_VOLUME
+                ),
+            )?;
         }
         build_wall(py, wall, o)
     }
@@ -247,16 +267,24 @@ impl PyHybridModel {
 
     /// FEM core node positions [m], (n, 3).
     #[getter]
-    fn core_points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> { conv::vec3s_to_py(py, &self.model.core_points) }
+    fn core_points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        conv::vec3s_to_py(py, &self.model.core_points)
+    }
     /// FEM core tets, (m, 4) int64 (positive volume).
     #[getter]
-    fn core_tets<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> { conv::index_rows_to_py(py, &self.model.core_tets) }
+    fn core_tets<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
+        conv::index_rows_to_py(py, &self.model.core_tets)
+    }
     /// Outer boundary faces of the core (towards the shell), (f, 3) int64, oriented outward.
     #[getter]
-    fn core_faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> { conv::index_rows_to_py(py, &self.model.core_faces) }
+    fn core_faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
+        conv::index_rows_to_py(py, &self.model.core_faces)
+    }
     /// Core nodes on a base (held fixed), int64 (k,); empty for a closed wall.
     #[getter]
-    fn core_base_nodes<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { conv::usizes_to_py(py, &self.model.core_base_nodes) }
+    fn core_base_nodes<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        conv::usizes_to_py(py, &self.model.core_base_nodes)
+    }
     /// The core's homogenised stiffness (``palpate_core::hybrid::homogenise``), as a dict:
     /// ``poisson`` (k,) and ``factor`` (k,) [-] (the factor by which ``HybridSim`` multiplies the
     /// core's Lame constants and viscosities, interpolated at the material's Poisson's ratio),
@@ -282,25 +310,39 @@ impl PyHybridModel {
     }
     /// Particle rest positions [m], (p, 3), sorted by the outer triangle above them.
     #[getter]
-    fn particles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> { conv::vec3s_to_py(py, &self.model.particles) }
+    fn particles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        conv::vec3s_to_py(py, &self.model.particles)
+    }
     /// Particle masses [kg], (p,).
     #[getter]
-    fn particle_masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> { conv::f64s_to_py(py, &self.model.particle_mass) }
+    fn particle_masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        conv::f64s_to_py(py, &self.model.particle_mass)
+    }
     /// Outer triangle above each particle, int64 (p,).
     #[getter]
-    fn particle_outer_triangle<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { conv::u32s_to_py(py, &self.model.particle_outer_tri) }
+    fn particle_outer_triangle<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        conv::u32s_to_py(py, &self.model.particle_outer_tri)
+    }
     /// Core face below each particle, int64 (p,).
     #[getter]
-    fn particle_core_face<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { conv::u32s_to_py(py, &self.model.particle_core_face) }
+    fn particle_core_face<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        conv::u32s_to_py(py, &self.model.particle_core_face)
+    }
     /// Outer surface vertices [m], (s, 3): one activation region and one skin link each.
     #[getter]
-    fn outer_points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> { conv::vec3s_to_py(py, &self.model.outer_points) }
+    fn outer_points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        conv::vec3s_to_py(py, &self.model.outer_points)
+    }
     /// Outer surface triangles, (t, 3) int64.
     #[getter]
-    fn outer_triangles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> { conv::index_rows_to_py(py, &self.model.outer_tris) }
+    fn outer_triangles<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i64>> {
+        conv::index_rows_to_py(py, &self.model.outer_tris)
+    }
     /// Skin: the core face each outer vertex is tied to, int64 (s,).
     #[getter]
-    fn skin_faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> { conv::u32s_to_py(py, &self.model.skin_face) }
+    fn skin_faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        conv::u32s_to_py(py, &self.model.skin_face)
+    }
     /// Skin: barycentric coordinates on that face, (s, 3), each in [0, 1], rows summing to 1.
     #[getter]
     fn skin_barycentric<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
@@ -308,22 +350,34 @@ impl PyHybridModel {
     }
     /// Skin: rest offset from the anchor point on the face to the vertex [m], (s, 3).
     #[getter]
-    fn skin_offsets<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> { conv::vec3s_to_py(py, &self.model.skin_offset) }
+    fn skin_offsets<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        conv::vec3s_to_py(py, &self.model.skin_offset)
+    }
     /// Number of activation regions (outer vertices).
     #[getter]
-    fn n_regions(&self) -> usize { self.model.n_regions() }
+    fn n_regions(&self) -> usize {
+        self.model.n_regions()
+    }
     /// Particle lattice spacing [m].
     #[getter]
-    fn spacing(&self) -> f64 { self.model.spacing }
+    fn spacing(&self) -> f64 {
+        self.model.spacing
+    }
     /// Volume enclosed by the wall's boundary [m^3].
     #[getter]
-    fn wall_volume(&self) -> f64 { self.model.wall_volume }
+    fn wall_volume(&self) -> f64 {
+        self.model.wall_volume
+    }
     /// Volume of the FEM core [m^3].
     #[getter]
-    fn core_volume(&self) -> f64 { self.model.core_volume() }
+    fn core_volume(&self) -> f64 {
+        self.model.core_volume()
+    }
     /// Volume the particles represent (lattice cells) [m^3].
     #[getter]
-    fn shell_volume(&self) -> f64 { self.model.shell_volume() }
+    fn shell_volume(&self) -> f64 {
+        self.model.shell_volume()
+    }
 
     /// RV(p_s): indices of the particles of region ``s``, int64.
     fn region_particles<'py>(&self, py: Python<'py>, s: errors::Int) -> PyResult<Bound<'py, PyArray1<i64>>> {
@@ -356,7 +410,15 @@ impl PyHybridModel {
         let d = PyDict::new(py);
         d.set_item("origin", PyArray1::from_vec(py, vec![f.origin.x, f.origin.y, f.origin.z]))?;
         d.set_item("h", f.h)?;
-        let labels: Vec<u8> = f.label.iter().map(|l| match l { VoxelLabel::Outside => 0, VoxelLabel::Inside => 1, VoxelLabel::Boundary => 2 }).collect();
+        let labels: Vec<u8> = f
+            .label
+            .iter()
+            .map(|l| match l {
+                VoxelLabel::Outside => 0,
+                VoxelLabel::Inside => 1,
+                VoxelLabel::Boundary => 2,
+            })
+            .collect();
         d.set_item("label", PyArray1::from_vec(py, labels).reshape([nz, ny, nx])?)?;
         let g: Vec<f32> = f.gradient.iter().flatten().copied().collect();
         d.set_item("gradient", PyArray1::from_vec(py, g).reshape([nz, ny, nx, 3])?)?;
@@ -370,7 +432,13 @@ impl PyHybridModel {
         let sizes: Vec<usize> = (0..m.n_regions()).map(|s| m.region_len(s)).collect();
         let mut sorted = sizes.clone();
         sorted.sort_unstable();
-        d.set_item("projection", match m.options.projection { Projection::Transmural => "transmural", Projection::Radial => "radial" })?;
+        d.set_item(
+            "projection",
+            match m.options.projection {
+                Projection::Transmural => "transmural",
+                Projection::Radial => "radial",
+            },
+        )?;
         d.set_item("core_fraction", m.options.core_fraction)?;
         d.set_item("core_tets", m.core_tets.len())?;
         d.set_item("core_nodes", m.core_points.len())?;

@@ -2,9 +2,11 @@
 //! in, force out. Ticks release the GIL.
 
 use numpy::{PyArray1, PyArray2};
-use palpate_core::parallel::Serial;
-use palpate_core::runtime::{finish_tick, scale, tick, tick_force_with, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, SkinSweep, TickReport, ToolOptions};
 use palpate_core::integrate::StiffnessTerm;
+use palpate_core::parallel::Serial;
+use palpate_core::runtime::{
+    finish_tick, scale, tick, tick_force_with, Sim, SimOptions, SimSnapshot, SimState, SimWorkspace, SkinSweep, TickReport, ToolOptions,
+};
 use palpate_core::{StepMemory, Vec3};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -131,7 +133,11 @@ impl PyHybridSim {
         // Keywords into the core's options, which check themselves (SimOptions::check).
         let max_substeps = errors::count_opt(max_substeps, "max_substeps")?;
         let defaults = SimOptions::default();
-        let tool = ToolOptions { radius: tool_radius.unwrap_or(defaults.tool.radius), area_stiffness: tool_area_stiffness.or(defaults.tool.area_stiffness), ..defaults.tool };
+        let tool = ToolOptions {
+            radius: tool_radius.unwrap_or(defaults.tool.radius),
+            area_stiffness: tool_area_stiffness.or(defaults.tool.area_stiffness),
+            ..defaults.tool
+        };
         let options = SimOptions {
             tool,
             hold,
@@ -194,7 +200,9 @@ impl PyHybridSim {
     /// tick counted (its force was given): go back to a state you trust (:meth:`set_state`).
     fn finish(&mut self, py: Python<'_>) -> PyResult<()> {
         let (sim, state, ws) = (&self.sim, &mut self.state, &mut self.ws);
-        let done = errors::guard("HybridSim.finish", || py.detach(|| finish_tick(sim, state, ws)).map_err(|e| errors::step_error(e, "in the rest of the hybrid tick")))?;
+        let done = errors::guard("HybridSim.finish", || {
+            py.detach(|| finish_tick(sim, state, ws)).map_err(|e| errors::step_error(e, "in the rest of the hybrid tick"))
+        })?;
         if let Some(core) = done.core {
             self.last.core = core;
         }
@@ -384,7 +392,18 @@ impl PyHybridSim {
         d.set_item("factored_dt", s.core_memory.factored_dt)?;
         d.set_item("refreshed_at", s.core_memory.refreshed_at.as_ref().map(|x| conv::vec3s_to_py(py, x)))?;
         d.set_item("excess_iterations", s.core_memory.excess_iterations)?;
-        let row = |t: &StiffnessTerm, sign: f64| [t.id as f64, t.nodes[0] as f64, t.nodes[1] as f64, t.nodes[2] as f64, t.weights[0], t.weights[1], t.weights[2], sign * t.stiffness];
+        let row = |t: &StiffnessTerm, sign: f64| {
+            [
+                t.id as f64,
+                t.nodes[0] as f64,
+                t.nodes[1] as f64,
+                t.nodes[2] as f64,
+                t.weights[0],
+                t.weights[1],
+                t.weights[2],
+                sign * t.stiffness,
+            ]
+        };
         let base: Vec<[f64; 8]> = s.core_memory.base_terms.iter().map(|t| row(t, 1.0)).collect();
         let updates: Vec<[f64; 8]> = s.core_memory.term_updates.iter().map(|(t, added)| row(t, if *added { 1.0 } else { -1.0 })).collect();
         d.set_item("factor_base_terms", conv::f64_rows_to_py(py, &base))?;
@@ -456,7 +475,10 @@ impl PyHybridSim {
             tool: opt("tool")?.map(|c| conv::vec3(&c, "tool")).transpose()?,
             last_touched: unsigned("region_last_touched", true)?.iter().map(|&t| u64::try_from(t).unwrap_or(u64::MAX)).collect(),
             regions: unsigned("active_regions", false)?.iter().map(|&s| u32::try_from(s).unwrap_or(u32::MAX)).collect(),
-            live: opt("skin_live")?.map(|l| conv::indices(&l, "skin_live", n_skin, skin_items, true)).transpose()?.map(|l| l.iter().map(|&v| v as u32).collect()),
+            live: opt("skin_live")?
+                .map(|l| conv::indices(&l, "skin_live", n_skin, skin_items, true))
+                .transpose()?
+                .map(|l| l.iter().map(|&v| v as u32).collect()),
             carried,
             live_ref_x: conv::vec3s(&item("skin_reference")?, "skin_reference", n_core, true)?,
             live_ref_tool: conv::vec3(&item("skin_reference_tool")?, "skin_reference_tool")?,
@@ -465,7 +487,8 @@ impl PyHybridSim {
                 None => None,
                 Some(next) => {
                     let next: i64 = conv::arg(&next)?;
-                    let reference = opt("skin_sweep_reference")?.ok_or_else(|| errors::param_error_from("skin_sweep_reference: None beside a skin_sweep_next"))?;
+                    let reference =
+                        opt("skin_sweep_reference")?.ok_or_else(|| errors::param_error_from("skin_sweep_reference: None beside a skin_sweep_next"))?;
                     Some(SkinSweep {
                         next: usize::try_from(next).map_err(|_| errors::param_error_from(format!("skin_sweep_next = {next}: must not be negative")))?,
                         ref_x: conv::vec3s(&reference, "skin_sweep_reference", n_core, true)?,
@@ -529,7 +552,13 @@ impl PyHybridSim {
     /// back to (``sim = snapshot.copy()``) or to try a different touch from. Ticks of the copy
     /// repeat those of the original bit for bit.
     fn copy(&self) -> PyHybridSim {
-        PyHybridSim { sim: self.sim.clone(), state: self.state.clone(), ws: self.ws.clone(), last: self.last, target_check: self.target_check.clone() }
+        PyHybridSim {
+            sim: self.sim.clone(),
+            state: self.state.clone(),
+            ws: self.ws.clone(),
+            last: self.last,
+            target_check: self.target_check.clone(),
+        }
     }
 
     fn __copy__(&self) -> PyHybridSim {

@@ -117,21 +117,13 @@ impl PyBackwardEuler {
 
     fn from_core(i: Integrator) -> Option<PyBackwardEuler> {
         Some(match i {
-            Integrator::BackwardEulerLinear => {
-                PyBackwardEuler { solver: PySolver::Linearised, max_iterations: None, tolerance: None, history: None }
+            Integrator::BackwardEulerLinear => PyBackwardEuler { solver: PySolver::Linearised, max_iterations: None, tolerance: None, history: None },
+            Integrator::BackwardEulerNewton { max_iterations, tolerance } => {
+                PyBackwardEuler { solver: PySolver::Newton, max_iterations: Some(max_iterations), tolerance: Some(tolerance), history: None }
             }
-            Integrator::BackwardEulerNewton { max_iterations, tolerance } => PyBackwardEuler {
-                solver: PySolver::Newton,
-                max_iterations: Some(max_iterations),
-                tolerance: Some(tolerance),
-                history: None,
-            },
-            Integrator::BackwardEulerQuasiNewton { max_iterations, tolerance, history } => PyBackwardEuler {
-                solver: PySolver::QuasiNewton,
-                max_iterations: Some(max_iterations),
-                tolerance: Some(tolerance),
-                history: Some(history),
-            },
+            Integrator::BackwardEulerQuasiNewton { max_iterations, tolerance, history } => {
+                PyBackwardEuler { solver: PySolver::QuasiNewton, max_iterations: Some(max_iterations), tolerance: Some(tolerance), history: Some(history) }
+            }
             Integrator::SemiImplicit { .. } => return None,
         })
     }
@@ -162,11 +154,9 @@ impl PyBackwardEuler {
     fn __repr__(&self) -> String {
         match self.solver {
             PySolver::Linearised => "BackwardEuler(Solver.LINEARISED)".into(),
-            PySolver::Newton => format!(
-                "BackwardEuler(Solver.NEWTON, max_iterations={}, tolerance={:e})",
-                self.max_iterations.unwrap_or(0),
-                self.tolerance.unwrap_or(0.0)
-            ),
+            PySolver::Newton => {
+                format!("BackwardEuler(Solver.NEWTON, max_iterations={}, tolerance={:e})", self.max_iterations.unwrap_or(0), self.tolerance.unwrap_or(0.0))
+            }
             PySolver::QuasiNewton => format!(
                 "BackwardEuler(Solver.QUASI_NEWTON, max_iterations={}, tolerance={:e}, history={})",
                 self.max_iterations.unwrap_or(0),
@@ -196,7 +186,11 @@ pub fn integrator_from_py(obj: Option<&Bound<'_, PyAny>>) -> PyResult<Integrator
     if let Ok(be) = obj.cast::<PyBackwardEuler>() {
         return Ok(be.get().integrator());
     }
-    let hint = if obj.cast::<pyo3::types::PyString>().is_ok() { " (integrators are objects, not strings)" } else { "" };
+    let hint = if obj.cast::<pyo3::types::PyString>().is_ok() {
+        " (integrators are objects, not strings)"
+    } else {
+        ""
+    };
     Err(crate::errors::type_error(format!(
         "integrator must be palpate.SemiImplicit(...) or palpate.BackwardEuler(...), got {}{hint}",
         obj.repr().map(|r| r.to_string()).unwrap_or_else(|_| "?".into())

@@ -89,15 +89,9 @@ impl PyMaterial {
         let elasticity = match (young, poisson, lame_lambda, lame_mu) {
             (Some(young), Some(poisson), None, None) => Elasticity::YoungPoisson { young, poisson },
             (None, None, Some(lambda), Some(mu)) => Elasticity::Lame { lambda, mu },
-            (None, None, None, None) => {
-                return Err(MaterialError::new_err(
-                    "give the elastic moduli: young and poisson, or lame_lambda and lame_mu",
-                ))
-            }
+            (None, None, None, None) => return Err(MaterialError::new_err("give the elastic moduli: young and poisson, or lame_lambda and lame_mu")),
             (y, p, l, m) if (y.is_some() || p.is_some()) && (l.is_some() || m.is_some()) => {
-                return Err(MaterialError::new_err(
-                    "give either (young, poisson) or (lame_lambda, lame_mu), not both",
-                ))
+                return Err(MaterialError::new_err("give either (young, poisson) or (lame_lambda, lame_mu), not both"))
             }
             (y, _, None, None) => {
                 let missing = if y.is_none() { "young" } else { "poisson" };

@@ -46,12 +46,7 @@ impl PyTetMesh {
 impl PyTetMesh {
     #[new]
     #[pyo3(signature = (points, tets, *, source = None))]
-    fn new(
-        py: Python<'_>,
-        points: &Bound<'_, PyAny>,
-        tets: &Bound<'_, PyAny>,
-        #[pyo3(from_py_with = conv::arg)] source: Option<String>,
-    ) -> PyResult<Self> {
+    fn new(py: Python<'_>, points: &Bound<'_, PyAny>, tets: &Bound<'_, PyAny>, #[pyo3(from_py_with = conv::arg)] source: Option<String>) -> PyResult<Self> {
         let p = conv::points(points, "points")?;
         let t = conv::index_rows::<4>(tets, "tets")?;
         let (mesh, warnings) = errors::guard("TetMesh", || Ok(TetMesh::from_arrays(&p, &t)))?.map_err(|e| match &source {
@@ -119,7 +114,13 @@ impl PyTetMesh {
     }
 
     fn __repr__(&self) -> String {
-        format!("TetMesh(n_nodes={}, n_tets={}, volume={:.6e} m^3, extent {} m)", self.inner.n_nodes(), self.inner.n_tets(), self.inner.volume(), crate::conv::extent_text(self.inner.points()))
+        format!(
+            "TetMesh(n_nodes={}, n_tets={}, volume={:.6e} m^3, extent {} m)",
+            self.inner.n_nodes(),
+            self.inner.n_tets(),
+            self.inner.volume(),
+            crate::conv::extent_text(self.inner.points())
+        )
     }
 }
 
@@ -172,7 +173,8 @@ pub fn ellipsoid_wall(
     #[pyo3(from_py_with = conv::arg)] inner: Option<[f64; 3]>,
     #[pyo3(from_py_with = conv::arg)] outer: Option<[f64; 3]>,
     subdivisions: Option<errors::Int>,
-    layers: Option<errors::Int>) -> PyResult<PyTetMesh> {
+    layers: Option<errors::Int>,
+) -> PyResult<PyTetMesh> {
     let (subdivisions, layers) = (errors::count_opt(subdivisions, "subdivisions")?, errors::count_opt(layers, "layers")?);
     let d = EllipsoidWall::default();
     let p = EllipsoidWall {
@@ -212,9 +214,13 @@ pub fn truncated_ellipsoid_wall(
     #[pyo3(from_py_with = conv::arg)] z_cut: Option<f64>,
     circumferential: Option<errors::Int>,
     longitudinal: Option<errors::Int>,
-    layers: Option<errors::Int>) -> PyResult<PyTetMesh> {
-    let (circumferential, longitudinal, layers) =
-        (errors::count_opt(circumferential, "circumferential")?, errors::count_opt(longitudinal, "longitudinal")?, errors::count_opt(layers, "layers")?);
+    layers: Option<errors::Int>,
+) -> PyResult<PyTetMesh> {
+    let (circumferential, longitudinal, layers) = (
+        errors::count_opt(circumferential, "circumferential")?,
+        errors::count_opt(longitudinal, "longitudinal")?,
+        errors::count_opt(layers, "layers")?,
+    );
     let d = TruncatedEllipsoidWall::default();
     let p = TruncatedEllipsoidWall {
         inner: axes(inner, d.inner, "inner")?,
@@ -244,7 +250,9 @@ pub fn truncated_ellipsoid_wall(
             .and_then(|t| t.checked_mul(3))
             .and_then(|t| t.checked_mul(p.layers)),
     )?;
-    errors::guard("truncated_ellipsoid_wall", || Ok(PyTetMesh::from_core(py.detach(|| generate::try_truncated_ellipsoid_wall(&p)).map_err(errors::mesh_error)?)))
+    errors::guard("truncated_ellipsoid_wall", || {
+        Ok(PyTetMesh::from_core(py.detach(|| generate::try_truncated_ellipsoid_wall(&p)).map_err(errors::mesh_error)?))
+    })
 }
 
 /// The box [0, sx] x [0, sy] x [0, sz] [m] cut into nx * ny * nz cells of 6 tets each.

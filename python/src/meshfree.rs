@@ -115,6 +115,7 @@ fn neighbours<'py>(py: Python<'py>, points: &Bound<'py, PyAny>, #[pyo3(from_py_w
     check_radius(radius, "radius")?;
     let p = conv::points_vec3(points, "points")?;
     // 40 bytes a pair: the index lists here and the two int64 arrays handed to Python.
-    let (ptr, idx) = crate::errors::guard("neighbours", || py.detach(|| neighbours_within_limited(&p, radius, 40.0)).map_err(|e| crate::errors::limit_error(&e, None)))?;
+    let (ptr, idx) =
+        crate::errors::guard("neighbours", || py.detach(|| neighbours_within_limited(&p, radius, 40.0)).map_err(|e| crate::errors::limit_error(&e, None)))?;
     Ok((conv::usizes_to_py(py, &ptr), conv::usizes_to_py(py, &idx)))
 }

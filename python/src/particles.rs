@@ -9,9 +9,9 @@ use palpate_core::Vec3;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+use crate::body::sig4;
 use crate::conv::{self, PARTICLES};
 use crate::errors;
-use crate::body::sig4;
 use crate::material::PyMaterial;
 use crate::meshfree::PyKernel;
 
@@ -132,12 +132,7 @@ impl PyParticleBody {
     /// Raises ``StepError`` if a step fails; the steps before it are kept and the body is left as
     /// it was before the failing step.
     #[pyo3(signature = (n = errors::Int::Fits(1), dt = 1e-3), text_signature = "($self, n=1, dt=1e-3)")]
-    fn step<'py>(
-        mut slf: PyRefMut<'py, Self>,
-        py: Python<'py>,
-        n: errors::Int,
-        #[pyo3(from_py_with = conv::arg)] dt: f64,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    fn step<'py>(mut slf: PyRefMut<'py, Self>, py: Python<'py>, n: errors::Int, #[pyo3(from_py_with = conv::arg)] dt: f64) -> PyResult<Bound<'py, PyDict>> {
         let n = errors::count(n, "n")?;
         if !(dt > 0.0 && dt.is_finite()) {
             return Err(errors::step_error(palpate_core::StepError::BadTimeStep(dt), ""));
@@ -191,7 +186,8 @@ impl PyParticleBody {
         let (model, state, ws) = (&this.model, &mut this.state, &mut this.ws);
         let substeps = model.substeps(dt);
         // The per-tick record grows as ticks are taken (reserving 1e11 up front aborted).
-        let run = errors::guard("ParticleBody.run_timed", || Ok(py.detach(|| {
+        let run = errors::guard("ParticleBody.run_timed", || {
+            Ok(py.detach(|| {
             let mut out = TimedRun { tick_wall: Vec::with_capacity(ticks.min(1 << 16)), substeps, substep_dt: dt / substeps as f64, error: None };
             let mut total = 0.0;
             for k in 0..ticks {
@@ -224,7 +220,8 @@ impl PyParticleBody {
                 }
             }
             out
-        })))?;
+        }))
+        })?;
         let d = PyDict::new(py);
         d.set_item("ticks", run.tick_wall.len())?;
         d.set_item("tick_wall_s", conv::f64s_to_py(py, &run.tick_wall))?;

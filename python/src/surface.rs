@@ -128,12 +128,7 @@ impl PyTriSurface {
     /// ``method="winding"`` (default): generalised winding number > 1/2 (O(triangles) per point);
     /// ``method="parity"``: parity of the +z ray's crossings (grid-accelerated, what the samplers use).
     #[pyo3(signature = (points, method = String::from("winding")), text_signature = "($self, points, method=\"winding\")")]
-    fn contains<'py>(
-        &self,
-        py: Python<'py>,
-        points: &Bound<'py, PyAny>,
-        #[pyo3(from_py_with = conv::arg)] method: String,
-    ) -> PyResult<Bound<'py, PyAny>> {
+    fn contains<'py>(&self, py: Python<'py>, points: &Bound<'py, PyAny>, #[pyo3(from_py_with = conv::arg)] method: String) -> PyResult<Bound<'py, PyAny>> {
         let s = &self.inner;
         match method.as_str() {
             "winding" => per_point(py, points, "points", |p| s.contains(p)),
@@ -184,7 +179,11 @@ impl PyTriSurface {
     /// (m',) int64, to carry per-triangle data. ``ParameterError`` unless
     /// ``0 <= min_volume_fraction < 1``.
     #[pyo3(signature = (min_volume_fraction = palpate_core::hybrid::MIN_PIECE_VOLUME), text_signature = "($self, min_volume_fraction=0.001)")]
-    fn without_specks<'py>(&self, py: Python<'py>, #[pyo3(from_py_with = conv::arg)] min_volume_fraction: f64) -> PyResult<(PyTriSurface, Bound<'py, PyArray1<i64>>)> {
+    fn without_specks<'py>(
+        &self,
+        py: Python<'py>,
+        #[pyo3(from_py_with = conv::arg)] min_volume_fraction: f64,
+    ) -> PyResult<(PyTriSurface, Bound<'py, PyArray1<i64>>)> {
         let s = &self.inner;
         let w = errors::guard("TriSurface.without_specks", || Ok(py.detach(|| s.without_specks(min_volume_fraction))))?.map_err(surface_error)?;
         let kept: Vec<i64> = w.kept.iter().map(|&t| t as i64).collect();
@@ -196,7 +195,13 @@ impl PyTriSurface {
     }
 
     fn __repr__(&self) -> String {
-        format!("TriSurface(n_vertices={}, n_triangles={}, volume={:.6e} m^3, extent {} m)", self.inner.n_vertices(), self.inner.n_triangles(), self.inner.volume(), crate::conv::extent_text(self.inner.points()))
+        format!(
+            "TriSurface(n_vertices={}, n_triangles={}, volume={:.6e} m^3, extent {} m)",
+            self.inner.n_vertices(),
+            self.inner.n_triangles(),
+            self.inner.volume(),
+            crate::conv::extent_text(self.inner.points())
+        )
     }
 }
 
@@ -213,7 +218,9 @@ pub fn ellipsoid_surface(py: Python<'_>, #[pyo3(from_py_with = conv::arg)] semi_
     if subdivisions > 9 {
         return Err(crate::errors::param_error_from(format!("subdivisions = {subdivisions} is too many (at most 9: 2 million triangles)")));
     }
-    let inner = crate::errors::guard("ellipsoid_surface", || py.detach(|| mesh::surface::try_ellipsoid_surface(semi_axes, subdivisions)).map_err(crate::errors::surface_error))?;
+    let inner = crate::errors::guard("ellipsoid_surface", || {
+        py.detach(|| mesh::surface::try_ellipsoid_surface(semi_axes, subdivisions)).map_err(crate::errors::surface_error)
+    })?;
     Ok(PyTriSurface { inner })
 }
 
@@ -244,7 +251,8 @@ pub fn sample_between<'py>(
     #[pyo3(from_py_with = conv::arg)] inner: Bound<'py, PyTriSurface>,
     #[pyo3(from_py_with = conv::arg)] outer: Bound<'py, PyTriSurface>,
     #[pyo3(from_py_with = conv::arg)] spacing: f64,
-    #[pyo3(from_py_with = conv::arg)] density: f64) -> PyResult<Sampled<'py>> {
+    #[pyo3(from_py_with = conv::arg)] density: f64,
+) -> PyResult<Sampled<'py>> {
     let (i, o) = (&inner.get().inner, &outer.get().inner);
     let set = crate::errors::guard("sample_between", || py.detach(|| mesh::sample_between(i, o, spacing, density)).map_err(surface_error))?;
     Ok((conv::vec3s_to_py(py, &set.positions), conv::f64s_to_py(py, &set.masses)))

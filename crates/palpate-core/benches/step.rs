@@ -41,8 +41,7 @@ fn bench_steps(c: &mut Criterion) {
     let mut group = c.benchmark_group("step_1ms");
     group.sample_size(20);
     for (name, case) in &cases {
-        let mut integrators =
-            vec![("quasi_newton", Integrator::quasi_newton()), ("backward_euler_linear", Integrator::BackwardEulerLinear)];
+        let mut integrators = vec![("quasi_newton", Integrator::quasi_newton()), ("backward_euler_linear", Integrator::BackwardEulerLinear)];
         // The semi-implicit scheme is unstable at 1 ms on the 48k-tet mesh (BENCHMARKS.md).
         if case.mesh.n_tets() < 20_000 {
             integrators.push(("semi_implicit", Integrator::semi_implicit()));
@@ -59,9 +58,7 @@ fn bench_steps(c: &mut Criterion) {
             for _ in 0..50 {
                 step(&model, &mut state, &mut ws, protocol::DT).expect("stable");
             }
-            group.bench_with_input(BenchmarkId::new(iname, name), &(), |b, _| {
-                b.iter(|| step(&model, &mut state, &mut ws, protocol::DT).expect("stable"))
-            });
+            group.bench_with_input(BenchmarkId::new(iname, name), &(), |b, _| b.iter(|| step(&model, &mut state, &mut ws, protocol::DT).expect("stable")));
         }
     }
     group.finish();
@@ -78,9 +75,7 @@ fn bench_steps(c: &mut Criterion) {
                 apply_loads(&load, &mut state.f_ext, state.t + protocol::DT);
                 step(&model, &mut state, &mut ws, protocol::DT).expect("stable");
             }
-            group.bench_with_input(BenchmarkId::new(iname, name), &(), |b, _| {
-                b.iter(|| step(&model, &mut state, &mut ws, protocol::DT).expect("stable"))
-            });
+            group.bench_with_input(BenchmarkId::new(iname, name), &(), |b, _| b.iter(|| step(&model, &mut state, &mut ws, protocol::DT).expect("stable")));
         }
     }
     group.finish();

@@ -51,6 +51,9 @@ fn main() {
     println!("  activation:                          {:.1} us", median_us(n, || good.activation.clone_from(&st.activation)));
     println!("  core:                                {:.1} us", median_us(n, || good.core.clone_from(&st.core)));
     let mut ok = true;
-    println!("  finiteness scan (core, particles x v, skin): {:.1} us", median_us(n, || ok &= finite(&st.core.x) && finite(&st.core.v) && finite(&st.particles.x) && finite(&st.particles.v) && finite(&st.skin)));
+    println!(
+        "  finiteness scan (core, particles x v, skin): {:.1} us",
+        median_us(n, || ok &= finite(&st.core.x) && finite(&st.core.v) && finite(&st.particles.x) && finite(&st.particles.v) && finite(&st.skin))
+    );
     assert!(ok);
 }

@@ -29,5 +29,10 @@ fn main() {
     println!("the first ticks [ms]: {:.3?}", &times[..times.len().min(4)]);
     let mean = times.iter().sum::<f64>() / ticks as f64;
     times.sort_by(f64::total_cmp);
-    println!("{path}: idle tick ms mean {mean:.4} p50 {:.4} p99 {:.4}; core iterations per tick {:.2}", percentile(&times, 0.5), percentile(&times, 0.99), iters as f64 / ticks as f64);
+    println!(
+        "{path}: idle tick ms mean {mean:.4} p50 {:.4} p99 {:.4}; core iterations per tick {:.2}",
+        percentile(&times, 0.5),
+        percentile(&times, 0.99),
+        iters as f64 / ticks as f64
+    );
 }

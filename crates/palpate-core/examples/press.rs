@@ -29,8 +29,14 @@ fn main() {
     ];
     let mut reference: Option<Vec<Vec3>> = None;
     for (label, integ) in integrators {
-        if only.as_deref().is_some_and(|o| o != label && !(o.ends_with('+') && (label == "newton" || label == &o[..o.len() - 1]))) { continue; }
-        let material = if std::env::var("LAW").as_deref() == Ok("nh") { protocol::material().with_law(palpate_core::material::Law::NeoHookean) } else { protocol::material() };
+        if only.as_deref().is_some_and(|o| o != label && !(o.ends_with('+') && (label == "newton" || label == &o[..o.len() - 1]))) {
+            continue;
+        }
+        let material = if std::env::var("LAW").as_deref() == Ok("nh") {
+            protocol::material().with_law(palpate_core::material::Law::NeoHookean)
+        } else {
+            protocol::material()
+        };
         let model = ModelBuilder::new(case.mesh.clone(), material).fixed_nodes(case.fixed.clone()).integrator(integ).build().unwrap();
         let mut st = State::rest(&model);
         let mut ws = Workspace::new(&model);
@@ -51,6 +57,8 @@ fn main() {
         println!("{name} {force} N {label:>21}: {:>8.0} steps/s | it mean {:.2} max {} | inverted max {} | max|u| {:.2} mm | p50 {:.0} p99 {:.0} max {:.0} us | rel vs newton {} | {}",
             run.steps as f64 / run.wall_s, t.mean_iterations(), t.max_iterations, t.max_inverted, run.max_disp * 1e3, pct(0.5), pct(0.99), pct(1.0),
             rel.map(|r| format!("{:.3}%", 100.0 * r)).unwrap_or("-".into()), run.stop.map(|s| s.to_string()).unwrap_or_default());
-        if reference.is_none() { reference = Some(run.mean_disp); }
+        if reference.is_none() {
+            reference = Some(run.mean_disp);
+        }
     }
 }

@@ -32,8 +32,19 @@ fn main() {
             Ok(rep) => {
                 if k % 25 == 0 || k > 380 {
                     let vmax = st.particles.active.iter().map(|&i| st.particles.v[i].norm()).fold(0.0, f64::max);
-                    let dmin = st.particles.active.iter().map(|&i| sim.particles.deformation_gradient(i, &st.particles.x).determinant()).fold(f64::INFINITY, f64::min);
-                    println!("tick {k}: depth {:.2} mm force {:.3} N active {} substeps {} vmax {vmax:.3} m/s min det F {dmin:.3}", depth * 1e3, rep.force.norm(), rep.active, rep.substeps);
+                    let dmin = st
+                        .particles
+                        .active
+                        .iter()
+                        .map(|&i| sim.particles.deformation_gradient(i, &st.particles.x).determinant())
+                        .fold(f64::INFINITY, f64::min);
+                    println!(
+                        "tick {k}: depth {:.2} mm force {:.3} N active {} substeps {} vmax {vmax:.3} m/s min det F {dmin:.3}",
+                        depth * 1e3,
+                        rep.force.norm(),
+                        rep.active,
+                        rep.substeps
+                    );
                 }
                 if rep.force.norm() < 2.0 {
                     depth = (depth + 5e-5).min(20e-3);

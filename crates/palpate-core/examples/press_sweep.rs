@@ -68,7 +68,19 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
     let r = sim.options.tool.radius;
     let mut st = SimState::rest(sim);
     let mut ws = SimWorkspace::new(sim);
-    let mut o = Outcome { fmax: 0.0, most_substeps: 0, shed: vec![], off: 0, jump: 0.0, jump_off: 0.0, jump_shed: 0.0, f_end: 0.0, gave_way: 0.0, jump_to_5n: 0.0, error: None };
+    let mut o = Outcome {
+        fmax: 0.0,
+        most_substeps: 0,
+        shed: vec![],
+        off: 0,
+        jump: 0.0,
+        jump_off: 0.0,
+        jump_shed: 0.0,
+        f_end: 0.0,
+        gave_way: 0.0,
+        jump_to_5n: 0.0,
+        error: None,
+    };
     let mut below_5n = true;
     let mut f_top = 0.0f64;
     // From 5 mm outside the probe vertex: a tool starting tangent to it is already up to 4 mm
@@ -94,7 +106,15 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
                         if let Some((t, w, pc)) = cc.surface(&st.core.x) {
                             let [a, b, cn] = sim.hybrid.core_faces[t];
                             let nf = (st.core.x[b] - st.core.x[a]).cross(&(st.core.x[cn] - st.core.x[a])).normalize();
-                            println!("    core face {t} {:?} w {:.3?} depth {:.2} mm dir {:.2?} face normal {:.2?} press {:.2?} beneath {beneath}", [a, b, cn], w, pc.depth * 1e3, pc.normal.as_slice(), nf.as_slice(), n.as_slice());
+                            println!(
+                                "    core face {t} {:?} w {:.3?} depth {:.2} mm dir {:.2?} face normal {:.2?} press {:.2?} beneath {beneath}",
+                                [a, b, cn],
+                                w,
+                                pc.depth * 1e3,
+                                pc.normal.as_slice(),
+                                nf.as_slice(),
+                                n.as_slice()
+                            );
                         }
                     }
                     if std::env::var("TRACE").as_deref() == Ok("2") {
@@ -102,7 +122,12 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
                             let d = x - c;
                             if d.norm() < r {
                                 let a = d.dot(&n);
-                                println!("    skin {v}: along {:.2} mm, lateral {:.2} mm, depth {:.2} mm", a * 1e3, (d - n * a).norm() * 1e3, (r - d.norm()) * 1e3);
+                                println!(
+                                    "    skin {v}: along {:.2} mm, lateral {:.2} mm, depth {:.2} mm",
+                                    a * 1e3,
+                                    (d - n * a).norm() * 1e3,
+                                    (r - d.norm()) * 1e3
+                                );
                             }
                         }
                     }
@@ -131,7 +156,13 @@ fn press(sim: &Sim, z: f64, theta: f64) -> Outcome {
                 o.off += rep.shell_off as usize;
                 if let Some(f0) = last {
                     let near_shed = o.shed.last().is_some_and(|&(s, _)| k <= s + 10);
-                    let j = if near_shed { &mut o.jump_shed } else if rep.shell_off { &mut o.jump_off } else { &mut o.jump };
+                    let j = if near_shed {
+                        &mut o.jump_shed
+                    } else if rep.shell_off {
+                        &mut o.jump_off
+                    } else {
+                        &mut o.jump
+                    };
                     *j = j.max((rep.force - f0).norm());
                     below_5n &= f0.norm() < 5.0 && rep.force.norm() < 5.0;
                     if below_5n {

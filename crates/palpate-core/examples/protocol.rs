@@ -17,10 +17,16 @@ fn main() {
     }
     for integ in integrators {
         let t0 = Instant::now();
-        let model = ModelBuilder::new(case.mesh.clone(), protocol::material()).fixed_nodes(case.fixed.clone()).integrator(integ).build().unwrap();
+        let model = ModelBuilder::new(case.mesh.clone(), protocol::material())
+            .fixed_nodes(case.fixed.clone())
+            .integrator(integ)
+            .build()
+            .unwrap();
         let build = t0.elapsed().as_secs_f64();
         let mut f = vec![Vec3::zeros(); model.n_nodes()];
-        for &i in &case.loaded { f[i] = case.f_node; }
+        for &i in &case.loaded {
+            f[i] = case.f_node;
+        }
         let stat = static_solve(&model, &f, &StaticOptions::default()).unwrap();
         let u_static: Vec<Vec3> = stat.x.iter().zip(model.mesh().points()).map(|(x, x0)| x - x0).collect();
         let mut st = State::rest(&model);
@@ -30,10 +36,20 @@ fn main() {
         if let Some(stop) = &run.stop {
             println!("{name:>5} {:?}: UNSTABLE: {stop}", integ);
         }
-        if run.steps <= steps / 2 { continue; }
+        if run.steps <= steps / 2 {
+            continue;
+        }
         let num: f64 = run.mean_disp.iter().zip(&u_static).map(|(m, u)| (m - u).norm_squared()).sum::<f64>().sqrt();
         let den: f64 = u_static.iter().map(|u| u.norm_squared()).sum::<f64>().sqrt();
-        println!("{name:>5} {:?}: build {:.3}s nnzL {} | {:.0} steps/s | max|u| {:.3e} m | rel L2 vs static {:.3}% | static iters {}",
-            integ, build, model.factor_blocks(), run.steps as f64 / run.wall_s, run.max_disp, 100.0 * num / den, stat.iterations);
+        println!(
+            "{name:>5} {:?}: build {:.3}s nnzL {} | {:.0} steps/s | max|u| {:.3e} m | rel L2 vs static {:.3}% | static iters {}",
+            integ,
+            build,
+            model.factor_blocks(),
+            run.steps as f64 / run.wall_s,
+            run.max_disp,
+            100.0 * num / den,
+            stat.iterations
+        );
     }
 }

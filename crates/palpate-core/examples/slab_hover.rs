@@ -30,12 +30,22 @@ fn main() {
     let ticks: usize = a.get(9).map(|s| s.parse().unwrap()).unwrap_or(2000);
     let mat = support::tissue(env("DAMPED").is_some());
     let mut opts = SimOptions { shell_fallback: None, ..SimOptions::default() };
-    if let Some(r) = env("R") { opts.tool.radius = r; }
+    if let Some(r) = env("R") {
+        opts.tool.radius = r;
+    }
     if let Some(k) = env("COUPLING_K") {
         opts.coupling = Some(palpate_core::runtime::Coupling { stiffness: k, damping: env("COUPLING_C").unwrap_or(0.0) });
     }
-    if let Some(cap) = env("QN_CAP") { opts.integrator = palpate_core::Integrator::BackwardEulerQuasiNewton { max_iterations: cap as usize, tolerance: env("QN_TOL").unwrap_or(1e-4), history: palpate_core::Integrator::QUASI_NEWTON_HISTORY }; }
-    if env("NOHOM").is_some() { opts.homogenise = false; }
+    if let Some(cap) = env("QN_CAP") {
+        opts.integrator = palpate_core::Integrator::BackwardEulerQuasiNewton {
+            max_iterations: cap as usize,
+            tolerance: env("QN_TOL").unwrap_or(1e-4),
+            history: palpate_core::Integrator::QUASI_NEWTON_HISTORY,
+        };
+    }
+    if env("NOHOM").is_some() {
+        opts.homogenise = false;
+    }
     let sim = Sim::new(m, mat, opts).unwrap();
     let mut st = SimState::rest(&sim);
     let mut ws = SimWorkspace::new(&sim);
@@ -48,12 +58,26 @@ fn main() {
                 let vmax_p = st.particles.active.iter().map(|&q| st.particles.v[q].norm()).fold(0.0, f64::max);
                 let vmax_c = st.core.v.iter().map(|v| v.norm()).fold(0.0, f64::max);
                 let (imax, _) = st.core.v.iter().enumerate().fold((0, 0.0), |b, (i, v)| if v.norm() > b.1 { (i, v.norm()) } else { b });
-                if std::env::var_os("SIGNED").is_some() && vmax_c > 1e-12 { println!("  node {imax} v {:?} fz_core_sum {:.3e}", st.core.v[imax].as_slice(), st.core.f_ext.iter().map(|f| f.z).sum::<f64>()); }
+                if std::env::var_os("SIGNED").is_some() && vmax_c > 1e-12 {
+                    println!("  node {imax} v {:?} fz_core_sum {:.3e}", st.core.v[imax].as_slice(), st.core.f_ext.iter().map(|f| f.z).sum::<f64>());
+                }
                 if t % 10 == 0 || vmax_p > 0.05 {
-                    println!("{t} d {:.2} F {:.4} act {} sub {} vp {:.2e} vc {:.2e} it {}", d * 1e3, -rep.force.dot(&n), rep.active, rep.substeps, vmax_p, vmax_c, rep.core.iterations);
+                    println!(
+                        "{t} d {:.2} F {:.4} act {} sub {} vp {:.2e} vc {:.2e} it {}",
+                        d * 1e3,
+                        -rep.force.dot(&n),
+                        rep.active,
+                        rep.substeps,
+                        vmax_p,
+                        vmax_c,
+                        rep.core.iterations
+                    );
                 }
             }
-            Err(e) => { println!("{t} failed: {e}"); break; }
+            Err(e) => {
+                println!("{t} failed: {e}");
+                break;
+            }
         }
     }
 }

@@ -83,20 +83,48 @@ fn main() {
         let ms = *times.last().unwrap();
         if std::env::var("WHY").is_ok() && k % 100 == 0 && rep.active > 0 {
             let held = sim.particles.fixed();
-            let s2 = st.particles.active.iter().filter(|&&p| !held[p]).map(|&p| palpate_core::runtime::stability::stretch_bound(&sim.particles.deformation_gradient(p, &st.particles.x))).fold(1.0, f64::max);
+            let s2 = st
+                .particles
+                .active
+                .iter()
+                .filter(|&&p| !held[p])
+                .map(|&p| palpate_core::runtime::stability::stretch_bound(&sim.particles.deformation_gradient(p, &st.particles.x)))
+                .fold(1.0, f64::max);
             let rest = sim.shell.substeps(1e-3, 1.0, 0.0, 0.0, 64);
             let stretched = sim.shell.substeps(1e-3, s2, 0.0, 0.0, 64);
             println!("tick {k}: substeps {} (rest {rest}, with the stretch s^2 = {s2:.3}: {stretched}; the rest is contact)", rep.substeps);
         }
         if std::env::var("SPIKES").is_ok() && ms > 1.5 {
-            println!("tick {k}: {ms:.2} ms active {} (+{} -{}) substeps {} core iterations {} contacts {}+{}+{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.particle_contacts, rep.skin_contacts, rep.core_contacts);
+            println!(
+                "tick {k}: {ms:.2} ms active {} (+{} -{}) substeps {} core iterations {} contacts {}+{}+{}",
+                rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, rep.particle_contacts, rep.skin_contacts, rep.core_contacts
+            );
         }
         if let Some(t) = trace.as_mut() {
             use std::io::Write;
             // The force's components exactly (shortest round-trip), so that two traces compare bit
             // for bit after the time column is dropped (`cut -d, -f1,3-`), then the contacts.
             let f = rep.force;
-            writeln!(t, "{k},{ms:.4},{},{},{},{},{},{:?},{:?},{:?},{},{},{},{},{},{},{}", rep.active, rep.entered, rep.left, rep.substeps, rep.core.iterations, f.x, f.y, f.z, rep.skin_refreshed, rep.core.evaluations, rep.confined, rep.skin_contacts, rep.core_contacts, rep.particle_contacts, rep.shell_failed).unwrap();
+            writeln!(
+                t,
+                "{k},{ms:.4},{},{},{},{},{},{:?},{:?},{:?},{},{},{},{},{},{},{}",
+                rep.active,
+                rep.entered,
+                rep.left,
+                rep.substeps,
+                rep.core.iterations,
+                f.x,
+                f.y,
+                f.z,
+                rep.skin_refreshed,
+                rep.core.evaluations,
+                rep.confined,
+                rep.skin_contacts,
+                rep.core_contacts,
+                rep.particle_contacts,
+                rep.shell_failed
+            )
+            .unwrap();
         }
         subs += rep.substeps;
         if k == press + hold - 1 {
@@ -118,12 +146,21 @@ fn main() {
         let bits = |xs: &[Vec3]| xs.iter().flat_map(|x| x.iter().map(|c| c.to_bits())).fold(0u64, u64::wrapping_add);
         let mut skin = vec![Vec3::zeros(); sim.hybrid.outer_points.len()];
         sim.skin_positions(&st, &mut skin);
-        writeln!(t, "digest core {:x} particles {:x} velocities {:x} skin {:x}", bits(&st.core.x), bits(&st.particles.x), bits(&st.particles.v), bits(&skin)).unwrap();
+        writeln!(t, "digest core {:x} particles {:x} velocities {:x} skin {:x}", bits(&st.core.x), bits(&st.particles.x), bits(&st.particles.v), bits(&skin))
+            .unwrap();
     }
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
     let pct = |q: f64| percentile(&sorted, q);
-    println!("{path}: tick ms mean {:.3} p50 {:.3} p99 {:.3}; sub-steps per tick {:.1} (mass scaling {:?}); last force {:.4} N", times.iter().sum::<f64>() / times.len() as f64, pct(0.5), pct(0.99), subs as f64 / ticks as f64, sim.particles.mass_scaling().applied, last_force);
+    println!(
+        "{path}: tick ms mean {:.3} p50 {:.3} p99 {:.3}; sub-steps per tick {:.1} (mass scaling {:?}); last force {:.4} N",
+        times.iter().sum::<f64>() / times.len() as f64,
+        pct(0.5),
+        pct(0.99),
+        subs as f64 / ticks as f64,
+        sim.particles.mass_scaling().applied,
+        last_force
+    );
     let sh = &sim.shell;
     println!("shell: omega2 {:.3e} /s^2, damping {:.3e} /s, springs {:.3e} /s^2 (coupling {:.1} N/m, wall {:.1} N/m), spring damping {:.3e} /s; rest sub-steps a 1 ms tick {}, without the springs {}", sh.omega2, sh.damping, sh.spring_rate, sim.coupling.stiffness, sim.confinement.stiffness, sh.spring_damping, sh.substeps(1e-3, 1.0, 0.0, 0.0, 1000), palpate_core::runtime::Shell { spring_rate: 0.0, spring_damping: 0.0, ..*sh }.substeps(1e-3, 1.0, 0.0, 0.0, 1000));
 }

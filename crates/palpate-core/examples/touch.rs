@@ -85,8 +85,21 @@ fn main() {
             let fcore = st.core.f_ext.iter().map(|f| f.norm()).fold(0.0, f64::max);
             let (iv, _) = st.particles.active.iter().map(|&i| (i, st.particles.v[i].norm())).fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
             let off = (st.particles.x[iv] - sim.particle_tie.position(iv, &st.core.x)).norm();
-            eprintln!("   vmax particle {iv}: coupled {} held {} nbrs {} tool dist {:.2e} tie off {:.2e} depth {:.2e}", sim.coupled[iv], sim.particles.fixed()[iv], sim.particles.neighbours(iv).len(), (st.particles.x[iv]-c).norm(), off, sim.particle_tie.offsets()[iv].norm());
-            let (jm, dm) = st.particles.active.iter().map(|&i| (i, sim.particles.deformation_gradient(i, &st.particles.x).determinant())).fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+            eprintln!(
+                "   vmax particle {iv}: coupled {} held {} nbrs {} tool dist {:.2e} tie off {:.2e} depth {:.2e}",
+                sim.coupled[iv],
+                sim.particles.fixed()[iv],
+                sim.particles.neighbours(iv).len(),
+                (st.particles.x[iv] - c).norm(),
+                off,
+                sim.particle_tie.offsets()[iv].norm()
+            );
+            let (jm, dm) = st
+                .particles
+                .active
+                .iter()
+                .map(|&i| (i, sim.particles.deformation_gradient(i, &st.particles.x).determinant()))
+                .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
             eprintln!("   min det F {dm:.3} at {jm}");
             eprintln!("dbg {k}: active umax {umax:.3e} vmax {vmax:.3e} core umax {ucore:.3e} fcore max {fcore:.3e} confined {}", rep.confined);
         }
@@ -100,7 +113,18 @@ fn main() {
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
     let pct = |q: f64| percentile(&sorted, q);
-    let (amean, amax) = if actives.is_empty() { (0.0, 0) } else { (actives.iter().sum::<usize>() as f64 / actives.len() as f64, *actives.iter().max().unwrap()) };
-    println!("{which}: {} core tets, {} particles | tick ms mean {:.3} p50 {:.3} p99 {:.3} max {:.3} | active mean {amean:.0} max {amax} | max force {fmax:.3} N",
-        sim.core.n_tets(), sim.n_particles(), times.iter().sum::<f64>() / times.len() as f64, pct(0.5), pct(0.99), sorted[sorted.len() - 1]);
+    let (amean, amax) = if actives.is_empty() {
+        (0.0, 0)
+    } else {
+        (actives.iter().sum::<usize>() as f64 / actives.len() as f64, *actives.iter().max().unwrap())
+    };
+    println!(
+        "{which}: {} core tets, {} particles | tick ms mean {:.3} p50 {:.3} p99 {:.3} max {:.3} | active mean {amean:.0} max {amax} | max force {fmax:.3} N",
+        sim.core.n_tets(),
+        sim.n_particles(),
+        times.iter().sum::<f64>() / times.len() as f64,
+        pct(0.5),
+        pct(0.99),
+        sorted[sorted.len() - 1]
+    );
 }

@@ -48,8 +48,8 @@ pub mod runtime;
 pub mod spatial;
 
 pub use error::{HybridError, LimitError, LoadError, MaterialError, MeshError, ModelError, ModelFileError, SolveError, StepError};
+pub use fem::{Model, ModelBuilder, Order, State, StepMemory, Workspace};
 pub use integrate::{step, Integrator, StepReport};
 pub use material::{Law, Material};
 pub use math::{Mat3, Real, Vec3};
 pub use mesh::TetMesh;
-pub use fem::{Model, ModelBuilder, Order, State, StepMemory, Workspace};

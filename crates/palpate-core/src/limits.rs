@@ -45,7 +45,11 @@ pub const MAX_FORCE_N: f64 = 1e6;
 /// squares to inf.
 pub fn force_magnitude(f: &crate::Vec3) -> f64 {
     let big = f.amax();
-    if big > 0.0 && big.is_finite() { big * (f / big).norm() } else { big }
+    if big > 0.0 && big.is_finite() {
+        big * (f / big).norm()
+    } else {
+        big
+    }
 }
 
 /// Is `f` finite with |f| <= [`MAX_FORCE_N`]?
@@ -198,7 +202,9 @@ pub fn cgroup_limits(cgroup: Option<&str>, read: &dyn Fn(&str) -> Option<String>
     let Some(cgroup) = cgroup else { return out };
     for line in cgroup.lines() {
         let mut parts = line.splitn(3, ':');
-        let (Some(_id), Some(ctrl), Some(path)) = (parts.next(), parts.next(), parts.next()) else { continue };
+        let (Some(_id), Some(ctrl), Some(path)) = (parts.next(), parts.next(), parts.next()) else {
+            continue;
+        };
         let (base, file) = if ctrl.is_empty() {
             ("/sys/fs/cgroup", "memory.max")
         } else if ctrl.split(',').any(|c| c == "memory") {
@@ -266,7 +272,11 @@ pub fn human_bytes(b: f64) -> String {
         v /= 1024.0;
         u += 1;
     }
-    if u == 0 { format!("{v:.0} B") } else { format!("{v:.1} {}", units[u]) }
+    if u == 0 {
+        format!("{v:.0} B")
+    } else {
+        format!("{v:.1} {}", units[u])
+    }
 }
 
 #[cfg(test)]
@@ -383,7 +393,12 @@ Max open files            1024                 1048576              files     \n
         let none = budget_from(&SystemFiles::default());
         assert_eq!(none.bytes, DEFAULT_MAX_MEMORY);
         assert!(none.source.contains("default"));
-        let junk = budget_from(&SystemFiles { limits: Some("junk".into()), status: Some("junk".into()), meminfo: Some("junk".into()), cgroup_limits: vec!["junk".into()] });
+        let junk = budget_from(&SystemFiles {
+            limits: Some("junk".into()),
+            status: Some("junk".into()),
+            meminfo: Some("junk".into()),
+            cgroup_limits: vec!["junk".into()],
+        });
         assert_eq!(junk.bytes, DEFAULT_MAX_MEMORY);
         // Mapped beyond the limit: a budget of 1 byte, not an underflow.
         let full = budget_from(&SystemFiles { limits: Some(LIMITS.into()), status: Some("VmSize: 4194304 kB\n".into()), ..Default::default() });

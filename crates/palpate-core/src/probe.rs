@@ -14,9 +14,9 @@
 //! each step so that the bookkeeping is not timed.
 
 use crate::error::LoadError;
+use crate::fem::{Model, State, Workspace};
 use crate::integrate::{step, StepReport};
 use crate::math::Vec3;
-use crate::fem::{Model, State, Workspace};
 
 /// A linear ramp from zero at `start` to one at `start + duration` \[s\], one after.
 /// A zero `duration` applies the load at once.
@@ -318,7 +318,11 @@ pub fn run_probe(model: &Model, state: &mut State, ws: &mut Workspace, loads: &[
             finite &= u.is_finite();
             umax = umax.max(u);
         }
-        let probe = if loaded.is_empty() { 0.0 } else { loaded.iter().map(|&i| (state.x[i] - rest[i]).norm()).sum::<f64>() / loaded.len() as f64 };
+        let probe = if loaded.is_empty() {
+            0.0
+        } else {
+            loaded.iter().map(|&i| (state.x[i] - rest[i]).norm()).sum::<f64>() / loaded.len() as f64
+        };
         out.probe_disp.push(probe);
         out.max_disp = out.max_disp.max(umax);
         if !finite || !(umax < opts.stable_limit) {

@@ -78,14 +78,7 @@ fn cantilever_tip_deflection_converges_to_beam_theory() {
     println!("| cells | tets | dofs | tip deflection [m] | / EB | / Timoshenko | time [s] |");
     println!("|---|---|---|---|---|---|---|");
     for (cells, tets, dofs, delta, secs) in &rows {
-        println!(
-            "| {}x{}x{} | {tets} | {dofs} | {delta:.6e} | {:.4} | {:.4} | {secs:.2} |",
-            cells[0],
-            cells[1],
-            cells[2],
-            delta / delta_eb,
-            delta / delta_t
-        );
+        println!("| {}x{}x{} | {tets} | {dofs} | {delta:.6e} | {:.4} | {:.4} | {secs:.2} |", cells[0], cells[1], cells[2], delta / delta_eb, delta / delta_t);
     }
 
     let errors: Vec<f64> = rows.iter().map(|r| (r.3 / delta_t - 1.0).abs()).collect();

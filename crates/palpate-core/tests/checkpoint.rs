@@ -56,7 +56,7 @@ fn clone_from_copies_every_field_and_allocates_nothing_once_warm() {
             }
             if k % 10 == 9 {
                 good.clone_from(&st);
-                st.clone_from(&good);   // a restore to what was just saved changes nothing
+                st.clone_from(&good); // a restore to what was just saved changes nothing
             }
         }
         if pass == 1 {

@@ -46,7 +46,6 @@ fn deformed(model: &Model, seed: u64) -> Vec<Vec3> {
     model.mesh().points().iter().map(|p| a * p + rng.vec3(0.1 * h)).collect()
 }
 
-
 #[test]
 fn total_force_is_minus_gradient_of_total_strain_energy() {
     let model = model(vec![], 0.0, 0.0);
@@ -149,10 +148,13 @@ fn rest_jacobian_is_symmetric_negative_semidefinite_with_six_rigid_modes() {
         Box::new(|p| Vec3::z().cross(p)),
     ];
     for m in &modes {
-        let v = DVector::from_iterator(n, x0.iter().flat_map(|p| {
-            let u = m(p);
-            [u.x, u.y, u.z]
-        }));
+        let v = DVector::from_iterator(
+            n,
+            x0.iter().flat_map(|p| {
+                let u = m(p);
+                [u.x, u.y, u.z]
+            }),
+        );
         let kv = (&k * &v).amax();
         assert!(kv <= 1e-12 * scale * v.amax() * (n as f64).sqrt(), "rigid mode not in the null space: {kv:e}");
     }

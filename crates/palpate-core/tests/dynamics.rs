@@ -26,10 +26,10 @@
 mod common;
 
 use common::*;
+use palpate_core::divergence::speed_bound;
+use palpate_core::integrate::Filter;
 use palpate_core::integrate::{static_solve, StaticOptions};
 use palpate_core::mesh::generate::{base_nodes, ellipsoid_wall, truncated_ellipsoid_wall, EllipsoidWall, TruncatedEllipsoidWall};
-use palpate_core::integrate::Filter;
-use palpate_core::divergence::speed_bound;
 use palpate_core::{step, Integrator, Material, Model, ModelBuilder, State, StepError, Vec3, Workspace};
 
 fn free_body(integ: Integrator, phi: f64, psi: f64) -> Model {
@@ -385,7 +385,10 @@ fn stable_filter_makes_the_semi_implicit_step_stable_on_default_truncated_wall()
     let l_coarse = block_jacobi_lambda_max(&coarse);
     let rho_paper = semi_implicit_spectral_radius(&coarse, 1.0, 0.1);
     let rho_coarse = semi_implicit_spectral_radius(&coarse, coarse.filter_factor(), 0.1);
-    println!("180-tet wall: lambda_max {l_coarse:.4}, dt 100 ms: paper filter rho = {rho_paper:.6}, stable filter (alpha {:.4}) rho = {rho_coarse:.9}", coarse.filter_factor());
+    println!(
+        "180-tet wall: lambda_max {l_coarse:.4}, dt 100 ms: paper filter rho = {rho_paper:.6}, stable filter (alpha {:.4}) rho = {rho_coarse:.9}",
+        coarse.filter_factor()
+    );
     assert!(l_coarse > 2.0 && rho_paper > 1.01, "the paper's filter is stable at 100 ms on the 180-tet wall (lambda_max {l_coarse}, rho {rho_paper})");
     assert!(rho_coarse <= 1.0 + 1e-9, "stable filter on the 180-tet wall: rho {rho_coarse}");
 
@@ -453,7 +456,9 @@ fn a_slow_divergence_is_reported_when_it_starts_before_anything_is_non_finite() 
                 }
             }
             Err(e) => {
-                let StepError::Diverging { node, speed, bound, .. } = e else { panic!("step {k}: {e} (expected Diverging)") };
+                let StepError::Diverging { node, speed, bound, .. } = e else {
+                    panic!("step {k}: {e} (expected Diverging)")
+                };
                 println!("step {k}: {e}; the last accepted step was at {:.2} c_p, first past c_p at {passed_c:?}", relative_speed(&model, &s.v) / c);
                 assert!(node < model.n_nodes() && speed > bound && bound == speed_bound(model.material()));
                 assert!(s.x == before.x && s.v == before.v && s.t == before.t, "the state was not restored");

@@ -71,7 +71,10 @@ fn the_core_under_the_active_shell_is_the_tissues() {
     let softened = held_press(&Sim::new(m.clone(), tissue(0.4), options).unwrap());
     let everywhere = held_press(&Sim::new(m.clone(), tissue(0.4).stiffened(f).unwrap(), SimOptions { homogenise: false, ..options }).unwrap());
     // Measured 2026-12-06: see the assertion's message.
-    assert!(paper < 0.9 * softened && softened < 0.9 * everywhere, "paper {paper:.4} N, softened {softened:.4} N, stiffened everywhere {everywhere:.4} N");
+    assert!(
+        paper < 0.9 * softened && softened < 0.9 * everywhere,
+        "paper {paper:.4} N, softened {softened:.4} N, stiffened everywhere {everywhere:.4} N"
+    );
 }
 
 fn held_press(sim: &Sim) -> f64 {

@@ -81,12 +81,20 @@ fn check_regions_and_skin(m: &HybridModel, what: &str) {
             .map(|v| [(v % nx) as f64, ((v / nx) % ny) as f64, (v / (nx * ny)) as f64])
             .collect();
         let targets: Vec<[f64; 3]> = if interior.is_empty() {
-            (0..f.label.len()).filter(|&v| f.label[v] == VoxelLabel::Boundary).map(|v| [(v % nx) as f64, ((v / nx) % ny) as f64, (v / (nx * ny)) as f64]).collect()
+            (0..f.label.len())
+                .filter(|&v| f.label[v] == VoxelLabel::Boundary)
+                .map(|v| [(v % nx) as f64, ((v / nx) % ny) as f64, (v / (nx * ny)) as f64])
+                .collect()
         } else {
             interior
         };
         assert!(!targets.is_empty(), "{what}: region {s} has no inside voxel");
-        let dist = |p: [f64; 3]| targets.iter().map(|t| ((t[0] - p[0]).powi(2) + (t[1] - p[1]).powi(2) + (t[2] - p[2]).powi(2)).sqrt()).fold(f64::INFINITY, f64::min);
+        let dist = |p: [f64; 3]| {
+            targets
+                .iter()
+                .map(|t| ((t[0] - p[0]).powi(2) + (t[1] - p[1]).powi(2) + (t[2] - p[2]).powi(2)).sqrt())
+                .fold(f64::INFINITY, f64::min)
+        };
         for v in 0..f.label.len() {
             if f.label[v] != VoxelLabel::Boundary {
                 continue;
@@ -271,6 +279,11 @@ fn version_and_twisted_core_errors_say_what_to_do() {
     let e = from_bytes(&b, "old.palpate").unwrap_err().to_string();
     assert!(e.contains("old.palpate") && e.contains("rebuild the model"), "{e}");
     let twisted = HybridError::TwistedCore { prism: 7, triangle: 3, radial: true }.to_string();
-    assert!(twisted.starts_with("FEM core: prism 7 (coarse inner triangle 3) stays twisted") && twisted.contains("try more core triangles") && twisted.contains("use the transmural projection"), "{twisted}");
+    assert!(
+        twisted.starts_with("FEM core: prism 7 (coarse inner triangle 3) stays twisted")
+            && twisted.contains("try more core triangles")
+            && twisted.contains("use the transmural projection"),
+        "{twisted}"
+    );
     assert!(!HybridError::TwistedCore { prism: 7, triangle: 3, radial: false }.to_string().contains("radial"));
 }

@@ -49,8 +49,8 @@ mod protocol;
 
 use common::*;
 use palpate_core::integrate::{incremental_potential, incremental_potential_gradient, step_with_potential, CorePotential};
-use palpate_core::probe::apply_loads;
 use palpate_core::mesh::generate::{base_nodes, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
+use palpate_core::probe::apply_loads;
 use palpate_core::{step, Integrator, Mat3, Material, Model, ModelBuilder, State, Vec3, Workspace};
 
 // ---------------------------------------------------------------------------------------------
@@ -128,7 +128,11 @@ const CELLS: [usize; 3] = [3, 2, 2];
 fn box_model(phi: f64, psi: f64) -> Model {
     let mesh = perturbed_box(SIZE, CELLS, 0.2, 3);
     let fixed = nodes_where(&mesh, 0, 0.0, 1e-12);
-    ModelBuilder::new(mesh, material(3.0e4, 0.4, 1000.0, phi, psi)).fixed_nodes(fixed).gravity(Vec3::new(2.0, -9.81, 4.0)).build().unwrap()
+    ModelBuilder::new(mesh, material(3.0e4, 0.4, 1000.0, phi, psi))
+        .fixed_nodes(fixed)
+        .gravity(Vec3::new(2.0, -9.81, 4.0))
+        .build()
+        .unwrap()
 }
 
 /// Free nodes mapped by `map` plus noise of `noise` per component; fixed nodes at rest.
@@ -516,7 +520,11 @@ fn steps_at_rest_cost_one_iteration() {
     let p = TruncatedEllipsoidWall::default();
     let mesh = truncated_ellipsoid_wall(&p);
     let fixed = base_nodes(&mesh, p.z_cut, 1e-9);
-    let model = ModelBuilder::new(mesh, material(3.0e4, 0.45, 1000.0, 0.0, 0.0)).fixed_nodes(fixed).integrator(Integrator::quasi_newton()).build().unwrap();
+    let model = ModelBuilder::new(mesh, material(3.0e4, 0.45, 1000.0, 0.0, 0.0))
+        .fixed_nodes(fixed)
+        .integrator(Integrator::quasi_newton())
+        .build()
+        .unwrap();
     let o = protocol::OUTER;
     let px = o[0] * (1.0 - (protocol::PROBE_Z / o[2]).powi(2)).sqrt();
     let probe = Vec3::new(px, 0.0, protocol::PROBE_Z);
@@ -532,7 +540,13 @@ fn steps_at_rest_cost_one_iteration() {
     let mut ws = Workspace::new(&model);
     let mut tail = vec![];
     for k in 0..500 {
-        let r = if k < 20 { (k + 1) as f64 / 20.0 } else if k < 80 { 1.0 } else { 0.0 };
+        let r = if k < 20 {
+            (k + 1) as f64 / 20.0
+        } else if k < 80 {
+            1.0
+        } else {
+            0.0
+        };
         s.f_ext[node] = normal * r;
         let rep = step(&model, &mut s, &mut ws, 4e-3).unwrap();
         if k >= 480 {
@@ -585,7 +599,11 @@ fn a_stiff_potential_inside_the_step_is_stable_and_is_backward_euler() {
     let qn = Integrator::BackwardEulerQuasiNewton { max_iterations: 1000, tolerance: 1e-9, history: 5 };
     let model = small_wall(mat, qn, Vec3::zeros());
     let top = top_node(&model);
-    let spring = Spring { node: top, anchor: model.mesh().points()[top] + Vec3::new(0.004, -0.002, -0.003), k: 100.0 * model.masses()[top] / (dt * dt) };
+    let spring = Spring {
+        node: top,
+        anchor: model.mesh().points()[top] + Vec3::new(0.004, -0.002, -0.003),
+        k: 100.0 * model.masses()[top] / (dt * dt),
+    };
     let mut s = State::rest(&model);
     let mut ws = Workspace::new(&model);
     s.f_ext[top] = Vec3::new(0.0, 0.0, -0.2);

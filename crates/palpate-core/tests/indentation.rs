@@ -71,7 +71,15 @@ fn a_sphere_on_a_thick_slab_follows_hertz() {
     let mut prev = 0.0;
     for (d, f, pen) in &rows {
         let h = hertz(r, *d);
-        println!("R = {:.1} mm, indentation {:.4} mm (penetration {:.2} um): F = {:.5e} N, Hertz {:.5e} N, ratio {:.4}", r * 1e3, d * 1e3, pen * 1e6, f, h, f / h);
+        println!(
+            "R = {:.1} mm, indentation {:.4} mm (penetration {:.2} um): F = {:.5e} N, Hertz {:.5e} N, ratio {:.4}",
+            r * 1e3,
+            d * 1e3,
+            pen * 1e6,
+            f,
+            h,
+            f / h
+        );
         assert!((f / h - 1.0).abs() < 0.12, "F / Hertz = {}", f / h);
         assert!(*pen < 0.02 * d, "the penalty penetrates {pen} at indentation {d}");
         assert!(*f > prev);

@@ -73,7 +73,9 @@ fn row_sums_are_the_dense_stiffness_row_sums() {
             assert_eq!(g[i], 0.0);
             continue;
         }
-        let want = (0..3).map(|a| free.iter().map(|&j| (0..3).map(|b| k[3 * i + a][3 * j + b].abs()).sum::<f64>()).sum::<f64>()).fold(0.0, f64::max);
+        let want = (0..3)
+            .map(|a| free.iter().map(|&j| (0..3).map(|b| k[3 * i + a][3 * j + b].abs()).sum::<f64>()).sum::<f64>())
+            .fold(0.0, f64::max);
         assert!((g[i] - want).abs() <= 1e-9 * want, "particle {i}: {} vs dense {}", g[i], want);
     }
 }
@@ -131,6 +133,9 @@ fn a_bad_quantile_or_gravity_is_refused() {
     for q in [0.0, -0.5, 1.5, f64::NAN] {
         assert!(ParticleModelBuilder::new(pts.clone(), m.clone(), material(false), 1.8 * SPACING).mass_scaling(q).build().is_err(), "q = {q}");
     }
-    let e = ParticleModelBuilder::new(pts, m, material(false), 1.8 * SPACING).gravity(Vec3::new(0.0, 0.0, -9.81)).mass_scaling(0.9).build();
+    let e = ParticleModelBuilder::new(pts, m, material(false), 1.8 * SPACING)
+        .gravity(Vec3::new(0.0, 0.0, -9.81))
+        .mass_scaling(0.9)
+        .build();
     assert!(e.unwrap_err().to_string().contains("gravity"));
 }

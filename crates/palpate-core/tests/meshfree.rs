@@ -277,7 +277,11 @@ fn hourglass_control_keeps_particles_from_clumping_or_crossing() {
     let build = |kappa: f64| {
         let (pts, m) = lattice(n);
         let fixed: Vec<usize> = (0..n[0] * n[1]).collect();
-        ParticleModelBuilder::new(pts, m, material(true), 1.8 * SPACING).fixed_particles(fixed).hourglass(kappa).build().unwrap()
+        ParticleModelBuilder::new(pts, m, material(true), 1.8 * SPACING)
+            .fixed_particles(fixed)
+            .hourglass(kappa)
+            .build()
+            .unwrap()
     };
     let top_centre = 3 + n[0] * (3 + n[1] * (n[2] - 1));
     let run = |model: &ParticleModel| {

@@ -27,7 +27,11 @@ use particles::{lattice, material, SPACING};
 /// A cubic lattice block, spacing 1 mm, support 1.8 spacings, hourglass `kappa`, `fixed` held.
 fn block(n: [usize; 3], damped: bool, kappa: f64, fixed: Vec<usize>) -> ParticleModel {
     let (pts, m) = lattice(n);
-    ParticleModelBuilder::new(pts, m, material(damped), 1.8 * SPACING).hourglass(kappa).fixed_particles(fixed).build().unwrap()
+    ParticleModelBuilder::new(pts, m, material(damped), 1.8 * SPACING)
+        .hourglass(kappa)
+        .fixed_particles(fixed)
+        .build()
+        .unwrap()
 }
 
 /// A random deformation (3% affine plus 3% of a spacing of noise), random velocities (1 cm/s)
@@ -284,7 +288,10 @@ fn k_single_substep_calls_equal_one_call_of_k_substeps_to_round_off() {
     let dv = one.v.iter().zip(&many.v).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
     let fmax = f_one.iter().map(|f| f.norm()).fold(0.0, f64::max);
     let df = f_one.iter().zip(&f_mean).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
-    eprintln!("1 call x {k} vs {k} calls x 1: |dx| {dx:.2e} m (motion {du:.2e}), |dv| {dv:.2e} m/s, ring |df| {df:.2e} N (max {fmax:.2e}), bitwise {}", one.x == many.x);
+    eprintln!(
+        "1 call x {k} vs {k} calls x 1: |dx| {dx:.2e} m (motion {du:.2e}), |dv| {dv:.2e} m/s, ring |df| {df:.2e} N (max {fmax:.2e}), bitwise {}",
+        one.x == many.x
+    );
     assert!(dx <= 1e-12 * SPACING, "{dx:e}");
     // A round-off difference in x comes back in v amplified by the stiffest mode.
     assert!(dv <= 1e-12 * SPACING * model.omega_max(), "{dv:e}");

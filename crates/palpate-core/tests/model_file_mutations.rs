@@ -37,7 +37,9 @@ impl Rng {
         self.0 ^= self.0 >> 27;
         self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
     }
-    fn below(&mut self, n: usize) -> usize { (self.next() % n as u64) as usize }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
 }
 
 fn use_model(bytes: &[u8]) -> bool {
@@ -97,7 +99,11 @@ fn nan_fields_are_refused() {
     let base = small_model();
     let m = from_bytes(&base, "base").expect("loads");
     // Each of these values, found by its bytes in the file, replaced by NaN.
-    for (what, v) in [("a particle mass", m.particle_mass[0]), ("the wall volume", m.wall_volume), ("the core fraction", m.options.core_fraction)] {
+    for (what, v) in [
+        ("a particle mass", m.particle_mass[0]),
+        ("the wall volume", m.wall_volume),
+        ("the core fraction", m.options.core_fraction),
+    ] {
         let at = base.windows(8).position(|w| w == v.to_le_bytes()).unwrap_or_else(|| panic!("{what} in the file"));
         let mut b = base.clone();
         b[at..at + 8].copy_from_slice(&f64::NAN.to_le_bytes());

@@ -52,7 +52,6 @@ fn nh_piola(f: &Mat3, lambda: f64, mu: f64) -> Mat3 {
     mu * f + (lambda * j.ln() - mu) * f_inv_t
 }
 
-
 #[test]
 fn nh_total_force_and_jacobian_match_finite_differences() {
     let size = [0.02, 0.015, 0.012];
@@ -65,7 +64,13 @@ fn nh_total_force_and_jacobian_match_finite_differences() {
     let squeeze = Mat3::from_diagonal(&Vec3::new(0.5, 0.9, 0.9)); // J ~ 0.4
     for (what, a) in [("deformed", generic), ("compressed (J ~ 0.4)", squeeze)] {
         let x: Vec<Vec3> = model.mesh().points().iter().map(|p| a * p + rng.vec3(0.05 * hcell)).collect();
-        let j_min = model.mesh().tets().iter().zip(model.rest()).map(|(t, r)| tet4::deformation_gradient(&t.map(|i| x[i]), r).determinant()).fold(f64::INFINITY, f64::min);
+        let j_min = model
+            .mesh()
+            .tets()
+            .iter()
+            .zip(model.rest())
+            .map(|(t, r)| tet4::deformation_gradient(&t.map(|i| x[i]), r).determinant())
+            .fold(f64::INFINITY, f64::min);
         assert!(j_min > 0.2, "{what}: set-up inverted or over-compressed an element (J = {j_min})");
         // Total force = -grad(total energy).
         let worst = energy_gradient_error(&model, &x);
@@ -137,7 +142,11 @@ fn bar(law: Law) -> (Model, TetMesh) {
 fn bisect(g: impl Fn(f64) -> f64, p: f64, mut lo: f64, mut hi: f64) -> f64 {
     for _ in 0..200 {
         let mid = 0.5 * (lo + hi);
-        if g(mid) < p { lo = mid } else { hi = mid }
+        if g(mid) < p {
+            lo = mid
+        } else {
+            hi = mid
+        }
     }
     0.5 * (lo + hi)
 }
@@ -167,7 +176,11 @@ fn nh_static_bar_matches_exact_solution() {
                 worst = worst.max((xi - expect).norm());
             }
             let u_tip = (s - 1.0).abs() * BAR_L;
-            println!("{law}, nominal stress {p_rel} E: exact stretch {s:.6}, max |x - exact| / |u_tip| = {:.2e} ({} Newton iterations)", worst / u_tip, sol.iterations);
+            println!(
+                "{law}, nominal stress {p_rel} E: exact stretch {s:.6}, max |x - exact| / |u_tip| = {:.2e} ({} Newton iterations)",
+                worst / u_tip,
+                sol.iterations
+            );
             assert!(worst <= 1e-6 * u_tip, "{law}, p = {p_rel} E: off the exact affine solution by {:e} of the tip displacement", worst / u_tip);
         }
     }

@@ -13,14 +13,14 @@
 //! (BE's mean matches it to ~1e-5 in practice: its steady state is the exact nonlinear
 //! equilibrium, and BE damps the oscillation within the first half).
 
-#[path = "support/protocol.rs"]
-mod protocol;
 #[path = "support/common.rs"]
 mod common;
+#[path = "support/protocol.rs"]
+mod protocol;
 
 use common::max_norm;
-use palpate_core::probe::{run_probe, NoClock, ProbeOptions};
 use palpate_core::integrate::{static_solve, StaticOptions};
+use palpate_core::probe::{run_probe, NoClock, ProbeOptions};
 use palpate_core::{Integrator, ModelBuilder, State, Vec3, Workspace};
 
 /// Runs the protocol; returns (max |u| over the run, rel L2 of the second-half mean vs static).
@@ -29,7 +29,11 @@ fn run(name: &str, integ: Integrator) -> Option<(f64, f64)> {
         println!("SKIP: shared mesh lv_{name} not found (set PALPATE_SHARED)");
         return None;
     };
-    let model = ModelBuilder::new(case.mesh.clone(), protocol::material()).fixed_nodes(case.fixed.clone()).integrator(integ).build().unwrap();
+    let model = ModelBuilder::new(case.mesh.clone(), protocol::material())
+        .fixed_nodes(case.fixed.clone())
+        .integrator(integ)
+        .build()
+        .unwrap();
     let mut f = vec![Vec3::zeros(); model.n_nodes()];
     for &i in &case.loaded {
         f[i] = case.f_node;

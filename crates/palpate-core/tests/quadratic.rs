@@ -76,7 +76,10 @@ fn a_coarse_quadratic_cantilever_bends_like_a_beam() {
 fn patch_test_and_energy_gradient() {
     let mesh = perturbed_box([0.02, 0.015, 0.01], [3, 2, 2], 0.2, 7);
     for law in [Law::StVenantKirchhoff, Law::NeoHookean] {
-        let model = ModelBuilder::new(mesh.clone(), material(3.0e4, 0.4, 1000.0, 0.0, 0.0).with_law(law)).order(Order::Quadratic).build().unwrap();
+        let model = ModelBuilder::new(mesh.clone(), material(3.0e4, 0.4, 1000.0, 0.0, 0.0).with_law(law))
+            .order(Order::Quadratic)
+            .build()
+            .unwrap();
         let a = palpate_core::Mat3::new(1.08, 0.05, -0.03, 0.02, 0.95, 0.06, -0.04, 0.03, 1.1);
         let x: Vec<Vec3> = model.rest_positions().iter().map(|p| a * p + Vec3::new(0.01, -0.02, 0.005)).collect();
         let f = forces(&model, &x);
@@ -120,7 +123,11 @@ fn patch_test_and_energy_gradient() {
 fn free_body_keeps_its_momentum_and_loses_energy() {
     let mesh = perturbed_box([0.02, 0.015, 0.01], [3, 2, 2], 0.2, 11);
     let model = ModelBuilder::new(mesh.clone(), material(3.0e4, 0.4, 1000.0, 0.5, 0.5)).order(Order::Quadratic).build().unwrap();
-    let volume: f64 = mesh.tets().iter().map(|t| palpate_core::mesh::signed_volume(&mesh.points()[t[0]], &mesh.points()[t[1]], &mesh.points()[t[2]], &mesh.points()[t[3]])).sum();
+    let volume: f64 = mesh
+        .tets()
+        .iter()
+        .map(|t| palpate_core::mesh::signed_volume(&mesh.points()[t[0]], &mesh.points()[t[1]], &mesh.points()[t[2]], &mesh.points()[t[3]]))
+        .sum();
     let total: f64 = model.masses().iter().sum();
     assert!(model.masses().iter().all(|&m| m > 0.0));
     assert!((total - 1000.0 * volume).abs() < 1e-12 * total);
@@ -143,7 +150,11 @@ fn free_body_keeps_its_momentum_and_loses_energy() {
         e_prev = e;
     }
     // The paper's semi-implicit filter is refused on quadratic tets (a clear error, not a blow-up).
-    let err = ModelBuilder::new(mesh, material(3.0e4, 0.4, 1000.0, 0.0, 0.0)).order(Order::Quadratic).integrator(Integrator::semi_implicit()).build().unwrap_err();
+    let err = ModelBuilder::new(mesh, material(3.0e4, 0.4, 1000.0, 0.0, 0.0))
+        .order(Order::Quadratic)
+        .integrator(Integrator::semi_implicit())
+        .build()
+        .unwrap_err();
     assert!(err.to_string().contains("semi-implicit"), "{err}");
 }
 
@@ -167,7 +178,14 @@ fn a_sphere_on_a_coarse_quadratic_slab_follows_hertz() {
     for p in &pts {
         let hertz = 4.0 / 3.0 * e / (1.0 - nu * nu) * r.sqrt() * p.indentation.powf(1.5);
         let ratio = p.force.z / hertz;
-        println!("quadratic slab ({} tets, {} nodes): indentation {:.4} mm, F = {:.5e} N, Hertz {:.5e} N, ratio {ratio:.4}", model.n_tets(), model.n_nodes(), p.indentation * 1e3, p.force.z, hertz);
+        println!(
+            "quadratic slab ({} tets, {} nodes): indentation {:.4} mm, F = {:.5e} N, Hertz {:.5e} N, ratio {ratio:.4}",
+            model.n_tets(),
+            model.n_nodes(),
+            p.indentation * 1e3,
+            p.force.z,
+            hertz
+        );
         assert!(p.force.xy().norm() <= 1e-2 * p.force.z);
         assert!((ratio - 1.0).abs() < 0.08, "F / Hertz = {ratio}");
         rows.push((p.indentation, p.force.z));

@@ -151,7 +151,11 @@ fn a_non_finite_state_given_to_the_step_is_refused_and_left_alone() {
                 (if velocity { &mut s.v } else { &mut s.x })[node].y = bad;
                 let before = s.clone();
                 let r = step(&model, &mut s, &mut ws, 1e-3);
-                assert!(matches!(r, Err(StepError::NonFinite { node: n, .. }) if n == node), "{name}: {bad} in {} gave {r:?}", if velocity { "v" } else { "x" });
+                assert!(
+                    matches!(r, Err(StepError::NonFinite { node: n, .. }) if n == node),
+                    "{name}: {bad} in {} gave {r:?}",
+                    if velocity { "v" } else { "x" }
+                );
                 assert!(same_state(&s, &before), "{name}: state changed by a refused step");
                 s.clone_from(&good);
             }
@@ -208,7 +212,10 @@ fn huge_forces_give_typed_errors_and_restore_the_state() {
                 }
             }
         }
-        println!("{name}: first error {first_error:?}, {errors} failed steps of 200, {unconverged} accepted unconverged, max|u| {:.2e} m", max_norm(&s.displacements(&model)));
+        println!(
+            "{name}: first error {first_error:?}, {errors} failed steps of 200, {unconverged} accepted unconverged, max|u| {:.2e} m",
+            max_norm(&s.displacements(&model))
+        );
     }
 }
 
@@ -272,7 +279,11 @@ fn particle_step_allocates_nothing_after_the_first_step() {
     }
     let m = vec![1000.0 * s * s * s; pts.len()];
     let mat = palpate_core::Material::new(Elasticity::YoungPoisson { young: 3e4, poisson: 0.4 }, 1000.0, Damping { phi: 0.5, psi: 0.5 }).unwrap();
-    let model = ParticleModelBuilder::new(pts, m, mat, 1.8 * s).fixed_particles((0..25).collect()).gravity(Vec3::new(0.0, 0.0, -9.81)).build().unwrap();
+    let model = ParticleModelBuilder::new(pts, m, mat, 1.8 * s)
+        .fixed_particles((0..25).collect())
+        .gravity(Vec3::new(0.0, 0.0, -9.81))
+        .build()
+        .unwrap();
     for simd in [true, false] {
         set_simd_enabled(simd);
         let mut st = ParticleState::rest(&model);
@@ -300,7 +311,12 @@ fn the_hybrid_tick_allocates_nothing() {
     use palpate_core::hybrid::{build, shapes, HybridOptions};
     use palpate_core::runtime::{tick, Sim, SimOptions, SimState, SimWorkspace};
     let m = build(&shapes::ellipsoids([0.020, 0.020, 0.035], [0.026, 0.026, 0.042], 5).unwrap(), &HybridOptions::default()).unwrap();
-    let mat = palpate_core::Material::new(palpate_core::material::Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, palpate_core::material::Damping::NONE).unwrap();
+    let mat = palpate_core::Material::new(
+        palpate_core::material::Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 },
+        1000.0,
+        palpate_core::material::Damping::NONE,
+    )
+    .unwrap();
     let sim = Sim::new(m, mat, SimOptions::default()).unwrap();
     let mut st = SimState::rest(&sim);
     let mut ws = SimWorkspace::new(&sim);

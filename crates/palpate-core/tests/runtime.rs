@@ -142,7 +142,13 @@ fn skin_updated_after_the_force(implicit_exchange: bool) {
     let (mut entered, mut left, mut refreshed, mut deferred) = (0, 0, 0, 0);
     for k in 0..400 {
         // In 3 mm over 150 ticks, then a 12 mm slide, then out.
-        let depth = if k < 150 { 3e-3 * k as f64 / 150.0 } else if k < 330 { 3e-3 } else { 3e-3 * (400 - k) as f64 / 70.0 } - 5e-4;
+        let depth = if k < 150 {
+            3e-3 * k as f64 / 150.0
+        } else if k < 330 {
+            3e-3
+        } else {
+            3e-3 * (400 - k) as f64 / 70.0
+        } - 5e-4;
         let slide = 12e-3 * ((k as f64 - 150.0) / 180.0).clamp(0.0, 1.0);
         let c_tool = p0 + n * (r - depth) + t * slide;
         let ra = tick(&sim, &mut a, &mut wa, c_tool, 1e-3).unwrap();
@@ -166,7 +172,13 @@ fn skin_updated_after_the_force(implicit_exchange: bool) {
     }
     finish_tick(&sim, &mut c, &mut wc).unwrap();
     assert_eq!(finish_tick(&sim, &mut c, &mut wc).unwrap(), Finished::default(), "nothing is owed twice");
-    for (x, y) in [(&a.skin, &b.skin), (&a.skin, &c.skin), (&a.particles.x, &b.particles.x), (&a.particles.x, &c.particles.x), (&a.core.x, &c.core.x)] {
+    for (x, y) in [
+        (&a.skin, &b.skin),
+        (&a.skin, &c.skin),
+        (&a.particles.x, &b.particles.x),
+        (&a.particles.x, &c.particles.x),
+        (&a.core.x, &c.core.x),
+    ] {
         assert!(x == y, "the states differ");
     }
     assert!(entered > 0 && left > 0 && refreshed > 0, "regions entered {entered}, left {left}; far skin refreshed {refreshed}");
@@ -217,7 +229,11 @@ fn an_idle_shell_leaves_the_core_as_the_core_alone() {
     // The same core, carrying the same shell mass (the idle shell rides on it).
     // The runtime's core material: the tissue's stiffened by the model's homogenisation (no
     // particle is active: none of it is softened).
-    let alone = ModelBuilder::new(mesh, material().stiffened(sim.core_stiffening()).unwrap()).fixed_nodes(fixed).attached_masses(sim.shell_mass.clone()).build().unwrap();
+    let alone = ModelBuilder::new(mesh, material().stiffened(sim.core_stiffening()).unwrap())
+        .fixed_nodes(fixed)
+        .attached_masses(sim.shell_mass.clone())
+        .build()
+        .unwrap();
     let mut s = State::rest(&alone);
     let mut w = Workspace::new(&alone);
     for ((a, b), x) in st.core.v.iter_mut().zip(s.v.iter_mut()).zip(sim.core.mesh().points()) {

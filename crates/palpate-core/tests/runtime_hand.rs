@@ -33,7 +33,11 @@ fn tissue() -> Material {
 /// there (the protocol's probe for `z = 20 mm`).
 fn probe(sim: &Sim, z: f64) -> (Vec3, Vec3) {
     let outer = &sim.hybrid.outer_points;
-    let p = *outer.iter().filter(|q| q.x > 0.0).min_by(|a, b| (a.y.powi(2) + (a.z - z).powi(2)).total_cmp(&(b.y.powi(2) + (b.z - z).powi(2)))).unwrap();
+    let p = *outer
+        .iter()
+        .filter(|q| q.x > 0.0)
+        .min_by(|a, b| (a.y.powi(2) + (a.z - z).powi(2)).total_cmp(&(b.y.powi(2) + (b.z - z).powi(2))))
+        .unwrap();
     (p, -Vec3::new(p.x, p.y, 0.0).normalize())
 }
 
@@ -75,7 +79,13 @@ fn slow_slide(implicit_exchange: bool) {
     // Press over 0.3 s, hold 0.1 s, slide 20 mm at 10 mm/s.
     let path: Vec<Vec3> = (0..2400)
         .map(|k| {
-            let (d, s) = if k < 300 { ((k + 1) as f64 / 300.0 * depth, 0.0) } else if k < 400 { (depth, 0.0) } else { (depth, 0.02 * (k - 399) as f64 / 2000.0) };
+            let (d, s) = if k < 300 {
+                ((k + 1) as f64 / 300.0 * depth, 0.0)
+            } else if k < 400 {
+                (depth, 0.0)
+            } else {
+                (depth, 0.02 * (k - 399) as f64 / 2000.0)
+            };
             // The sphere tangent to the surface at depth 0, `d` into it along the inward normal.
             p - n * (r - d) + t * s
         })
@@ -119,7 +129,16 @@ fn confinement_keeps_the_active_particles_in_their_regions_and_a_held_tool_pumps
             let slack = sim.confinement.slack(grid, &sim.hybrid.voxel_owner, counts, &anchor);
             let outside = push.distance - slack.max(0.0);
             worst = worst.max(outside / grid.h);
-            assert!(outside <= grid.h, "tick {k}: particle {i} is {:.2} voxels outside its regions ({:?}, slack {slack:.2e}, distance {:.2e}, voxel {:.2e}, held {}, u {:.2e})", outside / grid.h, push.placement, push.distance, grid.h, sim.particles.fixed()[i], (st.particles.x[i] - shift - anchor).norm());
+            assert!(
+                outside <= grid.h,
+                "tick {k}: particle {i} is {:.2} voxels outside its regions ({:?}, slack {slack:.2e}, distance {:.2e}, voxel {:.2e}, held {}, u {:.2e})",
+                outside / grid.h,
+                push.placement,
+                push.distance,
+                grid.h,
+                sim.particles.fixed()[i],
+                (st.particles.x[i] - shift - anchor).norm()
+            );
         }
         if k >= 300 {
             let m = sim.particles.masses();
@@ -224,7 +243,11 @@ fn a_press_toward_5_n_beside_the_held_base_does_not_pass_through_the_organ() {
         }
         depth = (depth + 5e-5).min(25e-3);
     }
-    println!("beside the held base: 5 N reached at {:?} mm of travel; the force along the press fell at most {:.1}% below its running maximum", reached.map(|d| d * 1e3), 100.0 * gave);
+    println!(
+        "beside the held base: 5 N reached at {:?} mm of travel; the force along the press fell at most {:.1}% below its running maximum",
+        reached.map(|d| d * 1e3),
+        100.0 * gave
+    );
     assert!(reached.is_some(), "the organ never gave 5 N over 25 mm of travel (largest along the press: {top:.3} N)");
     assert!(gave < 0.1, "the force along the press fell {:.1}% below its running maximum", 100.0 * gave);
     // Then a slide of 10 mm at 20 mm/s along the surface, the depth held: the tool's nearest
@@ -310,7 +333,8 @@ fn an_under_stepped_shell_is_reported_diverging_when_it_starts() {
     let mut passed_c = None;
     for k in 0..2000 {
         let depth = 3e-3 * ((k + 1) as f64 / 100.0).min(1.0);
-        let (core_x, core_v, px, pv, was_active) = (st.core.x.clone(), st.core.v.clone(), st.particles.x.clone(), st.particles.v.clone(), st.particles.active.clone());
+        let (core_x, core_v, px, pv, was_active) =
+            (st.core.x.clone(), st.core.v.clone(), st.particles.x.clone(), st.particles.v.clone(), st.particles.active.clone());
         match tick(&sim, &mut st, &mut ws, p - n * (r - depth), 1e-3) {
             Ok(_) => {
                 let s = active_relative_speed(&sim, &st);
@@ -319,7 +343,9 @@ fn an_under_stepped_shell_is_reported_diverging_when_it_starts() {
                 }
             }
             Err(e) => {
-                let StepError::Diverging { speed, bound, .. } = e else { panic!("tick {k}: {e} (expected Diverging)") };
+                let StepError::Diverging { speed, bound, .. } = e else {
+                    panic!("tick {k}: {e} (expected Diverging)")
+                };
                 println!("tick {k}: {e}; first past c_p at {passed_c:?}");
                 assert!(speed > bound);
                 assert!(st.core.x == core_x && st.core.v == core_v, "the core was not restored");
@@ -396,7 +422,10 @@ fn a_failed_shell_step_is_shed_and_the_tick_goes_on_with_the_core() {
                 } else if !rep.shell_off {
                     assert_eq!(k, touched_after_lift + 2, "tick {k}: the shell came back late or early");
                     assert!(rep.active > 0 || rep.shell_failed, "tick {k}: the shell did not come back (failed at {f}): {rep:?}");
-                    println!("shell failed at tick {f}, off until the tool let go, back at tick {k}: {} particles entered, failed again: {}", rep.entered, rep.shell_failed);
+                    println!(
+                        "shell failed at tick {f}, off until the tool let go, back at tick {k}: {} particles entered, failed again: {}",
+                        rep.entered, rep.shell_failed
+                    );
                     assert!(checked_restore, "the restored state was never ticked");
                     return;
                 }

@@ -11,14 +11,14 @@
 //! pointing away from the region, or a force that is not the gradient of its energy, lets
 //! particles escape or pumps energy into them; anything that allocates per tick breaks the
 //! haptic loop's timing.
+use palpate_core::error::ModelError;
 use palpate_core::hybrid::{build, shapes, HybridModel, HybridOptions, VoxelLabel};
+use palpate_core::integrate::CorePotential;
 use palpate_core::material::Material;
+use palpate_core::material::{Damping, Elasticity};
 use palpate_core::mesh::generate::TruncatedEllipsoidWall;
 use palpate_core::meshfree::ParticleModelBuilder;
-use palpate_core::integrate::CorePotential;
-use palpate_core::material::{Damping, Elasticity};
 use palpate_core::runtime::{Activation, AreaTool, Confinement, CoreContact, Placement, Sim, SimOptions, Tool, ToolOptions};
-use palpate_core::error::ModelError;
 use palpate_core::Vec3;
 use std::collections::BTreeSet;
 use std::sync::OnceLock;
@@ -45,7 +45,9 @@ impl Lcg {
         self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
     }
-    fn vec(&mut self) -> Vec3 { Vec3::new(self.next(), self.next(), self.next()) }
+    fn vec(&mut self) -> Vec3 {
+        Vec3::new(self.next(), self.next(), self.next())
+    }
 }
 
 // ------------------------------------------------------------------------------------------
@@ -101,11 +103,24 @@ fn core_contact_forces_are_minus_the_gradient_of_its_energy() {
     let [fa, fb, fc] = sim.hybrid.core_faces[sim.hybrid.core_faces.len() / 3];
     let centroid = (x[fa] + x[fb] + x[fc]) / 3.0;
     let nf = (x[fb] - x[fa]).cross(&(x[fc] - x[fa])).normalize();
-    for centre in [skin_point + outward * (r - 1.5e-3), x[a0] + outward * (r - 1.0e-3), centroid + nf * (r - 1.0e-3), centroid - nf * 1.0e-3] {
+    for centre in [
+        skin_point + outward * (r - 1.5e-3),
+        x[a0] + outward * (r - 1.0e-3),
+        centroid + nf * (r - 1.0e-3),
+        centroid - nf * 1.0e-3,
+    ] {
         let reach: Vec<usize> = (0..sim.hybrid.outer_points.len()).filter(|&v| (sim.skin.position(v, &x) - centre).norm() < r + 5e-3).collect();
         // A lift as a shed shell leaves the skin (constant offsets: the gradient holds with them).
         let lift: Vec<Vec3> = (0..sim.hybrid.outer_points.len()).map(|v| if v % 3 == 0 { 3e-4 * rng.vec() } else { Vec3::zeros() }).collect();
-        let contact = CoreContact { sim: &sim, centre, skin: &reach, core: &faces, lift: &lift, lift_scale: 0.7, beneath: CoreContact::centre_is_beneath(&sim, &x, &centre) };
+        let contact = CoreContact {
+            sim: &sim,
+            centre,
+            skin: &reach,
+            core: &faces,
+            lift: &lift,
+            lift_scale: 0.7,
+            beneath: CoreContact::centre_is_beneath(&sim, &x, &centre),
+        };
         let mut f = vec![Vec3::zeros(); x.len()];
         let u = contact.energy_forces(&x, &mut f);
         let sum = contact.sum(&x);
@@ -135,7 +150,10 @@ fn core_contact_forces_are_minus_the_gradient_of_its_energy() {
     // (the tissue's force points inward): a sign taken from the distance alone would let it
     // through (measured: the tool passed the held core of the paper's ellipsoids, 7 mm in).
     let inside = centroid - nf * 1.0e-3;
-    assert!(CoreContact::centre_is_beneath(&sim, &x, &inside) && !CoreContact::centre_is_beneath(&sim, &x, &(centroid + nf * 1.0e-3)), "the core's faces' winding tells no side");
+    assert!(
+        CoreContact::centre_is_beneath(&sim, &x, &inside) && !CoreContact::centre_is_beneath(&sim, &x, &(centroid + nf * 1.0e-3)),
+        "the core's faces' winding tells no side"
+    );
     let beneath = CoreContact { sim: &sim, centre: inside, skin: &[], core: &faces, lift: &[], lift_scale: 0.0, beneath: true };
     let s = beneath.sum(&x);
     assert!(s.core_contacts == 1 && (s.max_depth - (r + 1.0e-3)).abs() < 1e-9, "depth {} beneath the face", s.max_depth);
@@ -152,7 +170,11 @@ fn core_faces_point_out_of_the_core() {
     for (f, face) in m.core_faces.iter().enumerate() {
         let mut sorted = *face;
         sorted.sort_unstable();
-        let tet = m.core_tets.iter().find(|t| sorted.iter().all(|a| t.contains(a))).unwrap_or_else(|| panic!("face {f} bounds no tetrahedron"));
+        let tet = m
+            .core_tets
+            .iter()
+            .find(|t| sorted.iter().all(|a| t.contains(a)))
+            .unwrap_or_else(|| panic!("face {f} bounds no tetrahedron"));
         let fourth = *tet.iter().find(|a| !face.contains(a)).unwrap();
         let n = (x[face[1]] - x[face[0]]).cross(&(x[face[2]] - x[face[0]]));
         assert!(n.dot(&(x[fourth] - x[face[0]])) < 0.0, "face {f} points into the core");
@@ -497,7 +519,10 @@ fn hysteresis_stops_a_wobble_from_toggling_particles() {
             }
         }
     }
-    println!("wobble: ticks with entering or leaving particles after the first period: {} without hysteresis, {} with a linger of {period} ticks", changes[0], changes[1]);
+    println!(
+        "wobble: ticks with entering or leaving particles after the first period: {} without hysteresis, {} with a linger of {period} ticks",
+        changes[0], changes[1]
+    );
     assert!(changes[0] > 10, "the wobble does not change the regions ({})", changes[0]);
     assert_eq!(changes[1], 0);
 }
@@ -521,7 +546,10 @@ fn voxel_centre(f: &palpate_core::hybrid::RegionField, v: usize) -> Vec3 {
 
 /// Centre of an interior voxel of `f` (an anchor with no slack).
 fn interior_anchor(f: &palpate_core::hybrid::RegionField) -> Vec3 {
-    let v = (0..f.label.len()).find(|&v| f.label[v] == VoxelLabel::Inside).or_else(|| (0..f.label.len()).find(|&v| f.label[v] == VoxelLabel::Boundary)).unwrap();
+    let v = (0..f.label.len())
+        .find(|&v| f.label[v] == VoxelLabel::Inside)
+        .or_else(|| (0..f.label.len()).find(|&v| f.label[v] == VoxelLabel::Boundary))
+        .unwrap();
     voxel_centre(f, v)
 }
 
@@ -629,7 +657,10 @@ fn displaced_particles_are_pushed_back_along_the_region_field() {
         let a = only(m, s);
         let f = m.region_field(s);
         let anchor = interior_anchor(&f);
-        let cubes: Vec<Vec3> = (0..f.label.len()).filter(|&v| f.label[v] != VoxelLabel::Outside).map(|v| voxel_centre(&f, v) - Vec3::repeat(0.5 * h)).collect();
+        let cubes: Vec<Vec3> = (0..f.label.len())
+            .filter(|&v| f.label[v] != VoxelLabel::Outside)
+            .map(|v| voxel_centre(&f, v) - Vec3::repeat(0.5 * h))
+            .collect();
         for v in 0..f.label.len() {
             let g = f.gradient[v];
             if f.label[v] != VoxelLabel::Outside || g == [0.0; 3] {
@@ -652,7 +683,11 @@ fn displaced_particles_are_pushed_back_along_the_region_field() {
             }
             // Voxels of the region's triangles beyond its box may be nearer than the box's; the
             // search is exact up to (reach - 1) voxels.
-            assert!(reference > (wall.reach as f64 - 1.0) * h || p.distance <= reference + 1e-12, "region {s} voxel {v}: {} m vs reference {reference} m", p.distance);
+            assert!(
+                reference > (wall.reach as f64 - 1.0) * h || p.distance <= reference + 1e-12,
+                "region {s} voxel {v}: {} m vs reference {reference} m",
+                p.distance
+            );
             if (p.distance - reference).abs() <= 1e-12 {
                 exact += 1;
             }
@@ -712,7 +747,11 @@ fn the_wall_force_is_minus_the_gradient_of_its_energy() {
                     ok = false; // at a kink (two nearest cubes), the gradient is not defined
                 }
             }
-            if ok { checked += 1 } else { kinks += 1 }
+            if ok {
+                checked += 1
+            } else {
+                kinks += 1
+            }
         }
     }
     println!("energy consistency: {checked} points agree, {kinks} at kinks");
@@ -811,8 +850,6 @@ fn the_per_tick_parts_allocate_nothing() {
     assert!(work > 0);
     assert_eq!(n, 0, "the per-tick parts allocated {n} times");
 }
-
-
 
 /// Every option is checked once, by name and unit (`SimOptions::check`, which `Sim::new` and the
 /// binding call), and a long pause or linger is a count of ticks, not an overflow.

@@ -182,7 +182,12 @@ fn a_potentials_stiffness_terms_are_held_in_the_factor_and_in_the_memory() {
         // Every fifth step a different third of the anchors is off.
         let off = (step / 5) % 3;
         let keep: Vec<usize> = (0..nodes.len()).filter(|j| j % 3 != off).collect();
-        Anchors { nodes: keep.iter().map(|&j| nodes[j]).collect(), targets: keep.iter().map(|&j| targets[j] + Vec3::new(0.0, 0.0, -2e-3)).collect(), k, offer: true }
+        Anchors {
+            nodes: keep.iter().map(|&j| nodes[j]).collect(),
+            targets: keep.iter().map(|&j| targets[j] + Vec3::new(0.0, 0.0, -2e-3)).collect(),
+            k,
+            offer: true,
+        }
     };
     let mut s = State::rest(&model);
     let mut ws = Workspace::new(&model);
@@ -195,7 +200,11 @@ fn a_potentials_stiffness_terms_are_held_in_the_factor_and_in_the_memory() {
     let mem = ws.memory();
     assert!(mem.refreshed_at.is_some() && !mem.base_terms.is_empty() && !mem.term_updates.is_empty(), "after {n} steps: {mem:?}");
     let saved = s.clone();
-    let steps = |s: &mut State, ws: &mut Workspace| (n..n + 20).map(|j| palpate_core::integrate::step_with_potential(&model, s, ws, 1e-3, &pot_at(j)).unwrap().iterations).collect::<Vec<_>>();
+    let steps = |s: &mut State, ws: &mut Workspace| {
+        (n..n + 20)
+            .map(|j| palpate_core::integrate::step_with_potential(&model, s, ws, 1e-3, &pot_at(j)).unwrap().iterations)
+            .collect::<Vec<_>>()
+    };
     let a = steps(&mut s, &mut ws);
     let mut ws2 = Workspace::new(&model);
     ws2.restore_memory(&model, &mem).unwrap();
@@ -205,7 +214,8 @@ fn a_potentials_stiffness_terms_are_held_in_the_factor_and_in_the_memory() {
     assert_eq!(bits(&s.x), bits(&s2.x), "positions differ after the restore");
     // A memory that dropped the held terms remakes another factor: the steps differ.
     let mut ws3 = Workspace::new(&model);
-    ws3.restore_memory(&model, &palpate_core::StepMemory { base_terms: Vec::new(), term_updates: Vec::new(), ..mem.clone() }).unwrap();
+    ws3.restore_memory(&model, &palpate_core::StepMemory { base_terms: Vec::new(), term_updates: Vec::new(), ..mem.clone() })
+        .unwrap();
     let mut s3 = saved;
     steps(&mut s3, &mut ws3);
     assert_ne!(bits(&s.x), bits(&s3.x), "the held terms should matter");
@@ -244,7 +254,11 @@ fn many_terms_at_once_remake_the_factor_and_restore_bit_for_bit() {
     assert_eq!(first.factorizations, 2, "the rest factor, then the factor with the terms");
     assert_eq!(first.iterations, 1);
     let saved = s.clone();
-    let steps = |s: &mut State, ws: &mut Workspace| (0..10).map(|_| palpate_core::integrate::step_with_potential(&model, s, ws, 1e-3, &pot).unwrap().iterations).collect::<Vec<_>>();
+    let steps = |s: &mut State, ws: &mut Workspace| {
+        (0..10)
+            .map(|_| palpate_core::integrate::step_with_potential(&model, s, ws, 1e-3, &pot).unwrap().iterations)
+            .collect::<Vec<_>>()
+    };
     let a = steps(&mut s, &mut ws);
     assert!(a.iter().all(|&i| i == 1), "{a:?}");
     let mut ws2 = Workspace::new(&model);

@@ -24,8 +24,8 @@ mod common;
 
 use common::*;
 use palpate_core::integrate::{static_solve, static_solve_with, StaticOptions};
-use palpate_core::SolveError;
 use palpate_core::mesh::generate::{base_nodes, box_mesh, truncated_ellipsoid_wall, TruncatedEllipsoidWall};
+use palpate_core::SolveError;
 use palpate_core::{Model, ModelBuilder, Vec3};
 
 const L: f64 = 0.1;
@@ -149,7 +149,13 @@ fn default_static_tolerance_is_reachable_at_small_strain() {
     let p_total = E * W * W * 1e-6;
     let f = face_loads(model.mesh(), |p| (p.x - L).abs() < 1e-12, Vec3::new(p_total, 0.0, 0.0));
     let sol = static_solve(&model, &f, &StaticOptions::default()).expect("default options should converge at small strain");
-    let tip = sol.x.iter().zip(model.mesh().points()).filter(|(_, x0)| (x0.x - L).abs() < 1e-12).map(|(x, x0)| x.x - x0.x).fold(0.0, f64::max);
+    let tip = sol
+        .x
+        .iter()
+        .zip(model.mesh().points())
+        .filter(|(_, x0)| (x0.x - L).abs() < 1e-12)
+        .map(|(x, x0)| x.x - x0.x)
+        .fold(0.0, f64::max);
     assert!((tip / (p_total * L / (E * W * W)) - 1.0).abs() < 1e-5);
 }
 

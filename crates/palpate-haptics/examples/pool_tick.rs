@@ -20,7 +20,10 @@ fn main() {
     let p0 = *outer.iter().max_by(|a, b| a.x.total_cmp(&b.x)).unwrap();
     let n = (p0 - c).normalize();
     let t = n.cross(&Vec3::z()).normalize();
-    let mut runs: Vec<(usize, HybridPhysics, Vec<f64>)> = [1, threads].into_iter().map(|w| (w, HybridPhysics::new(m.clone(), mat, SimOptions::default()).unwrap().with_threads(w, false).unwrap(), Vec::new())).collect();
+    let mut runs: Vec<(usize, HybridPhysics, Vec<f64>)> = [1, threads]
+        .into_iter()
+        .map(|w| (w, HybridPhysics::new(m.clone(), mat, SimOptions::default()).unwrap().with_threads(w, false).unwrap(), Vec::new()))
+        .collect();
     let r = 0.005;
     for k in 0..ticks {
         let s = (k % 2000) as f64 / 2000.0;

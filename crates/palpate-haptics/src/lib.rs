@@ -19,12 +19,11 @@
 //! Units: SI throughout (m, s, N, kg); positions and forces in the model's world frame; the force
 //! sent to a device is the force on the user's hand.
 
-
 pub mod bridge;
 pub mod coupling;
-pub mod multirate;
 pub mod device;
 pub mod devices;
+pub mod multirate;
 pub mod physics;
 pub mod pool;
 pub mod realtime;
@@ -38,7 +37,6 @@ pub mod surface_contact;
 pub use coupling::{CouplingParams, VirtualCoupling};
 pub use device::{Device, DeviceInput, DeviceKind, ForceCell, ForceSink};
 pub use physics::{default_area_stiffness, FemOptions, FemPhysics, HybridPhysics, Identity, Idle, Physics, Wall};
-pub use surface_contact::{AreaTool, SurfaceContact};
 pub use pool::SpinPool;
 pub use realtime::Realtime;
 pub use record::{Recording, TickRecord};
@@ -46,3 +44,4 @@ pub use safety::{Safety, SafetyParams};
 pub use servo::{Fault, FaultRecord, HapticCore, Servo, ServoConfig, ServoHandle, ServoReport, TickOut, IDLE_SNAPSHOT_TICKS};
 pub use snapshot::{Mailbox, Snapshot, SnapshotCell, Vec3Cell};
 pub use stats::Stats;
+pub use surface_contact::{AreaTool, SurfaceContact};

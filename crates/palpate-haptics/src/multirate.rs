@@ -103,7 +103,22 @@ impl ModelCell {
     pub fn publish(&self, m: &LocalModel) {
         let k = &m.stiffness;
         let f = |v: f64| v.to_bits();
-        self.0.write(&[m.tick, f(m.tool.x), f(m.tool.y), f(m.tool.z), f(m.force.x), f(m.force.y), f(m.force.z), f(k[(0, 0)]), f(k[(0, 1)]), f(k[(0, 2)]), f(k[(1, 1)]), f(k[(1, 2)]), f(k[(2, 2)]), m.faults]);
+        self.0.write(&[
+            m.tick,
+            f(m.tool.x),
+            f(m.tool.y),
+            f(m.tool.z),
+            f(m.force.x),
+            f(m.force.y),
+            f(m.force.z),
+            f(k[(0, 0)]),
+            f(k[(0, 1)]),
+            f(k[(0, 2)]),
+            f(k[(1, 1)]),
+            f(k[(1, 2)]),
+            f(k[(2, 2)]),
+            m.faults,
+        ]);
     }
     /// The latest model (tick 0 before the first).
     pub fn latest(&self) -> LocalModel {
@@ -359,7 +374,14 @@ mod tests {
         // F = -K x with an anisotropic K: after moves in three directions the estimate is K.
         let k = Mat3::new(500.0, 50.0, 0.0, 50.0, 300.0, 0.0, 0.0, 0.0, 100.0);
         let mut e = StiffnessEstimate::default();
-        let pts = [Vec3::new(1e-3, 0.0, 0.0), Vec3::new(1e-3, 1e-3, 0.0), Vec3::new(1e-3, 1e-3, 1e-3), Vec3::new(0.0, 1e-3, 1e-3), Vec3::new(2e-3, 0.0, 1e-3), Vec3::new(1e-3, 2e-3, 0.0)];
+        let pts = [
+            Vec3::new(1e-3, 0.0, 0.0),
+            Vec3::new(1e-3, 1e-3, 0.0),
+            Vec3::new(1e-3, 1e-3, 1e-3),
+            Vec3::new(0.0, 1e-3, 1e-3),
+            Vec3::new(2e-3, 0.0, 1e-3),
+            Vec3::new(1e-3, 2e-3, 0.0),
+        ];
         let mut est = Mat3::zeros();
         for _ in 0..30 {
             for p in &pts {
@@ -387,7 +409,13 @@ mod tests {
     fn the_model_cell_round_trips() {
         let c = ModelCell::default();
         assert_eq!(c.latest().tick, 0);
-        let m = LocalModel { tick: 7, tool: Vec3::new(1.0, 2.0, 3.0), force: Vec3::new(-0.1, 0.2, 0.3), stiffness: Mat3::new(1.0, 2.0, 3.0, 2.0, 4.0, 5.0, 3.0, 5.0, 6.0), faults: 2 };
+        let m = LocalModel {
+            tick: 7,
+            tool: Vec3::new(1.0, 2.0, 3.0),
+            force: Vec3::new(-0.1, 0.2, 0.3),
+            stiffness: Mat3::new(1.0, 2.0, 3.0, 2.0, 4.0, 5.0, 3.0, 5.0, 6.0),
+            faults: 2,
+        };
         c.publish(&m);
         assert_eq!(c.latest(), m);
         assert_eq!(m.force_at(&(m.tool + Vec3::new(0.0, 0.0, 1.0))), m.force - Vec3::new(3.0, 5.0, 6.0));

@@ -113,7 +113,14 @@ impl HybridPhysics {
         let sim = Sim::new(model, material, options)?;
         let description = format!(
             "hybrid: {} core nodes, {} core tets, {} particles, {} outer vertices; E = {} Pa, nu = {}, rho = {} kg/m^3; tool radius {} m",
-            sim.core.n_nodes(), sim.core.n_tets(), sim.n_particles(), sim.hybrid.outer_points.len(), material.young(), material.poisson(), material.density(), options.tool.radius
+            sim.core.n_nodes(),
+            sim.core.n_tets(),
+            sim.n_particles(),
+            sim.hybrid.outer_points.len(),
+            material.young(),
+            material.poisson(),
+            material.density(),
+            options.tool.radius
         );
         Ok(HybridPhysics::from_sim(sim, Identity { digest, description }))
     }
@@ -376,8 +383,26 @@ impl FemPhysics {
         let forces = vec![Vec3::zeros(); model.n_nodes()];
         let (m, share) = (model.masses(), contact.area_shares());
         let disc = std::f64::consts::PI * (o.radius * (1.0 + surface_contact::REACH_MARGIN)).powi(2);
-        let mass_per_area = boundary.iter().filter(|&&i| !model.fixed()[i] && share[i] > 0.0).map(|&i| m[i] / share[i].min(disc)).fold(f64::INFINITY, f64::min);
-        Ok(FemPhysics { model, state, ws, good, options, area_stiffness: k, boundary, contact, mass_per_area, forces, tool: None, good_tool: None, identity })
+        let mass_per_area = boundary
+            .iter()
+            .filter(|&&i| !model.fixed()[i] && share[i] > 0.0)
+            .map(|&i| m[i] / share[i].min(disc))
+            .fold(f64::INFINITY, f64::min);
+        Ok(FemPhysics {
+            model,
+            state,
+            ws,
+            good,
+            options,
+            area_stiffness: k,
+            boundary,
+            contact,
+            mass_per_area,
+            forces,
+            tool: None,
+            good_tool: None,
+            identity,
+        })
     }
 
     pub fn model(&self) -> &Model {
@@ -453,7 +478,13 @@ fn fem_identity(model: &Model, options: &FemOptions) -> Identity {
     bytes.extend_from_slice(format!("{:?} {:?} {material:?} {:?} {options:?}", model.gravity(), model.integrator(), model.fixed().len()).as_bytes());
     let description = format!(
         "full FEM: {} nodes ({} fixed), {} tets; E = {} Pa, nu = {}, rho = {} kg/m^3; tool radius {} m",
-        model.n_nodes(), model.fixed().iter().filter(|&&f| f).count(), model.n_tets(), material.young(), material.poisson(), material.density(), options.radius
+        model.n_nodes(),
+        model.fixed().iter().filter(|&&f| f).count(),
+        model.n_tets(),
+        material.young(),
+        material.poisson(),
+        material.density(),
+        options.radius
     );
     Identity { digest: file::checksum(&bytes), description }
 }
@@ -547,7 +578,15 @@ pub struct Wall {
 
 impl Wall {
     pub fn new(point: Vec3, normal: Vec3, stiffness: f64, damping: f64) -> Wall {
-        Wall { point, normal: normal.normalize(), stiffness, damping, max_speed: SimOptions::default().max_tool_speed, tool: None, good: None }
+        Wall {
+            point,
+            normal: normal.normalize(),
+            stiffness,
+            damping,
+            max_speed: SimOptions::default().max_tool_speed,
+            tool: None,
+            good: None,
+        }
     }
 }
 
@@ -564,7 +603,11 @@ impl Physics for Wall {
         let depth = -(x - self.point).dot(&self.normal);
         let approach = -(x - prev).dot(&self.normal) / dt;
         self.tool = Some(x);
-        Ok(if depth > 0.0 { self.normal * (self.stiffness * depth + self.damping * approach.max(0.0)) } else { Vec3::zeros() })
+        Ok(if depth > 0.0 {
+            self.normal * (self.stiffness * depth + self.damping * approach.max(0.0))
+        } else {
+            Vec3::zeros()
+        })
     }
     fn tool(&self) -> Option<Vec3> {
         self.tool

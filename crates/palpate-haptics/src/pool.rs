@@ -105,7 +105,13 @@ impl SpinPool {
             })?);
         }
         drop(tx);
-        let realtime = rx.iter().take(ways - 1).fold(if realtime { Realtime::Granted(SERVO_PRIORITY) } else { Realtime::Off }, |acc, r| if acc.granted() && !r.granted() { r } else { acc });
+        let realtime = rx.iter().take(ways - 1).fold(if realtime { Realtime::Granted(SERVO_PRIORITY) } else { Realtime::Off }, |acc, r| {
+            if acc.granted() && !r.granted() {
+                r
+            } else {
+                acc
+            }
+        });
         Ok(SpinPool { shared, helpers, ways, busy: AtomicBool::new(false), realtime })
     }
 

@@ -132,7 +132,16 @@ pub fn request_short_slice(slice_ns: u64) -> bool {
     // The thread's own nice value, kept (errno is not needed: a nice of -1 is as good as any).
     // SAFETY: getpriority on the calling thread's id reads no memory of ours.
     let nice = unsafe { libc::getpriority(libc::PRIO_PROCESS, tid) };
-    let attr = SchedAttr { size: std::mem::size_of::<SchedAttr>() as u32, policy: libc::SCHED_OTHER as u32, flags: 0, nice, priority: 0, runtime: slice_ns, deadline: 0, period: 0 };
+    let attr = SchedAttr {
+        size: std::mem::size_of::<SchedAttr>() as u32,
+        policy: libc::SCHED_OTHER as u32,
+        flags: 0,
+        nice,
+        priority: 0,
+        runtime: slice_ns,
+        deadline: 0,
+        period: 0,
+    };
     // SAFETY: `attr` is a valid sched_attr of the size it declares, alive for the call; pid 0 is
     // the calling thread.
     let rc = unsafe { libc::syscall(libc::SYS_sched_setattr, 0, &attr as *const SchedAttr, 0u32) };

@@ -103,7 +103,17 @@ impl Recording {
         b.extend_from_slice(self.identity.description.as_bytes());
         let c = &self.coupling;
         let s = &self.safety;
-        for v in [c.stiffness, c.damping, c.proxy_mass, s.max_force, s.max_rate, s.ramp, s.stall_timeout, s.silence, self.physics_rate_hz.unwrap_or(0.0)] {
+        for v in [
+            c.stiffness,
+            c.damping,
+            c.proxy_mass,
+            s.max_force,
+            s.max_rate,
+            s.ramp,
+            s.stall_timeout,
+            s.silence,
+            self.physics_rate_hz.unwrap_or(0.0),
+        ] {
             b.extend_from_slice(&v.to_le_bytes());
         }
         b.extend_from_slice(&self.faults.to_le_bytes());
@@ -193,7 +203,17 @@ impl Recording {
         }
         let safety = SafetyParams { max_force: v[3], max_rate: v[4], ramp: v[5], stall_timeout: v[6], silence: v[7] };
         let physics_rate_hz = (v[8] > 0.0).then_some(v[8]);
-        Ok(Recording { rate_hz, identity: Identity { digest, description }, coupling: CouplingParams::new(v[0], v[1], v[2]), safety, faults, ticks, physics_rate_hz, model_ticks, targets })
+        Ok(Recording {
+            rate_hz,
+            identity: Identity { digest, description },
+            coupling: CouplingParams::new(v[0], v[1], v[2]),
+            safety,
+            faults,
+            ticks,
+            physics_rate_hz,
+            model_ticks,
+            targets,
+        })
     }
 
     pub fn save(&self, path: &std::path::Path) -> Result<(), RecordError> {
@@ -226,7 +246,10 @@ impl Recording {
 /// identical over the shorter; the lengths are the caller's to compare).
 pub fn compare(a: &Recording, b: &Recording) -> Option<usize> {
     let bits = |v: &Vec3| [v.x.to_bits(), v.y.to_bits(), v.z.to_bits()];
-    a.ticks.iter().zip(&b.ticks).position(|(x, y)| bits(&x.force) != bits(&y.force) || bits(&x.tool) != bits(&y.tool) || bits(&x.input.position) != bits(&y.input.position))
+    a.ticks
+        .iter()
+        .zip(&b.ticks)
+        .position(|(x, y)| bits(&x.force) != bits(&y.force) || bits(&x.tool) != bits(&y.tool) || bits(&x.input.position) != bits(&y.input.position))
 }
 
 struct Reader<'a> {

@@ -79,7 +79,10 @@ pub fn check_limits(kind: DeviceKind, coupling: &CouplingParams, safety: &Safety
         return Err(format!("coupling stiffness = {} N/m is above the {name} device class's rated {} N/m", coupling.stiffness, r.max_stiffness));
     }
     if safety.stall_timeout > MAX_TIMEOUT {
-        return Err(format!("stall_timeout = {} s is above {} s: the watchdog would let a stalled simulation push the hand that long", safety.stall_timeout, MAX_TIMEOUT));
+        return Err(format!(
+            "stall_timeout = {} s is above {} s: the watchdog would let a stalled simulation push the hand that long",
+            safety.stall_timeout, MAX_TIMEOUT
+        ));
     }
     if safety.silence > MAX_TIMEOUT {
         return Err(format!("silence = {} s is above {} s: a silent device would be pushed that long", safety.silence, MAX_TIMEOUT));
@@ -158,7 +161,14 @@ mod tests {
     /// a 100 s watchdog) and accept every class's defaults.
     #[test]
     fn limits_beyond_the_rating_are_refused() {
-        for kind in [DeviceKind::Simulated, DeviceKind::Bridge, DeviceKind::Touch, DeviceKind::ForceDimension, DeviceKind::Haply, DeviceKind::HapticMaster] {
+        for kind in [
+            DeviceKind::Simulated,
+            DeviceKind::Bridge,
+            DeviceKind::Touch,
+            DeviceKind::ForceDimension,
+            DeviceKind::Haply,
+            DeviceKind::HapticMaster,
+        ] {
             let (c, s) = kind.defaults();
             assert_eq!(check_limits(kind, &c, &s), Ok(()), "{kind:?}");
         }
@@ -166,7 +176,9 @@ mod tests {
         let e = check_limits(DeviceKind::Touch, &c, &SafetyParams { max_force: 50.0, ..s }).unwrap_err();
         assert!(e.contains("max_force = 50 N") && e.contains("3.3 N"), "{e}");
         assert!(check_limits(DeviceKind::Touch, &CouplingParams { stiffness: 5000.0, ..c }, &s).unwrap_err().contains("5000 N/m"));
-        assert!(check_limits(DeviceKind::HapticMaster, &c, &SafetyParams { stall_timeout: 100.0, ..s }).unwrap_err().contains("stall_timeout"));
+        assert!(check_limits(DeviceKind::HapticMaster, &c, &SafetyParams { stall_timeout: 100.0, ..s })
+            .unwrap_err()
+            .contains("stall_timeout"));
         assert!(check_limits(DeviceKind::Simulated, &c, &SafetyParams { silence: 0.2, ..s }).unwrap_err().contains("silence"));
         assert_eq!(check_limits(DeviceKind::HapticMaster, &c, &SafetyParams { max_force: 50.0, ..s }), Ok(()));
     }

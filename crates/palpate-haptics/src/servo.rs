@@ -180,7 +180,20 @@ pub const IDLE_SNAPSHOT_TICKS: u64 = 512;
 
 impl Default for ServoConfig {
     fn default() -> Self {
-        ServoConfig { rate_hz: 1000.0, physics_rate_hz: None, coupling: None, safety: None, checkpoint_every: 250, record_ticks: 0, stats_ticks: 600_000, max_ticks: None, spin: 200e-6, surface_every: 32, realtime: false, unsafe_limits: false }
+        ServoConfig {
+            rate_hz: 1000.0,
+            physics_rate_hz: None,
+            coupling: None,
+            safety: None,
+            checkpoint_every: 250,
+            record_ticks: 0,
+            stats_ticks: 600_000,
+            max_ticks: None,
+            spin: 200e-6,
+            surface_every: 32,
+            realtime: false,
+            unsafe_limits: false,
+        }
     }
 }
 
@@ -278,8 +291,25 @@ pub struct HapticCore {
 impl HapticCore {
     /// A loop over `physics` at `rate_hz` with these coupling and safety parameters, recording
     /// up to `record_ticks` ticks.
-    pub fn new(physics: Box<dyn Physics>, rate_hz: f64, coupling: CouplingParams, safety: SafetyParams, checkpoint_every: u64, record_ticks: usize) -> HapticCore {
-        let recording = (record_ticks > 0).then(|| Recording { rate_hz, identity: physics.identity(), coupling, safety, faults: 0, ticks: Vec::with_capacity(record_ticks), physics_rate_hz: None, model_ticks: Vec::new(), targets: Vec::new() });
+    pub fn new(
+        physics: Box<dyn Physics>,
+        rate_hz: f64,
+        coupling: CouplingParams,
+        safety: SafetyParams,
+        checkpoint_every: u64,
+        record_ticks: usize,
+    ) -> HapticCore {
+        let recording = (record_ticks > 0).then(|| Recording {
+            rate_hz,
+            identity: physics.identity(),
+            coupling,
+            safety,
+            faults: 0,
+            ticks: Vec::with_capacity(record_ticks),
+            physics_rate_hz: None,
+            model_ticks: Vec::new(),
+            targets: Vec::new(),
+        });
         HapticCore {
             physics,
             coupling: VirtualCoupling::new(coupling, Vec3::zeros()),
@@ -340,7 +370,15 @@ impl HapticCore {
             let z = Vec3::zeros();
             return TickOut { force: self.safety.zero(), raw_force: z, tissue: z, tool: z, device: z, buttons: 0, fault: false };
         };
-        let mut out = TickOut { force: Vec3::zeros(), raw_force: Vec3::zeros(), tissue: Vec3::zeros(), tool: self.coupling.proxy, device: input.position, buttons: input.buttons, fault: false };
+        let mut out = TickOut {
+            force: Vec3::zeros(),
+            raw_force: Vec3::zeros(),
+            tissue: Vec3::zeros(),
+            tool: self.coupling.proxy,
+            device: input.position,
+            buttons: input.buttons,
+            fault: false,
+        };
         let fault = match self.physics.tick(&self.coupling.proxy, self.dt) {
             Err(e) => Some(Fault::Step(e)),
             Ok(f) if !f.iter().all(|c| c.is_finite()) => Some(Fault::NonFinite),
@@ -420,7 +458,8 @@ impl HapticCore {
     /// which the caller counts.
     pub(crate) fn log(&mut self, fault: Fault, counted: bool) {
         if self.fault_log.len() < FAULT_LOG {
-            self.fault_log.push(FaultRecord { tick: self.tick.saturating_sub(1), time: self.tick.saturating_sub(1) as f64 * self.dt, fault, counted });
+            self.fault_log
+                .push(FaultRecord { tick: self.tick.saturating_sub(1), time: self.tick.saturating_sub(1) as f64 * self.dt, fault, counted });
         }
     }
 
@@ -1032,7 +1071,11 @@ impl Pacer {
     /// On the calling thread (made real-time if the configuration asks).
     fn new(cfg: &ServoConfig) -> Pacer {
         let period = Duration::from_secs_f64(cfg.dt());
-        let realtime = if cfg.realtime { crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY) } else { Realtime::Off };
+        let realtime = if cfg.realtime {
+            crate::realtime::make_current_thread_realtime(crate::realtime::SERVO_PRIORITY)
+        } else {
+            Realtime::Off
+        };
         // An ordinary servo thread asks for Linux's shortest slice and a 1 us timer slack (no
         // privilege needed; crate::realtime says why). Measured 2026-12-07 on Rodero with a
         // CPU-bound program beside the multirate loop (30 s): at 4 kHz 320 late periods without
@@ -1254,7 +1297,9 @@ fn run_render(mut core: HapticCore, mut device: Box<dyn Device>, cfg: ServoConfi
         }
         let (period, compute, t1) = pacer.end(core.tick);
         n += 1;
-        shared.snapshot.publish(&snapshot(&core, &out, period, compute, pacer.overruns(), shared.physics_ticks.load(Ordering::Relaxed)));
+        shared
+            .snapshot
+            .publish(&snapshot(&core, &out, period, compute, pacer.overruns(), shared.physics_ticks.load(Ordering::Relaxed)));
         pacer.wait(t1);
     }
     sink.send(&Vec3::zeros());

@@ -213,7 +213,11 @@ impl Mailbox {
     }
     /// A mailbox for up to `capacity` points (allocated now); empty before the first publish.
     pub fn up_to(capacity: usize) -> Mailbox {
-        Mailbox { slot: Mutex::new(Slot { tick: 0, len: 0, points: vec![Vec3::zeros(); capacity] }), variable: true, reads: AtomicU64::new(0) }
+        Mailbox {
+            slot: Mutex::new(Slot { tick: 0, len: 0, points: vec![Vec3::zeros(); capacity] }),
+            variable: true,
+            reads: AtomicU64::new(0),
+        }
     }
     /// Publishes `points` as of tick `tick` unless a reader holds the slot or the length does not
     /// fit (not the mailbox's length, or over its capacity); returns whether it did. Never blocks,
@@ -335,7 +339,21 @@ mod tests {
 
     #[test]
     fn snapshot_round_trips() {
-        let s = Snapshot { tick: 7, time: 0.007, device: Vec3::new(1.0, 2.0, 3.0), tool: Vec3::new(-1.0, 0.5, 1e-9), force: Vec3::new(0.1, 0.2, 0.3), raw_force: Vec3::new(4.0, 5.0, 6.0), tissue_force: Vec3::new(7.0, 8.0, 9.0), period: 1e-3, compute: 2e-4, overruns: 3, faults: 1, buttons: 5, physics_ticks: 11 };
+        let s = Snapshot {
+            tick: 7,
+            time: 0.007,
+            device: Vec3::new(1.0, 2.0, 3.0),
+            tool: Vec3::new(-1.0, 0.5, 1e-9),
+            force: Vec3::new(0.1, 0.2, 0.3),
+            raw_force: Vec3::new(4.0, 5.0, 6.0),
+            tissue_force: Vec3::new(7.0, 8.0, 9.0),
+            period: 1e-3,
+            compute: 2e-4,
+            overruns: 3,
+            faults: 1,
+            buttons: 5,
+            physics_ticks: 11,
+        };
         assert_eq!(Snapshot::from_words(&s.to_words()), s);
     }
 }

@@ -81,8 +81,8 @@ fn corpus(session: u64, last: u32) -> Vec<(Vec<u8>, Reject)> {
         (protocol::encode_state(0, next.wrapping_add(1 << 30), &DeviceInput::at(MOVED), None).to_vec(), Reject::NoSession),
         // A tag on an unkeyed loop changes nothing; a state packet of another kind's size is long.
         ([good(next).as_slice(), &[0; 8]].concat(), Reject::Long),
-        (good(last).to_vec(), Reject::OutOfOrder),                   // a duplicate
-        (good(last.wrapping_sub(1)).to_vec(), Reject::OutOfOrder),   // late
+        (good(last).to_vec(), Reject::OutOfOrder),                       // a duplicate
+        (good(last.wrapping_sub(1)).to_vec(), Reject::OutOfOrder),       // late
         (good(last.wrapping_sub(1 << 31)).to_vec(), Reject::OutOfOrder), // half the ring back
     ]
 }
@@ -116,7 +116,8 @@ fn malformed_packets_are_dropped_counted_and_never_move_the_tool() {
     let p0 = DeviceInput::at(Vec3::new(0.01, 0.02, 0.03));
     client.send(&p0).unwrap(); // seq 1
     assert_eq!(poll_until(&mut bridge, 2), Some(p0));
-    let mut core = HapticCore::new(Box::new(Wall::new(Vec3::new(0.0, 0.0, -1.0), Vec3::z(), 1000.0, 0.0)), 1000.0, Default::default(), Default::default(), 250, 0);
+    let mut core =
+        HapticCore::new(Box::new(Wall::new(Vec3::new(0.0, 0.0, -1.0), Vec3::z(), 1000.0, 0.0)), 1000.0, Default::default(), Default::default(), 250, 0);
     let first = core.step(Some(p0));
     assert_eq!(first.device, p0.position);
 
@@ -241,7 +242,10 @@ fn a_second_process_drives_the_loop() {
     let report = servo.stop();
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success(), "child failed: {text}\n{}", String::from_utf8_lossy(&out.stderr));
-    let line = text.lines().find_map(|l| l.find("CHILD").map(|i| &l[i..])).unwrap_or_else(|| panic!("no report from the child: {text}"));
+    let line = text
+        .lines()
+        .find_map(|l| l.find("CHILD").map(|i| &l[i..]))
+        .unwrap_or_else(|| panic!("no report from the child: {text}"));
     let field = |k: &str| -> f64 { line.split_whitespace().find_map(|w| w.strip_prefix(&format!("{k}="))).unwrap().parse().unwrap() };
     let accepted = stats.accepted.load(Relaxed);
     let received = stats.received.load(Relaxed);
@@ -319,7 +323,13 @@ fn a_stranger_cannot_take_the_tool() {
     let home = DeviceInput::at(Vec3::new(0.0, 0.0, 0.01));
     client.send(&home).unwrap();
     assert_eq!(poll_until(&mut bridge, 2), Some(home));
-    assert_eq!(stats.holder(), Some(match client_addr(&client) { SocketAddr::V4(a) => a, _ => unreachable!() }));
+    assert_eq!(
+        stats.holder(),
+        Some(match client_addr(&client) {
+            SocketAddr::V4(a) => a,
+            _ => unreachable!(),
+        })
+    );
 
     let evil = stranger(server);
     let moved = DeviceInput::at(MOVED);
@@ -416,7 +426,8 @@ fn a_restarted_client_opens_a_new_session() {
 #[test]
 fn a_keyed_bridge_takes_only_signed_packets() {
     let key = Key::new(b"a shared key of 32 bytes for it!").unwrap();
-    let mut bridge = Bridge::open(SocketAddrV4::new(Ipv4Addr::LOCALHOST, 0), DeviceKind::Bridge, BridgeOptions { key: Some(key.clone()), ..Default::default() }).unwrap();
+    let mut bridge =
+        Bridge::open(SocketAddrV4::new(Ipv4Addr::LOCALHOST, 0), DeviceKind::Bridge, BridgeOptions { key: Some(key.clone()), ..Default::default() }).unwrap();
     let server = bridge.local_addr().unwrap();
     let stats = bridge.stats();
     for wrong in [None, Some(Key::new(b"another key, also 32 bytes long!").unwrap())] {

@@ -41,14 +41,23 @@ fn material() -> Material {
 /// base half (z <= 0) held, with `gravity` and `integrator`.
 fn ellipsoid(gravity: Vec3, integrator: Integrator, fixed_base: bool) -> Model {
     let mesh = ellipsoid_wall(&EllipsoidWall::default());
-    let fixed: Vec<usize> = if fixed_base { (0..mesh.n_nodes()).filter(|&i| mesh.points()[i].z <= 1e-9).collect() } else { vec![] };
+    let fixed: Vec<usize> = if fixed_base {
+        (0..mesh.n_nodes()).filter(|&i| mesh.points()[i].z <= 1e-9).collect()
+    } else {
+        vec![]
+    };
     ModelBuilder::new(mesh, material()).fixed_nodes(fixed).gravity(gravity).integrator(integrator).build().unwrap()
 }
 
 /// The free boundary node with the largest x above the equator, and its outward direction.
 fn probe(p: &FemPhysics) -> (Vec3, Vec3) {
     let m = p.model();
-    let i = *p.boundary_nodes().iter().filter(|&&i| !m.fixed()[i] && m.mesh().points()[i].z > 0.005).max_by(|&&a, &&b| m.mesh().points()[a].x.total_cmp(&m.mesh().points()[b].x)).unwrap();
+    let i = *p
+        .boundary_nodes()
+        .iter()
+        .filter(|&&i| !m.fixed()[i] && m.mesh().points()[i].z > 0.005)
+        .max_by(|&&a, &&b| m.mesh().points()[a].x.total_cmp(&m.mesh().points()[b].x))
+        .unwrap();
     let x = m.mesh().points()[i];
     (x, Vec3::new(x.x, x.y, 0.0).normalize())
 }
@@ -238,7 +247,13 @@ fn nodal_forces_are_minus_the_gradient_of_the_penalty_energy() {
     let model = slab();
     let ph = FemPhysics::new(model, FemOptions::default()).unwrap();
     let (_, face) = slab_node_and_face();
-    let x: Vec<Vec3> = ph.model().mesh().points().iter().map(|p| p + 1e-3 * Vec3::new((97.0 * p.y).sin(), (71.0 * p.z).cos(), (53.0 * p.x).sin())).collect();
+    let x: Vec<Vec3> = ph
+        .model()
+        .mesh()
+        .points()
+        .iter()
+        .map(|p| p + 1e-3 * Vec3::new((97.0 * p.y).sin(), (71.0 * p.z).cos(), (53.0 * p.x).sin()))
+        .collect();
     let v = vec![Vec3::zeros(); x.len()];
     let centre = face + Vec3::z() * (radius() - 0.0025);
     let tool = AreaTool { radius: radius(), stiffness: 1e7, damping: 0.0 };
@@ -327,7 +342,13 @@ fn slab_press(at: Vec3, depth: f64) -> Vec3 {
 fn slab_node_and_face() -> (Vec3, Vec3) {
     let m = slab();
     let top = 0.02 - 1e-9;
-    let node = *m.mesh().points().iter().filter(|p| p.z >= top).min_by(|a, b| (*a - Vec3::new(0.03, 0.03, 0.02)).norm().total_cmp(&(*b - Vec3::new(0.03, 0.03, 0.02)).norm())).unwrap();
+    let node = *m
+        .mesh()
+        .points()
+        .iter()
+        .filter(|p| p.z >= top)
+        .min_by(|a, b| (*a - Vec3::new(0.03, 0.03, 0.02)).norm().total_cmp(&(*b - Vec3::new(0.03, 0.03, 0.02)).norm()))
+        .unwrap();
     let target = Vec3::new(0.0375, 0.035, 0.02);
     let face = m
         .mesh()
@@ -427,7 +448,12 @@ fn lv_1350_6mm_press_force_and_tick_cost() {
     let mut held = times[300..].to_vec();
     held.sort_by(f64::total_cmp);
     let q = |x: f64| held[((held.len() - 1) as f64 * x) as usize] * 1e6;
-    println!("lv_1350, 6 mm press: force {:.4} N ({f:?}), the most along the outward normal on the way {peak:.4} N; tick p50 {:.0} us, p99 {:.0} us", f.norm(), q(0.5), q(0.99));
+    println!(
+        "lv_1350, 6 mm press: force {:.4} N ({f:?}), the most along the outward normal on the way {peak:.4} N; tick p50 {:.0} us, p99 {:.0} us",
+        f.norm(),
+        q(0.5),
+        q(0.99)
+    );
     // At 1 kHz the contact's stiffness is set by stability, and a 6 mm press (deeper than the
     // radius) sinks the sphere through the surface: the force peaks on the way, then turns.
     assert!(f.iter().all(|c| c.is_finite()) && peak > 0.05, "the press must push the tool out on the way: {peak} N");

@@ -25,7 +25,9 @@ use std::time::Duration;
 use palpate_core::Vec3;
 use palpate_haptics::devices::{Hand, HandParams, Replay, Scripted};
 use palpate_haptics::record::compare;
-use palpate_haptics::{CouplingParams, Device, DeviceInput, DeviceKind, Fault, HapticCore, HybridPhysics, Physics, Recording, SafetyParams, Servo, ServoConfig, Wall};
+use palpate_haptics::{
+    CouplingParams, Device, DeviceInput, DeviceKind, Fault, HapticCore, HybridPhysics, Physics, Recording, SafetyParams, Servo, ServoConfig, Wall,
+};
 use support::*;
 
 fn wall() -> Wall {
@@ -507,7 +509,12 @@ fn identity_is_the_same_for_the_same_model_built_twice() {
     let opts = palpate_core::runtime::SimOptions::default();
     let ia = palpate_haptics::HybridPhysics::new(a.clone(), material(), opts).unwrap().identity();
     assert_eq!(ia, palpate_haptics::HybridPhysics::new(b, material(), opts).unwrap().identity());
-    let stiffer = palpate_core::Material::new(palpate_core::material::Elasticity::YoungPoisson { young: 6.0e4, poisson: 0.4 }, 1000.0, palpate_core::material::Damping::from_paper(0.5, 0.5)).unwrap();
+    let stiffer = palpate_core::Material::new(
+        palpate_core::material::Elasticity::YoungPoisson { young: 6.0e4, poisson: 0.4 },
+        1000.0,
+        palpate_core::material::Damping::from_paper(0.5, 0.5),
+    )
+    .unwrap();
     assert_ne!(ia.digest, palpate_haptics::HybridPhysics::new(a, stiffer, opts).unwrap().identity().digest, "the material is part of it");
 }
 
@@ -547,7 +554,6 @@ fn servo_publishes_the_surface_for_a_viewer() {
     let core_moved = interior.iter().zip(&core_rest).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
     assert!(core_moved > 1e-5, "the press moves the core in the snapshot: {core_moved} m");
 }
-
 
 /// A servo nobody reads copies its surface rarely (every `IDLE_SNAPSHOT_TICKS`: the skin is 0.76
 /// MB on Rodero, a cost in the servo thread 31 times a second otherwise), and a reader brings the

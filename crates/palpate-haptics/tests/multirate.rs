@@ -22,7 +22,9 @@ use palpate_core::{Mat3, Vec3};
 use palpate_haptics::devices::{Hand, HandParams, Scripted};
 use palpate_haptics::multirate::{LocalModel, PhysicsLoop};
 use palpate_haptics::record::compare;
-use palpate_haptics::{CouplingParams, Device, DeviceInput, DeviceKind, Fault, ForceSink, HapticCore, Physics, Recording, SafetyParams, Servo, ServoConfig, Wall};
+use palpate_haptics::{
+    CouplingParams, Device, DeviceInput, DeviceKind, Fault, ForceSink, HapticCore, Physics, Recording, SafetyParams, Servo, ServoConfig, Wall,
+};
 use support::*;
 
 fn fast_ramp() -> SafetyParams {
@@ -65,7 +67,12 @@ fn local_model_of_the_hybrid_predicts_the_next_tick() {
     }
     let m = models[400];
     let k_n = n.dot(&(m.stiffness * n));
-    println!("hybrid press: |F| {:.4} N at 3 mm, K_nn {k_n:.1} N/m; next-tick error: model {:.3e} N, hold {:.3e} N (sum over 200 ticks)", m.force.norm(), err_model, err_hold);
+    println!(
+        "hybrid press: |F| {:.4} N at 3 mm, K_nn {k_n:.1} N/m; next-tick error: model {:.3e} N, hold {:.3e} N (sum over 200 ticks)",
+        m.force.norm(),
+        err_model,
+        err_hold
+    );
     assert!(m.force.norm() > 0.02, "the press must touch");
     assert!(err_model < 0.3 * err_hold, "the model must predict the next tick: {err_model} vs hold {err_hold}");
     // Quasi-static: hold at 3 mm, then at 3.25 mm, 0.4 s each.
@@ -88,7 +95,13 @@ fn a_stalled_physics_fades_to_zero_within_30ms() {
         let mut core = HapticCore::new(Box::new(Wall::new(Vec3::zeros(), Vec3::z(), 2000.0, 0.0)), rate, CouplingParams::default(), fast_ramp(), 250, 0);
         let dev = DeviceInput::at(Vec3::new(0.0, 0.0, -0.012));
         // A model as the wall's at the device (2000 N/m x 12 mm = 24 N: past the 3 N limit).
-        let model = |tick: u64| LocalModel { tick, tool: dev.position, force: Vec3::new(0.0, 0.0, 24.0), stiffness: Mat3::from_diagonal(&Vec3::new(0.0, 0.0, 2000.0)), faults: 0 };
+        let model = |tick: u64| LocalModel {
+            tick,
+            tool: dev.position,
+            force: Vec3::new(0.0, 0.0, 24.0),
+            stiffness: Mat3::from_diagonal(&Vec3::new(0.0, 0.0, 2000.0)),
+            faults: 0,
+        };
         let ticks = (0.3 / dt) as u64;
         for k in 1..=ticks {
             core.render(Some(dev), Some(model(k)));
@@ -142,7 +155,10 @@ fn device_silence_fades_to_zero_and_resumes_through_the_ramp() {
         assert_eq!(f(0.381), 0.0, "{label}: zero within 30 ms of the fade's start");
         assert!((381..499).all(|ms| f(ms as f64 * 1e-3) == 0.0), "{label}: zero while silent");
         assert_eq!(core.silences(), 1, "{label}");
-        assert!(core.fault_log().iter().any(|r| matches!(r.fault, Fault::DeviceSilent(s) if (s - 0.05).abs() < 0.002) && !r.counted), "{label}: logged as an event");
+        assert!(
+            core.fault_log().iter().any(|r| matches!(r.fault, Fault::DeviceSilent(s) if (s - 0.05).abs() < 0.002) && !r.counted),
+            "{label}: logged as an event"
+        );
         assert_eq!(core.faults(), 0, "{label}: a silence is not a fault");
         let back = f(0.502);
         assert!(back > 0.0 && back < 0.5, "{label}: ramped in after the silence: {back}");
@@ -215,7 +231,14 @@ fn passivity_on_the_hybrid_model_at_both_rates() {
         let rel = rms(&diff) / rms(&f_single);
         let fmax = forces.iter().map(|f| f.norm()).fold(0.0, f64::max);
         let (at, jump) = forces.windows(2).map(|w| (w[1] - w[0]).norm()).enumerate().fold((0, 0.0), |a, (k, j)| if j > a.1 { (k, j) } else { a });
-        println!("  largest change at {:.4} s: {:?} -> {:?}, model ticks {} {}", (at + 1) as f64 / rate, forces[at], forces[at + 1], rec.model_ticks[at], rec.model_ticks[at + 1]);
+        println!(
+            "  largest change at {:.4} s: {:?} -> {:?}, model ticks {} {}",
+            (at + 1) as f64 / rate,
+            forces[at],
+            forces[at + 1],
+            rec.model_ticks[at],
+            rec.model_ticks[at + 1]
+        );
         println!("hybrid palpation, servo {rate} Hz, physics {pr} Hz: max force {fmax:.3} N, largest change in a servo period {jump:.4} N, energy into the user {e:.3e} J, RMS difference from single-rate {:.1}%", rel * 100.0);
         assert!(fmax > 0.05, "the press must touch");
         assert!(e <= 0.0, "servo {rate} Hz, physics {pr} Hz: the device put {e} J into the user");
@@ -249,7 +272,10 @@ fn replay_of_a_multirate_run_is_bit_identical() {
     rec.save(&path).unwrap();
     let loaded = Recording::load(&path).unwrap();
     std::fs::remove_dir_all(&dir).ok();
-    assert_eq!((loaded.physics_rate_hz, loaded.model_ticks.len(), loaded.targets.len(), loaded.safety, loaded.ticks.len()), (rec.physics_rate_hz, rec.model_ticks.len(), rec.targets.len(), rec.safety, rec.ticks.len()));
+    assert_eq!(
+        (loaded.physics_rate_hz, loaded.model_ticks.len(), loaded.targets.len(), loaded.safety, loaded.ticks.len()),
+        (rec.physics_rate_hz, rec.model_ticks.len(), rec.targets.len(), rec.safety, rec.ticks.len())
+    );
     assert!(loaded == rec, "the file round-trips the multirate fields");
     let mut again = HapticCore::new(Box::new(hybrid()), rate, loaded.coupling, loaded.safety, 100, ticks);
     assert_eq!(again.replay_multirate(&loaded), Ok(ticks as u64));
@@ -262,7 +288,15 @@ fn replay_of_a_multirate_run_is_bit_identical() {
     // Real time: the physics thread at 500 Hz beside the servo at 2 kHz.
     let dev = Scripted::new(times, knots).unwrap();
     let safety = SafetyParams { stall_timeout: 10.0, ..fast_ramp() };
-    let cfg = ServoConfig { rate_hz: rate, physics_rate_hz: Some(500.0), safety: Some(safety), record_ticks: ticks, checkpoint_every: 100, unsafe_limits: true, ..Default::default() };
+    let cfg = ServoConfig {
+        rate_hz: rate,
+        physics_rate_hz: Some(500.0),
+        safety: Some(safety),
+        record_ticks: ticks,
+        checkpoint_every: 100,
+        unsafe_limits: true,
+        ..Default::default()
+    };
     let core = HapticCore::with_config(Box::new(hybrid()), &cfg, &dev).unwrap();
     let report = Servo::start(core, Box::new(dev), &cfg).unwrap().join();
     let ps = report.physics.clone().expect("the physics thread's statistics");
@@ -364,8 +398,20 @@ fn a_hard_press_and_a_fast_slide_through_the_multirate_loop() {
     // 0.6 s clear (the start-up ramp), 0.4 s in, 0.3 s hold, 0.3 s slide 40 mm up and 0.3 s back,
     // 0.4 s out.
     let path = move |t: f64| {
-        let slide = if t < 1.3 { 0.0 } else if t < 1.6 { 0.04 * smooth((t - 1.3) / 0.3) } else { 0.04 * (1.0 - smooth((t - 1.6) / 0.3)) };
-        let press = if t < 0.6 { 0.0 } else if t < 1.9 { smooth((t - 0.6) / 0.4) } else { 1.0 - smooth((t - 1.9) / 0.4) };
+        let slide = if t < 1.3 {
+            0.0
+        } else if t < 1.6 {
+            0.04 * smooth((t - 1.3) / 0.3)
+        } else {
+            0.04 * (1.0 - smooth((t - 1.6) / 0.3))
+        };
+        let press = if t < 0.6 {
+            0.0
+        } else if t < 1.9 {
+            smooth((t - 0.6) / 0.4)
+        } else {
+            1.0 - smooth((t - 1.9) / 0.4)
+        };
         clear + (deep - clear) * press + Vec3::z() * slide
     };
     let arm = HandParams { mass: 0.1, stiffness: 500.0, damping: 14.0 };

@@ -22,7 +22,8 @@ fn load_within(path: &Path, secs: u64) -> Result<Recording, RecordError> {
     std::thread::spawn(move || {
         let _ = tx.send(Recording::load(&p));
     });
-    rx.recv_timeout(Duration::from_secs(secs)).unwrap_or_else(|_| panic!("Recording::load({}) did not return within {secs} s", path.display()))
+    rx.recv_timeout(Duration::from_secs(secs))
+        .unwrap_or_else(|_| panic!("Recording::load({}) did not return within {secs} s", path.display()))
 }
 
 #[test]

@@ -33,7 +33,11 @@ pub fn tissue(damped: bool) -> Material {
 /// the outward horizontal (radial) normal there.
 pub fn probe(sim: &Sim, z: f64) -> (Vec3, Vec3) {
     let outer = &sim.hybrid.outer_points;
-    let p = *outer.iter().filter(|q| q.x > 0.0).min_by(|a, b| (a.y.powi(2) + (a.z - z).powi(2)).total_cmp(&(b.y.powi(2) + (b.z - z).powi(2)))).unwrap();
+    let p = *outer
+        .iter()
+        .filter(|q| q.x > 0.0)
+        .min_by(|a, b| (a.y.powi(2) + (a.z - z).powi(2)).total_cmp(&(b.y.powi(2) + (b.z - z).powi(2))))
+        .unwrap();
     (p, Vec3::new(p.x, p.y, 0.0).normalize())
 }
 

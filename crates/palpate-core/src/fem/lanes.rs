@@ -35,7 +35,9 @@ pub(crate) struct L4<const FMA: bool>([f64; 4]);
 // loop ran 1.8x slower than one element at a time).
 impl<const FMA: bool> Scalar for L4<FMA> {
     #[inline(always)]
-    fn splat(x: f64) -> Self { L4([x; 4]) }
+    fn splat(x: f64) -> Self {
+        L4([x; 4])
+    }
     #[inline(always)]
     fn add(self, o: Self) -> Self {
         let mut r = self.0;
@@ -250,7 +252,9 @@ mod tests {
 
     /// Seven elements (one full chunk of four and a tail of three) sharing nodes, deformed.
     fn case() -> (Vec<[usize; 4]>, Vec<Vec3>, Vec<Vec3>, Vec<Vec3>) {
-        let rest: Vec<Vec3> = (0..10).map(|i| Vec3::new((i % 3) as f64 * 0.01, ((i / 3) % 3) as f64 * 0.01 + 0.001 * i as f64, (i / 5) as f64 * 0.012 + 0.0007 * (i * i % 7) as f64)).collect();
+        let rest: Vec<Vec3> = (0..10)
+            .map(|i| Vec3::new((i % 3) as f64 * 0.01, ((i / 3) % 3) as f64 * 0.01 + 0.001 * i as f64, (i / 5) as f64 * 0.012 + 0.0007 * (i * i % 7) as f64))
+            .collect();
         let mut tets = vec![[0, 1, 3, 5], [1, 2, 4, 6], [3, 4, 6, 7], [0, 2, 5, 8], [5, 6, 7, 9], [1, 3, 4, 8], [2, 6, 8, 9]];
         for t in &mut tets {
             if TetRest::new(&t.map(|i| rest[i])).volume < 0.0 {
@@ -292,7 +296,13 @@ mod tests {
         let d = m.damping();
         for viscous in [true, false] {
             for simd in [true, false] {
-                let lp = ElementLoop { tets: &tets, rest: &rests, stiffness: &stiffness, law: Svk::of(&m), viscous: viscous.then_some(((d.phi, d.psi), &xn[..], h)) };
+                let lp = ElementLoop {
+                    tets: &tets,
+                    rest: &rests,
+                    stiffness: &stiffness,
+                    law: Svk::of(&m),
+                    viscous: viscous.then_some(((d.phi, d.psi), &xn[..], h)),
+                };
                 let (mut ge, mut gv) = (vec![Vec3::zeros(); n], vec![Vec3::zeros(); n]);
                 let got = lp.run_copy(simd, &x, &mut ge, &mut gv);
                 assert!((got.w - want.w).abs() <= 1e-13 * want.w && (got.f2 - want.f2).abs() <= 1e-13 * want.f2);

@@ -28,7 +28,15 @@ impl ModelBuilder {
     /// A body of `mesh` (positions in \[m\]) made of `material`; no fixed nodes, no gravity,
     /// the default integrator (quasi-Newton backward Euler).
     pub fn new(mesh: TetMesh, material: Material) -> ModelBuilder {
-        ModelBuilder { mesh, material, fixed: Vec::new(), gravity: Vec3::zeros(), integrator: Integrator::default(), attached: Vec::new(), order: Order::Linear }
+        ModelBuilder {
+            mesh,
+            material,
+            fixed: Vec::new(),
+            gravity: Vec3::zeros(),
+            integrator: Integrator::default(),
+            attached: Vec::new(),
+            order: Order::Linear,
+        }
     }
     /// The element order (default linear): [`Order::Quadratic`] makes each tet a 10-node element
     /// (`fem/tet10.rs`) whose edge nodes follow the mesh's vertices in the body's node arrays, one
@@ -70,7 +78,8 @@ impl ModelBuilder {
             return Err(ModelError::Parameter {
                 name: "integrator",
                 value: f64::NAN,
-                reason: "the paper's semi-implicit scheme is for linear tets (its per-node filter is not stable on quadratic ones): use a backward Euler integrator",
+                reason:
+                    "the paper's semi-implicit scheme is for linear tets (its per-node filter is not stable on quadratic ones): use a backward Euler integrator",
             });
         }
         let (rest_x, quadratic) = match order {
@@ -102,7 +111,11 @@ impl ModelBuilder {
         // Element rest data and lumped masses: each linear tet gives a quarter of rho V to each
         // node, a quadratic one its HRZ shares (`fem/tet10.rs`).
         let pts = &rest_x;
-        let rest: Vec<TetRest> = if quadratic.is_some() { Vec::new() } else { mesh.tets().iter().map(|t| TetRest::new(&t.map(|i| pts[i]))).collect() };
+        let rest: Vec<TetRest> = if quadratic.is_some() {
+            Vec::new()
+        } else {
+            mesh.tets().iter().map(|t| TetRest::new(&t.map(|i| pts[i]))).collect()
+        };
         let mut mass = vec![0.0; n];
         for (t, r) in mesh.tets().iter().zip(&rest) {
             for &i in t {
@@ -161,11 +174,7 @@ impl ModelBuilder {
         if let Some(q) = quadratic.as_mut() {
             q.blocks = q.elements.iter().map(|e| element_blocks(e, &node_to_free, &pattern)).collect();
         }
-        let tet_blocks: Vec<[usize; 16]> = rest
-            .iter()
-            .zip(mesh.tets())
-            .map(|(_, t)| element_blocks(t, &node_to_free, &pattern))
-            .collect();
+        let tet_blocks: Vec<[usize; 16]> = rest.iter().zip(mesh.tets()).map(|(_, t)| element_blocks(t, &node_to_free, &pattern)).collect();
         // Rest Jacobians: K0 = df/dx and D0 = df/dv at rest, on the free pattern, and every
         // node's diagonal block (the paper's per-node J_F of eq. 34, "neighbours fixed").
         let mut k0 = vec![Mat3::zeros(); pattern.nnz()];
@@ -174,12 +183,24 @@ impl ModelBuilder {
         let mut node_d0 = vec![Mat3::zeros(); n];
         for ((t, r), blocks) in mesh.tets().iter().zip(&rest).zip(&tet_blocks) {
             let (k, d) = tet4::jacobians(&t.map(|i| pts[i]), r, &material);
-            add_rest_jacobians(t, blocks, |a, c| k[a][c], d.as_ref().map(|d| move |a: usize, c: usize| d[a][c]), [&mut k0, &mut d0, &mut node_k0, &mut node_d0]);
+            add_rest_jacobians(
+                t,
+                blocks,
+                |a, c| k[a][c],
+                d.as_ref().map(|d| move |a: usize, c: usize| d[a][c]),
+                [&mut k0, &mut d0, &mut node_k0, &mut node_d0],
+            );
         }
         if let Some(q) = &quadratic {
             for ((e, r), blocks) in q.elements.iter().zip(&q.rest).zip(&q.blocks) {
                 let (k, d) = tet10::jacobians(&e.map(|i| pts[i]), r, &material);
-                add_rest_jacobians(e, blocks, |a, c| k[a][c], d.as_ref().map(|d| move |a: usize, c: usize| d[a][c]), [&mut k0, &mut d0, &mut node_k0, &mut node_d0]);
+                add_rest_jacobians(
+                    e,
+                    blocks,
+                    |a, c| k[a][c],
+                    d.as_ref().map(|d| move |a: usize, c: usize| d[a][c]),
+                    [&mut k0, &mut d0, &mut node_k0, &mut node_d0],
+                );
             }
         }
 
@@ -230,9 +251,7 @@ impl ModelBuilder {
         };
         let mass_position2: f64 = (0..n).filter(|&i| !is_fixed[i]).map(|i| mass[i] * mass[i] * pts[i].norm_squared()).sum();
         let filter_alpha = match integrator {
-            Integrator::SemiImplicit { filter: Filter::Stable } => {
-                crate::integrate::stable_filter_factor(&pattern, &k0, &d0, !material.is_undamped())
-            }
+            Integrator::SemiImplicit { filter: Filter::Stable } => crate::integrate::stable_filter_factor(&pattern, &k0, &d0, !material.is_undamped()),
             _ => 1.0,
         };
 
@@ -322,16 +341,30 @@ pub struct Model {
 
 impl Model {
     /// The validated mesh (rest positions \[m\] of the vertices, and the tets' vertices).
-    pub fn mesh(&self) -> &TetMesh { &self.mesh }
+    pub fn mesh(&self) -> &TetMesh {
+        &self.mesh
+    }
     /// Number of nodes: the mesh's vertices, and with quadratic elements one per edge after them.
-    pub fn n_nodes(&self) -> usize { self.rest_x.len() }
+    pub fn n_nodes(&self) -> usize {
+        self.rest_x.len()
+    }
     /// Rest positions \[m\] of every node `(n_nodes)`.
-    pub fn rest_positions(&self) -> &[Vec3] { &self.rest_x }
+    pub fn rest_positions(&self) -> &[Vec3] {
+        &self.rest_x
+    }
     /// The element order.
-    pub fn order(&self) -> Order { if self.quadratic.is_some() { Order::Quadratic } else { Order::Linear } }
+    pub fn order(&self) -> Order {
+        if self.quadratic.is_some() {
+            Order::Quadratic
+        } else {
+            Order::Linear
+        }
+    }
     /// With quadratic elements, the two vertices of each edge node `(n_nodes - n_vertices)`, in
     /// node order (edge node `k` is node `n_vertices + k`); empty for linear tets.
-    pub fn edges(&self) -> &[[usize; 2]] { self.quadratic.as_ref().map_or(&[], |q| &q.edges[..]) }
+    pub fn edges(&self) -> &[[usize; 2]] {
+        self.quadratic.as_ref().map_or(&[], |q| &q.edges[..])
+    }
     /// Each element's nodes: a linear tet's four or a quadratic tet's ten (vertices, then the
     /// edge nodes in the order of [`TET10_EDGES`]).
     pub fn element_nodes(&self, e: usize) -> &[usize] {
@@ -341,33 +374,59 @@ impl Model {
         }
     }
     /// `true` when no node is fixed (linear momentum is then conserved).
-    pub fn is_free_body(&self) -> bool { self.free_nodes.len() == self.n_nodes() }
+    pub fn is_free_body(&self) -> bool {
+        self.free_nodes.len() == self.n_nodes()
+    }
     /// Number of tets.
-    pub fn n_tets(&self) -> usize { self.mesh.n_tets() }
+    pub fn n_tets(&self) -> usize {
+        self.mesh.n_tets()
+    }
     /// The material.
-    pub fn material(&self) -> &Material { &self.material }
+    pub fn material(&self) -> &Material {
+        &self.material
+    }
     /// The integrator `step` uses.
-    pub fn integrator(&self) -> Integrator { self.integrator }
+    pub fn integrator(&self) -> Integrator {
+        self.integrator
+    }
     /// Lumped node masses \[kg\], `(n_nodes)`.
-    pub fn masses(&self) -> &[f64] { &self.mass }
+    pub fn masses(&self) -> &[f64] {
+        &self.mass
+    }
     /// `true` for fixed nodes, `(n_nodes)`.
-    pub fn fixed(&self) -> &[bool] { &self.fixed }
+    pub fn fixed(&self) -> &[bool] {
+        &self.fixed
+    }
     /// Gravity \[m/s^2\].
-    pub fn gravity(&self) -> Vec3 { self.gravity }
+    pub fn gravity(&self) -> Vec3 {
+        self.gravity
+    }
     /// Per-tet rest data.
-    pub fn rest(&self) -> &[TetRest] { &self.rest }
+    pub fn rest(&self) -> &[TetRest] {
+        &self.rest
+    }
     /// The paper's per-node Jacobian block `J_F` of eq. (34), `d f_i / d x_i` at rest \[N/m\].
-    pub fn node_jacobians(&self) -> &[Mat3] { &self.node_k0 }
+    pub fn node_jacobians(&self) -> &[Mat3] {
+        &self.node_k0
+    }
     /// Number of unknowns of the implicit systems (3 per free node).
-    pub fn n_dofs(&self) -> usize { 3 * self.free_nodes.len() }
+    pub fn n_dofs(&self) -> usize {
+        3 * self.free_nodes.len()
+    }
     /// The semi-implicit filter factor `alpha` (1 unless the integrator is
     /// `SemiImplicit { filter: Filter::Stable }`).
-    pub fn filter_factor(&self) -> f64 { self.filter_alpha }
+    pub fn filter_factor(&self) -> f64 {
+        self.filter_alpha
+    }
     /// Cost of a factorisation of the implicit system relative to one pair of triangular solves
     /// (a block-operation count; see `Ldl::factor_to_solve_ratio`).
-    pub fn factor_to_solve_ratio(&self) -> f64 { self.ldl.factor_to_solve_ratio() }
+    pub fn factor_to_solve_ratio(&self) -> f64 {
+        self.ldl.factor_to_solve_ratio()
+    }
     /// Off-diagonal 3x3 blocks of the sparse factor L.
-    pub fn factor_blocks(&self) -> usize { self.ldl.nnz_l() }
+    pub fn factor_blocks(&self) -> usize {
+        self.ldl.nnz_l()
+    }
 
     /// Total strain energy \[J\] at positions `x` `(n_nodes)` \[m\].
     pub fn strain_energy(&self, x: &[Vec3]) -> f64 {
@@ -506,11 +565,8 @@ impl Model {
 
     /// Factor the system blocks `a` into `ldl`, translating a failed pivot into a node.
     pub(crate) fn factor(&self, ldl: &mut Ldl, a: &[Mat3]) -> Result<(), SolveError> {
-        ldl.factor(a).map_err(|e| SolveError::NotPositiveDefinite {
-            dof: 3 * e.column,
-            node: self.free_nodes[self.order[e.column]],
-            pivot: e.pivot,
-        })
+        ldl.factor(a)
+            .map_err(|e| SolveError::NotPositiveDefinite { dof: 3 * e.column, node: self.free_nodes[self.order[e.column]], pivot: e.pivot })
     }
 
     /// Scatter per-node vectors of the free nodes into the permuted unknown vector `b`.

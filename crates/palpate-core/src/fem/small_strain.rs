@@ -134,7 +134,13 @@ impl SmallStrain {
         let mut k = vec![Mat3::zeros(); pattern.nnz()];
         // Degree-2 rule on the tet: the permutations of (a, b, b, b), each a quarter of the volume.
         let (qa, qb) = (0.585_410_196_624_968_5, 0.138_196_601_125_010_5);
-        let points_q: Vec<[f64; 4]> = (0..4).map(|i| { let mut l = [qb; 4]; l[i] = qa; l }).collect();
+        let points_q: Vec<[f64; 4]> = (0..4)
+            .map(|i| {
+                let mut l = [qb; 4];
+                l[i] = qa;
+                l
+            })
+            .collect();
         let mut g = [Vec3::zeros(); 10];
         for (ti, (t, e)) in tets.iter().zip(&elements).enumerate() {
             let Some((gl, vol)) = barycentric_gradients(t.map(|i| points[i])) else {
@@ -191,7 +197,8 @@ impl SmallStrain {
             ap.push(ai.len());
         }
         let mut ldl = Ldl::symbolic(nf, ap, ai);
-        ldl.factor(&ax).map_err(|e| SolveError::NotPositiveDefinite { dof: 3 * e.column, node: free[perm[e.column]], pivot: e.pivot })?;
+        ldl.factor(&ax)
+            .map_err(|e| SolveError::NotPositiveDefinite { dof: 3 * e.column, node: free[perm[e.column]], pivot: e.pivot })?;
         let mut slot = vec![NONE; n];
         for (f, &node) in free.iter().enumerate() {
             slot[node] = pos[f];
@@ -200,19 +207,29 @@ impl SmallStrain {
     }
 
     /// The element order.
-    pub fn order(&self) -> Order { self.order }
+    pub fn order(&self) -> Order {
+        self.order
+    }
     /// Every node \[m\] `(n_nodes)`: the vertices, then (P2) the edge midpoints.
-    pub fn nodes(&self) -> &[Vec3] { &self.nodes }
+    pub fn nodes(&self) -> &[Vec3] {
+        &self.nodes
+    }
     /// P2: the vertex pair of each edge node (node `n_vertices + k` is `edges()[k]`'s midpoint).
-    pub fn edges(&self) -> &[[usize; 2]] { &self.edges }
+    pub fn edges(&self) -> &[[usize; 2]] {
+        &self.edges
+    }
     /// The node of the edge `(a, b)` of vertices (P1: none; P2: none if no tet has that edge).
     pub fn edge_node(&self, a: usize, b: usize) -> Option<usize> {
         self.edge_map.get(&(a.min(b), a.max(b))).copied()
     }
     /// Number of tets.
-    pub fn n_tets(&self) -> usize { self.elements.len() }
+    pub fn n_tets(&self) -> usize {
+        self.elements.len()
+    }
     /// Number of free nodes (the system has three times as many unknowns).
-    pub fn n_free(&self) -> usize { self.ldl.n() }
+    pub fn n_free(&self) -> usize {
+        self.ldl.n()
+    }
 
     /// The displacement \[m\] `(n_nodes)` under nodal forces `f` \[N\] `(n_nodes)` (held nodes: zero,
     /// their forces ignored).
@@ -317,7 +334,16 @@ mod tests {
         for k in 0..n[2] {
             for j in 0..n[1] {
                 for i in 0..n[0] {
-                    let c = [id(i, j, k), id(i + 1, j, k), id(i + 1, j + 1, k), id(i, j + 1, k), id(i, j, k + 1), id(i + 1, j, k + 1), id(i + 1, j + 1, k + 1), id(i, j + 1, k + 1)];
+                    let c = [
+                        id(i, j, k),
+                        id(i + 1, j, k),
+                        id(i + 1, j + 1, k),
+                        id(i, j + 1, k),
+                        id(i, j, k + 1),
+                        id(i + 1, j, k + 1),
+                        id(i + 1, j + 1, k + 1),
+                        id(i, j + 1, k + 1),
+                    ];
                     // Kuhn's split of the cube along its diagonal 0-6.
                     for t in [[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]] {
                         let mut tet = t.map(|q| c[q]);

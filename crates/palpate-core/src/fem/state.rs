@@ -178,7 +178,10 @@ impl Workspace {
                 return Err(StepError::Snapshot(format!("stiffness term {}: node {a} out of range for {n} nodes", t.id)));
             }
             if !(t.stiffness > 0.0 && t.stiffness.is_finite() && t.weights.iter().all(|w| w.is_finite())) {
-                return Err(StepError::Snapshot(format!("stiffness term {}: stiffness {} and weights {:?} must be finite, the stiffness positive", t.id, t.stiffness, t.weights)));
+                return Err(StepError::Snapshot(format!(
+                    "stiffness term {}: stiffness {} and weights {:?} must be finite, the stiffness positive",
+                    t.id, t.stiffness, t.weights
+                )));
             }
         }
         factor::restore(model, self, mem)

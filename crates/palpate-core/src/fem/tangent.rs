@@ -66,7 +66,12 @@ mod tests {
     #[test]
     fn exact_at_rest_and_semidefinite_everywhere() {
         use crate::fem::tet4::jacobians;
-        let u = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.011, 0.001, -0.002), Vec3::new(0.002, 0.009, 0.001), Vec3::new(-0.001, 0.002, 0.012)];
+        let u = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(0.011, 0.001, -0.002),
+            Vec3::new(0.002, 0.009, 0.001),
+            Vec3::new(-0.001, 0.002, 0.012),
+        ];
         let r = TetRest::new(&u);
         let base = Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, Damping::NONE).unwrap();
         for law in [Law::StVenantKirchhoff, Law::NeoHookean] {
@@ -77,9 +82,9 @@ mod tests {
                 assert!((&exact - &approx).norm() <= 1e-9 * approx.norm(), "{law:?} at rest");
             }
             for a in [
-                Mat3::new(0.5, 0.1, 0.0, 0.0, 0.6, 0.1, 0.0, 0.0, 0.4),   // strong compression
-                Mat3::new(1.4, 0.2, 0.0, 0.0, 1.1, -0.1, 0.1, 0.0, 0.3),  // mixed
-                Mat3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -0.3),  // inverted
+                Mat3::new(0.5, 0.1, 0.0, 0.0, 0.6, 0.1, 0.0, 0.0, 0.4),  // strong compression
+                Mat3::new(1.4, 0.2, 0.0, 0.0, 1.1, -0.1, 0.1, 0.0, 0.3), // mixed
+                Mat3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -0.3), // inverted
             ] {
                 let x = u.map(|p| a * p);
                 let k = to_dense(&definite_jacobian(&x, &r, &m));

@@ -346,7 +346,12 @@ mod tests {
 
     /// A curved element: the straight one with its edge nodes moved off the midpoints.
     fn rest_nodes() -> [Vec3; 10] {
-        let v = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.011, 0.001, -0.002), Vec3::new(0.002, 0.009, 0.001), Vec3::new(-0.001, 0.002, 0.012)];
+        let v = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(0.011, 0.001, -0.002),
+            Vec3::new(0.002, 0.009, 0.001),
+            Vec3::new(-0.001, 0.002, 0.012),
+        ];
         let mut x = with_midpoints(&v);
         x[4] += Vec3::new(0.0, -4e-4, 3e-4);
         x[9] += Vec3::new(2e-4, 1e-4, 0.0);
@@ -360,7 +365,12 @@ mod tests {
 
     #[test]
     fn interpolates_and_integrates_the_volume() {
-        let v = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.011, 0.001, -0.002), Vec3::new(0.002, 0.009, 0.001), Vec3::new(-0.001, 0.002, 0.012)];
+        let v = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(0.011, 0.001, -0.002),
+            Vec3::new(0.002, 0.009, 0.001),
+            Vec3::new(-0.001, 0.002, 0.012),
+        ];
         let r = Tet10Rest::straight(&v).unwrap();
         let vol = crate::mesh::signed_volume(&v[0], &v[1], &v[2], &v[3]);
         assert!((r.volume() - vol).abs() < 1e-15 * vol.abs().max(1e-30) + 1e-22);

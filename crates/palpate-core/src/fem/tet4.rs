@@ -73,9 +73,7 @@ pub fn deformation_gradient(x: &[Vec3; 4], rest: &TetRest) -> Mat3 {
 pub fn strain_energy(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> f64 {
     let f = deformation_gradient(x, rest);
     match m.law() {
-        Law::StVenantKirchhoff => {
-            rest.volume * material::energy_density(m, &material::green_strain(&f))
-        }
+        Law::StVenantKirchhoff => rest.volume * material::energy_density(m, &material::green_strain(&f)),
         Law::NeoHookean => rest.volume * neo_hookean_energy(m, &f),
     }
 }
@@ -246,8 +244,7 @@ pub fn svk_blocks<const N: usize>(f: &Mat3, s: &Mat3, l: f64, m: f64, g: &[Vec3;
     for a in 0..N {
         for b in 0..N {
             let gg = g[a].dot(&g[b]);
-            out[a][b] = c
-                * (Mat3::from_diagonal_element(g[a].dot(&sg[b])) + l * fg[a] * fg[b].transpose() + (m * gg) * fft + m * fg[b] * fg[a].transpose());
+            out[a][b] = c * (Mat3::from_diagonal_element(g[a].dot(&sg[b])) + l * fg[a] * fg[b].transpose() + (m * gg) * fft + m * fg[b] * fg[a].transpose());
         }
     }
     out
@@ -264,7 +261,12 @@ mod tests {
     }
 
     fn rest_tet() -> [Vec3; 4] {
-        [Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.011, 0.001, -0.002), Vec3::new(0.002, 0.009, 0.001), Vec3::new(-0.001, 0.002, 0.012)]
+        [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(0.011, 0.001, -0.002),
+            Vec3::new(0.002, 0.009, 0.001),
+            Vec3::new(-0.001, 0.002, 0.012),
+        ]
     }
 
     fn deformed() -> [Vec3; 4] {
@@ -407,7 +409,12 @@ mod neo_hookean_tests {
     }
 
     fn rest_tet() -> [Vec3; 4] {
-        [Vec3::new(0.0, 0.0, 0.0), Vec3::new(0.011, 0.001, -0.002), Vec3::new(0.002, 0.009, 0.001), Vec3::new(-0.001, 0.002, 0.012)]
+        [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(0.011, 0.001, -0.002),
+            Vec3::new(0.002, 0.009, 0.001),
+            Vec3::new(-0.001, 0.002, 0.012),
+        ]
     }
 
     /// Positions `A u + w` with `A` a generic stretch/shear scaled to `det A = j` (one axis

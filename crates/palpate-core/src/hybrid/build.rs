@@ -94,7 +94,11 @@ pub fn build(wall: &Wall, o: &HybridOptions) -> Result<HybridModel, HybridError>
     let core_grid = TetGrid::new(&m.core_points, &m.core_tets, 2.0 * spacing.max(h));
     let particles = shell::lattice(wall, &m.core_points, &core_grid, spacing, o.density)?;
     outer::build(&mut m, wall);
-    let project = Projector { field: &field, outer_grid: outer::grid(&m, 0.5 * h), core_face_grid: TriangleGrid::new(&m.core_points, &m.core_faces, 2.0 * h.max(spacing)) };
+    let project = Projector {
+        field: &field,
+        outer_grid: outer::grid(&m, 0.5 * h),
+        core_face_grid: TriangleGrid::new(&m.core_points, &m.core_faces, 2.0 * h.max(spacing)),
+    };
     region_field::owners(&mut m, &field, &core_grid, &project);
     let fallbacks = shell::assign(&mut m, particles, spacing, &project);
     stats.fallback_particle_outer = fallbacks.outer;

@@ -34,7 +34,11 @@ fn auto_layers(points: &[Vec3], tris: &[[usize; 3]], top: impl Fn(usize) -> Vec3
     let edge = tris.iter().map(|t| (0..3).map(|k| (points[t[k]] - points[t[(k + 1) % 3]]).norm()).sum::<f64>() / 3.0).sum::<f64>() / tris.len().max(1) as f64;
     let height = (0..points.len()).map(|v| (top(v) - points[v]).norm()).sum::<f64>() / points.len().max(1) as f64;
     let n = (height / edge).round();
-    if n.is_finite() { (n as usize).clamp(1, MAX_AUTO_CORE_LAYERS) } else { 1 }
+    if n.is_finite() {
+        (n as usize).clamp(1, MAX_AUTO_CORE_LAYERS)
+    } else {
+        1
+    }
 }
 
 /// The most layers [`auto_layers`] gives (300 triangles: 7,200 tets).
@@ -95,7 +99,10 @@ fn build_with(m: &mut HybridModel, wall: &Wall, field: &Transmural, wall_grid: &
         }
         let span = (o.core_fraction - phi_b[v]).max(0.25 * o.core_fraction);
         let level = (phi_b[v] + span * frac).min(0.95);
-        field.march_to_level(p, level, true, o.projection).or_else(|| field.march_to_level(p, level, true, Projection::Transmural)).unwrap_or(straight)
+        field
+            .march_to_level(p, level, true, o.projection)
+            .or_else(|| field.march_to_level(p, level, true, Projection::Transmural))
+            .unwrap_or(straight)
     };
     let layers = match o.core_layers {
         0 => auto_layers(&coarse.points, &coarse.triangles, |v| place(v, 1.0)),
@@ -163,7 +170,9 @@ fn build_with(m: &mut HybridModel, wall: &Wall, field: &Transmural, wall_grid: &
     Ok(())
 }
 
-fn tet_vol(pts: &[Vec3], t: &[usize; 4]) -> f64 { signed_volume(&pts[t[0]], &pts[t[1]], &pts[t[2]], &pts[t[3]]) }
+fn tet_vol(pts: &[Vec3], t: &[usize; 4]) -> f64 {
+    signed_volume(&pts[t[0]], &pts[t[1]], &pts[t[2]], &pts[t[3]])
+}
 
 /// Smooth the layer offsets of the vertices of twisted prisms (a tet of non-negative signed
 /// volume as split) and of their neighbours towards their neighbours' until none is left (at
@@ -182,8 +191,18 @@ fn untangle(core_points: &mut [Vec3], prisms: &[[usize; 4]], triangles: &[[usize
     });
     let mut untangle_rounds = 0;
     loop {
-        let scale = core_points.iter().take(nv).zip(core_points.iter().skip(layers * nv)).map(|(a, b)| (b - a).norm()).fold(0.0, f64::max).max(1e-9);
-        let bad: Vec<usize> = prisms.iter().filter(|t| tet_vol(core_points, t) > -1e-6 * scale.powi(3)).flat_map(|t| t.iter().map(|&n| n % nv)).collect();
+        let scale = core_points
+            .iter()
+            .take(nv)
+            .zip(core_points.iter().skip(layers * nv))
+            .map(|(a, b)| (b - a).norm())
+            .fold(0.0, f64::max)
+            .max(1e-9);
+        let bad: Vec<usize> = prisms
+            .iter()
+            .filter(|t| tet_vol(core_points, t) > -1e-6 * scale.powi(3))
+            .flat_map(|t| t.iter().map(|&n| n % nv))
+            .collect();
         if bad.is_empty() || untangle_rounds >= 200 {
             break;
         }
@@ -225,7 +244,9 @@ fn balance_on_surface(coarse: &mut Simplified, surf: &TriSurface, parts: &[WallP
                 for j in 0..=K - i {
                     let w = [(K - i - j) as f64 / K as f64, i as f64 / K as f64, j as f64 / K as f64];
                     let p = w[0] * a + w[1] * b + w[2] * c;
-                    let Some(Nearest { triangle: t, point: q, distance: d, .. }) = grid.nearest(pts, tris, &p, |t| parts[t] == WallPart::Inner) else { continue };
+                    let Some(Nearest { triangle: t, point: q, distance: d, .. }) = grid.nearest(pts, tris, &p, |t| parts[t] == WallPart::Inner) else {
+                        continue;
+                    };
                     let f = tris[t];
                     let n = (pts[f[1]] - pts[f[0]]).cross(&(pts[f[2]] - pts[f[0]]));
                     if (p - q).dot(&n) <= 0.0 {

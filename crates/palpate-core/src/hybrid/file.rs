@@ -45,11 +45,17 @@ struct Section {
     check: fn(&HybridModel) -> Result<(), String>,
 }
 
-const fn section(write: fn(&HybridModel, &mut Writer), read: fn(&mut Reader, &mut HybridModel) -> Res<()>, check: fn(&HybridModel) -> Result<(), String>) -> Section {
+const fn section(
+    write: fn(&HybridModel, &mut Writer),
+    read: fn(&mut Reader, &mut HybridModel) -> Res<()>,
+    check: fn(&HybridModel) -> Result<(), String>,
+) -> Section {
     Section { write, read, check }
 }
 
-fn unchecked(_: &HybridModel) -> Result<(), String> { Ok(()) }
+fn unchecked(_: &HybridModel) -> Result<(), String> {
+    Ok(())
+}
 
 /// The sections of the payload, in file order.
 const SECTIONS: [Section; 10] = [
@@ -68,7 +74,11 @@ const SECTIONS: [Section; 10] = [
 /// Sections a file of each format has: format 1 (palpate before the homogenised core) stops
 /// before the homogenisation, which then loads empty (the core stiff as the tissue).
 fn sections_of(version: u32) -> usize {
-    if version == 1 { SECTIONS.len() - 1 } else { SECTIONS.len() }
+    if version == 1 {
+        SECTIONS.len() - 1
+    } else {
+        SECTIONS.len()
+    }
 }
 
 /// FNV-1a, 64 bit.
@@ -85,10 +95,18 @@ pub fn checksum(bytes: &[u8]) -> u64 {
 pub(super) struct Writer(Vec<u8>);
 
 impl Writer {
-    pub(super) fn u8(&mut self, x: u8) { self.0.push(x); }
-    pub(super) fn u32(&mut self, x: u32) { self.0.extend_from_slice(&x.to_le_bytes()); }
-    pub(super) fn u64(&mut self, x: u64) { self.0.extend_from_slice(&x.to_le_bytes()); }
-    pub(super) fn f64(&mut self, x: f64) { self.0.extend_from_slice(&x.to_le_bytes()); }
+    pub(super) fn u8(&mut self, x: u8) {
+        self.0.push(x);
+    }
+    pub(super) fn u32(&mut self, x: u32) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+    pub(super) fn u64(&mut self, x: u64) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
+    pub(super) fn f64(&mut self, x: f64) {
+        self.0.extend_from_slice(&x.to_le_bytes());
+    }
     pub(super) fn vec3(&mut self, v: &Vec3) {
         self.f64(v.x);
         self.f64(v.y);
@@ -116,7 +134,9 @@ impl Writer {
         v.iter().flatten().for_each(|&x| item(self, x));
     }
     /// Rows of `N` indices, as u32.
-    pub(super) fn idx<const N: usize>(&mut self, v: &[[usize; N]]) { self.rows(v, |w, x| w.u32(x as u32)) }
+    pub(super) fn idx<const N: usize>(&mut self, v: &[[usize; N]]) {
+        self.rows(v, |w, x| w.u32(x as u32))
+    }
     pub(super) fn usizes(&mut self, v: &[usize]) {
         self.u64(v.len() as u64);
         v.iter().for_each(|&x| self.u32(x as u32));
@@ -134,7 +154,9 @@ pub(super) type Res<T> = Result<T, ModelFileError>;
 
 impl<'a> Reader<'a> {
     /// A corrupted file, for `reason`.
-    pub(super) fn corrupt(&self, reason: String) -> ModelFileError { ModelFileError::Corrupt { path: self.path.into(), reason } }
+    pub(super) fn corrupt(&self, reason: String) -> ModelFileError {
+        ModelFileError::Corrupt { path: self.path.into(), reason }
+    }
     fn take(&mut self, n: usize, field: &'static str) -> Res<&'a [u8]> {
         match self.off.checked_add(n).and_then(|end| self.b.get(self.off..end)) {
             Some(s) => {
@@ -151,16 +173,30 @@ impl<'a> Reader<'a> {
         a.copy_from_slice(s);
         Ok(a)
     }
-    pub(super) fn u8(&mut self, f: &'static str) -> Res<u8> { Ok(self.array_of::<1>(f)?[0]) }
-    pub(super) fn u32(&mut self, f: &'static str) -> Res<u32> { Ok(u32::from_le_bytes(self.array_of(f)?)) }
-    pub(super) fn u64(&mut self, f: &'static str) -> Res<u64> { Ok(u64::from_le_bytes(self.array_of(f)?)) }
-    pub(super) fn f64(&mut self, f: &'static str) -> Res<f64> { Ok(f64::from_le_bytes(self.array_of(f)?)) }
+    pub(super) fn u8(&mut self, f: &'static str) -> Res<u8> {
+        Ok(self.array_of::<1>(f)?[0])
+    }
+    pub(super) fn u32(&mut self, f: &'static str) -> Res<u32> {
+        Ok(u32::from_le_bytes(self.array_of(f)?))
+    }
+    pub(super) fn u64(&mut self, f: &'static str) -> Res<u64> {
+        Ok(u64::from_le_bytes(self.array_of(f)?))
+    }
+    pub(super) fn f64(&mut self, f: &'static str) -> Res<f64> {
+        Ok(f64::from_le_bytes(self.array_of(f)?))
+    }
     /// The count of an array of `item`-byte entries, checked against the bytes left.
     fn count(&mut self, item: usize, f: &'static str) -> Res<usize> {
         let n = self.u64(f)?;
         let left = self.b.len().saturating_sub(self.off) as u64;
         if n.saturating_mul(item as u64) > left {
-            return Err(ModelFileError::Truncated { path: self.path.into(), field: f, offset: self.off + HEADER, need: n.saturating_mul(item as u64).min(usize::MAX as u64) as usize, have: self.b.len() + HEADER });
+            return Err(ModelFileError::Truncated {
+                path: self.path.into(),
+                field: f,
+                offset: self.off + HEADER,
+                need: n.saturating_mul(item as u64).min(usize::MAX as u64) as usize,
+                have: self.b.len() + HEADER,
+            });
         }
         Ok(n as usize)
     }
@@ -169,13 +205,28 @@ impl<'a> Reader<'a> {
         let n = self.count(item, f)?;
         (0..n).map(|_| one(self)).collect()
     }
-    pub(super) fn vec3(&mut self, f: &'static str) -> Res<Vec3> { Ok(Vec3::new(self.f64(f)?, self.f64(f)?, self.f64(f)?)) }
-    pub(super) fn vec3s(&mut self, f: &'static str) -> Res<Vec<Vec3>> { self.array(24, f, |r| r.vec3(f)) }
-    pub(super) fn f64s(&mut self, f: &'static str) -> Res<Vec<f64>> { self.array(8, f, |r| r.f64(f)) }
-    pub(super) fn u32s(&mut self, f: &'static str) -> Res<Vec<u32>> { self.array(4, f, |r| r.u32(f)) }
-    pub(super) fn bytes(&mut self, f: &'static str) -> Res<Vec<u8>> { self.array(1, f, |r| r.u8(f)) }
+    pub(super) fn vec3(&mut self, f: &'static str) -> Res<Vec3> {
+        Ok(Vec3::new(self.f64(f)?, self.f64(f)?, self.f64(f)?))
+    }
+    pub(super) fn vec3s(&mut self, f: &'static str) -> Res<Vec<Vec3>> {
+        self.array(24, f, |r| r.vec3(f))
+    }
+    pub(super) fn f64s(&mut self, f: &'static str) -> Res<Vec<f64>> {
+        self.array(8, f, |r| r.f64(f))
+    }
+    pub(super) fn u32s(&mut self, f: &'static str) -> Res<Vec<u32>> {
+        self.array(4, f, |r| r.u32(f))
+    }
+    pub(super) fn bytes(&mut self, f: &'static str) -> Res<Vec<u8>> {
+        self.array(1, f, |r| r.u8(f))
+    }
     /// Rows of `N` entries of `size` bytes, each read by `item` (see [`Writer::rows`]).
-    pub(super) fn rows<T: Copy + Default, const N: usize>(&mut self, size: usize, f: &'static str, mut item: impl FnMut(&mut Self) -> Res<T>) -> Res<Vec<[T; N]>> {
+    pub(super) fn rows<T: Copy + Default, const N: usize>(
+        &mut self,
+        size: usize,
+        f: &'static str,
+        mut item: impl FnMut(&mut Self) -> Res<T>,
+    ) -> Res<Vec<[T; N]>> {
         self.array(size * N, f, |r| {
             let mut a = [T::default(); N];
             for x in a.iter_mut() {
@@ -184,8 +235,12 @@ impl<'a> Reader<'a> {
             Ok(a)
         })
     }
-    pub(super) fn idx<const N: usize>(&mut self, f: &'static str) -> Res<Vec<[usize; N]>> { self.rows(4, f, |r| Ok(r.u32(f)? as usize)) }
-    pub(super) fn usizes(&mut self, f: &'static str) -> Res<Vec<usize>> { self.array(4, f, |r| Ok(r.u32(f)? as usize)) }
+    pub(super) fn idx<const N: usize>(&mut self, f: &'static str) -> Res<Vec<[usize; N]>> {
+        self.rows(4, f, |r| Ok(r.u32(f)? as usize))
+    }
+    pub(super) fn usizes(&mut self, f: &'static str) -> Res<Vec<usize>> {
+        self.array(4, f, |r| Ok(r.u32(f)? as usize))
+    }
 }
 
 /// The model as the bytes of a model file.
@@ -225,7 +280,13 @@ pub fn from_bytes(bytes: &[u8], path: &str) -> Result<HybridModel, ModelFileErro
     let payload = bytes.get(HEADER..).ok_or_else(truncated)?;
     let have = payload.len() as u64;
     if len > have {
-        return Err(ModelFileError::Truncated { path: path.into(), field: "payload", offset: HEADER, need: len.min(usize::MAX as u64) as usize, have: bytes.len() });
+        return Err(ModelFileError::Truncated {
+            path: path.into(),
+            field: "payload",
+            offset: HEADER,
+            need: len.min(usize::MAX as u64) as usize,
+            have: bytes.len(),
+        });
     }
     if len < have {
         return Err(ModelFileError::Corrupt { path: path.into(), reason: format!("{} bytes after the end of the model", have - len) });

@@ -106,7 +106,9 @@ impl Homogenisation {
     }
 
     /// True when the build computed a table.
-    pub fn is_empty(&self) -> bool { self.poisson.is_empty() }
+    pub fn is_empty(&self) -> bool {
+        self.poisson.is_empty()
+    }
 }
 
 /// The height \[m\] at or below which the runtime holds a closed wall's core nodes: `fraction`
@@ -140,7 +142,12 @@ pub(super) fn compute(m: &HybridModel, wall: &Wall, field: &Transmural, wall_gri
         match core::build(&mut reference, wall, field, wall_grid) {
             Ok(()) => break,
             Err(HybridError::TwistedCore { .. }) if refinement > 1 => refinement /= 2,
-            Err(e) => return Err(fail(format!("the reference wall mesh ({} triangles): {e}; build with homogenise off for the paper's core", reference.options.core_triangles))),
+            Err(e) => {
+                return Err(fail(format!(
+                    "the reference wall mesh ({} triangles): {e}; build with homogenise off for the paper's core",
+                    reference.options.core_triangles
+                )))
+            }
         }
     }
     let out_refinement = refinement;
@@ -183,15 +190,21 @@ pub(super) fn compute(m: &HybridModel, wall: &Wall, field: &Transmural, wall_gri
     let mut out = Homogenisation { probes: probes.len(), load_radius: a, refinement: out_refinement, ..Homogenisation::default() };
     for nu in POISSON_TABLE {
         let (lambda, mu) = unit_lame(nu);
-        let wall_k = SmallStrain::new(&reference.core_points, &reference.core_tets, Order::Quadratic, lambda, mu, &ref_held).map_err(|e| fail(format!("the reference wall's stiffness: {e}")))?;
-        let core_k = SmallStrain::new(&m.core_points, &m.core_tets, Order::Linear, lambda, mu, &core_held).map_err(|e| fail(format!("the core's stiffness: {e}")))?;
+        let wall_k = SmallStrain::new(&reference.core_points, &reference.core_tets, Order::Quadratic, lambda, mu, &ref_held)
+            .map_err(|e| fail(format!("the reference wall's stiffness: {e}")))?;
+        let core_k =
+            SmallStrain::new(&m.core_points, &m.core_tets, Order::Linear, lambda, mu, &core_held).map_err(|e| fail(format!("the core's stiffness: {e}")))?;
         out.reference_tets = wall_k.n_tets();
         let mut ratios = Vec::with_capacity(probes.len());
         for &v in &probes {
             let (c, n) = (m.outer_points[v], normals[v]);
             let traction = |x: Vec3| {
                 let r2 = (x - c).norm_squared() / (a * a);
-                if r2 < 1.0 { -n * (1.0 - r2).sqrt() } else { Vec3::zeros() }
+                if r2 < 1.0 {
+                    -n * (1.0 - r2).sqrt()
+                } else {
+                    Vec3::zeros()
+                }
             };
             // The whole wall, loaded on its outer faces.
             let mut f = vec![Vec3::zeros(); wall_k.nodes().len()];
@@ -232,7 +245,10 @@ fn compliance(k: &SmallStrain, f: &[Vec3]) -> f64 {
 }
 
 fn outer_area(m: &HybridModel) -> f64 {
-    m.outer_tris.iter().map(|t| 0.5 * (m.outer_points[t[1]] - m.outer_points[t[0]]).cross(&(m.outer_points[t[2]] - m.outer_points[t[0]])).norm()).sum()
+    m.outer_tris
+        .iter()
+        .map(|t| 0.5 * (m.outer_points[t[1]] - m.outer_points[t[0]]).cross(&(m.outer_points[t[2]] - m.outer_points[t[0]])).norm())
+        .sum()
 }
 
 fn vertex_normals(m: &HybridModel) -> Vec<Vec3> {

@@ -25,8 +25,8 @@ mod skin;
 pub mod transmural;
 mod wall;
 
-pub use build::{build, BuildStats};
 pub use self::core::CoreQuality;
+pub use build::{build, BuildStats};
 pub use homogenise::Homogenisation;
 pub use model::HybridModel;
 pub use options::{HybridOptions, Spacing};

@@ -69,19 +69,28 @@ pub struct HybridModel {
 
 impl HybridModel {
     /// Number of activation regions (one per outer-surface vertex).
-    pub fn n_regions(&self) -> usize { self.region_box.len() }
+    pub fn n_regions(&self) -> usize {
+        self.region_box.len()
+    }
 
     /// Total core volume \[m^3\].
     pub fn core_volume(&self) -> f64 {
-        self.core_tets.iter().map(|t| signed_volume(&self.core_points[t[0]], &self.core_points[t[1]], &self.core_points[t[2]], &self.core_points[t[3]])).sum()
+        self.core_tets
+            .iter()
+            .map(|t| signed_volume(&self.core_points[t[0]], &self.core_points[t[1]], &self.core_points[t[2]], &self.core_points[t[3]]))
+            .sum()
     }
 
     /// Shell volume represented by the particles (lattice cells) \[m^3\].
-    pub fn shell_volume(&self) -> f64 { self.particles.len() as f64 * self.spacing.powi(3) }
+    pub fn shell_volume(&self) -> f64 {
+        self.particles.len() as f64 * self.spacing.powi(3)
+    }
 }
 
 /// The wall's section: its volume.
-pub(super) fn write_wall(m: &HybridModel, w: &mut Writer) { w.f64(m.wall_volume); }
+pub(super) fn write_wall(m: &HybridModel, w: &mut Writer) {
+    w.f64(m.wall_volume);
+}
 
 // A model file is input from anywhere: its section reader may not panic (as file.rs).
 #[deny(clippy::unwrap_used, clippy::expect_used, clippy::indexing_slicing)]

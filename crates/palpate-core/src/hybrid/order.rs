@@ -127,8 +127,12 @@ mod tests {
             }
         }
         // Each particle keeps its mass, its core face and the triangle above it.
-        let mut pa: Vec<_> = (0..a.particles.len()).map(|q| (bits(&a.particles[q]), a.particle_mass[q].to_bits(), a.particle_core_face[q], corners(&a, a.particle_outer_tri[q]))).collect();
-        let mut pb: Vec<_> = (0..b.particles.len()).map(|q| (bits(&b.particles[q]), b.particle_mass[q].to_bits(), b.particle_core_face[q], corners(&b, b.particle_outer_tri[q]))).collect();
+        let mut pa: Vec<_> = (0..a.particles.len())
+            .map(|q| (bits(&a.particles[q]), a.particle_mass[q].to_bits(), a.particle_core_face[q], corners(&a, a.particle_outer_tri[q])))
+            .collect();
+        let mut pb: Vec<_> = (0..b.particles.len())
+            .map(|q| (bits(&b.particles[q]), b.particle_mass[q].to_bits(), b.particle_core_face[q], corners(&b, b.particle_outer_tri[q])))
+            .collect();
         pa.sort();
         pb.sort();
         assert!(pa == pb, "{} of {} particles' position, mass, core face or triangle differ", pa.iter().zip(&pb).filter(|(x, y)| x != y).count(), pa.len());

@@ -45,4 +45,6 @@ pub(super) fn check(m: &HybridModel) -> Result<(), String> {
 }
 
 /// The adjacency of a loaded (and checked) model.
-pub(super) fn derive(m: &mut HybridModel) { m.outer_adjacency = SurfaceAdjacency::new(m.outer_points.len(), &m.outer_tris); }
+pub(super) fn derive(m: &mut HybridModel) {
+    m.outer_adjacency = SurfaceAdjacency::new(m.outer_points.len(), &m.outer_tris);
+}

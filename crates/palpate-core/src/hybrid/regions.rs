@@ -59,17 +59,24 @@ impl HybridModel {
     /// nv(p_s) of region `s`: its outer triangles, sorted (grown from the stored ring count in
     /// microseconds).
     pub fn region_triangles(&self, s: usize) -> Vec<u32> {
-        self.outer_adjacency.patch(&self.outer_tris, s, Some(self.region_rings[s] as usize), Marks::Sorted(Vec::new()), |_, _| false).triangles
+        self.outer_adjacency
+            .patch(&self.outer_tris, s, Some(self.region_rings[s] as usize), Marks::Sorted(Vec::new()), |_, _| false)
+            .triangles
     }
 
     /// RV(p_s): the particles of region `s`, as ranges into [`HybridModel::particles`] (one per
     /// triangle of nv(p_s): particles are sorted by the outer triangle above them).
     pub fn region_particle_ranges(&self, s: usize) -> Vec<std::ops::Range<usize>> {
-        self.region_triangles(s).iter().map(|&t| self.tri_particle_ptr[t as usize] as usize..self.tri_particle_ptr[t as usize + 1] as usize).collect()
+        self.region_triangles(s)
+            .iter()
+            .map(|&t| self.tri_particle_ptr[t as usize] as usize..self.tri_particle_ptr[t as usize + 1] as usize)
+            .collect()
     }
 
     /// Number of particles in RV(p_s).
-    pub fn region_len(&self, s: usize) -> usize { self.region_particle_ranges(s).iter().map(|r| r.len()).sum() }
+    pub fn region_len(&self, s: usize) -> usize {
+        self.region_particle_ranges(s).iter().map(|r| r.len()).sum()
+    }
 
     /// Core faces under RV(p_s) (the faces below its particles; the skin face of `s` if it has
     /// none), sorted.
@@ -84,10 +91,14 @@ impl HybridModel {
     }
 
     /// The boundary vertices of nv(p_s) (outer vertex indices), in loop order.
-    pub fn region_rim(&self, s: usize) -> Vec<u32> { self.outer_adjacency.rim(&self.outer_tris, &self.region_triangles(s)) }
+    pub fn region_rim(&self, s: usize) -> Vec<u32> {
+        self.outer_adjacency.rim(&self.outer_tris, &self.region_triangles(s))
+    }
 
     /// C(p_s): the projections on the core of nv(p_s)'s boundary vertices \[m\].
-    pub fn region_curve(&self, s: usize) -> Vec<Vec3> { self.region_rim(s).iter().map(|&v| self.skin_anchor(v as usize)).collect() }
+    pub fn region_curve(&self, s: usize) -> Vec<Vec3> {
+        self.region_rim(s).iter().map(|&v| self.skin_anchor(v as usize)).collect()
+    }
 }
 
 pub(super) fn write(m: &HybridModel, w: &mut Writer) {

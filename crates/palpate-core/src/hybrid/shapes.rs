@@ -1,8 +1,8 @@
 //! Walls that ship with palpate: the paper's two concentric ellipsoids and the synthetic
 //! truncated ventricle of the benchmark protocol.
 
-use super::wall::Wall;
 use super::transmural::WallPart;
+use super::wall::Wall;
 use crate::error::HybridError;
 use crate::mesh::generate::{try_truncated_ellipsoid_wall, TruncatedEllipsoidWall};
 use crate::mesh::{ellipsoid_surface, TriSurface};
@@ -29,7 +29,11 @@ pub fn truncated_ventricle(p: &TruncatedEllipsoidWall) -> Result<Wall, HybridErr
                 WallPart::Base
             } else {
                 let c = (pts[f[0]] + pts[f[1]] + pts[f[2]]) / 3.0;
-                if (level(&c, p.inner) - 1.0).abs() < (level(&c, p.outer) - 1.0).abs() { WallPart::Inner } else { WallPart::Outer }
+                if (level(&c, p.inner) - 1.0).abs() < (level(&c, p.outer) - 1.0).abs() {
+                    WallPart::Inner
+                } else {
+                    WallPart::Outer
+                }
             }
         })
         .collect();

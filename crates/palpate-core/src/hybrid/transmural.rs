@@ -206,7 +206,11 @@ pub fn solve(surface: &TriSurface, parts: &[WallPart], h: f64, tri_grid: &Triang
                 1 => 1.0,
                 _ => {
                     let w = nearest[v];
-                    if w == u32::MAX { 0.5 } else { phi[w as usize] }
+                    if w == u32::MAX {
+                        0.5
+                    } else {
+                        phi[w as usize]
+                    }
                 }
             };
         }
@@ -215,7 +219,13 @@ pub fn solve(surface: &TriSurface, parts: &[WallPart], h: f64, tri_grid: &Triang
     for v in 0..n {
         if !wall[v] && ext_kind[v] == 3 {
             let w = nearest[v];
-            phi[v] = if w == u32::MAX { 1.0 } else if phi[w as usize] < 0.5 { 0.0 } else { 1.0 };
+            phi[v] = if w == u32::MAX {
+                1.0
+            } else if phi[w as usize] < 0.5 {
+                0.0
+            } else {
+                1.0
+            };
         }
     }
     // Direction: central differences at wall voxels, copied outward.
@@ -283,11 +293,19 @@ impl Transmural {
         match mode {
             Projection::Radial => {
                 let d = p - self.centre;
-                if d.norm() > 0.0 { d.normalize() } else { Vec3::z() }
+                if d.norm() > 0.0 {
+                    d.normalize()
+                } else {
+                    Vec3::z()
+                }
             }
             Projection::Transmural => {
                 let d: Vec3 = self.stencil(p).iter().map(|&(v, w)| w * self.dir[v]).sum();
-                if d.norm() > 0.0 { d.normalize() } else { Vec3::zeros() }
+                if d.norm() > 0.0 {
+                    d.normalize()
+                } else {
+                    Vec3::zeros()
+                }
             }
         }
     }

@@ -228,7 +228,13 @@ pub fn indent(model: &Model, ind: &Indenter, travels: &[f64], opts: &IndentOptio
 /// [`indent`], asking `interrupted` before each Newton iteration whether to stop
 /// ([`SolveError::Interrupted`]; see [`super::static_solve_with`]): a fine reference curve takes
 /// half an hour.
-pub fn indent_with(model: &Model, ind: &Indenter, travels: &[f64], opts: &IndentOptions, interrupted: &mut dyn FnMut() -> bool) -> Result<Vec<IndentPoint>, SolveError> {
+pub fn indent_with(
+    model: &Model,
+    ind: &Indenter,
+    travels: &[f64],
+    opts: &IndentOptions,
+    interrupted: &mut dyn FnMut() -> bool,
+) -> Result<Vec<IndentPoint>, SolveError> {
     let bad = |m: String| Err(SolveError::Invalid(m));
     if !(ind.radius > 0.0 && ind.radius.is_finite()) {
         return bad(format!("sphere radius {} m must be positive and finite", ind.radius));
@@ -465,7 +471,17 @@ const PCG_REFACTOR: usize = 40;
 /// Newton's system at `x` on the free pattern: `op = -K(x) + H_c`, `H_c` the contact's
 /// Gauss-Newton Hessian `sum_s k_a A_s (b_s b_s^T) (x) (n_s n_s^T)`; `ws.k` keeps `-op`.
 #[allow(clippy::too_many_arguments)]
-fn assemble_system(model: &Model, samples: &[Sample], blocks: &[[usize; 36]], k: f64, r: f64, c: &Vec3, x: &[Vec3], ws: &mut crate::fem::Workspace, op: &mut [Mat3]) {
+fn assemble_system(
+    model: &Model,
+    samples: &[Sample],
+    blocks: &[[usize; 36]],
+    k: f64,
+    r: f64,
+    c: &Vec3,
+    x: &[Vec3],
+    ws: &mut crate::fem::Workspace,
+    op: &mut [Mat3],
+) {
     model.assemble_jacobians(x, &mut ws.k, &mut ws.d);
     for (s, b) in samples.iter().zip(blocks) {
         let p = s.point(x);

@@ -22,15 +22,15 @@ mod quasi_newton;
 mod semi_implicit;
 mod statics;
 
-pub use potential::{incremental_potential, incremental_potential_gradient};
+pub use factor::DT_CACHE_SIZE;
+pub(crate) use factor::ITERATIONS_PER_FACTOR_RATIO;
+pub use indent::{indent, indent_with, IndentOptions, IndentPoint, Indenter};
 pub(crate) use newton::CgWorkspace;
 pub(crate) use potential::PotentialWorkspace;
-pub(crate) use factor::ITERATIONS_PER_FACTOR_RATIO;
-pub use factor::DT_CACHE_SIZE;
+pub use potential::{incremental_potential, incremental_potential_gradient};
 pub(crate) use quasi_newton::Lbfgs;
 pub(crate) use semi_implicit::stable_filter_factor;
 pub use statics::{static_solve, static_solve_with, StaticOptions, StaticSolution};
-pub use indent::{indent, indent_with, IndentOptions, IndentPoint, Indenter};
 
 use crate::error::StepError;
 use crate::fem::{Model, State, Workspace};
@@ -196,7 +196,9 @@ pub trait CorePotential {
     /// True when the energy does not change under a rigid translation of every node (its forces
     /// sum to zero): the step then keeps a free body's linear momentum exact, as without it.
     /// Default false (a tool's contact pushes the body).
-    fn translation_invariant(&self) -> bool { false }
+    fn translation_invariant(&self) -> bool {
+        false
+    }
     /// The part of its stiffness made of rank-one terms ([`StiffnessTerm`]), each under an id
     /// stable from step to step, given to `emit` (any order, each id once). The minimising
     /// integrators hold them in the matrix they factorise, and keep it current as terms come and

@@ -16,9 +16,9 @@
 
 use super::factor;
 use super::potential::{self, dot, Progress, StepProblem};
-use crate::linalg::cg::{self, CgStop, CgWork};
 use crate::fem::model::NONE;
 use crate::fem::{tet10, tet4, viscous, Model, Workspace};
+use crate::linalg::cg::{self, CgStop, CgWork};
 use crate::math::{Mat3, Vec3};
 
 /// Conjugate-gradient iterations per Newton iteration, at most.

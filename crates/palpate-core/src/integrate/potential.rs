@@ -198,7 +198,18 @@ fn evaluate(p: &StepProblem, x: &[Vec3], f_el: &mut [Vec3], f_visc: &mut [Vec3],
 
 /// The nodal terms of `Phi` and its gradient, given the element terms `W` and `D`.
 #[allow(clippy::too_many_arguments)]
-fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64, f_el: &[Vec3], f_visc: Option<&[Vec3]>, g: &mut [Vec3], f_pot: &mut [Vec3]) -> Eval {
+fn finish(
+    p: &StepProblem,
+    x: &[Vec3],
+    w: f64,
+    d: f64,
+    inverted: usize,
+    f2: f64,
+    f_el: &[Vec3],
+    f_visc: Option<&[Vec3]>,
+    g: &mut [Vec3],
+    f_pot: &mut [Vec3],
+) -> Eval {
     let model = p.model;
     // The caller's potential (a tool's contact): its energy and forces at `x`.
     let u = match p.external {
@@ -236,7 +247,16 @@ fn finish(p: &StepProblem, x: &[Vec3], w: f64, d: f64, inverted: usize, f2: f64,
     // and the inertial term's positions (`sum m^2 |x|^2 / h^4`, at rest: a scale, not a value).
     let noise2 = model.mass_position2 * inv_h2 * inv_h2;
     let floor = ROUND_OFF_FACTOR * f64::EPSILON * (f2 + noise2 + model.position_noise2).sqrt();
-    Eval { phi: inertia + w + d + u - work, w, magnitude: inertia + w + d + u.abs() + work_abs, inverted, gnorm2, scale2, elastic_f2: f2, floor }
+    Eval {
+        phi: inertia + w + d + u - work,
+        w,
+        magnitude: inertia + w + d + u.abs() + work_abs,
+        inverted,
+        gnorm2,
+        scale2,
+        elastic_f2: f2,
+        floor,
+    }
 }
 
 /// `Phi` at the start of the step (`x = x_n`, where the dissipation and its force vanish), into
@@ -320,7 +340,11 @@ impl Progress {
     }
     /// The forcing term of an inexact solve: `min(cap, |g| / scale)`.
     pub fn relative_gradient(&self, cap: f64) -> f64 {
-        if self.scale > 0.0 { (self.gnorm() / self.scale).min(cap) } else { cap }
+        if self.scale > 0.0 {
+            (self.gnorm() / self.scale).min(cap)
+        } else {
+            cap
+        }
     }
     pub fn report(&self) -> crate::StepReport {
         crate::StepReport {
@@ -447,7 +471,11 @@ fn cubic_step(f0: f64, s0: f64, f1: f64, s1: f64) -> f64 {
         // No real minimiser: the quadratic through f0, s0 and f1.
         -s0 / (2.0 * (f1 - f0 - s0))
     };
-    if t.is_finite() { t.clamp(0.1, 0.5) } else { 0.5 }
+    if t.is_finite() {
+        t.clamp(0.1, 0.5)
+    } else {
+        0.5
+    }
 }
 
 /// The incremental potential `Phi(x)` \[J\] of a backward Euler step of `h` \[s\] from positions

@@ -79,7 +79,11 @@ fn residual(model: &Model, x: &[Vec3], applied: &[Vec3], lam: f64, ws: &mut Work
         ws.force[node] += lam * applied[node];
         worst = worst.max(ws.force[node].norm());
     }
-    if worst.is_nan() { f64::INFINITY } else { worst }
+    if worst.is_nan() {
+        f64::INFINITY
+    } else {
+        worst
+    }
 }
 
 /// Static equilibrium of `model` under per-node external forces `f_ext` \[N\] `(n_nodes)` and gravity.
@@ -100,7 +104,11 @@ pub fn static_solve_with(model: &Model, f_ext: &[Vec3], opts: &StaticOptions, in
         return Err(SolveError::NonFinite { what: "external force", node });
     }
     if let Some(node) = f_ext.iter().position(|f| !crate::limits::force_in_bound(f)) {
-        return Err(SolveError::Invalid(format!("node {node}: external force of {:e} N over the bound of {:e} N (limits::MAX_FORCE_N)", crate::limits::force_magnitude(&f_ext[node]), crate::limits::MAX_FORCE_N)));
+        return Err(SolveError::Invalid(format!(
+            "node {node}: external force of {:e} N over the bound of {:e} N (limits::MAX_FORCE_N)",
+            crate::limits::force_magnitude(&f_ext[node]),
+            crate::limits::MAX_FORCE_N
+        )));
     }
     // Zero increments is no solve at all: refused, not taken as 1 (issue 35 item 6).
     if opts.load_steps == 0 {
@@ -123,7 +131,14 @@ pub fn static_solve_with(model: &Model, f_ext: &[Vec3], opts: &StaticOptions, in
 }
 
 /// Newton from rest, the load applied in `steps` equal increments.
-fn solve_in_increments(model: &Model, applied: &[Vec3], scale: f64, opts: &StaticOptions, steps: usize, interrupted: &mut dyn FnMut() -> bool) -> Result<StaticSolution, SolveError> {
+fn solve_in_increments(
+    model: &Model,
+    applied: &[Vec3],
+    scale: f64,
+    opts: &StaticOptions,
+    steps: usize,
+    interrupted: &mut dyn FnMut() -> bool,
+) -> Result<StaticSolution, SolveError> {
     let n = model.n_nodes();
     let mut x = model.rest_x.clone();
     let tol = opts.tolerance * scale;

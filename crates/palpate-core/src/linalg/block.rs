@@ -32,9 +32,13 @@ impl BlockPattern {
     }
 
     /// Number of block rows.
-    pub fn n(&self) -> usize { self.diag.len() }
+    pub fn n(&self) -> usize {
+        self.diag.len()
+    }
     /// Number of stored blocks.
-    pub fn nnz(&self) -> usize { self.col.len() }
+    pub fn nnz(&self) -> usize {
+        self.col.len()
+    }
 
     /// Index of block (i, j), if stored.
     pub fn find(&self, i: usize, j: usize) -> Option<usize> {

@@ -21,25 +21,39 @@ pub trait CgEntry: Copy {
 impl CgEntry for f64 {
     const ZERO: f64 = 0.0;
     #[inline]
-    fn dot(self, other: f64) -> f64 { self * other }
+    fn dot(self, other: f64) -> f64 {
+        self * other
+    }
     #[inline]
-    fn add_scaled(self, a: f64, other: f64) -> f64 { self + a * other }
+    fn add_scaled(self, a: f64, other: f64) -> f64 {
+        self + a * other
+    }
     #[inline]
-    fn is_zero(self) -> bool { self == 0.0 }
+    fn is_zero(self) -> bool {
+        self == 0.0
+    }
 }
 
 impl CgEntry for Vec3 {
     const ZERO: Vec3 = Vec3::new(0.0, 0.0, 0.0);
     #[inline]
-    fn dot(self, other: Vec3) -> f64 { Vec3::dot(&self, &other) }
+    fn dot(self, other: Vec3) -> f64 {
+        Vec3::dot(&self, &other)
+    }
     #[inline]
-    fn add_scaled(self, a: f64, other: Vec3) -> Vec3 { self + a * other }
+    fn add_scaled(self, a: f64, other: Vec3) -> Vec3 {
+        self + a * other
+    }
     #[inline]
-    fn is_zero(self) -> bool { self == Self::ZERO }
+    fn is_zero(self) -> bool {
+        self == Self::ZERO
+    }
 }
 
 /// `sum_i a_i . b_i`, in index order.
-pub fn dot<T: CgEntry>(a: &[T], b: &[T]) -> f64 { a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum::<f64>() }
+pub fn dot<T: CgEntry>(a: &[T], b: &[T]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum::<f64>()
+}
 
 /// The work vectors of a solve of `n` entries: residual, preconditioned residual, search
 /// direction and operator times direction.
@@ -53,7 +67,9 @@ pub struct CgWork<T> {
 
 impl<T: CgEntry> CgWork<T> {
     /// Work vectors for `n` entries.
-    pub fn new(n: usize) -> CgWork<T> { CgWork { r: vec![T::ZERO; n], z: vec![T::ZERO; n], p: vec![T::ZERO; n], ap: vec![T::ZERO; n] } }
+    pub fn new(n: usize) -> CgWork<T> {
+        CgWork { r: vec![T::ZERO; n], z: vec![T::ZERO; n], p: vec![T::ZERO; n], ap: vec![T::ZERO; n] }
+    }
 }
 
 /// When to stop.
@@ -81,12 +97,21 @@ pub struct CgReport {
 }
 
 /// No preconditioner: `z = r`.
-pub fn identity<T: Copy>(r: &[T], z: &mut [T]) { z.copy_from_slice(r) }
+pub fn identity<T: Copy>(r: &[T], z: &mut [T]) {
+    z.copy_from_slice(r)
+}
 
 /// Solve `A x = b` from the guess in `x` (all zeros: `A` is not applied to it) by conjugate
 /// gradients preconditioned by `precondition(r, z)` (`z = M^-1 r`, `M` symmetric positive
 /// definite), `apply(p, ap)` setting `ap = A p`. Every slice has the length of `b`.
-pub fn solve<T: CgEntry>(mut apply: impl FnMut(&[T], &mut [T]), mut precondition: impl FnMut(&[T], &mut [T]), b: &[T], x: &mut [T], work: &mut CgWork<T>, stop: CgStop) -> CgReport {
+pub fn solve<T: CgEntry>(
+    mut apply: impl FnMut(&[T], &mut [T]),
+    mut precondition: impl FnMut(&[T], &mut [T]),
+    b: &[T],
+    x: &mut [T],
+    work: &mut CgWork<T>,
+    stop: CgStop,
+) -> CgReport {
     let n = b.len();
     assert!(x.len() == n && work.r.len() == n && work.z.len() == n && work.p.len() == n && work.ap.len() == n, "CG: slices of different lengths");
     let CgWork { r, z, p, ap } = work;
@@ -169,7 +194,8 @@ mod tests {
         let mut work = CgWork::new(n);
         for guess in [0.0, 0.5] {
             let mut x = vec![guess; n];
-            let rep = solve(|p, ap| laplacian(&scale, p, ap), |r, z| z.iter_mut().zip(r).zip(&diag).for_each(|((z, r), d)| *z = r / d), &b, &mut x, &mut work, stop);
+            let rep =
+                solve(|p, ap| laplacian(&scale, p, ap), |r, z| z.iter_mut().zip(r).zip(&diag).for_each(|((z, r), d)| *z = r / d), &b, &mut x, &mut work, stop);
             assert!(rep.converged && !rep.breakdown, "{rep:?}");
             assert!(x.iter().zip(&truth).all(|(a, t)| (a - t).abs() < 1e-9));
         }

@@ -111,9 +111,13 @@ impl Ldl {
     }
 
     /// Number of block rows.
-    pub fn n(&self) -> usize { self.n }
+    pub fn n(&self) -> usize {
+        self.n
+    }
     /// Number of off-diagonal blocks of L.
-    pub fn nnz_l(&self) -> usize { self.lp[self.n] }
+    pub fn nnz_l(&self) -> usize {
+        self.lp[self.n]
+    }
     /// Relative cost of a numeric factorisation, in units of one pair of triangular solves
     /// (block multiply-adds: `sum_k c_k^2` for the factorisation, `c_k` the column counts of L,
     /// against `2 nnz(L) + n` for the solves). A rough model, calibrated in BENCHMARKS.md.
@@ -137,7 +141,9 @@ impl Ldl {
         path.iter().sum::<f64>() / n.max(1) as f64 / f.max(1.0)
     }
     /// Number of stored input blocks (the length `ax` must have in [`Ldl::factor`]).
-    pub fn nnz_a(&self) -> usize { self.ap[self.n] }
+    pub fn nnz_a(&self) -> usize {
+        self.ap[self.n]
+    }
 
     /// Numeric factorisation with input blocks `ax` (same layout as the symbolic pattern; the
     /// diagonal blocks are full symmetric 3x3 blocks). Fails, naming the block column, if a
@@ -249,7 +255,11 @@ impl Ldl {
             let d_new = d + p * s * p.transpose();
             let d_new = 0.5 * (d_new + d_new.transpose());
             let pivot = min_cholesky_pivot(&d_new);
-            let inv = if pivot > 0.0 && pivot.is_finite() { d_new.try_inverse().filter(|m| m.iter().all(|v| v.is_finite())) } else { None };
+            let inv = if pivot > 0.0 && pivot.is_finite() {
+                d_new.try_inverse().filter(|m| m.iter().all(|v| v.is_finite()))
+            } else {
+                None
+            };
             let Some(inv) = inv else {
                 result = Err(LdlError { column: j, pivot });
                 continue;

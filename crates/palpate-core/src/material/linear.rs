@@ -22,15 +22,25 @@ pub(crate) trait Scalar: Copy {
 
 impl Scalar for f64 {
     #[inline(always)]
-    fn splat(x: f64) -> Self { x }
+    fn splat(x: f64) -> Self {
+        x
+    }
     #[inline(always)]
-    fn add(self, o: Self) -> Self { self + o }
+    fn add(self, o: Self) -> Self {
+        self + o
+    }
     #[inline(always)]
-    fn sub(self, o: Self) -> Self { self - o }
+    fn sub(self, o: Self) -> Self {
+        self - o
+    }
     #[inline(always)]
-    fn mul(self, o: Self) -> Self { self * o }
+    fn mul(self, o: Self) -> Self {
+        self * o
+    }
     #[inline(always)]
-    fn madd(self, b: Self, c: Self) -> Self { self * b + c }
+    fn madd(self, b: Self, c: Self) -> Self {
+        self * b + c
+    }
 }
 
 /// A 3x3 matrix as rows, `m[a][b]`.
@@ -134,13 +144,19 @@ impl Svk {
     }
 
     /// `(lambda, mu)` \[Pa\].
-    pub(crate) fn lame(&self) -> (f64, f64) { (self.lambda, self.mu) }
+    pub(crate) fn lame(&self) -> (f64, f64) {
+        (self.lambda, self.mu)
+    }
 
     /// The same law with no viscous stress.
-    pub(crate) fn without_viscosity(self) -> Svk { Svk { viscous: None, ..self } }
+    pub(crate) fn without_viscosity(self) -> Svk {
+        Svk { viscous: None, ..self }
+    }
 
     /// `true` when the viscous stress is not zero.
-    pub(crate) fn is_damped(&self) -> bool { self.viscous.is_some() }
+    pub(crate) fn is_damped(&self) -> bool {
+        self.viscous.is_some()
+    }
 
     /// Second Piola-Kirchhoff stress `S = lambda tr(E) I + 2 mu E` (eq. 9) of the Green strain
     /// `e`, plus, given the strain rate `nu` and when damped, the viscous

@@ -93,7 +93,11 @@ pub struct Material {
 }
 
 fn finite(name: &'static str, value: f64) -> Result<f64, MaterialError> {
-    if value.is_finite() { Ok(value) } else { Err(MaterialError::NonFinite { name, value }) }
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(MaterialError::NonFinite { name, value })
+    }
 }
 
 impl Material {
@@ -162,7 +166,12 @@ impl Material {
         if !(factor > 0.0 && factor.is_finite()) {
             return Err(MaterialError::NotPositive { name: "stiffness factor", value: factor, unit: "-" });
         }
-        Ok(Material { lambda: factor * self.lambda, mu: factor * self.mu, damping: Damping { phi: factor * self.damping.phi, psi: factor * self.damping.psi }, ..self })
+        Ok(Material {
+            lambda: factor * self.lambda,
+            mu: factor * self.mu,
+            damping: Damping { phi: factor * self.damping.phi, psi: factor * self.damping.psi },
+            ..self
+        })
     }
 
     /// Myocardium-like soft tissue in SI: E = 30 kPa, nu = 0.4, rho = 1060 kg/m^3, no damping.
@@ -171,35 +180,51 @@ impl Material {
     /// read from here so that they cannot disagree. (The shared benchmark protocol's tissue is
     /// 1000 kg/m^3: `palpate bench` keeps it, to compare with its peers.)
     pub fn myocardium() -> Material {
-        Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1060.0, Damping::NONE)
-            .expect("preset is valid")
+        Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1060.0, Damping::NONE).expect("preset is valid")
     }
 
     /// The paper's Table 1 "Ellipsoids Model" parameters in its (unstated, normalised) units:
     /// lambda = 5.5, mu = 2.5, phi = psi = 9e-5 (paper convention), density 1.
     pub fn paper_ellipsoids() -> Material {
-        Material::new(Elasticity::Lame { lambda: 5.5, mu: 2.5 }, 1.0, Damping::from_paper(9.0e-5, 9.0e-5))
-            .expect("preset is valid")
+        Material::new(Elasticity::Lame { lambda: 5.5, mu: 2.5 }, 1.0, Damping::from_paper(9.0e-5, 9.0e-5)).expect("preset is valid")
     }
 
     /// Lame's first parameter \[Pa\].
-    pub fn lambda(&self) -> f64 { self.lambda }
+    pub fn lambda(&self) -> f64 {
+        self.lambda
+    }
     /// Shear modulus \[Pa\].
-    pub fn mu(&self) -> f64 { self.mu }
+    pub fn mu(&self) -> f64 {
+        self.mu
+    }
     /// The elastic law.
-    pub fn law(&self) -> Law { self.law }
+    pub fn law(&self) -> Law {
+        self.law
+    }
     /// Mass density \[kg/m^3\].
-    pub fn density(&self) -> f64 { self.density }
+    pub fn density(&self) -> f64 {
+        self.density
+    }
     /// Viscous parameters \[Pa s\].
-    pub fn damping(&self) -> Damping { self.damping }
+    pub fn damping(&self) -> Damping {
+        self.damping
+    }
     /// Young's modulus \[Pa\].
-    pub fn young(&self) -> f64 { self.mu * (3.0 * self.lambda + 2.0 * self.mu) / (self.lambda + self.mu) }
+    pub fn young(&self) -> f64 {
+        self.mu * (3.0 * self.lambda + 2.0 * self.mu) / (self.lambda + self.mu)
+    }
     /// Poisson's ratio \[-\].
-    pub fn poisson(&self) -> f64 { self.lambda / (2.0 * (self.lambda + self.mu)) }
+    pub fn poisson(&self) -> f64 {
+        self.lambda / (2.0 * (self.lambda + self.mu))
+    }
     /// P-wave speed `sqrt((lambda + 2 mu) / rho)` \[m/s\]: sets explicit stability limits.
-    pub fn wave_speed(&self) -> f64 { ((self.lambda + 2.0 * self.mu) / self.density).sqrt() }
+    pub fn wave_speed(&self) -> f64 {
+        ((self.lambda + 2.0 * self.mu) / self.density).sqrt()
+    }
     /// `true` when both viscosities are zero.
-    pub fn is_undamped(&self) -> bool { self.damping.phi == 0.0 && self.damping.psi == 0.0 }
+    pub fn is_undamped(&self) -> bool {
+        self.damping.phi == 0.0 && self.damping.psi == 0.0
+    }
 }
 
 #[cfg(test)]

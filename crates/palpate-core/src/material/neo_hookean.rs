@@ -123,7 +123,9 @@ mod tests {
     use crate::material::{Damping, Elasticity, Law};
 
     fn mat() -> Material {
-        Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, Damping::NONE).unwrap().with_law(Law::NeoHookean)
+        Material::new(Elasticity::YoungPoisson { young: 3.0e4, poisson: 0.4 }, 1000.0, Damping::NONE)
+            .unwrap()
+            .with_law(Law::NeoHookean)
     }
 
     /// A fixed F with `det F = j` (a generic shear/stretch scaled to the volume ratio; `j < 0`

@@ -75,7 +75,9 @@ impl SurfaceAdjacency {
         SurfaceAdjacency { vertex_tris, across }
     }
 
-    fn around(&self, v: usize) -> &[u32] { self.vertex_tris.get(v) }
+    fn around(&self, v: usize) -> &[u32] {
+        self.vertex_tris.get(v)
+    }
 
     /// The triangles within `rings` rings of vertex `s` (sorted), growing one ring at a time
     /// while `more(rings so far, triangles added)` says so when `rings` is `None`. Returns the

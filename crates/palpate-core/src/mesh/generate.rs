@@ -98,7 +98,11 @@ fn check_size(generator: &'static str, nodes: f64, tets: f64) -> Result<(), Mesh
 }
 
 fn param(generator: &'static str, ok: bool, reason: impl FnOnce() -> String) -> Result<(), MeshError> {
-    if ok { Ok(()) } else { Err(MeshError::Generator { generator, reason: reason() }) }
+    if ok {
+        Ok(())
+    } else {
+        Err(MeshError::Generator { generator, reason: reason() })
+    }
 }
 
 fn to_arrays(points: &[Vec3], tets: &[[usize; 4]]) -> (Vec<[f64; 3]>, Vec<[i64; 4]>) {
@@ -162,25 +166,15 @@ fn box_arrays(size: [f64; 3], cells: [usize; 3]) -> (Vec<Vec3>, Vec<[usize; 4]>)
         for j in 0..=ny {
             for i in 0..=nx {
                 // Divide rather than accumulate a step, so the far faces land exactly on `size`.
-                points.push(Vec3::new(
-                    size[0] * i as f64 / nx as f64,
-                    size[1] * j as f64 / ny as f64,
-                    size[2] * k as f64 / nz as f64,
-                ));
+                points.push(Vec3::new(size[0] * i as f64 / nx as f64, size[1] * j as f64 / ny as f64, size[2] * k as f64 / nz as f64));
             }
         }
     }
 
     // The 6 orders of walking the axes from the low corner to the high one, with their parity:
     // the tet of an order has the sign of the permutation's determinant.
-    const ORDERS: [([usize; 3], bool); 6] = [
-        ([0, 1, 2], true),
-        ([1, 2, 0], true),
-        ([2, 0, 1], true),
-        ([0, 2, 1], false),
-        ([2, 1, 0], false),
-        ([1, 0, 2], false),
-    ];
+    const ORDERS: [([usize; 3], bool); 6] =
+        [([0, 1, 2], true), ([1, 2, 0], true), ([2, 0, 1], true), ([0, 2, 1], false), ([2, 1, 0], false), ([1, 0, 2], false)];
     let mut tets = Vec::with_capacity(6 * nx * ny * nz);
     for k in 0..nz {
         for j in 0..ny {
@@ -342,7 +336,9 @@ pub fn try_ellipsoid_wall(p: &EllipsoidWall) -> Result<TetMesh, MeshError> {
     axes_ok(G, "inner", p.inner)?;
     axes_ok(G, "outer", p.outer)?;
     param(G, (0..3).all(|i| p.outer[i] > p.inner[i]), || format!("outer semi-axes {:?} must exceed inner {:?}", p.outer, p.inner))?;
-    param(G, p.layers > 0 && p.subdivisions <= 12, || format!("layers must be at least 1 and subdivisions at most 12, got {} and {}", p.layers, p.subdivisions))?;
+    param(G, p.layers > 0 && p.subdivisions <= 12, || {
+        format!("layers must be at least 1 and subdivisions at most 12, got {} and {}", p.layers, p.subdivisions)
+    })?;
     let t = 8.0 * 4f64.powi(p.subdivisions as i32);
     check_size(G, (p.layers as f64 + 1.0) * (t / 2.0 + 2.0), 3.0 * p.layers as f64 * t)?;
     let (inner, outer, triangles) = ellipsoid_wall_surfaces(p);
@@ -431,14 +427,7 @@ impl Default for TruncatedEllipsoidWall {
     /// The benchmark-sized ventricle, cut at the equator: 20 x 6 points per surface plus the apex,
     /// 2 layers: 1320 tets, 363 nodes.
     fn default() -> Self {
-        Self {
-            inner: [0.020, 0.020, 0.035],
-            outer: [0.026, 0.026, 0.042],
-            z_cut: 0.0,
-            circumferential: 20,
-            longitudinal: 6,
-            layers: 2,
-        }
+        Self { inner: [0.020, 0.020, 0.035], outer: [0.026, 0.026, 0.042], z_cut: 0.0, circumferential: 20, longitudinal: 6, layers: 2 }
     }
 }
 
@@ -486,7 +475,9 @@ pub fn try_truncated_ellipsoid_wall(p: &TruncatedEllipsoidWall) -> Result<TetMes
     axes_ok(G, "inner", p.inner)?;
     axes_ok(G, "outer", p.outer)?;
     param(G, (0..3).all(|i| p.outer[i] > p.inner[i]), || format!("outer semi-axes {:?} must exceed inner {:?}", p.outer, p.inner))?;
-    param(G, p.z_cut.is_finite() && p.z_cut.abs() < p.inner[2], || format!("z_cut = {} must lie strictly inside the inner ellipsoid's z range", p.z_cut))?;
+    param(G, p.z_cut.is_finite() && p.z_cut.abs() < p.inner[2], || {
+        format!("z_cut = {} must lie strictly inside the inner ellipsoid's z range", p.z_cut)
+    })?;
     param(G, p.circumferential >= 3 && p.longitudinal >= 1 && p.layers >= 1, || {
         format!("need circumferential >= 3, longitudinal >= 1 and layers >= 1, got {}, {}, {}", p.circumferential, p.longitudinal, p.layers)
     })?;

@@ -22,5 +22,9 @@ pub use surface::{ellipsoid_surface, winding_number, SurfaceError, SurfaceWarnin
 /// Points given as arrays, as [`crate::Vec3`]s; `Err(i)` names the first with a non-finite
 /// coordinate.
 fn finite_points(points: &[[f64; 3]]) -> Result<Vec<crate::Vec3>, usize> {
-    points.iter().enumerate().map(|(i, p)| Some(crate::Vec3::new(p[0], p[1], p[2])).filter(crate::math::is_finite3).ok_or(i)).collect()
+    points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| Some(crate::Vec3::new(p[0], p[1], p[2])).filter(crate::math::is_finite3).ok_or(i))
+        .collect()
 }

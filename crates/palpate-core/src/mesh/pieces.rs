@@ -108,7 +108,11 @@ mod tests {
         p.extend(b.points().iter().map(|v| [v.x + shift, v.y, v.z]));
         let n = a.n_vertices() as i64;
         let mut t: Vec<[i64; 3]> = a.triangles().iter().map(|t| t.map(|v| v as i64)).collect();
-        t.extend(b.triangles().iter().map(|t| if flip { [t[0] as i64 + n, t[2] as i64 + n, t[1] as i64 + n] } else { t.map(|v| v as i64 + n) }));
+        t.extend(
+            b.triangles()
+                .iter()
+                .map(|t| if flip { [t[0] as i64 + n, t[2] as i64 + n, t[1] as i64 + n] } else { t.map(|v| v as i64 + n) }),
+        );
         TriSurface::from_arrays(&p, &t).unwrap().0
     }
 

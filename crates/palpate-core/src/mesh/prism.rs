@@ -30,7 +30,11 @@ pub fn split_prism(bottom: [usize; 3], nv: usize, order: TetOrder) -> [[usize; 4
     let m = (0..3).min_by_key(|&k| bottom[k]).unwrap();
     let (v1, v2, v3) = (bottom[m], bottom[(m + 1) % 3], bottom[(m + 2) % 3]);
     let (v4, v5, v6) = (v1 + nv, v2 + nv, v3 + nv);
-    let mut tets = if v2.min(v6) < v3.min(v5) { [[v1, v2, v3, v6], [v1, v2, v6, v5], [v1, v5, v6, v4]] } else { [[v1, v2, v3, v5], [v1, v5, v3, v6], [v1, v5, v6, v4]] };
+    let mut tets = if v2.min(v6) < v3.min(v5) {
+        [[v1, v2, v3, v6], [v1, v2, v6, v5], [v1, v5, v6, v4]]
+    } else {
+        [[v1, v2, v3, v5], [v1, v5, v3, v6], [v1, v5, v6, v4]]
+    };
     if order == TetOrder::SmallestFirst {
         for t in &mut tets {
             let k = (1..4).min_by_key(|&k| t[k]).unwrap();
@@ -75,7 +79,11 @@ mod tests {
                                 continue;
                             }
                             let tri = [a, b, c];
-                            assert_eq!(split_prism(tri.map(|i| i + l * nv), nv, TetOrder::SmallestFirst), generators_reference(tri, l * nv, (l + 1) * nv), "{tri:?} nv {nv} layer {l}");
+                            assert_eq!(
+                                split_prism(tri.map(|i| i + l * nv), nv, TetOrder::SmallestFirst),
+                                generators_reference(tri, l * nv, (l + 1) * nv),
+                                "{tri:?} nv {nv} layer {l}"
+                            );
                         }
                     }
                 }

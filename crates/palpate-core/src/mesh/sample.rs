@@ -31,11 +31,17 @@ pub struct ParticleSet {
 
 impl ParticleSet {
     /// Number of particles.
-    pub fn len(&self) -> usize { self.positions.len() }
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
     /// No particles?
-    pub fn is_empty(&self) -> bool { self.positions.is_empty() }
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
     /// Total mass \[kg\].
-    pub fn total_mass(&self) -> f64 { self.masses.iter().sum() }
+    pub fn total_mass(&self) -> f64 {
+        self.masses.iter().sum()
+    }
 }
 
 /// The lattice over a bounding box (see the module docs).
@@ -67,9 +73,15 @@ impl Lattice {
         Ok(Lattice { origin, n, s })
     }
 
-    fn x(&self, i: usize) -> f64 { self.origin.x + i as f64 * self.s }
-    fn y(&self, j: usize) -> f64 { self.origin.y + j as f64 * self.s }
-    fn z(&self, k: usize) -> f64 { self.origin.z + k as f64 * self.s }
+    fn x(&self, i: usize) -> f64 {
+        self.origin.x + i as f64 * self.s
+    }
+    fn y(&self, j: usize) -> f64 {
+        self.origin.y + j as f64 * self.s
+    }
+    fn z(&self, k: usize) -> f64 {
+        self.origin.z + k as f64 * self.s
+    }
 }
 
 fn check_params(spacing: f64, density: f64) -> Result<(), SurfaceError> {
@@ -247,7 +259,20 @@ mod tests {
     #[test]
     fn sample_cube_lattice_is_offset_by_half_a_spacing() {
         let p: Vec<[f64; 3]> = (0..8).map(|i| [(i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64]).collect();
-        let t = vec![[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4], [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]];
+        let t = vec![
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ];
         let cube = TriSurface::from_arrays(&p, &t).unwrap().0;
         let set = sample_inside(&cube, 0.1, 2.0).unwrap();
         assert_eq!(set.len(), 1000);
@@ -313,7 +338,12 @@ mod tests {
             let v = set.len() as f64 * s * s * s;
             eprintln!(
                 "LV shell fill at {:.2} mm: {} particles in {:.1} ms (surfaces: {} triangles each, built in {:.1} ms); volume {:+.2}% vs the ellipsoids",
-                s * 1e3, set.len(), dt * 1e3, outer.n_triangles(), t_surf * 1e3, 100.0 * (v - exact) / exact
+                s * 1e3,
+                set.len(),
+                dt * 1e3,
+                outer.n_triangles(),
+                t_surf * 1e3,
+                100.0 * (v - exact) / exact
             );
             assert!((v - exact).abs() < 0.03 * exact);
             assert!(dt < 2.0, "sampling took {dt} s");

@@ -44,7 +44,16 @@ impl Quadric {
     fn eval(&self, p: &Vec3) -> f64 {
         let q = &self.0;
         let (x, y, z) = (p.x, p.y, p.z);
-        q[0] * x * x + 2.0 * q[1] * x * y + 2.0 * q[2] * x * z + 2.0 * q[3] * x + q[4] * y * y + 2.0 * q[5] * y * z + 2.0 * q[6] * y + q[7] * z * z + 2.0 * q[8] * z + q[9]
+        q[0] * x * x
+            + 2.0 * q[1] * x * y
+            + 2.0 * q[2] * x * z
+            + 2.0 * q[3] * x
+            + q[4] * y * y
+            + 2.0 * q[5] * y * z
+            + 2.0 * q[6] * y
+            + q[7] * z * z
+            + 2.0 * q[8] * z
+            + q[9]
     }
     /// The minimiser, if the 3x3 block is well conditioned.
     fn optimum(&self) -> Option<Vec3> {
@@ -59,7 +68,13 @@ impl Quadric {
 }
 
 fn old_longest(pos: &[Vec3], tri: &[usize; 3]) -> f64 {
-    [(pos[tri[1]] - pos[tri[0]]).norm_squared(), (pos[tri[2]] - pos[tri[1]]).norm_squared(), (pos[tri[0]] - pos[tri[2]]).norm_squared()].into_iter().fold(0.0, f64::max)
+    [
+        (pos[tri[1]] - pos[tri[0]]).norm_squared(),
+        (pos[tri[2]] - pos[tri[1]]).norm_squared(),
+        (pos[tri[0]] - pos[tri[2]]).norm_squared(),
+    ]
+    .into_iter()
+    .fold(0.0, f64::max)
 }
 
 #[derive(Debug, PartialEq)]
@@ -77,7 +92,9 @@ impl Ord for Candidate {
     }
 }
 impl PartialOrd for Candidate {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> { Some(self.cmp(o)) }
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
 }
 
 /// A simplified surface.
@@ -246,7 +263,8 @@ pub fn simplify(points: &[Vec3], triangles: &[[usize; 3]], target: usize) -> Sim
                 // Shape: 2 sqrt(3) |n| / sum of squared edges is 1 for an equilateral triangle.
                 let sum_sq = (p(tri[1]) - p(tri[0])).norm_squared() + (p(tri[2]) - p(tri[1])).norm_squared() + (p(tri[0]) - p(tri[2])).norm_squared();
                 let shape = 2.0 * 3f64.sqrt() * ln / sum_sq;
-                let old_sum_sq = (pos[tri[1]] - pos[tri[0]]).norm_squared() + (pos[tri[2]] - pos[tri[1]]).norm_squared() + (pos[tri[0]] - pos[tri[2]]).norm_squared();
+                let old_sum_sq =
+                    (pos[tri[1]] - pos[tri[0]]).norm_squared() + (pos[tri[2]] - pos[tri[1]]).norm_squared() + (pos[tri[0]] - pos[tri[2]]).norm_squared();
                 let old_shape = 2.0 * 3f64.sqrt() * lo / old_sum_sq;
                 if longest.sqrt() > max_edge && longest > old_longest(&pos, &tri) {
                     rejected[2] += 1;
@@ -254,7 +272,15 @@ pub fn simplify(points: &[Vec3], triangles: &[[usize; 3]], target: usize) -> Sim
                     break;
                 }
                 if lo == 0.0 || ln <= 0.05 * longest || n_old.dot(&n_new) < cos_max * lo * ln || shape < min_shape.min(0.999 * old_shape) {
-                    rejected[if lo == 0.0 { 3 } else if ln <= 0.05 * longest { 4 } else if shape < min_shape.min(0.999 * old_shape) { 5 } else { 3 }] += 1;
+                    rejected[if lo == 0.0 {
+                        3
+                    } else if ln <= 0.05 * longest {
+                        4
+                    } else if shape < min_shape.min(0.999 * old_shape) {
+                        5
+                    } else {
+                        3
+                    }] += 1;
                     ok = false;
                     break;
                 }
@@ -303,7 +329,16 @@ pub fn simplify(points: &[Vec3], triangles: &[[usize; 3]], target: usize) -> Sim
         }
     }
     if std::env::var_os("PALPATE_DEBUG").is_some() {
-        eprintln!("simplify: {} -> {n_alive} triangles (target {target}); rejected: pinch {}, link {}, long edge {}, fold {}, sliver {}, shape {}", tris.len(), rejected[0], rejected[1], rejected[2], rejected[3], rejected[4], rejected[5]);
+        eprintln!(
+            "simplify: {} -> {n_alive} triangles (target {target}); rejected: pinch {}, link {}, long edge {}, fold {}, sliver {}, shape {}",
+            tris.len(),
+            rejected[0],
+            rejected[1],
+            rejected[2],
+            rejected[3],
+            rejected[4],
+            rejected[5]
+        );
     }
     // Compact.
     let mut map = vec![usize::MAX; pos.len()];

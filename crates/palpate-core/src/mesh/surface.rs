@@ -96,10 +96,9 @@ pub enum SurfaceWarning {
 impl std::fmt::Display for SurfaceWarning {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            SurfaceWarning::Reoriented { triangles, volume } => write!(
-                f,
-                "the surface is oriented inward (signed volume {volume:e} m^3): reversed all {triangles} triangles"
-            ),
+            SurfaceWarning::Reoriented { triangles, volume } => {
+                write!(f, "the surface is oriented inward (signed volume {volume:e} m^3): reversed all {triangles} triangles")
+            }
             SurfaceWarning::UnusedVertices { vertices } => {
                 let shown: Vec<String> = vertices.iter().take(8).map(|v| v.to_string()).collect();
                 let more = if vertices.len() > 8 { format!(", ... ({} in all)", vertices.len()) } else { String::new() };
@@ -199,28 +198,43 @@ impl TriSurface {
     }
 
     /// Vertex positions \[m\].
-    pub fn points(&self) -> &[Vec3] { &self.points }
+    pub fn points(&self) -> &[Vec3] {
+        &self.points
+    }
     /// Triangles as vertex indices, outward oriented (counter-clockwise seen from outside).
-    pub fn triangles(&self) -> &[[usize; 3]] { &self.triangles }
+    pub fn triangles(&self) -> &[[usize; 3]] {
+        &self.triangles
+    }
     /// Number of vertices (including any unused ones).
-    pub fn n_vertices(&self) -> usize { self.points.len() }
+    pub fn n_vertices(&self) -> usize {
+        self.points.len()
+    }
     /// Number of triangles.
-    pub fn n_triangles(&self) -> usize { self.triangles.len() }
+    pub fn n_triangles(&self) -> usize {
+        self.triangles.len()
+    }
 
     /// Enclosed volume \[m^3\] by the divergence theorem, `sum_t a . (b x c) / 6`: positive (the
     /// surface is outward oriented after validation).
-    pub fn volume(&self) -> f64 { signed_volume(&self.points, &self.triangles) }
+    pub fn volume(&self) -> f64 {
+        signed_volume(&self.points, &self.triangles)
+    }
 
     /// Surface area \[m^2\].
     pub fn area(&self) -> f64 {
-        self.triangles.iter().map(|t| {
-            let [a, b, c] = t.map(|i| self.points[i]);
-            0.5 * (b - a).cross(&(c - a)).norm()
-        }).sum()
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.points[i]);
+                0.5 * (b - a).cross(&(c - a)).norm()
+            })
+            .sum()
     }
 
     /// Axis-aligned bounding box `(lo, hi)` of the vertices used by triangles \[m\].
-    pub fn bounding_box(&self) -> (Vec3, Vec3) { (self.lo, self.hi) }
+    pub fn bounding_box(&self) -> (Vec3, Vec3) {
+        (self.lo, self.hi)
+    }
 
     /// Generalised winding number of the surface around `p` (1 inside, 0 outside for a closed
     /// surface; 1/2 on it): `sum_t Omega_t / (4 pi)` with the signed solid angle `Omega_t` of
@@ -262,10 +276,14 @@ impl TriSurface {
 
 /// Signed volume `sum_t a . (b x c) / 6` \[m^3\].
 fn signed_volume(points: &[Vec3], triangles: &[[usize; 3]]) -> f64 {
-    triangles.iter().map(|t| {
-        let [a, b, c] = t.map(|i| points[i]);
-        a.dot(&b.cross(&c))
-    }).sum::<f64>() / 6.0
+    triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|i| points[i]);
+            a.dot(&b.cross(&c))
+        })
+        .sum::<f64>()
+        / 6.0
 }
 
 /// Every edge must be used by exactly two triangles, in opposite directions.
@@ -331,8 +349,18 @@ fn edge_side(points: &[Vec3], u: usize, v: usize, x: f64, y: f64) -> (f64, f64) 
     let (dx, dy) = (pb.x - pa.x, pb.y - pa.y);
     let e = dx * (y - pa.y) - dy * (x - pa.x);
     // (x + eps, y + eps^2): e + eps^2 dx - eps dy
-    let s = if e != 0.0 { e } else if dy != 0.0 { -dy } else { dx };
-    if flip { (-e, -s.signum()) } else { (e, s.signum()) }
+    let s = if e != 0.0 {
+        e
+    } else if dy != 0.0 {
+        -dy
+    } else {
+        dx
+    };
+    if flip {
+        (-e, -s.signum())
+    } else {
+        (e, s.signum())
+    }
 }
 
 /// Height at which the vertical line through `(x, y)` crosses triangle `t`, if it does.
@@ -386,7 +414,12 @@ impl ColumnGrid {
             }
             // One cell of slack each way: a line exactly on a cell border finds the triangle.
             let cl = |v: f64, o: f64, n: usize| (((v - o) * inv_cell).floor() as i64).clamp(0, n as i64 - 1) as usize;
-            (cl(xmin, lo.x, nx).saturating_sub(1), (cl(xmax, lo.x, nx) + 1).min(nx - 1), cl(ymin, lo.y, ny).saturating_sub(1), (cl(ymax, lo.y, ny) + 1).min(ny - 1))
+            (
+                cl(xmin, lo.x, nx).saturating_sub(1),
+                (cl(xmax, lo.x, nx) + 1).min(nx - 1),
+                cl(ymin, lo.y, ny).saturating_sub(1),
+                (cl(ymax, lo.y, ny) + 1).min(ny - 1),
+            )
         };
         let cells = Buckets::build(nx * ny, triangles.len(), |t| {
             let (i0, i1, j0, j1) = range(&triangles[t]);
@@ -410,7 +443,9 @@ impl ColumnGrid {
     }
 
     #[inline]
-    fn cell(&self, i: usize, j: usize) -> &[u32] { self.cells.get(i + self.nx * j) }
+    fn cell(&self, i: usize, j: usize) -> &[u32] {
+        self.cells.get(i + self.nx * j)
+    }
 }
 
 /// The ellipsoid of semi-axes `semi_axes` \[m\] (along x, y, z, centred at the origin) as a
@@ -426,7 +461,11 @@ impl ColumnGrid {
 pub fn try_ellipsoid_surface(semi_axes: [f64; 3], subdivisions: usize) -> Result<TriSurface, SurfaceError> {
     let (lo, hi) = (semi_axes.iter().copied().fold(f64::INFINITY, f64::min), semi_axes.iter().copied().fold(0.0, f64::max));
     if !(semi_axes.iter().all(|a| a.is_finite() && a.is_normal() && *a > 0.0) && hi <= 1e6 * lo && hi < 1e150) {
-        return Err(SurfaceError::Parameter { name: "ellipsoid semi-axes ratio", value: hi / lo, reason: "semi-axes must be finite, positive, below 1e150 m and within a factor 1e6 of each other" });
+        return Err(SurfaceError::Parameter {
+            name: "ellipsoid semi-axes ratio",
+            value: hi / lo,
+            reason: "semi-axes must be finite, positive, below 1e150 m and within a factor 1e6 of each other",
+        });
     }
     if subdivisions > 10 {
         return Err(SurfaceError::Parameter { name: "subdivisions", value: subdivisions as f64, reason: "too many (at most 10)" });
@@ -436,7 +475,11 @@ pub fn try_ellipsoid_surface(semi_axes: [f64; 3], subdivisions: usize) -> Result
     let triangles: Vec<[i64; 3]> = tris.iter().map(|t| t.map(|i| i as i64)).collect();
     let (s, warnings) = TriSurface::from_arrays(&points, &triangles)?;
     if !warnings.is_empty() {
-        return Err(SurfaceError::Parameter { name: "ellipsoid surface warnings", value: warnings.len() as f64, reason: "the semi-axes give a surface that needed repairs" });
+        return Err(SurfaceError::Parameter {
+            name: "ellipsoid surface warnings",
+            value: warnings.len() as f64,
+            reason: "the semi-axes give a surface that needed repairs",
+        });
     }
     Ok(s)
 }

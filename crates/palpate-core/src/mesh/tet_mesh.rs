@@ -155,25 +155,38 @@ impl TetMesh {
     }
 
     /// Node positions \[m\], `(n_nodes)`.
-    pub fn points(&self) -> &[Vec3] { &self.points }
+    pub fn points(&self) -> &[Vec3] {
+        &self.points
+    }
     /// Tets as node indices, `(n_tets, 4)`, positively oriented.
-    pub fn tets(&self) -> &[[usize; 4]] { &self.tets }
+    pub fn tets(&self) -> &[[usize; 4]] {
+        &self.tets
+    }
     /// Number of nodes.
-    pub fn n_nodes(&self) -> usize { self.points.len() }
+    pub fn n_nodes(&self) -> usize {
+        self.points.len()
+    }
     /// Number of tets.
-    pub fn n_tets(&self) -> usize { self.tets.len() }
+    pub fn n_tets(&self) -> usize {
+        self.tets.len()
+    }
 
     /// Total volume \[m^3\].
     pub fn volume(&self) -> f64 {
-        self.tets.iter().map(|t| {
-            let [a, b, c, d] = t.map(|i| self.points[i]);
-            signed_volume(&a, &b, &c, &d)
-        }).sum()
+        self.tets
+            .iter()
+            .map(|t| {
+                let [a, b, c, d] = t.map(|i| self.points[i]);
+                signed_volume(&a, &b, &c, &d)
+            })
+            .sum()
     }
 
     /// Boundary faces (triangles used by exactly one tet), oriented outward, `(n_faces, 3)`,
     /// sorted ([`boundary_faces`]).
-    pub fn boundary_faces(&self) -> Vec<[usize; 3]> { boundary_faces(&self.points, &self.tets) }
+    pub fn boundary_faces(&self) -> Vec<[usize; 3]> {
+        boundary_faces(&self.points, &self.tets)
+    }
     /// Every edge once, lower vertex first, in the order of first appearance over the tets and
     /// their local edges `(0,1) (1,2) (0,2) (0,3) (1,3) (2,3)` (the order of a quadratic body's
     /// edge nodes, [`crate::fem::tet10::TET10_EDGES`]).
@@ -278,10 +291,7 @@ mod tests {
         assert!(matches!(TetMesh::from_arrays(&p, &[[0, 1, 2, 3], [1, 0, 2, 3]]), Err(MeshError::DuplicateTet { tet: 1, other: 0 })));
         // The same tet on copied nodes (issue 35 item 6): twice the volume, refused too.
         let twice: Vec<[f64; 3]> = p.iter().chain(p.iter()).copied().collect();
-        assert!(matches!(
-            TetMesh::from_arrays(&twice, &[[0, 1, 2, 3], [4, 6, 5, 7]]),
-            Err(MeshError::CoincidentTet { tet: 1, other: 0, .. })
-        ));
+        assert!(matches!(TetMesh::from_arrays(&twice, &[[0, 1, 2, 3], [4, 6, 5, 7]]), Err(MeshError::CoincidentTet { tet: 1, other: 0, .. })));
         // -0.0 is the same corner as 0.0.
         let mut signed = twice.clone();
         signed[4] = [-0.0, -0.0, -0.0];

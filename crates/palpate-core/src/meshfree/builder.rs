@@ -45,7 +45,19 @@ impl ParticleModelBuilder {
     /// Particles at rest positions `positions` \[m\] with masses `masses` \[kg\], of `material`,
     /// interacting within the kernel support radius `support` \[m\] (typically 1.5 - 2 particle spacings).
     pub fn new(positions: Vec<Vec3>, masses: Vec<f64>, material: Material, support: f64) -> Self {
-        ParticleModelBuilder { positions, masses, material, support, kernel: Kernel::default(), fixed: vec![], gravity: Vec3::zeros(), hourglass: DEFAULT_HOURGLASS, min_weight: DEFAULT_MIN_WEIGHT, fix_unsupported: false, mass_scaling: None }
+        ParticleModelBuilder {
+            positions,
+            masses,
+            material,
+            support,
+            kernel: Kernel::default(),
+            fixed: vec![],
+            gravity: Vec3::zeros(),
+            hourglass: DEFAULT_HOURGLASS,
+            min_weight: DEFAULT_MIN_WEIGHT,
+            fix_unsupported: false,
+            mass_scaling: None,
+        }
     }
     /// Kernel (default Wendland C2).
     pub fn kernel(mut self, k: Kernel) -> Self {
@@ -97,7 +109,19 @@ impl ParticleModelBuilder {
     /// not St. Venant-Kirchhoff (the only law of the particle hot loop for now); invalid particles,
     /// parameters, fixed indices or gravity.
     pub fn build(self) -> Result<ParticleModel, ModelError> {
-        let ParticleModelBuilder { positions: rest, masses, material, support: h, kernel, fixed, gravity, hourglass, min_weight, fix_unsupported, mass_scaling } = self;
+        let ParticleModelBuilder {
+            positions: rest,
+            masses,
+            material,
+            support: h,
+            kernel,
+            fixed,
+            gravity,
+            hourglass,
+            min_weight,
+            fix_unsupported,
+            mass_scaling,
+        } = self;
         // The pair loop (pair_loop/, with its AVX2 copy) evaluates the St. Venant-Kirchhoff
         // stress only: refuse any other law rather than silently simulate SVK.
         if material.law() != Law::StVenantKirchhoff {
@@ -123,7 +147,11 @@ impl ParticleModelBuilder {
             // Added mass is inertia, not weight: with gravity the scaled particles would weigh
             // more. Not needed by the hybrid shell (no gravity), so refused rather than half done.
             if gravity != Vec3::zeros() {
-                return Err(ModelError::Parameter { name: "mass scaling quantile", value: q, reason: "mass scaling with gravity is not supported (the added mass would weigh)" });
+                return Err(ModelError::Parameter {
+                    name: "mass scaling quantile",
+                    value: q,
+                    reason: "mass scaling with gravity is not supported (the added mass would weigh)",
+                });
             }
         }
         if !(hourglass >= 0.0 && hourglass.is_finite()) {
@@ -239,7 +267,13 @@ impl ParticleModelBuilder {
             // The eigenvalue test above passes a matrix whose entries underflow or overflow (masses
             // near 1e-150 make volumes of 1e-153): an error, not a panic.
             let Some(a_inv) = a.try_inverse().filter(|m| m.iter().all(|v| v.is_finite())) else {
-                return Err(ModelError::Particle { particle: i, reason: format!("its moment matrix cannot be inverted (volume {:e} m^3 from mass {:e} kg): masses and density must give volumes of a physical size", volume[i], masses[i]) });
+                return Err(ModelError::Particle {
+                    particle: i,
+                    reason: format!(
+                        "its moment matrix cannot be inverted (volume {:e} m^3 from mass {:e} kg): masses and density must give volumes of a physical size",
+                        volume[i], masses[i]
+                    ),
+                });
             };
             let c = hourglass * material.mu() * volume[i] / second;
             r_inv[i] = a_inv;

@@ -60,8 +60,8 @@
 //! and the per-call overhead (see [`step_with_substeps`]).
 
 mod builder;
-mod mass_scaling;
 pub mod kernel;
+mod mass_scaling;
 mod model;
 pub mod neighbors;
 mod pair_loop;
@@ -88,8 +88,8 @@ pub use model::{barrier_energy_density, ParticleModel};
 /// particle is pushed back out. The particle force stays minus the gradient of
 /// [`ParticleModel::strain_energy`] (which includes it: tests/meshfree.rs).
 pub const COMPRESSION_FLOOR: f64 = 0.5;
-pub use pair_loop::{set_simd_enabled, simd_path};
 pub(crate) use pair_loop::simd_allowed;
+pub use pair_loop::{set_simd_enabled, simd_path};
 pub use stability::STABILITY_SAFETY;
 pub use state::{ParticleState, ParticleStepReport, ParticleWorkspace, SubStep};
 pub use step::{step, step_with, step_with_fork, step_with_substeps};

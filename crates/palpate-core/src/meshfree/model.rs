@@ -49,44 +49,76 @@ pub struct ParticleModel {
 
 impl ParticleModel {
     /// Number of particles.
-    pub fn n_particles(&self) -> usize { self.rest.len() }
+    pub fn n_particles(&self) -> usize {
+        self.rest.len()
+    }
     /// Rest positions \[m\].
-    pub fn rest_positions(&self) -> &[Vec3] { &self.rest }
+    pub fn rest_positions(&self) -> &[Vec3] {
+        &self.rest
+    }
     /// Masses \[kg\].
-    pub fn masses(&self) -> &[f64] { &self.mass }
+    pub fn masses(&self) -> &[f64] {
+        &self.mass
+    }
     /// Kernel-sum densities \[kg/m^3\] (eq. 25, Shepard-normalised).
-    pub fn densities(&self) -> &[f64] { &self.density }
+    pub fn densities(&self) -> &[f64] {
+        &self.density
+    }
     /// Volumes `m / rho` \[m^3\].
-    pub fn volumes(&self) -> &[f64] { &self.volume }
+    pub fn volumes(&self) -> &[f64] {
+        &self.volume
+    }
     /// Neighbours of particle `i` at rest.
-    pub fn neighbours(&self, i: usize) -> &[usize] { &self.nbr[self.ptr[i]..self.ptr[i + 1]] }
+    pub fn neighbours(&self, i: usize) -> &[usize] {
+        &self.nbr[self.ptr[i]..self.ptr[i + 1]]
+    }
     /// Total number of (directed) neighbour pairs.
-    pub fn n_pairs(&self) -> usize { self.nbr.len() }
+    pub fn n_pairs(&self) -> usize {
+        self.nbr.len()
+    }
     /// Particles the builder held because their neighbours do not span 3D (empty unless
     /// [`super::ParticleModelBuilder::fix_unsupported`]).
     pub fn unsupported(&self) -> &[usize] {
         &self.unsupported
     }
     /// Fixed flags.
-    pub fn fixed(&self) -> &[bool] { &self.fixed }
+    pub fn fixed(&self) -> &[bool] {
+        &self.fixed
+    }
     /// The material.
-    pub fn material(&self) -> &Material { &self.material }
+    pub fn material(&self) -> &Material {
+        &self.material
+    }
     /// The kernel.
-    pub fn kernel(&self) -> Kernel { self.kernel }
+    pub fn kernel(&self) -> Kernel {
+        self.kernel
+    }
     /// Support radius \[m\].
-    pub fn support(&self) -> f64 { self.support }
+    pub fn support(&self) -> f64 {
+        self.support
+    }
     /// Hourglass-control stiffness `kappa` \[-\].
-    pub fn hourglass(&self) -> f64 { self.hourglass }
+    pub fn hourglass(&self) -> f64 {
+        self.hourglass
+    }
     /// Largest explicit (Verlet) time step that is stable for this body \[s\], with safety factor
     /// [`super::STABILITY_SAFETY`] (from the largest eigenfrequency of the linearised system).
-    pub fn stable_dt(&self) -> f64 { self.stable_dt }
+    pub fn stable_dt(&self) -> f64 {
+        self.stable_dt
+    }
     /// Largest angular eigenfrequency of the rest-linearised, undamped system \[rad/s\].
-    pub fn omega_max(&self) -> f64 { self.omega_max }
+    pub fn omega_max(&self) -> f64 {
+        self.omega_max
+    }
     /// Largest eigenvalue of the rest-linearised `M^-1 D` (the viscous stress's rate) \[1/s\]; 0
     /// for an undamped material.
-    pub fn damping_max(&self) -> f64 { self.damping_max }
+    pub fn damping_max(&self) -> f64 {
+        self.damping_max
+    }
     /// Sub-steps that [`super::step`] takes for a caller step `dt` \[s\].
-    pub fn substeps(&self, dt: f64) -> usize { (dt / self.stable_dt).ceil().max(1.0) as usize }
+    pub fn substeps(&self, dt: f64) -> usize {
+        (dt / self.stable_dt).ceil().max(1.0) as usize
+    }
 
     /// Deformation gradient of particle `i` at positions `x` (the MLS fit).
     pub fn deformation_gradient(&self, i: usize, x: &[Vec3]) -> Mat3 {
@@ -110,7 +142,8 @@ impl ParticleModel {
     /// particles (frozen ones carry no stress).
     pub fn particle_energy(&self, i: usize, x: &[Vec3]) -> f64 {
         let f = self.deformation_gradient(i, x);
-        let mut total = self.volume[i] * (material::energy_density(&self.material, &material::green_strain(&f)) + barrier_energy_density(&self.material, f.determinant()));
+        let mut total =
+            self.volume[i] * (material::energy_density(&self.material, &material::green_strain(&f)) + barrier_energy_density(&self.material, f.determinant()));
         let ui = x[i] - self.rest[i];
         let hmat = f - Mat3::identity();
         for p in self.ptr[i]..self.ptr[i + 1] {

@@ -28,7 +28,13 @@ impl ParticleModel {
     fn max_eigenvalue(&self, viscous: bool) -> f64 {
         let n = self.n_particles();
         let mut u: Vec<Vec3> = (0..n)
-            .map(|i| if self.fixed[i] { Vec3::zeros() } else { Vec3::new(((i * 7919) % 13) as f64 - 6.0, ((i * 104729) % 11) as f64 - 5.0, ((i * 31) % 7) as f64 - 3.0) })
+            .map(|i| {
+                if self.fixed[i] {
+                    Vec3::zeros()
+                } else {
+                    Vec3::new(((i * 7919) % 13) as f64 - 6.0, ((i * 104729) % 11) as f64 - 5.0, ((i * 31) % 7) as f64 - 3.0)
+                }
+            })
             .collect();
         let mut f = vec![Vec3::zeros(); n];
         let mut lambda = 0.0;

@@ -108,7 +108,19 @@ impl ParticleWorkspace {
     /// Number of particles it was made for (every per-particle array has this length).
     pub(crate) fn len(&self) -> usize {
         let n = self.u.len();
-        if [self.force.len(), self.v.len(), self.b.len(), self.gamma.len(), self.acc_ext.len(), self.u_next.len(), self.mark.len(), self.f_sub.len()].iter().all(|&l| l == n) {
+        if [
+            self.force.len(),
+            self.v.len(),
+            self.b.len(),
+            self.gamma.len(),
+            self.acc_ext.len(),
+            self.u_next.len(),
+            self.mark.len(),
+            self.f_sub.len(),
+        ]
+        .iter()
+        .all(|&l| l == n)
+        {
             n
         } else {
             usize::MAX

@@ -40,7 +40,13 @@ pub fn step(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleW
 /// and adds `h` to `t` `k` times. They also repeat the per-call work (validation, the neighbour
 /// scan of the active set, the ring set-up) `k` times. A caller whose forces depend on the state
 /// at every sub-step should use [`step_with`], which is exactly this function's loop.
-pub fn step_with_substeps(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize) -> Result<ParticleStepReport, StepError> {
+pub fn step_with_substeps(
+    model: &ParticleModel,
+    state: &mut ParticleState,
+    ws: &mut ParticleWorkspace,
+    dt: f64,
+    substeps: usize,
+) -> Result<ParticleStepReport, StepError> {
     advance(model, state, ws, dt, substeps, None, &Serial)
 }
 
@@ -56,7 +62,14 @@ pub fn step_with_substeps(model: &ParticleModel, state: &mut ParticleState, ws: 
 ///
 /// The callback must not allocate for the step to stay allocation-free. Non-finite forces it
 /// returns make the step fail (non-finite state) and leave the state unchanged.
-pub fn step_with<E>(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize, mut external: E) -> Result<ParticleStepReport, StepError>
+pub fn step_with<E>(
+    model: &ParticleModel,
+    state: &mut ParticleState,
+    ws: &mut ParticleWorkspace,
+    dt: f64,
+    substeps: usize,
+    mut external: E,
+) -> Result<ParticleStepReport, StepError>
 where
     E: FnMut(&SubStep<'_>, &mut [Vec3]),
 {
@@ -66,7 +79,15 @@ where
 /// [`step_with`] with the passes of each sub-step split over the caller's threads (`fork`, see
 /// [`crate::parallel`]): bitwise the same result. The callback runs on the calling thread,
 /// between the passes.
-pub fn step_with_fork<E>(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize, fork: &dyn Fork, mut external: E) -> Result<ParticleStepReport, StepError>
+pub fn step_with_fork<E>(
+    model: &ParticleModel,
+    state: &mut ParticleState,
+    ws: &mut ParticleWorkspace,
+    dt: f64,
+    substeps: usize,
+    fork: &dyn Fork,
+    mut external: E,
+) -> Result<ParticleStepReport, StepError>
 where
     E: FnMut(&SubStep<'_>, &mut [Vec3]),
 {
@@ -78,7 +99,15 @@ where
 pub const MAX_PARTICLE_SUBSTEPS: usize = 100_000_000;
 pub const MIN_SUBSTEP_CAP: usize = 1000;
 
-fn advance(model: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, dt: f64, substeps: usize, external: Option<ExtForce<'_>>, fork: &dyn Fork) -> Result<ParticleStepReport, StepError> {
+fn advance(
+    model: &ParticleModel,
+    state: &mut ParticleState,
+    ws: &mut ParticleWorkspace,
+    dt: f64,
+    substeps: usize,
+    external: Option<ExtForce<'_>>,
+    fork: &dyn Fork,
+) -> Result<ParticleStepReport, StepError> {
     // A ring left from an earlier step must not be mistaken for this one's if this one fails.
     ws.ring.clear();
     ws.ring_force.clear();

@@ -22,11 +22,11 @@
 //! `touch(s)` for each outer vertex under the tool ([`Activation::touch_sphere`] finds them),
 //! then `update(tick)`, which returns the active, entered and left particles.
 
-use std::sync::Arc;
 use crate::hybrid::HybridModel;
 use crate::math::Vec3;
 use crate::mesh::adjacency::Marks;
 use crate::spatial::Buckets;
+use std::sync::Arc;
 
 /// `last_touched` of a region never touched.
 const NEVER: u64 = u64::MAX;
@@ -110,7 +110,25 @@ impl Clone for Activation {
     /// with the capacities the updates rely on to allocate nothing.
     fn clone_from(&mut self, s: &Self) {
         // Exhaustive: a new field is a compile error here until it is copied.
-        let Activation { region_tris, tri_particle_ptr, tri_count, triangles, last_touched, is_active, is_pending, pending, regions, linger, tri_on, tri_off, active, scratch, entered, left, mean_edge } = self;
+        let Activation {
+            region_tris,
+            tri_particle_ptr,
+            tri_count,
+            triangles,
+            last_touched,
+            is_active,
+            is_pending,
+            pending,
+            regions,
+            linger,
+            tri_on,
+            tri_off,
+            active,
+            scratch,
+            entered,
+            left,
+            mean_edge,
+        } = self;
         if !Arc::ptr_eq(region_tris, &s.region_tris) {
             *region_tris = s.region_tris.clone();
         }
@@ -169,7 +187,11 @@ impl Activation {
         let region_tris = Buckets { ptr, items };
         // Per-triangle particle ranges, clamped so a damaged table cannot index past the particles.
         let n_particles = model.particles.len() as u32;
-        let mut tri_particle_ptr: Vec<u32> = if model.tri_particle_ptr.len() == n_tris + 1 { model.tri_particle_ptr.clone() } else { vec![0; n_tris + 1] };
+        let mut tri_particle_ptr: Vec<u32> = if model.tri_particle_ptr.len() == n_tris + 1 {
+            model.tri_particle_ptr.clone()
+        } else {
+            vec![0; n_tris + 1]
+        };
         let mut lo = 0;
         for p in tri_particle_ptr.iter_mut() {
             *p = (*p).clamp(lo, n_particles);
@@ -207,27 +229,45 @@ impl Activation {
     }
 
     /// Number of regions (outer vertices).
-    pub fn n_regions(&self) -> usize { self.last_touched.len() }
+    pub fn n_regions(&self) -> usize {
+        self.last_touched.len()
+    }
 
     /// Number of outer triangles.
-    pub fn n_triangles(&self) -> usize { self.tri_count.len() }
+    pub fn n_triangles(&self) -> usize {
+        self.tri_count.len()
+    }
 
     /// The triangles of region `s`, sorted (empty for `s` out of range).
-    pub fn region_triangles(&self, s: usize) -> &[u32] { if s < self.n_regions() { self.region_tris.get(s) } else { &[] } }
+    pub fn region_triangles(&self, s: usize) -> &[u32] {
+        if s < self.n_regions() {
+            self.region_tris.get(s)
+        } else {
+            &[]
+        }
+    }
 
     /// The region-triangle table's size \[bytes\].
-    pub fn table_bytes(&self) -> usize { 4 * (self.region_tris.ptr.len() + self.region_tris.items.len()) }
+    pub fn table_bytes(&self) -> usize {
+        4 * (self.region_tris.ptr.len() + self.region_tris.items.len())
+    }
 
     /// Ticks a region stays active after its last contact.
-    pub fn linger(&self) -> u64 { self.linger }
+    pub fn linger(&self) -> u64 {
+        self.linger
+    }
 
     /// Regions now linger `ticks` ticks after their last contact (the runtime sets it each tick
     /// from [`crate::runtime::SimOptions::linger`] and the tick's length).
-    pub fn set_linger(&mut self, ticks: u64) { self.linger = ticks; }
+    pub fn set_linger(&mut self, ticks: u64) {
+        self.linger = ticks;
+    }
 
     /// Mean edge length of the outer surface \[m\]: a margin for [`Activation::touch_sphere`] that
     /// catches the vertices of the triangles a sphere presses between vertices.
-    pub fn mean_edge(&self) -> f64 { self.mean_edge }
+    pub fn mean_edge(&self) -> f64 {
+        self.mean_edge
+    }
 
     /// Mark region `s` as touched this tick (takes effect at the next [`Activation::update`]);
     /// false for `s` out of range.
@@ -358,30 +398,46 @@ impl Activation {
     }
 
     /// The lists of the last [`Activation::update`].
-    pub fn sets(&self) -> ActiveSets<'_> { ActiveSets { active: &self.active, entered: &self.entered, left: &self.left } }
+    pub fn sets(&self) -> ActiveSets<'_> {
+        ActiveSets { active: &self.active, entered: &self.entered, left: &self.left }
+    }
 
     /// The active particles (sorted).
-    pub fn active(&self) -> &[usize] { &self.active }
+    pub fn active(&self) -> &[usize] {
+        &self.active
+    }
 
     /// The active regions (unordered).
-    pub fn active_regions(&self) -> &[u32] { &self.regions }
+    pub fn active_regions(&self) -> &[u32] {
+        &self.regions
+    }
 
     /// Is region `s` active?
-    pub fn is_region_active(&self, s: usize) -> bool { self.is_active.get(s).copied().unwrap_or(false) }
+    pub fn is_region_active(&self, s: usize) -> bool {
+        self.is_active.get(s).copied().unwrap_or(false)
+    }
 
     /// Is outer triangle `t` active (covered by an active region)?
     #[inline]
-    pub fn is_triangle_active(&self, t: u32) -> bool { self.tri_count.get(t as usize).is_some_and(|&c| c > 0) }
+    pub fn is_triangle_active(&self, t: u32) -> bool {
+        self.tri_count.get(t as usize).is_some_and(|&c| c > 0)
+    }
 
     /// Per outer triangle: the number of active regions covering it (> 0: active). The slice
     /// [`super::confinement`] reads.
-    pub fn triangle_counts(&self) -> &[u32] { &self.tri_count }
+    pub fn triangle_counts(&self) -> &[u32] {
+        &self.tri_count
+    }
 
     /// The outer triangles under an active region, each once, in no particular order.
-    pub fn active_triangles(&self) -> &[u32] { &self.triangles }
+    pub fn active_triangles(&self) -> &[u32] {
+        &self.triangles
+    }
 
     /// Per region: the tick of its last contact (`u64::MAX`: never touched).
-    pub fn last_touched(&self) -> &[u64] { &self.last_touched }
+    pub fn last_touched(&self) -> &[u64] {
+        &self.last_touched
+    }
 
     /// Bring the activation to the one whose [`Activation::last_touched`] and
     /// [`Activation::active_regions`] (in that order: the order decides nothing but is kept, so

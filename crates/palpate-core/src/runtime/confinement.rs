@@ -112,15 +112,21 @@ pub struct ConfinementSum {
 
 /// Is voxel owner `o` an active outer triangle under the per-triangle counts `tri_count`?
 #[inline]
-fn allowed(o: u32, tri_count: &[u32]) -> bool { o < VOXEL_CORE && tri_count.get(o as usize).is_some_and(|&c| c > 0) }
+fn allowed(o: u32, tri_count: &[u32]) -> bool {
+    o < VOXEL_CORE && tri_count.get(o as usize).is_some_and(|&c| c > 0)
+}
 
 impl Default for Confinement {
-    fn default() -> Self { Confinement::new(DEFAULT_STIFFNESS) }
+    fn default() -> Self {
+        Confinement::new(DEFAULT_STIFFNESS)
+    }
 }
 
 impl Confinement {
     /// A wall of stiffness `stiffness` \[N/m\] with the default reach.
-    pub fn new(stiffness: f64) -> Confinement { Confinement { stiffness, reach: DEFAULT_REACH } }
+    pub fn new(stiffness: f64) -> Confinement {
+        Confinement { stiffness, reach: DEFAULT_REACH }
+    }
 
     /// The allowed voxel nearest to `x` \[m\] within `reach` voxels (its linear index and the
     /// nearest point of its cube), searched ring by ring: `None` if there is none (or `x` is not
@@ -143,7 +149,13 @@ impl Confinement {
                 let i = c[a] as isize + o;
                 if i >= 0 && i < grid.dims[a] as isize {
                     let lo = grid.origin[a] + i as f64 * h;
-                    let g = if x[a] < lo { lo - x[a] } else if x[a] > lo + h { x[a] - lo - h } else { 0.0 };
+                    let g = if x[a] < lo {
+                        lo - x[a]
+                    } else if x[a] > lo + h {
+                        x[a] - lo - h
+                    } else {
+                        0.0
+                    };
                     gap[a][(o + MAX_REACH as isize) as usize] = g * g;
                 }
             }
@@ -255,7 +267,12 @@ impl Confinement {
                     return Push { force: Vec3::zeros(), energy: 0.0, distance: d, placement: Placement::Slack };
                 }
                 let stretch = d - slack;
-                Push { force: -self.stiffness * stretch / d * (x - q), energy: 0.5 * self.stiffness * stretch * stretch, distance: d, placement: Placement::Outside }
+                Push {
+                    force: -self.stiffness * stretch / d * (x - q),
+                    energy: 0.5 * self.stiffness * stretch * stretch,
+                    distance: d,
+                    placement: Placement::Outside,
+                }
             }
             None => {
                 let r = x - anchor;
@@ -317,7 +334,9 @@ impl Confinement {
     fn outside_free_radius(&self, grid: &VoxelGrid, owner: &[u32], tri_count: &[u32], x0: &Vec3, slack: f64) -> f64 {
         let found = (self.reach.min(MAX_REACH) as f64 - 1.0).max(0.0) * grid.h;
         // Staying in the grid (the search starts from the particle's own cell).
-        let edge = (0..3).map(|a| (x0[a] - grid.origin[a]).min(grid.origin[a] + grid.dims[a] as f64 * grid.h - x0[a])).fold(f64::INFINITY, f64::min);
+        let edge = (0..3)
+            .map(|a| (x0[a] - grid.origin[a]).min(grid.origin[a] + grid.dims[a] as f64 * grid.h - x0[a]))
+            .fold(f64::INFINITY, f64::min);
         match self.distance(grid, owner, tri_count, x0) {
             Some((d, _)) => (slack.min(found) - d).min(edge).max(0.0),
             None => 0.0,
@@ -338,7 +357,17 @@ impl Confinement {
     /// as `x`, from [`Confinement::slacks`]), the slacks are read instead of searched per call.
     /// Allocation-free.
     #[allow(clippy::too_many_arguments)]
-    pub fn apply(&self, grid: &VoxelGrid, owner: &[u32], tri_count: &[u32], x: &[Vec3], anchors: &[Vec3], slacks: Option<&[f64]>, which: &[usize], forces: &mut [Vec3]) -> ConfinementSum {
+    pub fn apply(
+        &self,
+        grid: &VoxelGrid,
+        owner: &[u32],
+        tri_count: &[u32],
+        x: &[Vec3],
+        anchors: &[Vec3],
+        slacks: Option<&[f64]>,
+        which: &[usize],
+        forces: &mut [Vec3],
+    ) -> ConfinementSum {
         let mut sum = ConfinementSum::default();
         let n = x.len().min(anchors.len()).min(forces.len()).min(slacks.map_or(usize::MAX, |s| s.len()));
         for &i in which {

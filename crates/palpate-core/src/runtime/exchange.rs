@@ -87,7 +87,9 @@ impl<'a> ShellReaction<'a> {
     }
 
     /// True when no coupled particle is active (the potential is zero).
-    pub fn is_empty(&self) -> bool { !self.active.iter().any(|&p| self.sim.coupled[p]) }
+    pub fn is_empty(&self) -> bool {
+        !self.active.iter().any(|&p| self.sim.coupled[p])
+    }
 }
 
 impl CorePotential for ShellReaction<'_> {
@@ -130,7 +132,9 @@ impl CorePotential for ShellReaction<'_> {
         u
     }
 
-    fn translation_invariant(&self) -> bool { self.mean }
+    fn translation_invariant(&self) -> bool {
+        self.mean
+    }
 
     /// Each coupled active particle's spring, `k (w (x) I)(w (x) I)^T` on its tie's nodes, under the
     /// particle's index. The mean's dense part (rank three, `k / M` small; a free core only) is
@@ -177,7 +181,11 @@ mod tests {
             let r = ShellReaction { mean, ..held };
             let mut f = vec![Vec3::zeros(); n];
             assert_eq!(r.energy_forces(r.predicted, &mut f), 0.0);
-            let x: Vec<Vec3> = r.predicted.iter().map(|p| p + Vec3::new(1e-4 * (p.y * 90.0).sin(), 2e-4 * (p.z * 70.0).cos(), -1e-4 * (p.x * 50.0).sin())).collect();
+            let x: Vec<Vec3> = r
+                .predicted
+                .iter()
+                .map(|p| p + Vec3::new(1e-4 * (p.y * 90.0).sin(), 2e-4 * (p.z * 70.0).cos(), -1e-4 * (p.x * 50.0).sin()))
+                .collect();
             let mut f = vec![Vec3::zeros(); n];
             let u = r.energy_forces(&x, &mut f);
             assert!(u > 0.0);
@@ -232,4 +240,3 @@ mod tests {
         assert!((0.5 * quad - energy).abs() <= 1e-12 * energy, "{} against {energy:e}", 0.5 * quad);
     }
 }
-

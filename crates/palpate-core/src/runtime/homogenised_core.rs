@@ -95,7 +95,9 @@ impl CorePotential for Softening<'_> {
         u
     }
 
-    fn translation_invariant(&self) -> bool { true }
+    fn translation_invariant(&self) -> bool {
+        true
+    }
 }
 
 /// Two potentials as one (the tool's contact and the softening).
@@ -106,7 +108,9 @@ impl CorePotential for Sum<'_> {
         self.0.energy_forces(x, f) + self.1.energy_forces(x, f)
     }
 
-    fn translation_invariant(&self) -> bool { self.0.translation_invariant() && self.1.translation_invariant() }
+    fn translation_invariant(&self) -> bool {
+        self.0.translation_invariant() && self.1.translation_invariant()
+    }
 
     fn stiffness_terms(&self, emit: &mut dyn FnMut(crate::integrate::StiffnessTerm)) {
         self.0.stiffness_terms(emit);
@@ -132,20 +136,31 @@ mod tests {
         assert!(sim.stiffening > 1.5, "{}", sim.stiffening);
         let n = sim.core.n_nodes();
         // A smooth, finite deformation.
-        let x: Vec<Vec3> = sim.hybrid.core_points.iter().map(|p| p + Vec3::new(0.05 * p.y.sin() * p.x, 0.03 * p.z * p.x / 0.02, -0.04 * p.x * p.y / 0.02)).collect();
+        let x: Vec<Vec3> = sim
+            .hybrid
+            .core_points
+            .iter()
+            .map(|p| p + Vec3::new(0.05 * p.y.sin() * p.x, 0.03 * p.z * p.x / 0.02, -0.04 * p.x * p.y / 0.02))
+            .collect();
         let tets: Vec<(usize, f64)> = (0..sim.core.n_tets()).step_by(7).map(|t| (t, 1.0)).collect();
         let s = Softening { sim: &sim, tets: &tets };
         let mut f = vec![Vec3::zeros(); n];
         let u = s.energy_forces(&x, &mut f);
         // Softened tets' energy: the stiffened core's plus U is the tissue's.
-        let core_w: f64 = tets.iter().map(|&(t, _)| {
-            let q = sim.core.mesh().tets()[t];
-            tet4::strain_energy(&q.map(|i| x[i]), &sim.core.rest()[t], sim.core.material())
-        }).sum();
-        let tissue_w: f64 = tets.iter().map(|&(t, _)| {
-            let q = sim.core.mesh().tets()[t];
-            tet4::strain_energy(&q.map(|i| x[i]), &sim.core.rest()[t], &tissue)
-        }).sum();
+        let core_w: f64 = tets
+            .iter()
+            .map(|&(t, _)| {
+                let q = sim.core.mesh().tets()[t];
+                tet4::strain_energy(&q.map(|i| x[i]), &sim.core.rest()[t], sim.core.material())
+            })
+            .sum();
+        let tissue_w: f64 = tets
+            .iter()
+            .map(|&(t, _)| {
+                let q = sim.core.mesh().tets()[t];
+                tet4::strain_energy(&q.map(|i| x[i]), &sim.core.rest()[t], &tissue)
+            })
+            .sum();
         assert!(tissue_w > 0.0 && ((core_w + u) / tissue_w - 1.0).abs() < 1e-10, "{core_w} + {u} vs {tissue_w}");
         let h = 1e-7;
         let mut worst: f64 = 0.0;

@@ -40,7 +40,11 @@ pub fn sig(x: f64) -> String {
     }
     let decimals = (3 - x.abs().log10().floor() as i32).max(0) as usize;
     let s = format!("{x:.decimals$}");
-    if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.').to_string() } else { s }
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
 }
 
 /// Messages for a material's Young's modulus outside [`TISSUE_YOUNG_PA`] and a tool radius over
@@ -99,7 +103,9 @@ mod tests {
     use super::*;
     use crate::material::{Damping, Elasticity};
 
-    fn tissue(young: f64) -> Material { Material::new(Elasticity::YoungPoisson { young, poisson: 0.4 }, 1060.0, Damping::NONE).unwrap() }
+    fn tissue(young: f64) -> Material {
+        Material::new(Elasticity::YoungPoisson { young, poisson: 0.4 }, 1060.0, Damping::NONE).unwrap()
+    }
 
     #[test]
     fn plausible_values_pass_and_unit_mistakes_are_named() {

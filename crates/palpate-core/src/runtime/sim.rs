@@ -13,8 +13,8 @@ use crate::hybrid::HybridModel;
 use crate::material::Material;
 use crate::math::Vec3;
 use crate::mesh::TetMesh;
-use crate::spatial::csr::Buckets;
 use crate::meshfree::{ParticleModel, ParticleModelBuilder};
+use crate::spatial::csr::Buckets;
 use crate::Integrator;
 
 /// The haptic tick the capped coupling stiffness is chosen for \[s\] ([`SimOptions::implicit_exchange`]
@@ -119,8 +119,20 @@ impl SimOptions {
     /// them valid.
     pub fn check(&self) -> Result<(), ModelError> {
         let bad = |name, value, reason| Err(ModelError::Parameter { name, value, reason });
-        let positive = |name, value: f64| if value > 0.0 && value.is_finite() { Ok(()) } else { bad(name, value, "must be positive and finite") };
-        let non_negative = |name, value: f64| if value >= 0.0 && value.is_finite() { Ok(()) } else { bad(name, value, "must be non-negative and finite") };
+        let positive = |name, value: f64| {
+            if value > 0.0 && value.is_finite() {
+                Ok(())
+            } else {
+                bad(name, value, "must be positive and finite")
+            }
+        };
+        let non_negative = |name, value: f64| {
+            if value >= 0.0 && value.is_finite() {
+                Ok(())
+            } else {
+                bad(name, value, "must be non-negative and finite")
+            }
+        };
         positive("support_spacings [lattice spacings]", self.support_spacings)?;
         non_negative("coupling_depth_spacings [lattice spacings]", self.coupling_depth_spacings)?;
         positive("tool_radius [m]", self.tool.radius)?;
@@ -320,7 +332,11 @@ impl Sim {
         let (mesh, _) = TetMesh::from_arrays(&pts, &tets)?;
         let fixed = if !options.hold {
             vec![]
-        } else if hybrid.core_base_nodes.is_empty() { lowest_nodes(&hybrid.core_points, crate::hybrid::homogenise::CLOSED_HOLD_FRACTION) } else { hybrid.core_base_nodes.clone() };
+        } else if hybrid.core_base_nodes.is_empty() {
+            lowest_nodes(&hybrid.core_points, crate::hybrid::homogenise::CLOSED_HOLD_FRACTION)
+        } else {
+            hybrid.core_base_nodes.clone()
+        };
         let h = hybrid.spacing;
         let particle_tie = Embedding::project(&hybrid.core_points, &hybrid.core_faces, &hybrid.particle_core_face, &hybrid.particles);
         // The shell rides on the core where it is not simulated: its mass belongs to the core's
@@ -335,10 +351,15 @@ impl Sim {
         // tissue's, stiffened by the build's homogenisation (`crate::hybrid::homogenise`).
         let stiffening = if options.homogenise { hybrid.homogenisation.factor(material.poisson()) } else { 1.0 };
         let core_material = material.stiffened(stiffening)?;
-        let core = ModelBuilder::new(mesh, core_material).fixed_nodes(fixed).integrator(options.integrator).attached_masses(attached.clone()).build()?;
+        let core = ModelBuilder::new(mesh, core_material)
+            .fixed_nodes(fixed)
+            .integrator(options.integrator)
+            .attached_masses(attached.clone())
+            .build()?;
         // A lattice leaves a few lone particles in thin parts of a shell (a base's rim); they are held
         // (and, active, carried to the core by the ring) rather than refusing the model.
-        let mut builder = ParticleModelBuilder::new(hybrid.particles.clone(), hybrid.particle_mass.clone(), material, options.support_spacings * h).fix_unsupported(true);
+        let mut builder =
+            ParticleModelBuilder::new(hybrid.particles.clone(), hybrid.particle_mass.clone(), material, options.support_spacings * h).fix_unsupported(true);
         if let Some(q) = options.mass_scaling {
             builder = builder.mass_scaling(q);
         }
@@ -365,7 +386,11 @@ impl Sim {
                 .filter(|&a| weight[a] > 0.0 && !core.fixed()[a])
                 .map(|a| 0.5 * core.masses()[a] / (TICK * TICK * weight[a]))
                 .fold(f64::INFINITY, f64::min);
-            if c.stiffness > limit { Coupling::for_tissue(limit / h, h, mean_mass, 0.5) } else { c }
+            if c.stiffness > limit {
+                Coupling::for_tissue(limit / h, h, mean_mass, 0.5)
+            } else {
+                c
+            }
         });
         let confinement = Confinement::new(options.confinement_stiffness.unwrap_or(material.young() * h));
         let shell = Shell::new(&particles, &coupled, &coupling, &confinement);
@@ -375,16 +400,39 @@ impl Sim {
         let skin_face_reach = skin.face_reach(hybrid.core_faces.len());
         let skin_carriers = SkinCarriers::new(&hybrid);
         let node_tets = Buckets::build(core.n_nodes(), core.n_tets(), |t| core.mesh().tets()[t]);
-        Ok(Sim { hybrid, core, particles, particle_tie, skin, skin_face_reach, coupled, coupling, confinement, shell, core_surface, shell_mass: attached, skin_carriers, options, tool, skin_area, stiffening, node_tets })
+        Ok(Sim {
+            hybrid,
+            core,
+            particles,
+            particle_tie,
+            skin,
+            skin_face_reach,
+            coupled,
+            coupling,
+            confinement,
+            shell,
+            core_surface,
+            shell_mass: attached,
+            skin_carriers,
+            options,
+            tool,
+            skin_area,
+            stiffening,
+            node_tets,
+        })
     }
 
     /// The factor the core's material was stiffened by (1: not homogenised; see
     /// [`SimOptions::homogenise`]).
-    pub fn core_stiffening(&self) -> f64 { self.stiffening }
+    pub fn core_stiffening(&self) -> f64 {
+        self.stiffening
+    }
 
     /// The tissue's material, as given to [`Sim::new`] (the shell's; the core's is it stiffened
     /// by [`Sim::core_stiffening`]).
-    pub fn material(&self) -> &Material { self.particles.material() }
+    pub fn material(&self) -> &Material {
+        self.particles.material()
+    }
 
     /// Number of shell particles.
     pub fn n_particles(&self) -> usize {
@@ -397,7 +445,11 @@ impl Sim {
     pub fn skin_positions(&self, state: &SimState, out: &mut [Vec3]) {
         let x = &state.core.x;
         for (i, o) in out.iter_mut().enumerate() {
-            let carried = if super::skin::over_active(self, &state.activation, i) { super::skin::over_particles(self, &state.activation, i, &state.particles.x, x, None) } else { None };
+            let carried = if super::skin::over_active(self, &state.activation, i) {
+                super::skin::over_particles(self, &state.activation, i, &state.particles.x, x, None)
+            } else {
+                None
+            };
             *o = carried.unwrap_or_else(|| self.skin.position(i, x));
         }
     }

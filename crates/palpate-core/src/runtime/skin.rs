@@ -154,7 +154,22 @@ impl Clone for LiveSkin {
         }
     }
     fn clone_from(&mut self, s: &Self) {
-        let LiveSkin { list, member, carried, valid, unsorted, ref_x, ref_frames, ref_tool, travel, slack, sweep_next, sweep_ref_x, sweep_ref_frames, sweep_slack } = self;
+        let LiveSkin {
+            list,
+            member,
+            carried,
+            valid,
+            unsorted,
+            ref_x,
+            ref_frames,
+            ref_tool,
+            travel,
+            slack,
+            sweep_next,
+            sweep_ref_x,
+            sweep_ref_frames,
+            sweep_slack,
+        } = self;
         list.clone_from(&s.list);
         member.clone_from(&s.member);
         carried.clone_from(&s.carried);
@@ -204,7 +219,11 @@ impl LiveSkin {
 
     /// The vertices to look at, in index order.
     pub(crate) fn iter(&self) -> LiveIter<'_> {
-        if self.valid { LiveIter::List(self.list.iter()) } else { LiveIter::All(0..self.member.len()) }
+        if self.valid {
+            LiveIter::List(self.list.iter())
+        } else {
+            LiveIter::All(0..self.member.len())
+        }
     }
 
     /// Add vertex `v` (it moved).
@@ -393,7 +412,19 @@ fn skin_travel(sim: &Sim, core_x: &[Vec3], frames: &[Option<Mat3>], ref_x: &[Vec
 /// the whole skin's update a third of its tick); the list is rebuilt when the tool has moved
 /// [`SKIN_LIVE_MARGIN`] since it last was. Every vertex moved here joins `live`.
 #[allow(clippy::too_many_arguments)]
-fn update_skin(sim: &Sim, activation: &Activation, particles: &meshfree::ParticleState, core_x: &[Vec3], frames: &mut [Option<Mat3>], over: &mut [u64], stamp: u64, tool: Vec3, dt: f64, live: &mut LiveSkin, skin: &mut [Vec3]) -> usize {
+fn update_skin(
+    sim: &Sim,
+    activation: &Activation,
+    particles: &meshfree::ParticleState,
+    core_x: &[Vec3],
+    frames: &mut [Option<Mat3>],
+    over: &mut [u64],
+    stamp: u64,
+    tool: Vec3,
+    dt: f64,
+    live: &mut LiveSkin,
+    skin: &mut [Vec3],
+) -> usize {
     embed::face_frames(core_x, &sim.hybrid.core_faces, frames);
     let frames = &*frames;
     let place = |v: usize, over: bool| {

@@ -162,14 +162,28 @@ impl SimState {
     pub fn restore(sim: &Sim, snap: &SimSnapshot) -> Result<(SimState, SimWorkspace), StepError> {
         let bad = |what: String| StepError::Snapshot(what);
         let (n_core, n_p, n_skin) = (sim.core.n_nodes(), sim.n_particles(), sim.hybrid.outer_points.len());
-        let sizes = [("core positions", snap.core_x.len(), n_core), ("core velocities", snap.core_v.len(), n_core), ("particle positions", snap.particle_x.len(), n_p),
-            ("particle velocities", snap.particle_v.len(), n_p), ("skin", snap.skin.len(), n_skin), ("skin flags", snap.carried.len(), n_skin), ("skin reference", snap.live_ref_x.len(), n_core)];
+        let sizes = [
+            ("core positions", snap.core_x.len(), n_core),
+            ("core velocities", snap.core_v.len(), n_core),
+            ("particle positions", snap.particle_x.len(), n_p),
+            ("particle velocities", snap.particle_v.len(), n_p),
+            ("skin", snap.skin.len(), n_skin),
+            ("skin flags", snap.carried.len(), n_skin),
+            ("skin reference", snap.live_ref_x.len(), n_core),
+        ];
         for (what, got, want) in sizes {
             if got != want {
                 return Err(bad(format!("{what}: {got} rows, the simulation has {want}")));
             }
         }
-        for (what, v) in [("core positions", &snap.core_x), ("core velocities", &snap.core_v), ("particle positions", &snap.particle_x), ("particle velocities", &snap.particle_v), ("skin", &snap.skin), ("skin reference", &snap.live_ref_x)] {
+        for (what, v) in [
+            ("core positions", &snap.core_x),
+            ("core velocities", &snap.core_v),
+            ("particle positions", &snap.particle_x),
+            ("particle velocities", &snap.particle_v),
+            ("skin", &snap.skin),
+            ("skin reference", &snap.live_ref_x),
+        ] {
             if let Some(i) = v.iter().position(|x| !x.iter().all(|c| c.is_finite())) {
                 return Err(bad(format!("{what}: row {i} is not finite")));
             }
@@ -182,7 +196,12 @@ impl SimState {
         }
         if let Some(sw) = &snap.sweep {
             if sw.next >= n_skin || sw.ref_x.len() != n_core || !(sw.slack >= 0.0 && sw.slack.is_finite()) {
-                return Err(bad(format!("skin sweep: next vertex {} of {n_skin}, reference of {} rows of {n_core}, slack {}", sw.next, sw.ref_x.len(), sw.slack)));
+                return Err(bad(format!(
+                    "skin sweep: next vertex {} of {n_skin}, reference of {} rows of {n_core}, slack {}",
+                    sw.next,
+                    sw.ref_x.len(),
+                    sw.slack
+                )));
             }
             if let Some(i) = sw.ref_x.iter().position(|x| !x.iter().all(|c| c.is_finite())) {
                 return Err(bad(format!("skin sweep reference: row {i} is not finite")));

@@ -37,8 +37,8 @@ mod activate;
 mod core_step;
 mod shell;
 
-pub use core_step::IMPLICIT_CONTACT_MARGIN;
 pub use super::skin::{SKIN_LIVE_MARGIN, SKIN_SWEEP_TICKS};
+pub use core_step::IMPLICIT_CONTACT_MARGIN;
 
 use super::embed;
 use super::sim::Sim;
@@ -49,7 +49,6 @@ use crate::integrate::StepReport;
 use crate::math::{is_finite3, Vec3};
 use crate::meshfree;
 use crate::parallel::{Fork, Serial};
-
 
 /// What a tick did.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -102,7 +102,9 @@ pub struct Tool {
 }
 
 impl Default for Tool {
-    fn default() -> Self { Tool { radius: DEFAULT_RADIUS, stiffness: DEFAULT_STIFFNESS, damping: DEFAULT_DAMPING } }
+    fn default() -> Self {
+        Tool { radius: DEFAULT_RADIUS, stiffness: DEFAULT_STIFFNESS, damping: DEFAULT_DAMPING }
+    }
 }
 
 /// The contact of one point with the tool.
@@ -138,21 +140,33 @@ impl Tool {
     /// non-positive or non-finite input). See the module docs.
     pub fn stiffness_for(mass: f64, substep: f64) -> f64 {
         let k = (4.0 - (2.0 * STABILITY_SAFETY).powi(2)) * mass / (substep * substep);
-        if mass > 0.0 && substep > 0.0 && k.is_finite() { k } else { 0.0 }
+        if mass > 0.0 && substep > 0.0 && k.is_finite() {
+            k
+        } else {
+            0.0
+        }
     }
 
     /// Damping \[N s/m\] of ratio `ratio` (1: critical) for stiffness `k` \[N/m\] on mass `mass`
     /// \[kg\]: `2 ratio sqrt(k m)` (0 for negative or non-finite input).
     pub fn damping_for(stiffness: f64, mass: f64, ratio: f64) -> f64 {
         let c = 2.0 * ratio * (stiffness * mass).sqrt();
-        if c.is_finite() && c > 0.0 { c } else { 0.0 }
+        if c.is_finite() && c > 0.0 {
+            c
+        } else {
+            0.0
+        }
     }
 
     /// The penalty potential `k d^2 / 2` \[J\] of a point at `x` \[m\] against the tool centred at
     /// `centre` \[m\] (0 outside contact or for non-finite input).
     pub fn potential(&self, centre: &Vec3, x: &Vec3) -> f64 {
         let d = self.radius - (x - centre).norm();
-        if d > 0.0 && d.is_finite() { 0.5 * self.stiffness * d * d } else { 0.0 }
+        if d > 0.0 && d.is_finite() {
+            0.5 * self.stiffness * d * d
+        } else {
+            0.0
+        }
     }
 
     /// The contact of a point at `x` \[m\] with velocity `v` \[m/s\] against the tool at `centre`
@@ -271,7 +285,9 @@ pub struct ToolOptions {
 }
 
 impl Default for ToolOptions {
-    fn default() -> Self { ToolOptions { radius: DEFAULT_RADIUS, area_stiffness: None, area_damping: DEFAULT_AREA_DAMPING } }
+    fn default() -> Self {
+        ToolOptions { radius: DEFAULT_RADIUS, area_stiffness: None, area_damping: DEFAULT_AREA_DAMPING }
+    }
 }
 
 impl ToolOptions {

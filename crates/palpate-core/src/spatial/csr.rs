@@ -26,11 +26,15 @@ impl Buckets {
     }
 
     /// Number of buckets.
-    pub fn n_buckets(&self) -> usize { self.ptr.len() - 1 }
+    pub fn n_buckets(&self) -> usize {
+        self.ptr.len() - 1
+    }
 
     /// The items of bucket `b`.
     #[inline]
-    pub fn get(&self, b: usize) -> &[u32] { &self.items[self.ptr[b] as usize..self.ptr[b + 1] as usize] }
+    pub fn get(&self, b: usize) -> &[u32] {
+        &self.items[self.ptr[b] as usize..self.ptr[b + 1] as usize]
+    }
 }
 
 /// The offset table of a bucket table (the counts' prefix sums) whose item entries fall into

@@ -16,15 +16,23 @@ pub struct Grid3 {
 
 impl Grid3 {
     /// Number of cells.
-    pub fn len(&self) -> usize { self.dims[0] * self.dims[1] * self.dims[2] }
+    pub fn len(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
     /// No cells?
-    pub fn is_empty(&self) -> bool { self.len() == 0 }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
     /// Linear index of `(i, j, k)`.
     #[inline]
-    pub fn index(&self, i: usize, j: usize, k: usize) -> usize { i + self.dims[0] * (j + self.dims[1] * k) }
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
     /// Linear index of a cell `[i, j, k]`.
     #[inline]
-    pub fn index_of(&self, c: [usize; 3]) -> usize { self.index(c[0], c[1], c[2]) }
+    pub fn index_of(&self, c: [usize; 3]) -> usize {
+        self.index(c[0], c[1], c[2])
+    }
     /// `(i, j, k)` of a linear index.
     #[inline]
     pub fn ijk(&self, v: usize) -> [usize; 3] {

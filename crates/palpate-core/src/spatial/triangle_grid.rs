@@ -171,7 +171,10 @@ mod tests {
                 let q = Vec3::new(((k * 37) % 101) as f64 / 1000.0 - 0.05, ((k * 53) % 89) as f64 / 1000.0 - 0.045, ((k * 17) % 97) as f64 / 1000.0 - 0.05);
                 let keep = |i: usize| !i.is_multiple_of(3);
                 let Nearest { triangle: bt, distance: bd, .. } = g.nearest(p, t, &q, keep).unwrap();
-                let brute = (0..t.len()).filter(|&i| keep(i)).map(|i| (closest_on_triangle(&q, &p[t[i][0]], &p[t[i][1]], &p[t[i][2]]).0 - q).norm()).fold(f64::INFINITY, f64::min);
+                let brute = (0..t.len())
+                    .filter(|&i| keep(i))
+                    .map(|i| (closest_on_triangle(&q, &p[t[i][0]], &p[t[i][1]], &p[t[i][2]]).0 - q).norm())
+                    .fold(f64::INFINITY, f64::min);
                 assert!((bd - brute).abs() < 1e-15, "cell {cell} point {k}: grid {bd} (tri {bt}) vs brute {brute}");
             }
         }

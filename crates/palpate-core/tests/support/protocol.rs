@@ -19,9 +19,9 @@ pub const DT: f64 = 1e-3;
 
 /// `shared/bench/meshes`, found from `PALPATE_SHARED` or beside the repository.
 pub fn meshes_dir() -> Option<PathBuf> {
-    let base = std::env::var_os("PALPATE_SHARED").map(PathBuf::from).unwrap_or_else(|| {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared")
-    });
+    let base = std::env::var_os("PALPATE_SHARED")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared"));
     let d = base.join("bench/meshes");
     d.is_dir().then_some(d)
 }

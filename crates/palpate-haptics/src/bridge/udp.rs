@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use palpate_core::Vec3;
 
-use super::protocol::{self, Handshake, Key, Refusal, Reject, FLAG_ZEROED, FORCE_BYTES, KIND_HELLO, KIND_STATE, KIND_WELCOME, KIND_REFUSED};
+use super::protocol::{self, Handshake, Key, Refusal, Reject, FLAG_ZEROED, FORCE_BYTES, KIND_HELLO, KIND_REFUSED, KIND_STATE, KIND_WELCOME};
 use crate::device::{Device, DeviceInput, DeviceKind, ForceSink};
 
 /// Receive buffer: larger than any valid packet, so that a long one is seen as long.

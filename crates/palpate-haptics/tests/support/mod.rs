@@ -82,7 +82,22 @@ pub struct Faulty<P: Physics> {
 
 impl<P: Physics> Faulty<P> {
     pub fn new(inner: P, at: u64) -> Faulty<P> {
-        Faulty { inner, at, stall: None, burn: None, nan: false, corrupt: None, bad_state_from: None, ticks: 0, since_restore: 0, stalled_at: Arc::default(), restores: Arc::default(), on_checkpoint: None, on_finish: None, finish_fails_at: None }
+        Faulty {
+            inner,
+            at,
+            stall: None,
+            burn: None,
+            nan: false,
+            corrupt: None,
+            bad_state_from: None,
+            ticks: 0,
+            since_restore: 0,
+            stalled_at: Arc::default(),
+            restores: Arc::default(),
+            on_checkpoint: None,
+            on_finish: None,
+            finish_fails_at: None,
+        }
     }
 }
 

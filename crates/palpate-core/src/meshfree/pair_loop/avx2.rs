@@ -9,9 +9,9 @@
 
 use super::passes::{self, b_matrix, Verlet};
 use super::{Cols, Disjoint, ExtForce, LoopCopy, P4};
-use crate::parallel::Fork;
 use crate::material::linear::{Scalar, Svk, M3};
 use crate::meshfree::{ParticleModel, ParticleState, ParticleWorkspace};
+use crate::parallel::Fork;
 use std::arch::x86_64::*;
 
 /// Proof that the CPU has AVX2 and FMA: the AVX2 copy of the loop.
@@ -31,7 +31,16 @@ impl Avx2 {
 
     /// `substeps` Verlet sub-steps (see [`passes::substeps_impl`]) in this copy.
     #[allow(clippy::too_many_arguments)]
-    pub(super) fn run_substeps(self, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>, fork: &dyn Fork) -> Option<(usize, f64)> {
+    pub(super) fn run_substeps(
+        self,
+        m: &ParticleModel,
+        state: &mut ParticleState,
+        ws: &mut ParticleWorkspace,
+        h: f64,
+        substeps: usize,
+        ext: Option<ExtForce<'_>>,
+        fork: &dyn Fork,
+    ) -> Option<(usize, f64)> {
         // SAFETY: a `target_feature` function needs only that the CPU has the features, which
         // an `Avx2` proves.
         unsafe { substeps_avx2(self, m, state, ws, h, substeps, ext, fork) }
@@ -47,7 +56,16 @@ impl Avx2 {
 
 #[target_feature(enable = "avx2,fma")]
 #[allow(clippy::too_many_arguments)]
-fn substeps_avx2(c: Avx2, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>, fork: &dyn Fork) -> Option<(usize, f64)> {
+fn substeps_avx2(
+    c: Avx2,
+    m: &ParticleModel,
+    state: &mut ParticleState,
+    ws: &mut ParticleWorkspace,
+    h: f64,
+    substeps: usize,
+    ext: Option<ExtForce<'_>>,
+    fork: &dyn Fork,
+) -> Option<(usize, f64)> {
     passes::substeps_impl(c, m, state, ws, h, substeps, ext, fork)
 }
 
@@ -112,15 +130,25 @@ struct F4(__m256d);
 // SAFETY (every `unsafe` below): the invariant of `F4`.
 impl Scalar for F4 {
     #[inline(always)]
-    fn splat(x: f64) -> Self { unsafe { F4(_mm256_set1_pd(x)) } }
+    fn splat(x: f64) -> Self {
+        unsafe { F4(_mm256_set1_pd(x)) }
+    }
     #[inline(always)]
-    fn add(self, o: Self) -> Self { unsafe { F4(_mm256_add_pd(self.0, o.0)) } }
+    fn add(self, o: Self) -> Self {
+        unsafe { F4(_mm256_add_pd(self.0, o.0)) }
+    }
     #[inline(always)]
-    fn sub(self, o: Self) -> Self { unsafe { F4(_mm256_sub_pd(self.0, o.0)) } }
+    fn sub(self, o: Self) -> Self {
+        unsafe { F4(_mm256_sub_pd(self.0, o.0)) }
+    }
     #[inline(always)]
-    fn mul(self, o: Self) -> Self { unsafe { F4(_mm256_mul_pd(self.0, o.0)) } }
+    fn mul(self, o: Self) -> Self {
+        unsafe { F4(_mm256_mul_pd(self.0, o.0)) }
+    }
     #[inline(always)]
-    fn madd(self, b: Self, c: Self) -> Self { unsafe { F4(_mm256_fmadd_pd(self.0, b.0, c.0)) } }
+    fn madd(self, b: Self, c: Self) -> Self {
+        unsafe { F4(_mm256_fmadd_pd(self.0, b.0, c.0)) }
+    }
 }
 
 /// Rows of the 4x4 matrix whose columns are `a`, `b`, `c`, `d`.
@@ -253,13 +281,21 @@ unsafe fn stress_pass(m: &ParticleModel, idx: &[usize], u: &[P4], v: Option<&[P4
         let gamma = F4(_mm256_set_pd(g[3], g[2], g[1], g[0]));
         let (bm, det) = b_matrix(&k, kv.as_ref(), &r, gamma, law, linear);
         // (No closures here: they would not inherit this function's target features.)
-        let t = [transpose(bm[0][0].0, bm[1][0].0, bm[2][0].0, z), transpose(bm[0][1].0, bm[1][1].0, bm[2][1].0, z), transpose(bm[0][2].0, bm[1][2].0, bm[2][2].0, z)];
+        let t = [
+            transpose(bm[0][0].0, bm[1][0].0, bm[2][0].0, z),
+            transpose(bm[0][1].0, bm[1][1].0, bm[2][1].0, z),
+            transpose(bm[0][2].0, bm[1][2].0, bm[2][2].0, z),
+        ];
         let det = store(det.0);
         for (l, &i) in chunk.iter().enumerate() {
             // SAFETY: the caller's contract gives this call the entry at `i`.
             let bi = unsafe { b.at(i) };
             // A particle compressed past the floor (rare) gets the barrier from the portable copy.
-            *bi = if det[l] < crate::meshfree::COMPRESSION_FLOOR { passes::particle_stress(m, i, u, v, linear) } else { [store(t[0][l]), store(t[1][l]), store(t[2][l])] };
+            *bi = if det[l] < crate::meshfree::COMPRESSION_FLOOR {
+                passes::particle_stress(m, i, u, v, linear)
+            } else {
+                [store(t[0][l]), store(t[1][l]), store(t[2][l])]
+            };
         }
     }
 }

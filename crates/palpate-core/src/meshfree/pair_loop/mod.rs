@@ -160,7 +160,15 @@ fn avx2_copy() -> Option<avx2::Avx2> {
 
 /// Run the sub-steps with the best copy this CPU supports; stops early at a particle over the
 /// material's speed bound and returns it with its speed ([`passes::substeps_impl`]).
-pub(crate) fn run_substeps(m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, ext: Option<ExtForce<'_>>, fork: &dyn Fork) -> Option<(usize, f64)> {
+pub(crate) fn run_substeps(
+    m: &ParticleModel,
+    state: &mut ParticleState,
+    ws: &mut ParticleWorkspace,
+    h: f64,
+    substeps: usize,
+    ext: Option<ExtForce<'_>>,
+    fork: &dyn Fork,
+) -> Option<(usize, f64)> {
     let n = m.n_particles();
     // The caller has already returned an error for a mismatched workspace or an out-of-range
     // active index; the passes check the lengths again (their unchecked reads rely on them).

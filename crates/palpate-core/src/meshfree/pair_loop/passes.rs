@@ -2,10 +2,10 @@
 //! (see [`super`]); the portable copy's per-particle gathers, which the AVX2 copy replaces.
 
 use super::{Cols, Disjoint, ExtForce, LoopCopy, P4};
-use crate::parallel::{part, Fork, MAX_WAYS};
 use crate::material::linear::{det3, green_strain_of, mm, strain_rate_of, sym, Scalar, Svk, M3};
 use crate::math::Vec3;
 use crate::meshfree::{ParticleModel, ParticleState, ParticleWorkspace};
+use crate::parallel::{part, Fork, MAX_WAYS};
 
 /// `acc += s * x` on 4 lanes.
 #[inline(always)]
@@ -178,7 +178,16 @@ pub(super) fn particle_force(m: &ParticleModel, i: usize, u: &[P4], b: &[Cols], 
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 #[allow(unsafe_code)]
-pub(super) fn all_forces_impl<C: LoopCopy>(c: C, m: &ParticleModel, u: &[P4], v: Option<&[P4]>, linear: bool, b: &mut [Cols], gamma: &mut [f64], out: &mut [P4]) {
+pub(super) fn all_forces_impl<C: LoopCopy>(
+    c: C,
+    m: &ParticleModel,
+    u: &[P4],
+    v: Option<&[P4]>,
+    linear: bool,
+    b: &mut [Cols],
+    gamma: &mut [f64],
+    out: &mut [P4],
+) {
     let n = m.n_particles();
     let all: Vec<usize> = (0..n).collect();
     // SAFETY: one call, which `b` is borrowed by alone.
@@ -202,7 +211,16 @@ pub(super) fn all_forces_impl<C: LoopCopy>(c: C, m: &ParticleModel, u: &[P4], v:
 /// `fork`: the passes run in its parts (bitwise the same result as in one).
 #[inline(always)]
 #[allow(unsafe_code, clippy::too_many_arguments)]
-pub(super) fn substeps_impl<C: LoopCopy>(c: C, m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, h: f64, substeps: usize, mut ext: Option<ExtForce<'_>>, fork: &dyn Fork) -> Option<(usize, f64)> {
+pub(super) fn substeps_impl<C: LoopCopy>(
+    c: C,
+    m: &ParticleModel,
+    state: &mut ParticleState,
+    ws: &mut ParticleWorkspace,
+    h: f64,
+    substeps: usize,
+    mut ext: Option<ExtForce<'_>>,
+    fork: &dyn Fork,
+) -> Option<(usize, f64)> {
     for &i in &ws.touched {
         ws.b[i] = [[0.0; 4]; 3];
         ws.gamma[i] = 0.0;
@@ -369,7 +387,14 @@ fn accumulate_rim(rim: &[usize], b: &[Cols], u: &[P4], sums: &mut [[P4; 4]]) {
 /// state (the callback reads them there; the first sub-step's are the state's own), ask the
 /// caller for this sub-step's external forces, and turn them into accelerations.
 #[inline(never)]
-fn external_forces(m: &ParticleModel, state: &mut ParticleState, ws: &mut ParticleWorkspace, ext: &mut dyn FnMut(&crate::meshfree::SubStep<'_>, &mut [Vec3]), s: usize, h: f64) {
+fn external_forces(
+    m: &ParticleModel,
+    state: &mut ParticleState,
+    ws: &mut ParticleWorkspace,
+    ext: &mut dyn FnMut(&crate::meshfree::SubStep<'_>, &mut [Vec3]),
+    s: usize,
+    h: f64,
+) {
     if s > 0 {
         for &i in &ws.free {
             state.v[i] = super::v3(&ws.v[i]);

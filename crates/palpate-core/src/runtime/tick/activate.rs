@@ -1,10 +1,10 @@
 //! Stages 1 and 2 of the tick: which particles are simulated, and the frozen ring around them.
 
 use super::TickReport;
+use crate::math::Vec3;
 use crate::runtime::homogenised_core;
 use crate::runtime::sim::Sim;
 use crate::runtime::state::{SimState, SimWorkspace};
-use crate::math::Vec3;
 
 /// Stage 1, activation (§6): the outer vertices within the tool's radius plus a margin touch
 /// their regions; the active set is the union of RV(p_s) over the touched regions, each lingering

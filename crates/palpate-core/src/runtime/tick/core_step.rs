@@ -26,7 +26,15 @@ pub const IMPLICIT_CONTACT_MARGIN: f64 = 0.001;
 /// the force is the particles' alone and the core's step is left owed (`owed`, after the force
 /// is sent). Adds the core's share to `tool_force` \[N\]. A failed core step puts the
 /// particles' motion back at the tick's start.
-pub(super) fn step_core(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, dt: f64, tool_force: &mut Vec3, report: &mut TickReport) -> Result<(), StepError> {
+pub(super) fn step_core(
+    sim: &Sim,
+    state: &mut SimState,
+    ws: &mut SimWorkspace,
+    tool: Vec3,
+    dt: f64,
+    tool_force: &mut Vec3,
+    report: &mut TickReport,
+) -> Result<(), StepError> {
     let SimState { core, particles, skin, activation, ticks, live, lift, core_owed, .. } = state;
     let o = &sim.options;
     // 4. The tool against what moves with the core: the skin where no particle carries it (over
@@ -46,7 +54,8 @@ pub(super) fn step_core(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, 
     if implicit {
         ws.reach.extend(live.iter().filter(|&v| (skin[v] - tool).norm_squared() < reach * reach));
     } else {
-        ws.reach.extend(live.iter().filter(|&v| (skin[v] - tool).norm_squared() < reach * reach && !over_active(sim, activation, v)));
+        ws.reach
+            .extend(live.iter().filter(|&v| (skin[v] - tool).norm_squared() < reach * reach && !over_active(sim, activation, v)));
         ws.reach.extend(ws.uncarried.iter().copied().filter(|&v| (skin[v] - tool).norm_squared() < reach * reach));
     }
     // The core's faces within reach of their nearest point (a face can reach the tool with its

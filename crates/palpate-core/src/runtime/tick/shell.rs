@@ -25,7 +25,17 @@ use crate::runtime::state::{SimState, SimWorkspace};
 /// it, the error), and the skin the particles carried fades back to its ties
 /// (`skin::SkinLift`).
 #[allow(clippy::too_many_arguments)]
-pub(super) fn step(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, prev: Vec3, tool: Vec3, tool_v: Vec3, dt: f64, fork: &dyn Fork, report: &mut TickReport) -> Result<Vec3, StepError> {
+pub(super) fn step(
+    sim: &Sim,
+    state: &mut SimState,
+    ws: &mut SimWorkspace,
+    prev: Vec3,
+    tool: Vec3,
+    tool_v: Vec3,
+    dt: f64,
+    fork: &dyn Fork,
+    report: &mut TickReport,
+) -> Result<Vec3, StepError> {
     ws.f_core.iter_mut().for_each(|f| *f = Vec3::zeros());
     if state.particles.active.is_empty() {
         return Ok(Vec3::zeros());
@@ -33,7 +43,8 @@ pub(super) fn step(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, prev:
     let k = substeps(sim, &state.particles, ws, dt);
     let tri_count = state.activation.triangle_counts();
     let rest = &sim.hybrid.particles;
-    sim.confinement.slacks(&sim.hybrid.grid, &sim.hybrid.voxel_owner, tri_count, rest, &state.particles.active, &mut ws.slacks);
+    sim.confinement
+        .slacks(&sim.hybrid.grid, &sim.hybrid.voxel_owner, tri_count, rest, &state.particles.active, &mut ws.slacks);
     // Most particles are well inside their regions: the sub-steps look only at those that
     // moved farther than their free radius since the tick's start (the same forces, cheaper).
     for &p in &state.particles.active {
@@ -191,7 +202,16 @@ impl SubStepForces<'_, '_> {
     /// particle's tie (momentum stays exact).
     fn wall(&mut self, f: &mut [Vec3]) {
         let (sim, hybrid) = (self.sim, &self.sim.hybrid);
-        let wall = sim.confinement.apply(&hybrid.grid, &hybrid.voxel_owner, self.tri_count, self.x_rest, &hybrid.particles, Some(self.slacks), self.wall_check, self.f_wall);
+        let wall = sim.confinement.apply(
+            &hybrid.grid,
+            &hybrid.voxel_owner,
+            self.tri_count,
+            self.x_rest,
+            &hybrid.particles,
+            Some(self.slacks),
+            self.wall_check,
+            self.f_wall,
+        );
         self.report.confined = self.report.confined.max(wall.pushed);
         if wall.pushed > 0 {
             for &p in self.wall_check.iter() {
@@ -266,7 +286,12 @@ fn spread_reactions(sim: &Sim, state: &SimState, ws: &mut SimWorkspace, k: usize
 /// within its reach (`ws.near`, their lists from `skin::near_tool`).
 fn substeps(sim: &Sim, particles: &meshfree::ParticleState, ws: &mut SimWorkspace, dt: f64) -> usize {
     let held = sim.particles.fixed();
-    let stretch2 = particles.active.iter().filter(|&&p| !held[p]).map(|&p| stretch_bound(&sim.particles.deformation_gradient(p, &particles.x))).fold(1.0, f64::max);
+    let stretch2 = particles
+        .active
+        .iter()
+        .filter(|&&p| !held[p])
+        .map(|&p| stretch_bound(&sim.particles.deformation_gradient(p, &particles.x)))
+        .fold(1.0, f64::max);
     let mass = sim.particles.masses();
     // Each skin vertex's penalty is the tool's per unit area times the vertex's area: the share
     // of a particle is that area times its weight over its mass.
