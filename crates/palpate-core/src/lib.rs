@@ -31,6 +31,7 @@
 // (`f[a]`, `cof[a][b]`); iterator zips of three or four of them read worse than the formulas.
 #![allow(clippy::needless_range_loop)]
 
+pub mod contact;
 pub mod divergence;
 pub mod error;
 pub mod fem;

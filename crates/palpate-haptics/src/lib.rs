@@ -32,7 +32,9 @@ pub mod safety;
 pub mod servo;
 pub mod snapshot;
 pub mod stats;
-pub mod surface_contact;
+/// The sphere against a tet mesh's surface, moved to the core beside the FEM body
+/// ([`palpate_core::contact::surface`]); its old path kept.
+pub use palpate_core::contact::surface as surface_contact;
 
 pub use coupling::{CouplingParams, VirtualCoupling};
 pub use device::{Device, DeviceInput, DeviceKind, ForceCell, ForceSink};

@@ -59,7 +59,9 @@ pub mod skin;
 pub mod stability;
 pub mod state;
 pub mod tick;
-pub mod tool;
+/// The tool's contact laws live in [`crate::contact::tool`] (every body's); re-exported here, where
+/// the hybrid runtime uses them.
+pub use crate::contact::tool;
 
 pub use activation::{Activation, ActiveSets};
 pub use confinement::{Confinement, ConfinementSum, Placement, Push};

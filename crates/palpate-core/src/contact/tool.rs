@@ -40,7 +40,7 @@
 //! coarser outer polyhedron is a thinner wall). On the Rodero skin (0.72 mm^2 a vertex) the
 //! default is the 62 N/m a vertex it had; on the ellipsoids' (2.8 mm^2) four times that.
 //!
-//! A vertex carries at most [`super::sim::SKIN_AREA_CAP_SPACINGS2`] squared lattice spacings:
+//! A vertex carries at most [`crate::runtime::sim::SKIN_AREA_CAP_SPACINGS2`] squared lattice spacings:
 //! on a skin much coarser than the lattice (the tests' 66-vertex ellipsoid, 230 mm^2 a vertex on
 //! a 4 mm lattice) one vertex, carried by the few particles under it, met the sphere with 25 kN/m
 //! and bounced off it (1.7 N one tick, 0 the next three). Capped, such a skin's contact is softer
@@ -57,7 +57,7 @@
 //!   critical step), so in the worst case (the stiffest internal mode at the contacted particle,
 //!   along the normal) the contact spring may add `k <= (4 - (2 S)^2) m / h^2 = 0.76 m / h^2`:
 //!   [`Tool::stiffness_for`]. The runtime does not bound the contact by it: its sub-step count
-//!   counts the contact's share of each particle ([`super::stability`]), and the contact is cheap
+//!   counts the contact's share of each particle ([`crate::runtime::stability`]), and the contact is cheap
 //!   there (on the Rodero ventricle 60 / 120 / 240 / 480 N/m a vertex took 12.0 / 12.7 / 13.9 /
 //!   16.2 sub-steps a tick; on the ellipsoids 60 / 240 / 960 N/m 16.0 / 17.1 / 19.9).
 //! - **Fidelity**: the contact springs in series with the tissue should be stiffer than the
@@ -79,7 +79,7 @@ pub const DEFAULT_STIFFNESS: f64 = 60.0;
 ///
 /// Why not more (it was 0.0065, half critical, until 2026-11-26): the damper is explicit, so its
 /// rate `c / m` over the particles under the tool adds to the shell's damping in the sub-step
-/// count ([`super::stability`]), and on the Rodero ventricle (a fine skin: ~4.5 skin vertices a
+/// count ([`crate::runtime::stability`]), and on the Rodero ventricle (a fine skin: ~4.5 skin vertices a
 /// surface particle) it was as large as the tissue's own: 11.7 sub-steps a contact tick with
 /// 0.0065 against 11.0 with 0.002 and 10.8 with none (5 mm tool, 4 mm press and 10 mm slide,
 /// `examples/tick_profile.rs` with `TOOL_C`). What it buys is small and saturates early: with
@@ -271,7 +271,7 @@ impl AreaTool {
     }
 }
 
-/// The tool of a hybrid simulation as its options give it ([`super::SimOptions::tool`]):
+/// The tool of a hybrid simulation as its options give it ([`crate::runtime::SimOptions::tool`]):
 /// resolved against the material by [`ToolOptions::resolve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ToolOptions {

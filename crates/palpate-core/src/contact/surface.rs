@@ -1,5 +1,5 @@
 //! The rigid sphere tool against a tet mesh's boundary **surface** (its triangles), for
-//! [`crate::FemPhysics`]: a penalty per unit area, integrated by sample points fixed on the
+//! `palpate_haptics::FemPhysics`: a penalty per unit area, integrated by sample points fixed on the
 //! triangles, each sample's force spread to its triangle's nodes.
 //!
 //! # Why the surface, not the nodes
@@ -19,7 +19,7 @@
 //! meets a patch of radius `sqrt(2 R d)` and, from 1 mm deep, a dozen samples or more wherever
 //! it is (the nodes do not matter).
 //!
-//! Each sample's penalty is [`palpate_core::runtime::Tool::contact`] (the hybrid runtime's point contact, with the
+//! Each sample's penalty is [`crate::contact::Tool::contact`] (the hybrid runtime's point contact, with the
 //! stiffness `k_a A_s` and damping `c_a A_s`); its force goes to the triangle's nodes with the
 //! sample's barycentric weights. That spread is the transpose of the interpolation `x_s = sum_i
 //! b_si x_i`, so the nodal forces are exactly `-dU/dx_i` (the damping aside), the sample forces
@@ -28,7 +28,7 @@
 //! surface is stretched, which is what makes the stability bound below hold at every state.
 //!
 //! # Stability: a Gershgorin bound per node
-//! The contact is explicit (held over an implicit step, see [`crate::FemPhysics`]); it is stable
+//! The contact is explicit (held over an implicit step, see `palpate_haptics::FemPhysics`); it is stable
 //! while `omega^2 dt^2` of its stiffness on the lumped masses stays below the limit on every
 //! node. The contact Hessian's positive part is `sum_s k_a A_s (b_s b_s^T) (x) (n_s n_s^T)`
 //! (the curvature term `-k d / r (I - n n^T)` only lowers it), whose Gershgorin row sum at node
@@ -64,9 +64,10 @@
 //! 30 flops each), and two over the samples of the few triangles near the tool. Nothing is
 //! allocated.
 
-use palpate_core::runtime::tool::ContactSum;
-pub use palpate_core::runtime::AreaTool;
-use palpate_core::{ModelError, Vec3};
+pub use super::tool::AreaTool;
+use super::tool::ContactSum;
+use crate::error::ModelError;
+use crate::math::Vec3;
 
 /// Largest spacing of the contact samples, as a fraction of the tool's radius.
 pub const SAMPLE_SPACING: f64 = 1.0 / 3.0;
@@ -231,7 +232,7 @@ impl SurfaceContact {
     /// Adds the contact forces of `tool` centred at `centre` (moving at `tool_velocity`) on the
     /// near faces' samples, spread to their nodes, to `forces` \[N\] (positions `x`, velocities
     /// `v`); returns the sums (`force_on_tool`: minus the sum of the sample forces, equal to
-    /// minus the sum of what the nodes received up to round-off; [`crate::FemPhysics`] sums the
+    /// minus the sum of what the nodes received up to round-off; `palpate_haptics::FemPhysics` sums the
     /// nodes for an exact reaction). Call after [`SurfaceContact::find_near`] with a reach of at
     /// least `tool.radius`. Allocation-free.
     pub fn apply(&self, tool: &AreaTool, centre: &Vec3, tool_velocity: &Vec3, x: &[Vec3], v: &[Vec3], forces: &mut [Vec3]) -> ContactSum {
