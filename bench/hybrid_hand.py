@@ -18,7 +18,7 @@ import sys
 import numpy as np
 
 import palpate
-from palpate import bench_hybrid
+from palpate.bench import hybrid as bench_hybrid
 
 
 def main():

@@ -1,5 +1,5 @@
 """Bit-identity check of the hybrid tick: runs the script of ``palpate bench hybrid`` (press to
-3 mm at the probe point, hold, 10 mm slide, release; :mod:`palpate.bench_hybrid`) with a fixed
+3 mm at the probe point, hold, 10 mm slide, release; :mod:`palpate.bench.hybrid`) with a fixed
 tool radius and prints a hash of every tick's force and of the final (fresh) surface, with the
 sub-step count and the tick's CPU time (``time.thread_time``, less sensitive to the machine's load
 than wall time). A change meant to leave the physics as it is must leave the hash unchanged.
@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 import palpate as _p
-from palpate import bench_hybrid as bh
+from palpate.bench import hybrid as bh
 
 
 def main() -> None:

@@ -1,6 +1,6 @@
 """St. Venant-Kirchhoff vs Neo-Hookean: static solutions of the benchmark case at several probe forces.
 
-The shared protocol case (python/palpate/bench.py: E = 30 kPa, nu = 0.4, base fixed, the outer-surface
+The shared protocol case (python/palpate/bench/__init__.py: E = 30 kPa, nu = 0.4, base fixed, the outer-surface
 nodes near the probe point share the total force along the inward normal) is solved to static
 equilibrium (`Body.static_solve`, Newton with load increments) for both laws. Prints a markdown
 table: per force, the loaded nodes' mean |u| and max |u| for each law, the relative L2 difference

@@ -16,7 +16,7 @@ beside the paper's Table 1 (Pentium IV, 2006): 980 frames/s for 188 tets, 35 fra
 
 Table 1's hybrid rows (:func:`hybrid_rows`): the hybrid synthetic ventricle (FEM core + particle
 shell, :class:`palpate.HybridSim`) pressed 3 mm, held, slid 10 mm and released
-(:mod:`palpate.bench_hybrid`, ``--hybrid-ticks`` ticks of 1 ms, 1000 by default), with the tool
+(:mod:`palpate.bench.hybrid`, ``--hybrid-ticks`` ticks of 1 ms, 1000 by default), with the tool
 radius calibrated for about 200 (the paper's average) and 600 (its worst case) active particles;
 ticks/s = 1 / mean tick beside the paper's 330-600 frames/s.
 
@@ -142,12 +142,13 @@ def _firm_press(a) -> None:
 
 def hybrid_rows(model=None, shape: str = "ventricle", ticks: int = HYBRID_TICKS, rows=HYBRID_ROWS,
                 quiet: bool = False):
-    """Table 1's hybrid rows: for each ``(target, label)`` of ``rows``, :func:`palpate.bench_hybrid.run`
+    """Table 1's hybrid rows: for each ``(target, label)`` of ``rows``, :func:`palpate.bench.hybrid.run`
     on ``model`` (built from ``shape`` if None) with ``ticks`` ticks; prints one line per row
     (unless ``quiet``) and returns the reports."""
     import warnings
 
-    from . import bench_hybrid, hybrid
+    from . import hybrid
+    from .bench import hybrid as bench_hybrid
 
     if model is None:
         with warnings.catch_warnings():
@@ -181,7 +182,7 @@ def hybrid_rows(model=None, shape: str = "ventricle", ticks: int = HYBRID_TICKS,
 
 
 def bench_hybrid_min_ticks() -> int:
-    from .bench_hybrid import MIN_TICKS
+    from .bench.hybrid import MIN_TICKS
     return MIN_TICKS
 
 

@@ -651,7 +651,7 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
             print(f"building the hybrid model of {shape!r} ...", flush=True)
         model = build_shape(shape)
     if shape != "ellipsoids":
-        from .bench_hybrid import probe
+        from .bench.hybrid import probe
 
         _, point, inward, _ = probe(model, shape)
         case.point, case.direction = tuple(float(v) for v in point), tuple(float(v) for v in inward)

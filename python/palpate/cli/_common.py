@@ -265,10 +265,10 @@ def palpate_errors():
 
 
 def load_hybrid_model(model_spec: str, cmd: str):
-    """``(name, model)`` of a hybrid model file or shape name (``bench_hybrid.load_model``), or a
+    """``(name, model)`` of a hybrid model file or shape name (:func:`palpate.bench.hybrid.load_model`), or a
     :class:`Fail` naming ``palpate CMD``, its code by :data:`EXIT_CODES` (a bad name or file:
     input; data that cannot be fetched: a failed run)."""
-    from .. import bench_hybrid as bh
+    from ..bench import hybrid as bh
     from ..data import DataError
 
     try:

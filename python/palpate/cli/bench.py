@@ -1,9 +1,9 @@
-"""``palpate bench protocol|particles|hybrid|haptic|view``: the shared FEM probe case (:mod:`palpate.bench`),
-the per-tick cost of a particle body (:mod:`palpate.bench_particles`) and of the hybrid
-simulation at a chosen active count (:mod:`palpate.bench_hybrid`), and the haptic loop's timing
-(:func:`palpate.haptics.bench`), and what the web viewer costs that loop
-(:func:`palpate.viewer.bench.bench`). The defaults are those
-modules' (the benchmarks' definitions)."""
+"""``palpate bench protocol|particles|hybrid|haptic|view|sweep``: the shared FEM probe case
+(:mod:`palpate.bench`), the per-tick cost of a particle body (:mod:`palpate.bench.particles`) and
+of the hybrid simulation at a chosen active count (:mod:`palpate.bench.hybrid`), the haptic loop's
+timing (:mod:`palpate.bench.haptic`), what the web viewer costs that loop
+(:mod:`palpate.bench.view`) and the batch-study runner's overhead (:mod:`palpate.bench.sweep`).
+The defaults are those modules' (the benchmarks' definitions)."""
 from __future__ import annotations
 
 import json
@@ -13,8 +13,8 @@ import sys
 from .. import __version__
 from .. import _progress
 from .. import bench
-from .. import bench_hybrid as bh
-from .. import bench_particles as bp
+from ..bench import hybrid as bh
+from ..bench import particles as bp
 from ._common import FAILED, Fail, RunFailed, Usage, add_physics_rate, add_quiet, fmt_mm, load_hybrid_model, load_view_model, num, palpate_errors, physics_rate
 from .._extras import install_hint
 
@@ -48,7 +48,7 @@ def add_parser(sub) -> None:
     sizes = ", ".join(map(str, bp.ALL))
     q = bsub.add_parser("particles", help="per-tick cost of a meshfree particle body (an LV-shell cluster of N particles)",
                         description="Time 1 ms ticks of the N particles of the LV shell fill nearest the probe point "
-                                    f"(see palpate/bench_particles.py), or --all: N = {sizes}.")
+                                    f"(see palpate/bench/particles.py), or --all: N = {sizes}.")
     q.add_argument("n", nargs="?", type=int, metavar="N", help="number of (active) particles")
     q.add_argument("--all", action="store_true", help=f"N = {sizes}")
     q.add_argument("--spacing", type=float, default=bp.SPACING, metavar="M",
@@ -68,7 +68,7 @@ def add_parser(sub) -> None:
                                     f"{num(bh.DEPTH * 1e3)} mm press at the probe point of MODEL (a palpate model file, "
                                     "or a shape: ellipsoids, ventricle, rodero), then time each tick of a scripted "
                                     f"press, hold, {num(bh.SLIDE * 1e3)} mm slide and release (one thread; see "
-                                    "palpate/bench_hybrid.py for the probe point and the calibration rule). "
+                                    "palpate/bench/hybrid.py for the probe point and the calibration rule). "
                                     "Exit 3 if a tick fails.")
     h.add_argument("model", metavar="MODEL", help="model file (palpate build) or ellipsoids|ventricle|rodero")
     h.add_argument("--active", type=int, required=True, metavar="N", help="target number of active particles")
@@ -95,7 +95,7 @@ def _add_sweep(bsub) -> None:
     w = bsub.add_parser("sweep", help="the batch-study runner's overhead and 2-worker speed-up (palpate sweep)",
                         description="A study of N probe scenarios on a protocol mesh run as a plain Python loop, then "
                                     "by the Dask runner with 1 and 2 local workers: scenarios per second, the runner's "
-                                    "overhead per scenario and the 2-worker speed-up (palpate/sweep/bench.py).")
+                                    "overhead per scenario and the 2-worker speed-up (palpate/bench/sweep.py).")
     w.add_argument("mesh", nargs="?", default="1350", metavar="MESH",
                    help="190, 1350, 10k, 50k (the shared lv_* meshes) or ellipsoid_192 (default 1350)")
     w.add_argument("--scenarios", type=int, default=64, metavar="N", help="scenarios (default 64)")
@@ -108,7 +108,7 @@ def _add_sweep(bsub) -> None:
 def cmd_bench_sweep(a) -> int:
     import json as _json
 
-    from ..sweep import bench as sb
+    from ..bench import sweep as sb
 
     if a.scenarios < 2:
         raise Usage("palpate bench sweep: --scenarios must be at least 2")
@@ -131,7 +131,7 @@ def _add_view(bsub) -> None:
                         description="Run the haptic loop on MODEL with a simulated hand dragged across the probe point "
                                     "(20 Hz targets, as a mouse drag): alone, under palpate view with no page, with the page "
                                     "open in the system's headless Chromium (niced), and alone again; report the loop's period "
-                                    "percentiles and overruns, and the viewer's frame rates (palpate/viewer/bench.py).")
+                                    "percentiles and overruns, and the viewer's frame rates (palpate/bench/view.py).")
     w.add_argument("model", metavar="MODEL", nargs="?", default="rodero",
                    help="as palpate view's: a hybrid model or shape, or a full-FEM tet mesh, scene or protocol mesh name")
     w.add_argument("--unit", choices=("m", "cm", "mm"), default="m", help="a tet mesh file's coordinate unit (default m)")
@@ -160,7 +160,7 @@ def cmd_bench_view(a) -> int:
     exe, why2 = find_chromium()
     if not ok or exe is None:
         raise RunFailed(f"palpate bench view: needs a browser: {why or why2}")
-    from ..viewer import bench as vb
+    from ..bench import view as vb
 
     name, model = load_view_model(a.model, "bench view", a.unit)
     say = (lambda s: None) if a.json else (lambda s: print(f"  ... {s}", file=sys.stderr, flush=True))
@@ -186,7 +186,7 @@ def cmd_bench_view(a) -> int:
 
 
 def _add_haptic(bsub) -> None:
-    from .. import haptics
+    from ..bench import haptic as hb
 
     k = bsub.add_parser("haptic", help="the haptic loop's period, compute time and overruns on a scripted palpation",
                         description="Run the haptic servo loop on MODEL (a model file or shape name) for --seconds with a "
@@ -208,12 +208,12 @@ def _add_haptic(bsub) -> None:
                         "--realtime; see palpate haptic --help)")
     w.add_argument("--sleep", action="store_true",
                    help="both runs' servo sleeps through each wait but its last 200 us (see palpate haptic --help)")
-    k.add_argument("--json", action="store_true", help="one JSON object (keys: " + ", ".join(haptics.BENCH_KEYS) + ", ...)")
+    k.add_argument("--json", action="store_true", help="one JSON object (keys: " + ", ".join(hb.BENCH_KEYS) + ", ...)")
     k.set_defaults(func=cmd_bench_haptic)
 
 
 def cmd_bench_haptic(a) -> int:
-    from .. import haptics
+    from ..bench import haptic as hb
 
     if not (a.seconds > 0 and math.isfinite(a.seconds)):
         raise Usage(f"palpate bench haptic: --seconds must be positive, got {a.seconds}")
@@ -227,7 +227,7 @@ def cmd_bench_haptic(a) -> int:
                     "meets the kernel's real-time throttling")
     name, model = load_hybrid_model(a.model, "bench haptic")
     try:
-        r = haptics.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name, realtime=a.realtime, threads=a.threads,
+        r = hb.bench(model, a.seconds, a.rate, idle=not a.no_idle, name=name, realtime=a.realtime, threads=a.threads,
                           busy_wait=True if a.busy_wait else False if a.sleep else None, physics_rate=hz)
     except palpate_errors() as e:
         raise Fail(f"palpate bench haptic: {type(e).__name__}: {e}", cause=e) from None

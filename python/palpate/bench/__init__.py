@@ -1,4 +1,12 @@
-"""The shared benchmark case (``shared/bench/PROTOCOL.md``, defined in code in ``shared/bench/common.py``).
+"""palpate's benchmarks (``palpate bench ...``), and here the shared benchmark case
+(``shared/bench/PROTOCOL.md``, defined in code in ``shared/bench/common.py``).
+
+The other benchmarks are this package's modules, each imported only when used (they reach up into
+the hybrid simulation, the haptic loop, the viewer and the sweep runner): :mod:`.hybrid` (a tick of
+the hybrid simulation at a chosen active count), :mod:`.particles` (a meshfree particle body),
+:mod:`.haptic` (the haptic loop's timing), :mod:`.view` (what the web viewer costs that loop) and
+:mod:`.sweep` (the batch-study runner's overhead). The old modules ``palpate.bench_hybrid``,
+``palpate.bench_particles``, ``palpate.viewer.bench`` and ``palpate.sweep.bench`` re-export them.
 
 A left-ventricle-like wall (the region between the ellipsoids of semi-axes (2.0, 2.0, 3.5) and
 (2.6, 2.6, 4.2) mesh units, truncated at z = 0), mesh units x 0.01 = m. E = 3e4 Pa, nu = 0.4,
@@ -26,9 +34,9 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from . import _palpate as _p
-from . import defaults
-from .io import read_mesh_arrays
+from .. import _palpate as _p
+from .. import defaults
+from ..io import read_mesh_arrays
 
 SCALE = 0.01          # mesh unit -> m
 E = 3.0e4             # Young's modulus [Pa]
@@ -225,7 +233,7 @@ def shared_dir() -> Optional[Path]:
     if env:
         cands.append(Path(env))
     here = Path(__file__).resolve()
-    cands += [here.parents[2] / ".." / "shared", Path.cwd() / ".." / "shared", Path.cwd() / "shared"]
+    cands += [here.parents[3] / ".." / "shared", Path.cwd() / ".." / "shared", Path.cwd() / "shared"]
     for c in cands:
         if (c / "bench" / "meshes").is_dir():
             return c.resolve()
