@@ -794,10 +794,12 @@ def plot(result: Dict[str, Any], path: str) -> Optional[str]:
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
     for r in result["references"]:
         graded = " (graded)" if result["case"]["shape"] == "ellipsoids" else ""
-        a.plot(np.r_[0, r["indentation"]] * 1e3, np.r_[0, r["force"]], "o-", lw=1, label=f"FEM {r['tets']} tets{graded}")
+        kind = "quadratic " if r.get("order", 1) == 2 else ""
+        a.plot(np.r_[0, r["indentation"]] * 1e3, np.r_[0, r["force"]], "o-", lw=1,
+               label=f"FEM {r['tets']} {kind}tets{graded}")
     for key, style, name in (("coarse", "s--", "coarse FEM"), ("hybrid", "^-", "hybrid")):
         r = result[key]
-        label = f"{name} ({r['tets']} tets)" if key == "coarse" else f"hybrid ({r['core_tets']}-tet core)"
+        label = f"{name} ({r['tets']} linear tets)" if key == "coarse" else f"hybrid ({r['core_tets']}-tet core)"
         a.plot(np.r_[0, r["indentation"]] * 1e3, np.r_[0, r["force"]], style, lw=1.5, label=label)
     conv = result.get("convergence", [])
     ex = [(cv["indentation"], cv["extrapolated"]) for cv in conv if np.isfinite(cv["extrapolated"])]
