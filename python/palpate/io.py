@@ -498,13 +498,17 @@ class VtuSeries:
     Point data written per frame: ``displacement`` [m] and ``velocity`` [m/s], both (n, 3), and
     whatever ``point_data`` / ``cell_data`` :meth:`write` is given; :meth:`write_body` writes
     everything a ParaView user plots (see there). Points are the deformed positions [m]; cells
-    are the mesh's tets.
+    are the mesh's tets: ``tets`` (m, 4), or (m, 10) quadratic tets in VTK's node order (the
+    vertices, then the edges (0,1) (1,2) (0,2) (0,3) (1,3) (2,3), palpate's own). A quadratic
+    :class:`~palpate.Body` (``order=2``) given the mesh's (m, 4) tets is written with its (m, 10)
+    cells (:func:`quadratic_cells`), so ParaView draws its curved elements.
     """
 
     def __init__(self, outdir: PathLike, tets: np.ndarray, stem: str = "frame"):
         self.outdir = os.fspath(outdir)
         self.stem = stem
-        self.tets = whole_indices(tets, "tets", 4)
+        a = np.asarray(tets)
+        self.tets = whole_indices(tets, "tets", 10 if a.ndim == 2 and a.shape[1] == 10 else 4)
         self.entries: List[Tuple[float, str]] = []
         os.makedirs(self.outdir, exist_ok=True)
         remove_frames(self.outdir, [stem])
@@ -536,7 +540,7 @@ class VtuSeries:
         pd.update(extra)
         mesh = meshio.Mesh(
             pts,
-            [("tetra", self.tets)],
+            [("tetra10" if self.tets.shape[1] == 10 else "tetra", self.tets)],
             point_data=pd,
             cell_data={k: [v] for k, v in cd.items()},
         )
@@ -570,6 +574,8 @@ class VtuSeries:
         the given node indices, else the nodes carrying a non-zero external force); cell data
         ``von_mises`` [Pa] and ``energy_density`` [J/m^3] (``Body.element_fields``), ``det_f``
         [-] and ``inverted`` (m,) uint8 (det F <= 0)."""
+        if getattr(body, "order", 1) == 2 and self.tets.shape[1] == 4:
+            self.tets = quadratic_cells(self.tets, body.edges, body.mesh.n_nodes)
         n = body.n_nodes
         fixed = np.zeros(n, dtype=np.uint8)
         fixed[body.fixed] = 1
@@ -586,6 +592,27 @@ class VtuSeries:
 
     def _write_pvd(self) -> None:
         write_pvd(self.pvd_path, [(t, f, 0, None) for t, f in self.entries])
+
+
+def quadratic_cells(tets: np.ndarray, edges: np.ndarray, n_vertices: int) -> np.ndarray:
+    """The (m, 10) cells of a quadratic body: each tet's four vertices, then the nodes of its
+    edges (0,1) (1,2) (0,2) (0,3) (1,3) (2,3) (VTK's ``tetra10`` order, and palpate's), edge node
+    ``k`` being node ``n_vertices + k`` of ``edges[k]`` (:attr:`palpate.Body.edges`)."""
+    tets = np.asarray(tets, dtype=np.int64)
+    edges = np.sort(np.asarray(edges, dtype=np.int64), axis=1)
+    key = edges[:, 0] * (n_vertices + 1) + edges[:, 1]
+    order = np.argsort(key)
+    out = np.empty((len(tets), 10), dtype=np.int64)
+    out[:, :4] = tets
+    for j, (a, b) in enumerate(((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))):
+        lo, hi = np.minimum(tets[:, a], tets[:, b]), np.maximum(tets[:, a], tets[:, b])
+        k = lo * (n_vertices + 1) + hi
+        pos = np.searchsorted(key, k, sorter=order)
+        found = order[np.minimum(pos, len(order) - 1)]
+        if len(key) == 0 or not np.array_equal(key[found], k):
+            raise ParameterError("quadratic_cells: a tet's edge is not among the body's edges")
+        out[:, 4 + j] = n_vertices + found
+    return out
 
 
 def remove_frames(outdir: PathLike, stems: Sequence[str]) -> None:

@@ -117,3 +117,24 @@ def test_hybrid_model_parts(tmp_path):
     skin = meshio.read(tmp_path / "hybrid_skin.vtu")
     np.testing.assert_array_equal(skin.cells_dict["triangle"], model.outer_triangles)
     assert len(skin.points) == model.n_regions
+
+
+def test_a_quadratic_body_is_written_with_its_ten_node_cells(tmp_path):
+    """A ``Body(order=2)`` frame holds VTK ``tetra10`` cells over all its nodes (vertices, then
+    edge nodes), each edge node at its edge's midpoint at rest: ParaView draws the curved
+    elements rather than the vertices' linear tets."""
+    import meshio
+
+    mesh = palpate.box_mesh(size=(0.02, 0.01, 0.01), cells=(2, 1, 1))
+    fixed = np.flatnonzero(mesh.points[:, 0] == 0.0)
+    body = palpate.Body(mesh, palpate.Material(young=3e4, poisson=0.4, density=1000.0), fixed=fixed,
+                        gravity=(0, 0, -9.81), order=2)
+    path = palpate.VtuSeries(tmp_path, mesh.tets).write_body(body)
+    m = meshio.read(path)
+    (block,) = m.cells
+    assert block.type == "tetra10" and block.data.shape == (mesh.n_tets, 10)
+    assert len(m.points) == body.n_nodes
+    p = body.positions
+    for a, b, e in ((0, 1, 4), (1, 2, 5), (0, 2, 6), (0, 3, 7), (1, 3, 8), (2, 3, 9)):
+        np.testing.assert_allclose(p[block.data[:, e]], 0.5 * (p[block.data[:, a]] + p[block.data[:, b]]), atol=1e-15)
+    np.testing.assert_array_equal(block.data[:, :4], mesh.tets)
