@@ -116,6 +116,14 @@ def cmd_build(a) -> int:
     if a.shape is not None and a.unit is not None:
         raise Usage("palpate build: --unit is for surface files, not --shape (the shapes are in metres)")
     unit = a.unit or "m"
+    # Where the model goes, checked before the build's seconds are spent (it is written again at
+    # the end, which reports any other failure to write).
+    parent = os.path.dirname(os.path.abspath(a.output))
+    if os.path.isdir(a.output):
+        raise RunFailed(f"palpate build: cannot write the model: {a.output} is a directory (give a file name, "
+                        f"e.g. {os.path.join(a.output, 'model.palpate')})")
+    if not os.path.isdir(parent):
+        raise RunFailed(f"palpate build: cannot write the model: {parent} is not a directory")
     opts = {"projection": _PROJECTIONS[a.projection][0],
             "core_fraction": a.core_fraction, "core_triangles": a.core_triangles, "core_layers": a.core_layers,
             "spacing": a.spacing, "particles": a.particles, "density": a.density,
