@@ -26,6 +26,12 @@
 //!
 //! Samples and their triangles' nodes are all in the model's pattern (a boundary triangle is a
 //! face of a tet), so the contact adds no fill: one symbolic factorisation serves every iteration.
+//!
+//! On a body of quadratic tets ([`crate::fem::ModelBuilder::order`], the references' element:
+//! they do not lock in the wall's bending) a sample lies on the curved face: `b_si` are the six
+//! quadratic shape functions of its vertices and edge nodes at the sample's barycentric point,
+//! which sum to one as the linear weights do, so the spread is still the transpose of the
+//! interpolation and the nodal forces still sum to minus the sphere's.
 
 use crate::error::SolveError;
 use crate::fem::model::NONE;
