@@ -21,6 +21,14 @@ use crate::fem::tet4::{deformation_gradient, svk_form_blocks, TetRest};
 use crate::material::{self, neo_hookean, Law, Material};
 use crate::math::{Mat3, Vec3};
 
+/// The positive part of a symmetric stress (its eigenvalues clamped at 0): the geometric
+/// term's stress in the definite tangent (module docs), the linear tet's and the quadratic's.
+pub(crate) fn positive_part(s: &Mat3) -> Mat3 {
+    let eig = s.symmetric_eigen();
+    let clamped = eig.eigenvalues.map(|l| l.max(0.0));
+    eig.eigenvectors * Mat3::from_diagonal(&clamped) * eig.eigenvectors.transpose()
+}
+
 /// Negative semi-definite approximation of `d f / d x` (3x3 blocks) at positions `x` \[m\].
 pub fn definite_jacobian(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> [[Mat3; 4]; 4] {
     let f = deformation_gradient(x, rest);
@@ -28,10 +36,7 @@ pub fn definite_jacobian(x: &[Vec3; 4], rest: &TetRest, m: &Material) -> [[Mat3;
     match m.law() {
         Law::StVenantKirchhoff => {
             let s = material::stress(m, &material::green_strain(&f));
-            let eig = s.symmetric_eigen();
-            let clamped = eig.eigenvalues.map(|l| l.max(0.0));
-            let s_pos = eig.eigenvectors * Mat3::from_diagonal(&clamped) * eig.eigenvectors.transpose();
-            svk_form_blocks(&f, &s_pos, lam, mu, rest, -rest.volume)
+            svk_form_blocks(&f, &positive_part(&s), lam, mu, rest, -rest.volume)
         }
         Law::NeoHookean => {
             let g = rest.grads();

@@ -289,10 +289,7 @@ pub fn definite_jacobian(x: &[Vec3; 10], rest: &Tet10Rest, m: &Material) -> Box<
         let f = gradient(x, g);
         match m.law() {
             Law::StVenantKirchhoff => {
-                let s = material::stress(m, &material::green_strain(&f));
-                let eig = s.symmetric_eigen();
-                let clamped = eig.eigenvalues.map(|l| l.max(0.0));
-                let s_pos = eig.eigenvectors * Mat3::from_diagonal(&clamped) * eig.eigenvectors.transpose();
+                let s_pos = super::tangent::positive_part(&material::stress(m, &material::green_strain(&f)));
                 add_blocks(&mut k, &svk_blocks(&f, &s_pos, m.lambda(), m.mu(), g, -w));
             }
             Law::NeoHookean => neo_hookean_blocks(&f, g, m, -w, true, &mut k),
