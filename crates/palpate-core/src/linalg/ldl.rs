@@ -11,6 +11,7 @@
 //! The symbolic phase (elimination tree, column counts) runs once per pattern; [`Ldl::factor`]
 //! and [`Ldl::solve_in_place`] then work in preallocated storage and allocate nothing.
 
+use super::supernodal::{Supernodal, SUPERNODAL_MIN_BLOCKS};
 use crate::math::{Mat3, Vec3};
 
 /// A factorisation failure: the matrix is not (numerically) positive definite.
@@ -41,6 +42,8 @@ pub struct Ldl {
     flag: Vec<usize>,
     pattern: Vec<usize>,
     y: Vec<Mat3>,
+    // faer's supernodal numeric factorisation, for large factors (see `linalg/supernodal.rs`).
+    supernodal: Option<Box<Supernodal>>,
 }
 
 const NONE: usize = usize::MAX;
@@ -94,7 +97,7 @@ impl Ldl {
             lp[k + 1] = lp[k] + lnz[k];
         }
         let nnz = lp[n];
-        Ldl {
+        let mut ldl = Ldl {
             n,
             ap,
             ai,
@@ -107,7 +110,55 @@ impl Ldl {
             flag,
             pattern: vec![0; n],
             y: vec![Mat3::zeros(); n],
+            supernodal: None,
+        };
+        if nnz >= SUPERNODAL_MIN_BLOCKS {
+            ldl.fill_pattern();
+            ldl.supernodal = Supernodal::new(n, &ldl.ap, &ldl.ai).map(Box::new);
         }
+        ldl
+    }
+
+    /// The row indices of L (`li`), as [`Ldl::factor`] writes them: block row `k`'s pattern is
+    /// the reach of its entries in the elimination tree; column `i` gets its rows in increasing
+    /// order.
+    fn fill_pattern(&mut self) {
+        let (n, ap, ai, parent) = (self.n, &self.ap, &self.ai, &self.parent);
+        let (lp, li, lnz, flag) = (&self.lp, &mut self.li, &mut self.lnz, &mut self.flag);
+        for k in 0..n {
+            flag[k] = k;
+            lnz[k] = 0;
+            for &i0 in &ai[ap[k]..ap[k + 1]] {
+                let mut i = i0;
+                if i > k {
+                    continue;
+                }
+                while flag[i] != k {
+                    flag[i] = k;
+                    li[lp[i] + lnz[i]] = k;
+                    lnz[i] += 1;
+                    i = parent[i];
+                }
+            }
+        }
+    }
+
+    /// The numeric factorisation by faer's supernodal Cholesky (`true`) or the block code
+    /// (`false`), whatever the factor's size ([`Ldl::symbolic`] picks faer's from
+    /// [`crate::linalg::SUPERNODAL_MIN_BLOCKS`] blocks on). For tests and benchmarks.
+    pub fn with_supernodal(mut self, on: bool) -> Ldl {
+        self.supernodal = if on {
+            self.fill_pattern();
+            Supernodal::new(self.n, &self.ap, &self.ai).map(Box::new)
+        } else {
+            None
+        };
+        self
+    }
+
+    /// Whether the numeric factorisation is faer's supernodal one (`linalg/supernodal.rs`).
+    pub fn is_supernodal(&self) -> bool {
+        self.supernodal.is_some()
     }
 
     /// Number of block rows.
@@ -149,6 +200,12 @@ impl Ldl {
     /// diagonal blocks are full symmetric 3x3 blocks). Fails, naming the block column, if a
     /// pivot block is not positive definite.
     pub fn factor(&mut self, ax: &[Mat3]) -> Result<(), LdlError> {
+        if let Some(sn) = self.supernodal.as_mut() {
+            if sn.factor(ax, &self.lp, &self.li, &mut self.lx, &mut self.d_inv) {
+                return Ok(());
+            }
+            // Not positive definite, or not finite: the block code below finds where.
+        }
         let n = self.n;
         let (ap, ai) = (&self.ap, &self.ai);
         let (lp, li, lx, d_inv) = (&self.lp, &mut self.li, &mut self.lx, &mut self.d_inv);
@@ -399,6 +456,52 @@ mod tests {
         for i in 0..n {
             assert!((b[i] - x_true[i]).norm() < 1e-12, "{i}: {} vs {}", b[i], x_true[i]);
         }
+    }
+
+    /// faer's supernodal factorisation, turned into block factors, gives the block code's factors
+    /// (to round-off), solves, rank updates and failure reports.
+    #[test]
+    fn supernodal_factors_match_the_block_code() {
+        let n = 120;
+        let a = test_matrix(n);
+        let (ap, ai, ax) = upper(&a);
+        let mut blocks = Ldl::symbolic(n, ap.clone(), ai.clone()).with_supernodal(false);
+        let mut sn = Ldl::symbolic(n, ap.clone(), ai.clone()).with_supernodal(true);
+        assert!(sn.is_supernodal() && !blocks.is_supernodal());
+        blocks.factor(&ax).unwrap();
+        sn.factor(&ax).unwrap();
+        assert_eq!(blocks.li, sn.li);
+        let scale = blocks.lx.iter().chain(&blocks.d_inv).map(|m| m.amax()).fold(0.0, f64::max);
+        let err = blocks.lx.iter().zip(&sn.lx).chain(blocks.d_inv.iter().zip(&sn.d_inv)).map(|(a, b)| (a - b).amax()).fold(0.0, f64::max);
+        assert!(err < 1e-13 * scale, "factors differ by {err:e} (scale {scale:e})");
+        // An update of the supernodal factor, against the block one's.
+        let rhs: Vec<Vec3> = (0..n).map(|i| Vec3::new((i as f64).sin(), 1.0, (0.3 * i as f64).cos())).collect();
+        for f in [&mut blocks, &mut sn] {
+            f.update(&[3, 4], &[0.5, 0.3], 40.0).unwrap();
+        }
+        let (mut x1, mut x2) = (rhs.clone(), rhs.clone());
+        blocks.solve_in_place(&mut x1);
+        sn.solve_in_place(&mut x2);
+        let err = x1.iter().zip(&x2).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        assert!(err < 1e-12, "updated solves differ by {err:e}");
+        // Not positive definite, or not finite: the block code's report.
+        let mut bad = a.clone();
+        bad[57][57] = Some(Mat3::from_diagonal(&Vec3::new(3.0, -2.0, 3.0)));
+        let (_, _, bx) = upper(&bad);
+        let e = sn.factor(&bx).unwrap_err();
+        assert_eq!((e.column, e.pivot <= 0.0), (57, true));
+        let mut nan = ax.clone();
+        nan[ap[80]][(1, 1)] = f64::NAN;
+        assert!(sn.factor(&nan).is_err());
+        // And it recovers on the good matrix.
+        sn.factor(&ax).unwrap();
+        let mut x3 = rhs.clone();
+        sn.solve_in_place(&mut x3);
+        blocks.factor(&ax).unwrap();
+        let mut x4 = rhs;
+        blocks.solve_in_place(&mut x4);
+        let err = x3.iter().zip(&x4).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+        assert!(err < 1e-12, "{err:e}");
     }
 
     #[test]

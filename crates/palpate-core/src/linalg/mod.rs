@@ -10,6 +10,8 @@ pub mod block;
 pub mod cg;
 pub mod ldl;
 pub mod ordering;
+mod supernodal;
 
 pub use block::BlockPattern;
 pub use ldl::{Ldl, LdlError};
+pub use supernodal::SUPERNODAL_MIN_BLOCKS;
