@@ -15,10 +15,10 @@ use std::time::{Duration, Instant};
 use palpate_core::runtime::{scale, SimOptions};
 use palpate_core::{ModelBuilder, Vec3};
 use palpate_haptics::bridge::protocol::Reject;
-use palpate_haptics::bridge::{Bridge, BridgeError, BridgeOptions, BridgeStats, Key};
-use palpate_haptics::devices::{Hand, HandParams, Replay, ReplayCheck, Scripted};
+use palpate_haptics::bridge::{BridgeError, BridgeStats, Key};
+use palpate_haptics::devices::ReplayCheck;
 use palpate_haptics::{
-    CouplingParams, Device, DeviceKind, FemOptions, FemPhysics, HapticCore, HybridPhysics, Idle, Physics, Realtime, Recording, SafetyParams, Servo,
+    BuiltLoop, CouplingSpec, Device, DeviceKind, DeviceSpec, FemOptions, HapticCore, LoopError, LoopSpec, PhysicsSpec, Realtime, Recording, SafetySpec, Servo,
     ServoConfig, ServoHandle, ServoReport, Snapshot, Stats, Vec3Cell,
 };
 use pyo3::prelude::*;
@@ -29,17 +29,6 @@ use crate::conv;
 use crate::errors::{self, HapticsError};
 use crate::hybrid::PyHybridModel;
 use crate::material::PyMaterial;
-
-/// The default `spin` of a servo that is not real-time [s]: longer than any period (the servo
-/// never sleeps; see the class docs for why). `palpate.haptics.BUSY_SPIN` is the same value.
-const BUSY_SPIN: f64 = 1.0;
-
-/// The default `spin` of the multirate loop's servo [s]: it sleeps to each deadline, leaving the
-/// cores to the physics thread (see the class docs).
-const MULTIRATE_SPIN: f64 = 0.0;
-
-/// The physics thread's rate of the multirate loop when none is given [Hz] (at most the servo's).
-const DEFAULT_PHYSICS_RATE_HZ: f64 = 1000.0;
 
 // One per loop, moved rarely: the variants' sizes do not matter.
 #[allow(clippy::large_enum_variant)]
@@ -394,106 +383,17 @@ impl PyHapticLoop {
             None => None,
         };
         errors::guard("HapticLoop", || {
+            // Python's values into the loop's description (palpate_haptics::LoopSpec), which
+            // checks and builds it; here only what is Python's: conversions, the unit checks'
+            // warnings, which model class was given.
             for (n, v) in [
                 ("tool_radius", tool_radius),
                 ("core_contact_stiffness", core_contact_stiffness),
                 ("tool_area_stiffness", tool_area_stiffness),
-                ("coupling_stiffness", coupling_stiffness),
-                ("proxy_mass", proxy_mass),
-                ("max_force", max_force),
-                ("max_rate", max_rate),
-                ("stall_timeout", stall_timeout),
-                ("silence", silence),
-                ("physics_rate", physics_rate),
             ] {
                 positive(n, v, false)?;
             }
-            for (n, v) in [("coupling_damping", coupling_damping), ("ramp", ramp), ("spin", spin)] {
-                positive(n, v, true)?;
-            }
-            let mut replay: Option<Recording> = None;
-            let mut rate_hz = rate_hz;
-            if single_rate && physics_rate.is_some() {
-                return Err(errors::param_error_from("physics_rate and single_rate=True together: the single-rate loop has no physics thread"));
-            }
-            // The multirate loop by default, its physics at 1 kHz (or the servo's rate, if lower);
-            // the idle loop has no physics to run.
-            let mut physics_rate = if single_rate || idle {
-                None
-            } else {
-                Some(physics_rate.unwrap_or(DEFAULT_PHYSICS_RATE_HZ.min(rate_hz)))
-            };
-            if device == "replay" {
-                let path = recording.as_ref().ok_or_else(|| errors::param_error_from("device 'replay' needs recording=PATH"))?;
-                let r = Recording::load(path).map_err(record_error)?;
-                rate_hz = r.rate_hz;
-                physics_rate = r.physics_rate_hz;
-                replay = Some(r);
-            }
-            let kind = match kind {
-                Some(k) => kind_of(&k)?,
-                None if device == "bridge" => DeviceKind::Bridge,
-                None => DeviceKind::Simulated,
-            };
-            let (dc, ds) = kind.defaults();
-            let coupling = match &replay {
-                Some(r) => r.coupling,
-                None => CouplingParams {
-                    stiffness: coupling_stiffness.unwrap_or(dc.stiffness),
-                    damping: coupling_damping.unwrap_or(dc.damping),
-                    proxy_mass: proxy_mass.unwrap_or(dc.proxy_mass),
-                },
-            };
-            let safety = match &replay {
-                Some(r) => r.safety,
-                None => SafetyParams {
-                    max_force: max_force.unwrap_or(ds.max_force),
-                    max_rate: max_rate.unwrap_or(ds.max_rate),
-                    ramp: ramp.unwrap_or(ds.ramp),
-                    stall_timeout: stall_timeout.unwrap_or(ds.stall_timeout),
-                    silence: silence.unwrap_or(ds.silence),
-                },
-            };
-            // The device class's rated limits (a replay drives no device: its recorded limits
-            // stand); beyond them only with `unsafe_limits`, and then said.
-            let beyond = if replay.is_some() {
-                None
-            } else {
-                palpate_haptics::safety::check_limits(kind, &coupling, &safety).err()
-            };
-            let unsafe_note = match beyond {
-                Some(why) if !unsafe_limits => {
-                    return Err(errors::param_error_from(format!(
-                        "{why}: refused (unsafe_limits=True, or --unsafe-limits on the command line, allows it, at the user's risk)"
-                    )));
-                }
-                Some(why) => {
-                    let msg = std::ffi::CString::new(format!("unsafe limits: {why}")).unwrap_or_default();
-                    PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &msg, 1)?;
-                    Some(why)
-                }
-                None => None,
-            };
-            let defaults = ServoConfig::default();
-            let mut config = ServoConfig {
-                rate_hz,
-                physics_rate_hz: physics_rate,
-                coupling: Some(coupling),
-                safety: Some(safety),
-                record_ticks,
-                max_ticks,
-                spin: spin.unwrap_or(if realtime {
-                    0.0
-                } else if physics_rate.is_some() {
-                    MULTIRATE_SPIN
-                } else {
-                    BUSY_SPIN
-                }),
-                realtime,
-                ..defaults
-            };
-            config.check().map_err(errors::param_error_from)?;
-
+            let kind = kind.map(|k| kind_of(&k)).transpose()?;
             // Values most likely in the wrong unit (palpate_core::runtime::scale): warned, or
             // refused with strict_units; the model's box for the hand target's check.
             let tool_r = tool_radius.unwrap_or(palpate_core::runtime::tool::DEFAULT_RADIUS);
@@ -511,27 +411,18 @@ impl PyHapticLoop {
                 },
                 strict_units,
             );
-            let mut hand = None;
-            let mut bridge = None;
-            let mut replay_check = None;
-            // Ticks a finite device gives (a script's, a replay's): no recording needs more.
-            let mut device_ticks: Option<usize> = None;
-            let dev: Box<dyn Device> = match device.as_str() {
+            let device_spec = match device.as_str() {
                 "scripted" => {
                     let (Some(t), Some(k)) = (times, knots) else {
                         return Err(errors::param_error_from("device 'scripted' needs times=(k,) [s] and knots=(k, 3) [m]"));
                     };
                     let (t, _) = conv::reals_nd(t, "times")?;
                     let k = conv::vec3s(k, "knots", t.len(), true)?;
-                    let s = Scripted::new(t, k).map_err(errors::param_error_from)?;
-                    device_ticks = Some((s.duration() * rate_hz).ceil() as usize + 1);
-                    Box::new(s)
+                    DeviceSpec::Scripted { times: t, knots: k }
                 }
                 "replay" => {
-                    device_ticks = replay.as_ref().map(|r| r.ticks.len());
-                    let r = Replay::new(replay.as_ref().unwrap());
-                    replay_check = Some(r.check());
-                    Box::new(r)
+                    let path = recording.as_ref().ok_or_else(|| errors::param_error_from("device 'replay' needs recording=PATH"))?;
+                    DeviceSpec::Replay(Recording::load(path).map_err(record_error)?)
                 }
                 "hand" => {
                     let at = match hand_start {
@@ -539,9 +430,7 @@ impl PyHapticLoop {
                         None => return Err(errors::param_error_from("device 'hand' needs hand_start=(3,) [m]")),
                     };
                     target_check.check(py, "HapticLoop: hand_start", &at)?;
-                    let h = Hand::new(HandParams::default(), at);
-                    hand = Some(h.target());
-                    Box::new(h)
+                    DeviceSpec::Hand { start: at }
                 }
                 "bridge" => {
                     let ip: Ipv4Addr = host.parse().map_err(|_| errors::param_error_from(format!("host = {host:?} is not an IPv4 address")))?;
@@ -550,22 +439,12 @@ impl PyHapticLoop {
                         Some(k) => Some(Key::new(k.as_bytes()).map_err(|e| errors::param_error_from(format!("bridge_key: {e}")))?),
                         None => None,
                     };
-                    let b = match Bridge::open(SocketAddrV4::new(ip, port), kind, BridgeOptions { key, ..Default::default() }) {
-                        Ok(b) => b,
-                        Err(e @ BridgeError::KeyRequired(_)) => {
-                            return Err(errors::param_error_from(format!("{e} (bridge_key=..., or --key-file FILE on the command line)")))
-                        }
-                        Err(e) => return Err(haptics_error(e.to_string())),
-                    };
-                    let addr = b.local_addr().map_err(haptics_error)?.to_string();
-                    bridge = Some((addr, b.stats()));
-                    Box::new(b)
+                    DeviceSpec::Bridge { address: SocketAddrV4::new(ip, port), key }
                 }
                 other => return Err(errors::param_error_from(format!("device = {other:?}: expected scripted, replay, hand or bridge"))),
             };
-
-            let physics: Box<dyn Physics> = if idle {
-                Box::new(Idle::default())
+            let physics = if idle {
+                PhysicsSpec::Idle
             } else if let Ok(hm) = model.cast::<PyHybridModel>() {
                 let mut options = SimOptions { hold, ..SimOptions::default() };
                 if let Some(r) = tool_radius {
@@ -575,13 +454,7 @@ impl PyHapticLoop {
                 if let Some(k) = core_contact_stiffness {
                     options.core_contact_stiffness = k;
                 }
-                let (hm, mat) = (hm.borrow().model.clone(), material.inner);
-                let physics = py.detach(|| HybridPhysics::new(hm, mat, options)).map_err(errors::model_error)?;
-                Box::new(
-                    physics
-                        .with_threads(threads, realtime)
-                        .map_err(|e| haptics_error(format!("cannot start {} helper threads: {e}", threads - 1)))?,
-                )
+                PhysicsSpec::Hybrid { model: hm.borrow().model.clone(), material: material.inner, options, threads }
             } else if let Ok(body) = model.cast::<PyBody>() {
                 if threads > 1 {
                     return Err(errors::param_error_from(format!(
@@ -605,33 +478,45 @@ impl PyHapticLoop {
                     .gravity(src.gravity())
                     .integrator(src.integrator());
                 drop(m);
-                Box::new(py.detach(|| builder.build().and_then(|model| FemPhysics::new(model, options))).map_err(errors::model_error)?)
+                PhysicsSpec::Fem { model: py.detach(|| builder.build()).map_err(errors::model_error)?, options }
             } else {
                 return Err(errors::type_error(format!("model: expected a HybridModel or a Body, got {}", model.get_type().name()?)));
             };
-            let id = physics.identity();
-            if let Some(r) = &replay {
-                if r.identity.digest != id.digest {
-                    return Err(haptics_error(format!(
-                        "the recording is of another simulation (digest {:016x}: {}), this loop's is {:016x} ({}): a replay would not give the recorded forces",
-                        r.identity.digest, r.identity.description, id.digest, id.description
-                    )));
+            let spec = LoopSpec {
+                kind,
+                rate_hz,
+                physics_rate_hz: physics_rate,
+                single_rate,
+                coupling: CouplingSpec { stiffness: coupling_stiffness, damping: coupling_damping, proxy_mass },
+                safety: SafetySpec { max_force, max_rate, ramp, stall_timeout, silence, unsafe_limits },
+                record_ticks,
+                max_ticks,
+                spin,
+                realtime,
+                ..LoopSpec::new(physics, device_spec)
+            };
+            let built = py.detach(|| spec.build()).map_err(|e| match e {
+                LoopError::Parameter(msg) if msg.contains("unsafe_limits allows it") => {
+                    errors::param_error_from(msg.replace("unsafe_limits allows it", "unsafe_limits=True, or --unsafe-limits on the command line, allows it"))
                 }
+                LoopError::Parameter(msg) => errors::param_error_from(msg),
+                LoopError::Model(e) => errors::model_error(e),
+                LoopError::Bridge(e @ BridgeError::KeyRequired(_)) => {
+                    errors::param_error_from(format!("{e} (bridge_key=..., or --key-file FILE on the command line)"))
+                }
+                other => haptics_error(other),
+            })?;
+            if let Some(why) = &built.unsafe_note {
+                let msg = std::ffi::CString::new(format!("unsafe limits: {why}")).unwrap_or_default();
+                PyErr::warn(py, &py.get_type::<pyo3::exceptions::PyUserWarning>(), &msg, 1)?;
             }
-            // The recording buffer is allocated at start (the servo never allocates): no longer than a
-            // finite device can fill, so that a generous default (the CLI's, sized for open-ended
-            // devices) costs a short script nothing.
-            let record_ticks = device_ticks.map_or(record_ticks, |n| record_ticks.min(n));
-            config.record_ticks = record_ticks;
-            let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
-            // A multirate recording replays from its own schedule (`run`), not the device's samples.
-            let replay = replay.filter(|r| r.physics_rate_hz.is_some());
+            let BuiltLoop { core, device, config, hand, bridge, identity, replay, replay_check, unsafe_note } = built;
             Ok(PyHapticLoop {
-                stage: Mutex::new(Stage::Ready(core, dev)),
+                stage: Mutex::new(Stage::Ready(core, device)),
                 config,
                 hand,
                 bridge,
-                identity: (id.digest, id.description),
+                identity: (identity.digest, identity.description),
                 replay,
                 unsafe_note,
                 replay_check,

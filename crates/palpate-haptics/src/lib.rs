@@ -14,6 +14,8 @@
 //! - [`device`], [`devices`]: the [`Device`] interface; scripted, replay, simulated hand;
 //! - [`bridge`]: the UDP bridge and its versioned binary protocol (`PROTOCOL.md`): vendor
 //!   devices connect through it as separate processes;
+//! - [`spec`]: a loop described as values ([`LoopSpec`]: physics, device, servo, safety) and
+//!   built by one constructor that checks it;
 //! - [`record`]: record and replay files; [`snapshot`]: non-blocking snapshots; [`stats`].
 //!
 //! Units: SI throughout (m, s, N, kg); positions and forces in the model's world frame; the force
@@ -31,6 +33,7 @@ pub mod record;
 pub mod safety;
 pub mod servo;
 pub mod snapshot;
+pub mod spec;
 pub mod stats;
 /// The sphere against a tet mesh's surface, moved to the core beside the FEM body
 /// ([`palpate_core::contact::surface`]); its old path kept.
@@ -45,5 +48,6 @@ pub use record::{Recording, TickRecord};
 pub use safety::{Safety, SafetyParams};
 pub use servo::{Fault, FaultRecord, HapticCore, Servo, ServoConfig, ServoHandle, ServoReport, TickOut, IDLE_SNAPSHOT_TICKS};
 pub use snapshot::{Mailbox, Snapshot, SnapshotCell, Vec3Cell};
+pub use spec::{BuiltLoop, CouplingSpec, DeviceSpec, LoopError, LoopSpec, PhysicsSpec, SafetySpec};
 pub use stats::Stats;
 pub use surface_contact::{AreaTool, SurfaceContact};
