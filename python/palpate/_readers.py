@@ -474,15 +474,27 @@ def _n(k: int, one: str, many: str) -> str:
     return f"{k} {one if k == 1 else many}"
 
 
+#: The ``MeshVersionFormatted`` values of an ASCII Medit file. In libMeshb (Medit's library) the
+#: version says how a *binary* .meshb stores its numbers: 1 float32 reals, 2 float64 reals, 3 also
+#: 64-bit file positions, 4 also 64-bit integers; an ASCII file's text is the same whatever it says
+#: (numbers written out in full, any number of digits). meshio's ASCII reader takes 0 to 2 only
+#: (the float type it parses the vertices with) and failed on 3 and 4 with a bare ``KeyError:
+#: '3'``; palpate parses the vertices itself, in double precision, so every version reads alike.
+_MEDIT_VERSIONS = ("0", "1", "2", "3", "4")
+
+
 @dataclass
 class MeditCheck:
     """What :func:`medit_precheck` found: ``skipped``, the sections read past (``"<keyword>
     (<count> entries, line <n>)"``, for the caller's MeshWarning); ``vertices``, the Vertices
     section's coordinates ``(n, dim)`` parsed from the text in double precision, and
-    ``vertex_refs``, their references ``(n,)`` int64 (both None without a Vertices section)."""
+    ``vertex_refs``, their references ``(n,)`` int64 (both None without a Vertices section);
+    ``meshio_text``, for a file of version 3 or 4 only, its text with the version line written
+    ``MeshVersionFormatted 2`` (the same ASCII content under a version meshio's reader takes)."""
     skipped: List[str]
     vertices: Optional[np.ndarray] = None
     vertex_refs: Optional[np.ndarray] = None
+    meshio_text: Optional[str] = None
 
 
 def _medit_vertices(name: str, lines: List[str], start: int, end: int, count: int, dim: int):
@@ -505,7 +517,15 @@ def _medit_vertices(name: str, lines: List[str], start: int, end: int, count: in
                 except ValueError:
                     raise MeshError(f"{name}: line {k + 1}: expected numbers in Vertices, got {t[:40]!r}") from None
         raise
-    coords, refs = values[:, :dim].copy(), values[:, dim]
+    coords = values[:, :dim].copy()
+    try:
+        # As integers, exactly: a version 4 file's references are 64-bit (over 2**53 a float64
+        # would round them).
+        return coords, np.array(tokens[dim::dim + 1], dtype=np.int64)
+    except (ValueError, OverflowError):
+        pass
+    # Written otherwise ("2.0", "1e3"): whole numbers within float64's exact integers only.
+    refs = values[:, dim]
     bad = np.flatnonzero(~np.isfinite(refs) | (refs != np.round(refs)) | (np.abs(refs) >= 2.0 ** 53))
     if len(bad):
         raise MeshError(f"{name}: Vertices: vertex {bad[0] + 1} (as Medit numbers them, from 1) has reference "
@@ -519,7 +539,8 @@ def medit_precheck(path: str) -> MeditCheck:
     would drop. Every section's count must match the numbers that follow it up to the next
     keyword (a wrong count is refused with the line; meshio reads numbers by count across line
     ends and would misread the rest), a keyword meshio does not know is refused by name, and the
-    sections meshio skips line by line must hold one entry a line. Returns a :class:`MeditCheck`:
+    sections meshio skips line by line must hold one entry a line, and ``MeshVersionFormatted``
+    must be one of :data:`_MEDIT_VERSIONS`. Returns a :class:`MeditCheck`:
     for the sections that are read past (:data:`_MEDIT_DROPPED`, :data:`_MEDIT_ONE_LINE`),
     ``"<keyword> (<count> entries, line <n>)"`` (the keyword's line), for the caller's
     MeshWarning, and the vertices and their references as the text gives them (the caller puts
@@ -529,6 +550,7 @@ def medit_precheck(path: str) -> MeditCheck:
     dim: Optional[int] = None
     skipped: List[str] = []
     out = MeditCheck(skipped)
+    meshio_lines: Optional[List[str]] = None   # the text for meshio, if a version line is rewritten
     i = 0
     while i < len(lines):
         line = lines[i].strip()
@@ -545,6 +567,15 @@ def medit_precheck(path: str) -> MeditCheck:
         if kw == "MeshVersionFormatted":
             if len(tok) < 2:
                 raise MeshError(f"{name}: line {i}: expected the version on the 'MeshVersionFormatted' line")
+            if tok[1] not in _MEDIT_VERSIONS:
+                raise MeshError(f"{name}: line {i}: MeshVersionFormatted {tok[1][:20]!r} is not a Medit version: "
+                                "palpate reads ASCII Medit files of versions 0 to 4 (the version says how a binary "
+                                ".meshb stores its numbers; an ASCII file reads alike under any of them)")
+            if tok[1] in ("3", "4"):
+                # Versions 3 and 4 (64-bit positions, 64-bit integers) differ from 2 in the binary
+                # format only: meshio reads the text as version 2 (see _MEDIT_VERSIONS).
+                meshio_lines = meshio_lines or list(lines)
+                meshio_lines[i - 1] = "MeshVersionFormatted 2"
             continue
         if kw == "Dimension":
             value = tok[1] if len(tok) > 1 else (lines[i].strip() if i < len(lines) else "")
@@ -603,6 +634,8 @@ def medit_precheck(path: str) -> MeditCheck:
                                     "drop it")
         if kw in _MEDIT_DROPPED:
             skipped.append(f"{kw} ({_n(count, 'entry', 'entries')}, line {at})")
+    if meshio_lines is not None:
+        out.meshio_text = "\n".join(meshio_lines) + "\n"
     return out
 
 
@@ -667,7 +700,46 @@ def _abaqus_params(line: str) -> Dict[str, str]:
     return out
 
 
-def abaqus_precheck(path: str) -> Tuple[str, List[str]]:
+@dataclass
+class AbaqusSetPiece:
+    """One definition that adds members to an Abaqus node set (``kind`` ``"node"``) or element
+    set (``"element"``), as :func:`abaqus_precheck` found it; :func:`abaqus_sets` adds them up in
+    file order. Abaqus sets are additive: a name defined again (``*NSET, NSET=BASE`` twice, or a
+    ``*NODE, NSET=BASE`` and an ``*NSET, NSET=BASE``) gets the members of every definition.
+
+    ``block``: every node of the node block (``*NODE, NSET=``) or every element of element block
+    ``block`` (``*ELEMENT, ELSET=``, counted from 0 in file order, as meshio's cell blocks);
+    ``meshio_key``: the numbers an ``*NSET`` / ``*ELSET`` lists, which meshio reads (and maps to
+    indices) under that name; ``refs``: the sets its data lines name (``(name, line)``);
+    ``elset``: ``*NSET, ELSET=<name>``, the nodes of that element set's elements."""
+    kind: str
+    name: str
+    line: int
+    block: Optional[int] = None
+    meshio_key: Optional[str] = None
+    refs: List[Tuple[str, int]] = field(default_factory=list)
+    elset: Optional[str] = None
+
+
+@dataclass
+class AbaqusCheck:
+    """What :func:`abaqus_precheck` found: ``text``, the file's text for meshio's reader (comment
+    lines blanked, set definitions rewritten: see there); ``unknown``, ``"*<keyword> (line <n>)"``
+    for each keyword not known here (for the caller's MeshWarning); ``sets``, the set
+    definitions in file order; ``element_blocks``, the number of *ELEMENT blocks."""
+    text: str
+    unknown: List[str]
+    sets: List[AbaqusSetPiece]
+    element_blocks: int
+
+
+def _abaqus_label(item: str) -> bool:
+    """A data line item that names a set rather than giving a number: Abaqus labels begin with a
+    letter (Abaqus/CAE's internal sets with ``_``), or are quoted."""
+    return bool(item) and (item[0].isalpha() or item[0] in '_"')
+
+
+def abaqus_precheck(path: str) -> AbaqusCheck:
     """Check the keywords of an Abaqus .inp file before meshio reads it; meshio's reader reads
     *NODE, *ELEMENT, *NSET and *ELSET and skips every other line without a word. The rule:
 
@@ -684,15 +756,26 @@ def abaqus_precheck(path: str) -> Tuple[str, List[str]]:
       naming the file, the line and the keyword;
     - any other keyword is read past, and named in the caller's MeshWarning.
 
-    Returns ``(text, unknown)``: the file's text with its comment lines (``**``) blanked, for
-    meshio (its reader ends a *NODE or *ELEMENT block at a comment line and skipped the lines
-    after it as unknown keywords: the rest of the block was lost), and ``"*<keyword> (line
-    <n>)"`` for each keyword not known here."""
+    The sets are palpate's to add up (:func:`abaqus_sets`), because meshio's reader gets several
+    of them wrong: it ignores ``*NODE, NSET=`` (no set), maps ``*ELEMENT, ELSET=`` onto the wrong
+    cell block when an element block without ELSET comes before (an IndexError, or another
+    block's cells), replaces a set defined twice instead of adding to it, drops the set names an
+    *NSET data line lists and nests those of an *ELSET line, and leaves ``*NSET, ELSET=`` empty.
+    So the text meshio reads has each *NSET / *ELSET renamed to a key of its own (meshio maps the
+    numbers it lists), set names removed from their data lines, and ``ELSET=`` removed from
+    *ELEMENT lines; every definition is an :class:`AbaqusSetPiece`.
+
+    Comment lines (``**``) are blanked in that text: meshio's reader ends a *NODE or *ELEMENT
+    block at a comment line and skipped the lines after it as unknown keywords (the rest of the
+    block was lost)."""
     name = os.path.basename(path)
     lines = read_text(path).splitlines()
     unknown: List[str] = []
+    sets: List[AbaqusSetPiece] = []
+    piece: Optional[AbaqusSetPiece] = None   # the *NSET / *ELSET whose data lines follow
     current: Optional[str] = None   # the keyword whose data lines follow
-    node_line = instance_line = 0
+    node_line = instance_line = part_line = 0
+    element_blocks = 0
 
     def refuse(i: int, shown: str, why: str) -> MeshError:
         return MeshError(f"{name}: line {i}: Abaqus keyword *{shown} {why}")
@@ -716,6 +799,13 @@ def abaqus_precheck(path: str) -> Tuple[str, List[str]]:
                     raise refuse(instance_line, "INSTANCE", f"moves its part by a translation or rotation (line {i}: "
                                  f"{line[:60]!r}), which meshio's reader skips: the nodes would be read where the "
                                  "part defines them; write the part's nodes where the instance puts them")
+            elif piece is not None:
+                # Set names on a set's data line are palpate's (abaqus_sets); meshio reads the numbers.
+                items = [t.strip() for t in line.split(",")]
+                named = [t for t in items if _abaqus_label(t)]
+                if named:
+                    piece.refs.extend((t, i) for t in named)
+                    lines[i - 1] = ", ".join(t for t in items if t and not _abaqus_label(t))
             elif current not in _ABAQUS_READ and meshio_kw in _ABAQUS_READ + ("INCLUDE",):
                 raise MeshError(f"{name}: line {i}: the data line {line[:60]!r} of *{current or '(none)'} begins "
                                 f"with {head.strip()!r}, which meshio's Abaqus reader takes for the keyword "
@@ -724,7 +814,7 @@ def abaqus_precheck(path: str) -> Tuple[str, List[str]]:
         shown = " ".join(head[1:].split()).upper()
         kw = shown.replace(" ", "")
         params = _abaqus_params(line)
-        current = kw
+        current, piece = kw, None
         if kw in _ABAQUS_REFUSED:
             what, fix = _ABAQUS_REFUSED[kw]
             meshio_does = ("follows its own way (it merges that file's nodes without their numbers, and opens it "
@@ -738,6 +828,12 @@ def abaqus_precheck(path: str) -> Tuple[str, List[str]]:
             raise refuse(i, shown, f"is written {head.strip()!r}, which meshio's reader does not recognise (it "
                          f"would skip the block): write it *{kw}")
         if kw == "NODE":
+            if node_line and part_line > node_line:
+                raise refuse(i, shown, f"opens the node block of a second part (*PART at line {part_line}; the first "
+                             f"part's nodes at line {node_line}): each part numbers its nodes apart, and meshio's "
+                             "reader keeps the last block's nodes only; palpate reads .inp files with one part, "
+                             "placed by at most one *INSTANCE: export each part to a file of its own, or merge "
+                             "them into one part")
             if node_line:
                 raise refuse(i, shown, f"opens a second node block (the first at line {node_line}): meshio's "
                              "reader replaces the nodes read before at each *NODE, and elements read before "
@@ -749,6 +845,29 @@ def abaqus_precheck(path: str) -> Tuple[str, List[str]]:
                 kind = {"C": "cylindrical", "S": "spherical"}.get(system, "non-rectangular")
                 raise refuse(i, shown, f"gives its nodes in {kind} coordinates (SYSTEM={params['SYSTEM']}), which "
                              "meshio's reader takes for x, y, z: write them in rectangular coordinates")
+            if params.get("NSET"):
+                # The block's nodes form that set (meshio's reader ignores the parameter).
+                sets.append(AbaqusSetPiece("node", params["NSET"], i, block=0))
+        elif kw == "ELEMENT":
+            if params.get("ELSET"):
+                # The block's elements form that set; taken out of meshio's text, whose reader
+                # puts it on the wrong cell block when a block without ELSET comes before.
+                sets.append(AbaqusSetPiece("element", params["ELSET"], i, block=element_blocks))
+                keyword, *rest = raw.split(",")
+                lines[i - 1] = ",".join([keyword] + [t for t in rest if t.partition("=")[0].strip().upper() != "ELSET"])
+            element_blocks += 1
+        elif kw in ("NSET", "ELSET"):
+            if not params.get(kw):
+                raise refuse(i, shown, f"has no {kw}= parameter: the set's name is given as {kw}=<name>")
+            piece = AbaqusSetPiece("node" if kw == "NSET" else "element", params[kw], i,
+                                   meshio_key=f"PALPATE_SET_{len(sets)}",
+                                   elset=(params.get("ELSET") or None) if kw == "NSET" else None)
+            sets.append(piece)
+            # meshio reads the numbers listed, under a name of their own (so that a set defined
+            # twice is not replaced); GENERATE is the only other parameter its reader uses.
+            lines[i - 1] = f"*{kw}, {kw}={piece.meshio_key}" + (", GENERATE" if "GENERATE" in params else "")
+        elif kw == "PART":
+            part_line = i
         elif kw == "INSTANCE":
             if instance_line:
                 raise refuse(i, shown, f"places a second instance (the first at line {instance_line}): meshio's "
@@ -757,7 +876,57 @@ def abaqus_precheck(path: str) -> Tuple[str, List[str]]:
             instance_line = i
         elif kw not in _ABAQUS_READ and kw not in _ABAQUS_IGNORED:
             unknown.append(f"*{shown} (line {i})")
-    return "\n".join(lines) + "\n", unknown
+    return AbaqusCheck("\n".join(lines) + "\n", unknown, sets, element_blocks)
+
+
+def abaqus_sets(name: str, check: AbaqusCheck, n_nodes: int, blocks: List[np.ndarray],
+                meshio_point_sets: Dict[str, np.ndarray], meshio_cell_sets: Dict[str, list]):
+    """The node and element sets of an Abaqus file, as meshio's ``(point_sets, cell_sets)``
+    (``{name: node indices}``, ``{name: [row indices of each cell block]}``): the definitions
+    of ``check.sets`` added up in file order (:class:`AbaqusSetPiece`), the numbers they list as
+    meshio mapped them (``meshio_*_sets``, under each piece's key), over the mesh meshio read
+    (``n_nodes`` nodes, ``blocks`` the cells of each *ELEMENT block). Set names are compared in
+    upper case, as Abaqus compares labels, and kept as first written. A set named on a data line
+    that no definition before it gives is a MeshError (its members are unknown)."""
+    empty = np.zeros(0, dtype=np.int64)
+    nodes: Dict[str, np.ndarray] = {}
+    elements: Dict[str, List[np.ndarray]] = {}
+    spelled: Dict[Tuple[str, str], str] = {}
+
+    def defined(table: Dict, kind: str, ref: str, line: int, piece: AbaqusSetPiece):
+        if ref.upper() not in table:
+            raise MeshError(f"{name}: line {line}: the {piece.kind} set {piece.name!r} lists the {kind} set {ref!r}, "
+                            f"which no definition before it gives (no *{'NSET' if kind == 'node' else 'ELSET'} or "
+                            f"*{'NODE' if kind == 'node' else 'ELEMENT'} line names it): its members are unknown")
+        return table[ref.upper()]
+
+    for piece in check.sets:
+        key = piece.name.upper()
+        spelled.setdefault((piece.kind, key), piece.name)
+        if piece.kind == "node":
+            parts = [nodes.get(key, empty)]
+            if piece.block is not None:
+                parts.append(np.arange(n_nodes, dtype=np.int64))
+            if piece.meshio_key is not None:
+                parts.append(np.asarray(meshio_point_sets.get(piece.meshio_key, empty), dtype=np.int64).ravel())
+            parts.extend(defined(nodes, "node", ref, line, piece) for ref, line in piece.refs)
+            if piece.elset:
+                rows = defined(elements, "element", piece.elset, piece.line, piece)
+                parts.extend(np.asarray(blocks[k], dtype=np.int64)[r].ravel() for k, r in enumerate(rows))
+            nodes[key] = np.unique(np.concatenate(parts))
+        else:
+            per_block = [[rows] for rows in elements.get(key, [empty] * len(blocks))]
+            if piece.block is not None:
+                per_block[piece.block].append(np.arange(len(blocks[piece.block]), dtype=np.int64))
+            if piece.meshio_key is not None:
+                for k, rows in enumerate(meshio_cell_sets.get(piece.meshio_key, [])[:len(blocks)]):
+                    per_block[k].append(np.asarray(rows, dtype=np.int64).ravel())
+            for ref, line in piece.refs:
+                for k, rows in enumerate(defined(elements, "element", ref, line, piece)):
+                    per_block[k].append(rows)
+            elements[key] = [np.unique(np.concatenate(p)) for p in per_block]
+    return ({spelled["node", k]: v for k, v in nodes.items()},
+            {spelled["element", k]: v for k, v in elements.items()})
 
 
 def read_gmsh_ascii(path: str, version: str) -> Tuple[np.ndarray, List[CellBlock], List[str]]:

@@ -96,7 +96,7 @@ def _meshio_warnings_refused(name: str, fmt: str, expected: Sequence[str] = (), 
         if k and k.group(1) in expected:
             return   # a Medit section medit_precheck checked and the caller's MeshWarning names
         if notes is not None and any(n in text for n in _MESHIO_NOTES):
-            notes.append(text)
+            notes.append(f"meshio: {text}")
             return
         raise MeshError(f"{name}: cannot read as {fmt.upper()}: {text} (meshio would have dropped it and gone on)")
 
@@ -122,17 +122,22 @@ def _meshio_read(reader, path: str, name: str, fmt: str, warn_skipped: bool = Tr
     (:func:`_readers.medit_precheck`); those meshio reads past are named in one MeshWarning
     (``warn_skipped``) after a successful read, and its vertices and their references are the
     precheck's, parsed from the text in double precision (meshio's are float32 under
-    ``MeshVersionFormatted 1``). An Abaqus file's keywords are checked first
+    ``MeshVersionFormatted 1``); a file of version 3 or 4 is read by meshio as version 2 (the same
+    ASCII text: :func:`_meshio_medit_text`). An Abaqus file's keywords are checked first
     (:func:`_readers.abaqus_precheck`: those that would change the mesh are refused), meshio
-    reads its text without the comment lines, and the keywords not known are named in one
-    MeshWarning (``warn_skipped``)."""
+    reads its text without the comment lines, its sets are palpate's (:func:`_meshio_abaqus`),
+    and the keywords not known are named in one MeshWarning (``warn_skipped``). A reader's own
+    notes (``mesh.palpate_notes``: :func:`_gmsh4_groups`) are MeshWarnings too."""
     medit = _readers.medit_precheck(path) if fmt == "medit" else None
     skipped = medit.skipped if medit is not None else []
     unknown: List[str] = []
     read = reader
+    if medit is not None and medit.meshio_text is not None:
+        read = lambda _path: _meshio_medit_text(medit.meshio_text)  # noqa: E731  (version 3 or 4)
     if fmt == "abaqus":
-        text, unknown = _readers.abaqus_precheck(path)
-        read = lambda _path: reader(_path, text)  # noqa: E731
+        abaqus = _readers.abaqus_precheck(path)
+        unknown = abaqus.unknown
+        read = lambda _path: reader(_path, abaqus)  # noqa: E731
     notes: List[str] = []
     try:
         with warnings.catch_warnings(), _meshio_warnings_refused(name, fmt, [s.split()[0] for s in skipped], notes):
@@ -150,6 +155,7 @@ def _meshio_read(reader, path: str, name: str, fmt: str, warn_skipped: bool = Tr
         raise MeshError(f"{name}: cannot read as {fmt.upper()} ({type(e).__name__}: {reason})") from None
     if medit is not None and medit.vertices is not None:
         _medit_exact_vertices(mesh, medit, name)
+    notes.extend(getattr(mesh, "palpate_notes", ()))   # a reader's own (_meshio_gmsh)
     if unknown and warn_skipped:
         warnings.warn(f"{name}: Abaqus keywords palpate does not know, read past: {', '.join(unknown)}; palpate takes "
                       "the mesh from *NODE, *ELEMENT, *NSET and *ELSET and reads past the model's other definitions "
@@ -160,7 +166,7 @@ def _meshio_read(reader, path: str, name: str, fmt: str, warn_skipped: bool = Tr
                       "or reference (feature marks, normals, tangents, geometry links), so the mesh and its sets "
                       "are read in full", MeshWarning, stacklevel=2)
     for note in notes:
-        warnings.warn(f"{name}: meshio: {note}", MeshWarning, stacklevel=2)
+        warnings.warn(f"{name}: {note}", MeshWarning, stacklevel=2)
     return mesh
 
 
@@ -177,32 +183,59 @@ def _medit_exact_vertices(mesh, medit: "_readers.MeditCheck", name: str) -> None
     mesh.point_data["medit:ref"] = medit.vertex_refs
 
 
-def _meshio_abaqus(path: str, text: str):
-    """meshio's Abaqus reader on ``text`` (:func:`_readers.abaqus_precheck`: the file with its
-    comment lines blanked, its keywords checked)."""
+def _meshio_medit_text(text: str):
+    """meshio's ASCII Medit reader on ``text``: a file of ``MeshVersionFormatted 3`` or ``4``
+    with its version line written ``2`` (:class:`_readers.MeditCheck`), which meshio's reader
+    takes (it failed on 3 and 4 with a bare ``KeyError: '3'``; the ASCII content is the same).
+    That reader parses numbers with ``np.fromfile``, which needs a real file, not a StringIO: the
+    text goes through an anonymous temporary file, removed when closed."""
+    import tempfile
+
+    from meshio.medit import _medit
+
+    with tempfile.TemporaryFile("w+", encoding="utf-8") as fh:
+        fh.write(text)
+        fh.seek(0)
+        return _medit.read_ascii_buffer(fh)
+
+
+def _meshio_abaqus(path: str, check: "_readers.AbaqusCheck"):
+    """meshio's Abaqus reader on ``check.text`` (:func:`_readers.abaqus_precheck`: the file with
+    its comment lines blanked, its keywords checked, its set definitions rewritten), then the
+    sets added up by palpate (:func:`_readers.abaqus_sets`) in place of meshio's."""
     import io as _io
 
     from meshio.abaqus import _abaqus
 
-    return _abaqus.read_buffer(_io.StringIO(text))
+    mesh = _abaqus.read_buffer(_io.StringIO(check.text))
+    if len(mesh.cells) != check.element_blocks:
+        raise MeshError(f"{os.path.basename(path)}: meshio read {len(mesh.cells)} element blocks, the file has "
+                        f"{check.element_blocks} *ELEMENT blocks: sets not mapped")
+    mesh.point_sets, mesh.cell_sets = _readers.abaqus_sets(
+        os.path.basename(path), check, len(mesh.points), [np.asarray(cb.data) for cb in mesh.cells],
+        mesh.point_sets or {}, mesh.cell_sets or {})
+    return mesh
 
 
-def _gmsh40_read_nodes(f, is_ascii: bool):
+def _gmsh40_read_nodes(f, is_ascii: bool, entities: Optional[List[Tuple[int, int]]] = None):
     """meshio's MSH 4.0 ``_read_nodes`` (meshio 5.3, ``gmsh/_gmsh40.py``), with the parametric
     coordinates a node of a parametric entity block carries after x y z (``u [v [w]]``, the
     entity's dimension of them) read past: meshio's own read ``tag x y z`` only and failed on
     them (ASCII: a ValueError; binary: a record of the wrong width). Returns ``(points, tags)`` as
-    meshio's does. The file was read by palpate's strict 4.0 reader first (``read_mesh_arrays``),
-    so its counts and tags are known good here."""
+    meshio's does, and appends each node block's entity ``(dim, tag)`` to ``entities``. The file
+    was read by palpate's strict 4.0 reader first (``read_mesh_arrays``), so its counts and tags
+    are known good here."""
     from meshio.gmsh.common import _fast_forward_to_end_block
 
+    entities = [] if entities is None else entities
     if is_ascii:
         n_blocks, n_nodes = (int(k) for k in f.readline().decode().split())
         points = np.empty((n_nodes, 3), dtype=float)
         tags = np.empty(n_nodes, dtype=int)
         idx = 0
         for _ in range(n_blocks):
-            _, _, _, count = map(int, f.readline().decode().split())
+            entity, dim, _, count = map(int, f.readline().decode().split())
+            entities.append((dim, entity))
             for _ in range(count):
                 tok = f.readline().decode().split()
                 tags[idx], points[idx] = int(tok[0]), [float(x) for x in tok[1:4]]
@@ -211,7 +244,8 @@ def _gmsh40_read_nodes(f, is_ascii: bool):
         n_blocks, _ = np.fromfile(f, count=2, dtype=np.dtype("L"))
         all_points, all_tags = [], []
         for _ in range(int(n_blocks)):
-            _, dim, parametric = (int(x) for x in np.fromfile(f, count=3, dtype=np.dtype("i")))
+            entity, dim, parametric = (int(x) for x in np.fromfile(f, count=3, dtype=np.dtype("i")))
+            entities.append((dim, entity))
             count = int(np.fromfile(f, count=1, dtype=np.dtype("L"))[0])
             per = 3 + (dim if parametric else 0)
             data = np.fromfile(f, count=count, dtype=[("tag", np.dtype("i")), ("x", np.dtype("d"), (per,))])
@@ -225,27 +259,156 @@ def _gmsh40_read_nodes(f, is_ascii: bool):
     return points, tags
 
 
+class _GmshEntities:
+    """Stands in for the physical tags meshio's MSH 4.0 / 4.1 reader takes from $Entities (one
+    ``{entity tag: [physical tags]}`` per dimension), while its element reader runs: that reader
+    looks up ``physical_tags[dim][tag]`` once per element block, in file order; this records the
+    ``(dim, tag)`` of each block in ``blocks`` and answers "no physical tag", so that meshio makes
+    no physical-group data of its own. The groups are then palpate's (:func:`_gmsh4_groups`),
+    from ``physical`` (the $Entities section as meshio read it). meshio's own use of them:
+
+    - an element block on an entity that $Entities does not declare: a bare ``KeyError``;
+    - an entity with several physical groups: in 4.0 the first one only (the others lost);
+    - an entity in no physical group beside others in one (a file saved with gmsh's
+      ``Mesh.SaveAll``): its ``gmsh:physical`` data a block short, ``ValueError: Incompatible cell
+      data``;
+    - in 4.1, the bounding entities of each entity as a cell set ``gmsh:bounding_entities``,
+      which read_mesh_sets took for a set of rows (an IndexError, or a set of unrelated cells),
+      and the groups twice (as cell sets and as ``gmsh:physical``: each tet listed twice)."""
+
+    def __init__(self):
+        self.physical: Optional[tuple] = None   # $Entities' physical tags, one dict per dimension
+        self.blocks: List[Tuple[int, int]] = []   # each element block's entity (dim, tag)
+        self.node_blocks: List[Tuple[int, int]] = []   # each node block's entity (4.0)
+
+    def __getitem__(self, dim):
+        return _GmshEntityLookup(self, int(dim))
+
+
+class _GmshEntityLookup:
+    def __init__(self, owner: _GmshEntities, dim: int):
+        self.owner, self.dim = owner, dim
+
+    def __getitem__(self, tag):
+        self.owner.blocks.append((self.dim, int(tag)))
+        return []
+
+
+def _gmsh_group_label(field_data, dim: int, tag: int) -> str:
+    """A gmsh physical group's set name: its $PhysicalNames name, looked up by dimension and tag
+    as gmsh does (a surface group 1 and a volume group 1 are two groups), else ``"physical <tag>"``."""
+    for name, value in (field_data or {}).items():
+        value = np.asarray(value).ravel()
+        if len(value) >= 2 and int(value[0]) == tag and int(value[1]) == dim:
+            return name
+    return f"physical {tag}"
+
+
+_GMSH_ENTITY_KINDS = ("point", "curve", "surface", "volume")
+
+
+def _gmsh4_groups(mesh, entities: _GmshEntities, node_entities: set, name: str) -> None:
+    """Give ``mesh`` (meshio's MSH 4.x read, with :class:`_GmshEntities` in place of its physical
+    tags) its physical groups as cell sets, ``{label: [rows of each cell block]}``
+    (:func:`_gmsh_group_label`), every physical group of each element block's entity.
+
+    An element block on an entity that $Entities does not declare: gmsh reads the file when
+    $Nodes has a block on that entity (it makes it a discrete entity, with no physical group), and
+    refuses it when not (``Unknown entity 6 of dimension 2``). The same here. A file gives its
+    physical groups through $Entities only, so such elements are in none: nothing of the file is
+    lost, but a mistyped entity tag would take them out of their group without a word, so a
+    MeshWarning names them. With no node block on the entity either, a MeshError names it, as
+    what the file means is unclear (gmsh's refusal)."""
+    if len(entities.blocks) != len(mesh.cells):
+        raise MeshError(f"{name}: meshio looked up the entities of {len(entities.blocks)} of its {len(mesh.cells)} "
+                        "element blocks ($Entities after $Elements?): physical groups not mapped")
+    sets: Dict[str, List[np.ndarray]] = {}
+    undeclared: Dict[Tuple[int, int], List[str]] = {}
+    for k, ((dim, tag), cb) in enumerate(zip(entities.blocks, mesh.cells)):
+        where = f"element block {k + 1} ({len(cb.data)} {cb.type})"
+        if not 0 <= dim <= 3:
+            raise MeshError(f"{name}: gmsh {where} is on entity {tag} of dimension {dim}: dimensions are 0 to 3")
+        if tag not in entities.physical[dim]:
+            if (dim, tag) not in node_entities:
+                raise MeshError(f"{name}: gmsh {where} is on {_GMSH_ENTITY_KINDS[dim]} {tag} (entity of dimension "
+                                f"{dim}, tag {tag}), which neither $Entities nor $Nodes declares: gmsh refuses such "
+                                f"a file ('Unknown entity {tag} of dimension {dim}'), and the physical groups of these "
+                                "elements are unknown; declare the entity in $Entities, with its physical tags")
+            undeclared.setdefault((dim, tag), []).append(where)
+            continue
+        for physical in dict.fromkeys(int(t) for t in entities.physical[dim][tag]):
+            label = _gmsh_group_label(mesh.field_data, dim, physical)
+            rows = sets.setdefault(label, [np.zeros(0, dtype=np.int64) for _ in mesh.cells])
+            rows[k] = np.arange(len(cb.data), dtype=np.int64)
+    mesh.cell_sets = sets
+    if undeclared:
+        listed = "; ".join(f"{_GMSH_ENTITY_KINDS[d]} {t} (dimension {d}): {', '.join(w)}"
+                           for (d, t), w in undeclared.items())
+        mesh.palpate_notes = [f"gmsh elements on entities $Entities does not declare, in no physical group: {listed}; "
+                              "physical groups are given to the entities $Entities declares, and gmsh reads these as "
+                              "entities of their own (from their $Nodes block) without one"]
+
+
 def _meshio_gmsh(path: str):
     """meshio's gmsh reader, with a ``4`` or ``4.0`` $MeshFormat read as MSH 4.0: gmsh 4.0 writes
     ``4`` (and reads it as 4.0), where ``meshio.gmsh.read`` takes it for 4.1. Its 4.0 reader runs
     with :func:`_gmsh40_read_nodes` in place of its node reader, which failed on parametric nodes
-    (the physical groups of such a file were not read): a swap of the module's attribute for the
-    read's duration, as :func:`_meshio_warnings_refused` swaps ``warn``."""
+    (the physical groups of such a file were not read), and its MSH 4.0 and 4.1 readers with
+    :class:`_GmshEntities` in place of the physical tags of $Entities, whose use by meshio's
+    element readers failed or lost groups (see there): the physical groups of a 4.x file are
+    palpate's (:func:`_gmsh4_groups`). Each is a swap of the module's attribute for the read's
+    duration, as :func:`_meshio_warnings_refused` swaps ``warn``."""
+    import functools
+
     import meshio
-    from meshio.gmsh import _gmsh40, main
+    from meshio.gmsh import _gmsh40, _gmsh41, main
 
     version, _ = _readers.gmsh_format(path)
-    if _readers.gmsh_layout(os.path.basename(path), version) != "4.0":
+    layout = _readers.gmsh_layout(os.path.basename(path), version)
+    if layout == "2":
         return meshio.gmsh.read(path)
-    saved = _gmsh40._read_nodes
-    _gmsh40._read_nodes = _gmsh40_read_nodes
+    entities = _GmshEntities()
+    module = _gmsh40 if layout == "4.0" else _gmsh41
+    saved = {attr: getattr(module, attr) for attr in ("_read_entities", "_read_elements", "_read_nodes")}
+
+    def read_entities(*args):
+        if module is _gmsh40:
+            entities.physical = saved["_read_entities"](*args)
+            return entities
+        entities.physical, _ = saved["_read_entities"](*args)
+        return entities, None   # no bounding entities: meshio made them a cell set
+
+    def read_elements_41(f, point_tags, physical_tags, bounding_entities, is_ascii, data_size, field_data):
+        # No physical names either: meshio's 4.1 reader looks every block's entity up once per
+        # name for the cell sets it makes of them (the groups are palpate's), which would upset
+        # the one lookup per block that _GmshEntities counts on.
+        return saved["_read_elements"](f, point_tags, physical_tags, bounding_entities, is_ascii, data_size, {})
+
+    module._read_entities = read_entities
+    if module is _gmsh40:
+        module._read_nodes = functools.partial(_gmsh40_read_nodes, entities=entities.node_blocks)
+    else:
+        module._read_elements = read_elements_41
     try:
-        with open(path, "rb") as f:
-            f.readline()   # $MeshFormat, the first line (gmsh_format)
-            _, data_size, is_ascii = main._read_header(f)
-            return _gmsh40.read_buffer(f, is_ascii, data_size)
+        if module is _gmsh40:
+            with open(path, "rb") as f:
+                f.readline()   # $MeshFormat, the first line (gmsh_format)
+                _, data_size, is_ascii = main._read_header(f)
+                mesh = _gmsh40.read_buffer(f, is_ascii, data_size)
+        else:
+            mesh = meshio.gmsh.read(path)
     finally:
-        _gmsh40._read_nodes = saved
+        for attr, value in saved.items():
+            setattr(module, attr, value)
+    if entities.physical is not None:   # without $Entities a 4.x file has no physical groups
+        if module is _gmsh40:
+            node_entities = set(entities.node_blocks)
+        else:
+            # meshio's 4.1 node reader gives each node's entity (a node block of no nodes is missed)
+            dim_tags = np.asarray(mesh.point_data.get("gmsh:dim_tags", np.zeros((0, 2))), dtype=np.int64)
+            node_entities = {(int(d), int(t)) for d, t in dim_tags.reshape(-1, 2)}
+        _gmsh4_groups(mesh, entities, node_entities, os.path.basename(path))
+    return mesh
 
 
 def _meshio_arrays(m, name: str, fmt: str):
@@ -357,14 +520,23 @@ def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.
     each ``{name: int64 indices, ascending}`` into the nodes and tets of :func:`load_mesh` /
     :func:`read_mesh_arrays` of the same file (a scene can fix or load a set by name).
 
-    gmsh (``.msh``): one set per physical group, named by ``$PhysicalNames`` (``"physical <tag>"``
-    if unnamed): its tets, and the nodes of all its elements (e.g. a clamped face's triangles).
+    gmsh (``.msh``): one set per physical group, named by ``$PhysicalNames`` (looked up by the
+    group's dimension and tag, as gmsh does; ``"physical <tag>"`` if unnamed): its tets, and the
+    nodes of all its elements (e.g. a clamped face's triangles). In MSH 4.0 / 4.1 an element is in
+    every physical group of its entity, as ``$Entities`` gives them; elements on an entity that
+    ``$Entities`` does not declare are in none, with a :class:`palpate.MeshWarning` (gmsh reads
+    them so when ``$Nodes`` has a block on that entity), and the file is a MeshError when
+    ``$Nodes`` has no block on it either (gmsh refuses such a file).
     Medit (``.mesh``): one set per element reference, ``"ref <k>"``, and one node set per non-zero
-    vertex reference, ``"vertex ref <k>"``. Abaqus (``.inp``) and any format meshio gives point /
-    cell sets for: those, by name. The file is read by :func:`read_mesh_arrays` first (its errors
-    and warnings), then by meshio for the sets. Raises :class:`MeshError` for an unreadable file,
-    one that meshio would read with a loss it reports only on stderr, or one whose tets meshio
-    orders differently from palpate's reader.
+    vertex reference, ``"vertex ref <k>"``. Abaqus (``.inp``): its node and element sets, by name,
+    from *NSET and *ELSET and the ``NSET=`` / ``ELSET=`` of a *NODE / *ELEMENT line (that
+    block's nodes / elements); as in Abaqus, a set defined twice has the members of both, a
+    set's data lines may name other sets, ``*NSET, ELSET=<set>`` holds the nodes of that element
+    set, and names compare in upper case (a set keeps its name as first written). Any other
+    format meshio gives point / cell sets for: those, by name. The file is read by
+    :func:`read_mesh_arrays` first (its errors and warnings), then by meshio for the sets. Raises
+    :class:`MeshError` for an unreadable file, one that meshio would read with a loss it reports
+    only on stderr, or one whose tets meshio orders differently from palpate's reader.
     """
     import meshio
 
@@ -380,7 +552,8 @@ def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.
     reader = {"vtk": meshio.vtk.read, "vtu": meshio.vtu.read, "gmsh": _meshio_gmsh,
               "medit": meshio.medit.read, "abaqus": _meshio_abaqus}[fmt]
     m = _meshio_read(reader, path, name, fmt, warn_skipped=False)   # read_mesh_arrays warned
-    tet_blocks = [k for k, cb in enumerate(m.cells) if cb.type == "tetra"]
+    # Empty blocks left out, as read_mesh_arrays leaves them (meshio gives an empty Abaqus block shape (0,)).
+    tet_blocks = [k for k, cb in enumerate(m.cells) if cb.type == "tetra" and len(cb.data)]
     mesh_tets = np.concatenate([np.asarray(m.cells[k].data, dtype=np.int64) for k in tet_blocks]) if tet_blocks \
         else np.zeros((0, 4), dtype=np.int64)
     if not np.array_equal(mesh_tets, tets):
@@ -391,13 +564,13 @@ def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.
         offsets[k] = k0
         k0 += len(m.cells[k].data)
     node_sets: Dict[str, set] = {}
-    tet_sets: Dict[str, list] = {}
+    tet_sets: Dict[str, set] = {}   # sets: a tet given a label twice (two sources of one group) counts once
 
     def add(label: str, k: int, rows: np.ndarray) -> None:
         cb = m.cells[k]
         node_sets.setdefault(label, set()).update(np.asarray(cb.data)[rows].ravel().tolist())
         if k in offsets:
-            tet_sets.setdefault(label, []).extend((offsets[k] + rows).tolist())
+            tet_sets.setdefault(label, set()).update((offsets[k] + rows).tolist())
 
     tags = {"gmsh": "gmsh:physical", "medit": "medit:ref"}.get(fmt)
     if fmt == "medit":
@@ -408,12 +581,12 @@ def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.
         refs = np.asarray(m.point_data.get("medit:ref", np.zeros(0)), dtype=np.int64)
         for ref in np.unique(refs[refs != 0]):
             node_sets[f"vertex ref {int(ref)}"] = set(np.flatnonzero(refs == ref).tolist())
-    if tags and tags in m.cell_data:
-        names = {int(v[0]): n for n, v in (m.field_data or {}).items()}
+    if tags and tags in m.cell_data:   # gmsh MSH 2.2 (a 4.x file's groups are cell sets: _gmsh4_groups)
         for k, values in enumerate(m.cell_data[tags]):
             values = np.asarray(values)
             for tag in np.unique(values):
-                label = names.get(int(tag), f"physical {int(tag)}") if fmt == "gmsh" else f"ref {int(tag)}"
+                label = (_gmsh_group_label(m.field_data, m.cells[k].dim, int(tag)) if fmt == "gmsh"
+                         else f"ref {int(tag)}")
                 add(label, k, np.flatnonzero(values == tag))
     for label, per_block in (m.cell_sets or {}).items():
         for k, rows in enumerate(per_block):
@@ -450,11 +623,13 @@ def load_mesh(path: PathLike, unit: str = "m") -> TetMesh:
         RequiredVertices, Normals, Tangents, ...) is read past with a :class:`palpate.MeshWarning`
         naming it; a keyword meshio cannot read past, or a count that does not match its data, is a
         MeshError naming the keyword and line; the vertices are read in double precision whatever
-        the file's MeshVersionFormatted. An Abaqus file's keywords are checked before meshio reads
-        it: the mesh is taken from *NODE, *ELEMENT, *NSET and *ELSET; one that makes, copies or
-        moves nodes or elements, which meshio would skip (*NGEN, *ELGEN, *NCOPY, *NFILL, *INCLUDE,
-        *PARAMETER, *SYSTEM, a second *NODE block, a placed *INSTANCE, ...), is a MeshError naming
-        the keyword and line; a keyword palpate does not know is read past with a MeshWarning.
+        the file's MeshVersionFormatted (0 to 4: the version says how a binary .meshb stores its
+        numbers, and an ASCII file reads alike under any). An Abaqus file's keywords are checked
+        before meshio reads it: the mesh is taken from *NODE, *ELEMENT, *NSET and *ELSET; one that
+        makes, copies or moves nodes or elements, which meshio would skip (*NGEN, *ELGEN, *NCOPY,
+        *NFILL, *INCLUDE, *PARAMETER, *SYSTEM, a second *NODE block or part, a placed *INSTANCE,
+        ...), is a MeshError naming the keyword and line; a keyword palpate does not know is read
+        past with a MeshWarning.
     unit:
         Length unit of the file's coordinates: ``"m"``, ``"cm"`` or ``"mm"``. Points are scaled to
         metres.

@@ -266,19 +266,20 @@ $EndElements
 """
 
 
-def _msh40_parametric_binary():
-    """The same file in binary MSH 4.0 (counts unsigned long, tags int, the surface's nodes with u v)."""
+def _msh40_parametric_binary(node_surface=5, element_surface=5):
+    """The same file in binary MSH 4.0 (counts unsigned long, tags int, the surface's nodes with u v);
+    ``node_surface``, ``element_surface``: the entity tag of the surface's node and element blocks."""
     out = b"$MeshFormat\n4 1 8\n" + struct.pack("<i", 1) + b"\n$EndMeshFormat\n"
     out += b'$PhysicalNames\n2\n2 1 "clamp"\n3 2 "body"\n$EndPhysicalNames\n'
     out += b"$Entities\n" + struct.pack("<4Q", 0, 0, 1, 1)
     out += struct.pack("<i6dQiQ", 5, 0, 0, 0, 1, 1, 0, 1, 1, 0)
     out += struct.pack("<i6dQiQi", 1, 0, 0, 0, 1, 1, 1, 1, 2, 1, 5)
-    out += b"\n$EndEntities\n$Nodes\n" + struct.pack("<2Q", 2, 5) + struct.pack("<3iQ", 5, 2, 1, 3)
+    out += b"\n$EndEntities\n$Nodes\n" + struct.pack("<2Q", 2, 5) + struct.pack("<3iQ", node_surface, 2, 1, 3)
     for tag, xyz, uv in ((10, (0, 0, 0), (0, 0)), (20, (1, 0, 0), (1, 0)), (30, (0, 1, 0), (0, 1))):
         out += struct.pack("<i5d", tag, *xyz, *uv)
     out += struct.pack("<3iQ", 1, 3, 0, 2) + struct.pack("<i3d", 40, 0, 0, 1) + struct.pack("<i3d", 50, 1, 1, 1)
     out += b"\n$EndNodes\n$Elements\n" + struct.pack("<2Q", 2, 3)
-    out += struct.pack("<3iQ", 5, 2, 2, 1) + struct.pack("<4i", 1, 10, 20, 30)
+    out += struct.pack("<3iQ", element_surface, 2, 2, 1) + struct.pack("<4i", 1, 10, 20, 30)
     out += struct.pack("<3iQ", 1, 3, 4, 2) + struct.pack("<5i", 11, 10, 20, 30, 40)
     out += struct.pack("<5i", 12, 50, 20, 40, 30)
     return out + b"\n$EndElements\n"
@@ -391,3 +392,245 @@ def test_abaqus_unknown_keyword_is_named_in_a_warning(tmp_path):
                       r"\*ELEMENT, \*NSET and \*ELSET") as rec:
         m = palpate.load_mesh(path)
     assert len(rec) == 1 and m.n_tets == 2
+
+
+
+# The readers' leftovers of issue 35: Medit versions 3 and 4, the sets an Abaqus *NODE / *ELEMENT
+# line names (and how Abaqus sets add up), and the physical groups of gmsh MSH 4.x entities.
+
+@pytest.mark.parametrize("version", ["3", "4"])
+def test_medit_versions_3_and_4_read_as_version_2(tmp_path, version):
+    """MeshVersionFormatted 3 and 4 (64-bit file positions, 64-bit integers) differ from 2 in a
+    binary .meshb only: an ASCII file's text is the same. meshio's reader took 0 to 2 and failed
+    with 'cannot read as MEDIT (KeyError: '3')'; they read as version 2 now, with references
+    over 2**32 (what version 4 is for) kept."""
+    big = 2 ** 53 + 1
+    text = (f"MeshVersionFormatted {version}\nDimension 3\nVertices\n5\n0.1234567891 0 0 1\n1 0 0 1\n0 1 0 1\n"
+            f"0 0 1 1\n1 1 1 {big}\nTriangles\n1\n1 2 3 {2 ** 32 + 1}\nTetrahedra\n2\n1 2 3 4 7\n5 2 4 3 {big}\nEnd\n")
+    path, v2 = tmp_path / f"v{version}.mesh", tmp_path / "v2.mesh"
+    path.write_text(text)
+    v2.write_text(text.replace(f"MeshVersionFormatted {version}", "MeshVersionFormatted 2"))
+    m, m2 = palpate.load_mesh(path), palpate.load_mesh(v2)
+    np.testing.assert_array_equal(m.points, m2.points)
+    np.testing.assert_array_equal(m.tets, m2.tets)
+    assert m.points[0, 0] == 0.1234567891
+    nodes, tets = palpate.read_mesh_sets(path)
+    assert set(nodes) == {"vertex ref 1", f"vertex ref {big}", f"ref {2 ** 32 + 1}", "ref 7", f"ref {big}"}
+    np.testing.assert_array_equal(nodes[f"vertex ref {big}"], [4])
+    np.testing.assert_array_equal(tets[f"ref {big}"], [1])
+    np.testing.assert_array_equal(nodes[f"ref {2 ** 32 + 1}"], [0, 1, 2])
+
+
+def test_medit_unknown_version_is_refused_with_the_line(tmp_path):
+    path = _medit(tmp_path, "v5.mesh")
+    path.write_text(path.read_text().replace("MeshVersionFormatted 2", "MeshVersionFormatted 5"))
+    for call in (palpate.load_mesh, palpate.read_mesh_sets):
+        with pytest.raises(palpate.MeshError, match=r"v5.mesh: line 1: MeshVersionFormatted '5' is not a Medit "
+                           r"version: palpate reads ASCII Medit files of versions 0 to 4"):
+            call(path)
+
+
+def test_abaqus_node_block_nset_makes_a_node_set(tmp_path):
+    """*NODE, NSET=<name> puts the block's nodes in that set; meshio's reader ignored the
+    parameter (a scene naming the set got 'no node set')."""
+    path = _inp(tmp_path, "n.inp", _INP_MESH.replace("*NODE\n", "*NODE, NSET=NALL\n") + "*NSET, NSET=TIP\n5\n")
+    nodes, tets = palpate.read_mesh_sets(path)
+    np.testing.assert_array_equal(nodes["NALL"], [0, 1, 2, 3, 4])
+    np.testing.assert_array_equal(nodes["TIP"], [4])
+    np.testing.assert_array_equal(tets["ALL"], [0, 1])
+
+
+def test_abaqus_element_block_elset_is_kept(tmp_path, bar):
+    """*ELEMENT, ELSET=<name> puts the block's elements in that set. meshio's reader kept it on
+    the wrong cell block when a block without ELSET came before (here the clamped face's S3
+    triangles: 'IndexError: index 1 is out of bounds'), and a name given to two blocks took the
+    second block's rows for both."""
+    pts, tets, faces, _ = bar
+    k, j = 5, 8   # tets[:k] and tets[j:] in LEFT (two blocks of one name), tets[k:j] in MID
+    rows = lambda first, ts: "".join(f"{first + i}, " + ", ".join(str(n + 1) for n in t) + "\n"  # noqa: E731
+                                     for i, t in enumerate(ts))
+    text = ("*NODE\n" + "".join(f"{i + 1}, {x!r}, {y!r}, {z!r}\n" for i, (x, y, z) in enumerate(pts.tolist()))
+            + "*ELEMENT, TYPE=S3\n" + rows(1001, faces)
+            + "*ELEMENT, TYPE=C3D4, ELSET=LEFT\n" + rows(1, tets[:k])
+            + "*Element, type=C3D4, elset=MID\n" + rows(1 + k, tets[k:j])
+            + "*ELEMENT, TYPE=C3D4, ELSET=LEFT\n" + rows(1 + j, tets[j:]))
+    path = _inp(tmp_path, "e.inp", text)
+    np.testing.assert_array_equal(palpate.load_mesh(path).tets, tets)
+    nodes, tet_sets = palpate.read_mesh_sets(path)
+    assert set(tet_sets) == {"LEFT", "MID"}
+    left = np.r_[0:k, j:len(tets)]
+    np.testing.assert_array_equal(tet_sets["LEFT"], left)
+    np.testing.assert_array_equal(tet_sets["MID"], np.arange(k, j))
+    np.testing.assert_array_equal(nodes["LEFT"], np.unique(tets[left]))
+    np.testing.assert_array_equal(nodes["MID"], np.unique(tets[k:j]))
+
+
+def test_abaqus_sets_add_up_and_name_other_sets(tmp_path):
+    """Abaqus sets add up: a name defined again gets the members of both definitions (labels
+    compare in upper case), a data line may name other sets, and *NSET, ELSET=<set> takes the
+    nodes of that element set. meshio's reader kept the last definition only (BASE = [2]),
+    dropped the set names of an *NSET line (ALLN = [3]), kept only the first of an *ELSET line
+    (BOTH = [0]) and left *NSET, ELSET= empty."""
+    text = ("*NODE\n" + _INP_NODES + "*ELEMENT, TYPE=C3D4, ELSET=T1\n1, 1, 2, 3, 4\n"
+            "*ELEMENT, TYPE=C3D4, ELSET=T2\n2, 5, 2, 4, 3\n"
+            "*NSET, NSET=BASE\n1, 2\n*NSET, NSET=base\n3\n*NSET, NSET=TOP\n5\n*NSET, NSET=ALLN\nBASE, TOP\n4\n"
+            "*ELSET, ELSET=BOTH\nT1, T2\n*NSET, NSET=T2NODES, ELSET=T2\n*NSET, NSET=GEN, GENERATE\n1, 5, 2\n")
+    nodes, tets = palpate.read_mesh_sets(_inp(tmp_path, "s.inp", text))
+    assert set(nodes) == {"T1", "T2", "BASE", "TOP", "ALLN", "BOTH", "T2NODES", "GEN"}
+    np.testing.assert_array_equal(nodes["BASE"], [0, 1, 2])   # as first written
+    np.testing.assert_array_equal(nodes["ALLN"], [0, 1, 2, 3, 4])
+    np.testing.assert_array_equal(nodes["T2NODES"], [1, 2, 3, 4])
+    np.testing.assert_array_equal(nodes["GEN"], [0, 2, 4])
+    np.testing.assert_array_equal(tets["BOTH"], [0, 1])
+    np.testing.assert_array_equal(tets["T2"], [1])
+    bad = _inp(tmp_path, "bad.inp", _INP_MESH + "*NSET, NSET=FIX\nBASE, 1\n")
+    with pytest.raises(palpate.MeshError, match=r"bad.inp: line 11: the node set 'FIX' lists the node set 'BASE', "
+                       r"which no definition before it gives .*: its members are unknown"):
+        palpate.read_mesh_sets(bad)
+    unnamed = _inp(tmp_path, "unnamed.inp", _INP_MESH + "*NSET\n1, 2\n")
+    with pytest.raises(palpate.MeshError, match=r"unnamed.inp: line 10: Abaqus keyword \*NSET has no NSET= "
+                       r"parameter"):
+        palpate.read_mesh_sets(unnamed)
+
+
+def test_abaqus_empty_element_block_is_left_out_of_the_sets(tmp_path):
+    """An *ELEMENT block with no data lines: load_mesh read the file, read_mesh_sets failed with a
+    bare ValueError (meshio gives the empty block shape (0,), which was concatenated with the
+    (n, 4) tets); it is left out, as read_mesh_arrays leaves it."""
+    path = _inp(tmp_path, "empty.inp", _INP_MESH + "*ELEMENT, TYPE=C3D4, ELSET=NONE\n")
+    assert palpate.load_mesh(path).n_tets == 2
+    nodes, tets = palpate.read_mesh_sets(path)
+    assert set(nodes) == {"ALL"} and set(tets) == {"ALL"}   # an empty set is none, as before
+    np.testing.assert_array_equal(tets["ALL"], [0, 1])
+
+
+def test_abaqus_second_part_is_refused_clearly(tmp_path):
+    """Two parts (each numbering its nodes apart): refused, naming the second part, rather than
+    'a second node block ... merge the blocks'."""
+    text = ("*PART, NAME=P\n" + _INP_MESH + "*END PART\n*PART, NAME=Q\n*NODE\n1, 0., 0., 2.\n*END PART\n")
+    with pytest.raises(palpate.MeshError, match=r"two.inp: line 13: Abaqus keyword \*NODE opens the node block of a "
+                       r"second part \(\*PART at line 12; the first part's nodes at line 2\).*palpate reads .inp files "
+                       r"with one part, placed by at most one \*INSTANCE"):
+        palpate.load_mesh(_inp(tmp_path, "two.inp", text))
+
+
+# MSH 4.1 twin of _MSH40_PARAMETRIC (without the parametric coordinates, which 4.1 keeps apart):
+# volume 1 is bounded by surface 5, which meshio made a cell set "gmsh:bounding_entities".
+_MSH41 = """$MeshFormat
+4.1 0 8
+$EndMeshFormat
+$PhysicalNames
+2
+2 1 "clamp"
+3 2 "body"
+$EndPhysicalNames
+$Entities
+0 0 1 1
+5 0 0 0 1 1 0 1 1 0
+1 0 0 0 1 1 1 1 2 1 5
+$EndEntities
+$Nodes
+2 5 10 50
+2 5 0 3
+10
+20
+30
+0 0 0
+1 0 0
+0 1 0
+3 1 0 2
+40
+50
+0 0 1
+1 1 1
+$EndNodes
+$Elements
+2 3 1 12
+2 5 2 1
+1 10 20 30
+3 1 4 2
+11 10 20 30 40
+12 50 20 40 30
+$EndElements
+"""
+
+
+def _msh4_on_surface(layout, node_surface, element_surface):
+    """The clamp/body mesh in MSH ``layout`` ("4.0", "4.0 binary", "4.1") with the surface's node
+    and element blocks on the given entity tags ($Entities declares surface 5)."""
+    if layout == "4.0 binary":
+        return _msh40_parametric_binary(node_surface, element_surface)
+    if layout == "4.0":
+        text = _MSH40_PARAMETRIC.replace("\n5 2 1 3\n", f"\n{node_surface} 2 1 3\n")
+        return text.replace("\n5 2 2 1\n", f"\n{element_surface} 2 2 1\n").encode()
+    text = _MSH41.replace("\n2 5 0 3\n", f"\n2 {node_surface} 0 3\n")
+    return text.replace("\n2 5 2 1\n", f"\n2 {element_surface} 2 1\n").encode()
+
+
+@pytest.mark.parametrize("layout", ["4.0", "4.0 binary", "4.1"])
+def test_gmsh4_elements_on_an_undeclared_entity(tmp_path, layout):
+    """An element block on an entity that $Entities does not declare: meshio's readers failed on
+    it ('cannot read as GMSH (KeyError: np.int32(6))'). gmsh reads such a file when $Nodes has a
+    block on the entity (a discrete entity, in no physical group) and refuses it when not
+    ('Unknown entity 6 of dimension 2'); so does read_mesh_sets, with a MeshWarning in the first
+    case (a mistyped tag would otherwise drop the elements from their group without a word) and
+    a MeshError naming the entity in the second. load_mesh reads both, as before."""
+    path = tmp_path / "u.msh"
+    path.write_bytes(_msh4_on_surface(layout, 6, 6))
+    assert palpate.load_mesh(path).n_tets == 2
+    with pytest.warns(palpate.MeshWarning, match=r"u.msh: gmsh elements on entities \$Entities does not declare, in "
+                      r"no physical group: surface 6 \(dimension 2\): element block 1 \(1 triangle\)"):
+        nodes, tets = palpate.read_mesh_sets(path)
+    assert set(nodes) == {"body"} and set(tets) == {"body"}   # the triangle's "clamp" is gone, as in gmsh
+    np.testing.assert_array_equal(tets["body"], [0, 1])
+    path.write_bytes(_msh4_on_surface(layout, 5, 6))
+    assert palpate.load_mesh(path).n_tets == 2
+    with pytest.raises(palpate.MeshError, match=r"u.msh: gmsh element block 1 \(1 triangle\) is on surface 6 \(entity "
+                       r"of dimension 2, tag 6\), which neither \$Entities nor \$Nodes declares: gmsh refuses such a "
+                       r"file \('Unknown entity 6 of dimension 2'\)"):
+        palpate.read_mesh_sets(path)
+
+
+@pytest.mark.parametrize("version", ["4.0", "4.1"])
+def test_gmsh4_every_physical_group_of_an_entity(tmp_path, version):
+    """The physical groups of MSH 4.x entities, as $Entities gives them: surface 5 in two groups
+    (meshio's 4.0 reader kept the first), surface 6 in none beside them (a file saved with
+    Mesh.SaveAll: meshio failed, 'Incompatible cell data'), a surface group and a volume group
+    of one tag (1) told apart by their dimension, as gmsh names them; and no set of meshio's 4.1
+    bounding entities, nor a tet listed twice (main: 'gmsh:bounding_entities' sets, each tet of
+    'body' twice, or an IndexError)."""
+    names = '$PhysicalNames\n3\n2 1 "clamp"\n2 3 "sides"\n3 1 "body"\n$EndPhysicalNames\n'
+    # $Entities: surface 5 in groups 1 and 3, surface 6 in none, volume 1 (bounded by 5 and 6) in 1.
+    entities = "0 0 2 1\n5 0 0 0 1 1 0 2 1 3 0\n6 0 0 0 1 1 1 0 0\n1 0 0 0 1 1 1 1 1 2 5 6\n"
+    if version == "4.0":   # a triangle on surface 6 added (element blocks: tag dim type count)
+        text = (_MSH40_PARAMETRIC.replace("0 0 1 1\n5 0 0 0 1 1 0 1 1 0\n1 0 0 0 1 1 1 1 2 1 5\n", entities)
+                .replace("$Elements\n2 3\n5 2 2 1\n1 10 20 30\n",
+                         "$Elements\n3 4\n5 2 2 1\n1 10 20 30\n6 2 2 1\n2 20 30 40\n"))
+    else:   # element blocks: dim tag type count
+        text = (_MSH41.replace("0 0 1 1\n5 0 0 0 1 1 0 1 1 0\n1 0 0 0 1 1 1 1 2 1 5\n", entities)
+                .replace("$Elements\n2 3 1 12\n2 5 2 1\n1 10 20 30\n",
+                         "$Elements\n3 4 1 12\n2 5 2 1\n1 10 20 30\n2 6 2 1\n2 20 30 40\n"))
+    text = text[:text.index("$PhysicalNames")] + names + text[text.index("$Entities"):]
+    path = tmp_path / "g.msh"
+    path.write_text(text)
+    np.testing.assert_array_equal(palpate.load_mesh(path).tets, [[0, 1, 2, 3], [4, 1, 3, 2]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        nodes, tets = palpate.read_mesh_sets(path)
+    assert set(nodes) == {"clamp", "sides", "body"} and set(tets) == {"body"}
+    np.testing.assert_array_equal(nodes["clamp"], [0, 1, 2])
+    np.testing.assert_array_equal(nodes["sides"], [0, 1, 2])
+    np.testing.assert_array_equal(nodes["body"], [0, 1, 2, 3, 4])
+    np.testing.assert_array_equal(tets["body"], [0, 1])
+
+
+def test_gmsh41_sets_of_a_bounded_volume(tmp_path):
+    """A 4.1 file as gmsh writes it (the volume's $Entities line lists its bounding surface):
+    read_mesh_sets failed on main with a bare IndexError (meshio's 'gmsh:bounding_entities' cell
+    set, surface tag 5 taken for a row of the 2-tet block)."""
+    path = tmp_path / "b.msh"
+    path.write_text(_MSH41)
+    nodes, tets = palpate.read_mesh_sets(path)
+    assert set(nodes) == {"clamp", "body"} and set(tets) == {"body"}
+    np.testing.assert_array_equal(nodes["clamp"], [0, 1, 2])
+    np.testing.assert_array_equal(tets["body"], [0, 1])
