@@ -22,6 +22,9 @@ from palpate.sweep.fit import FitError, fit  # noqa: E402
 
 distributed = pytest.importorskip("distributed")
 
+HAVE_MATPLOTLIB = __import__("importlib.util").util.find_spec("matplotlib") is not None
+PNG = b"\x89PNG\r\n\x1a\n"
+
 #: A small probe study on the generated 192-tet ellipsoid wall: 2 x 2 x 2 = 8 scenarios, one of
 #: them (40 N on a soft wall) past the stability limit.
 STUDY = {
@@ -229,10 +232,11 @@ def test_the_cli_runs_a_study_and_a_fit_and_refuses_a_bad_spec_in_one_line(tmp_p
     (tmp_path / "s.toml").write_text(
         '[study]\nname = "cli"\n[model]\nmesh = "ellipsoid_192"\n[loading]\nkind = "probe"\nsteps = 110\n'
         '[parameters]\nyoung = [3e4, 3.5e4]\n')
-    p = run_cli("sweep", "s.toml", "--out", "o", "--workers", "0", "--json", cwd=tmp_path)
+    p = run_cli("sweep", "s.toml", "--out", "o", "--workers", "0", "--json", "--no-plot", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     out = json.loads(p.stdout)
     assert out["scenarios"] == 2 and out["failed"] == 0 and (tmp_path / "o" / "results.parquet").exists()
+    assert out["plot"] is None and not (tmp_path / "o" / "results.png").exists()
     import pyarrow.parquet as pq
     row = pq.read_table(tmp_path / "o" / "results.parquet").to_pylist()[1]
     with open(tmp_path / "m.csv", "w") as fh:
@@ -244,6 +248,9 @@ def test_the_cli_runs_a_study_and_a_fit_and_refuses_a_bad_spec_in_one_line(tmp_p
     p = run_cli("sweep", "s.toml", "--out", "o2", "--workers", "0", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     assert re.search(r"scenario +young +status +max_force_n", p.stdout) and "results.csv" in p.stdout, p.stdout
+    if HAVE_MATPLOTLIB:   # the plot's path on the line that names the tables (issue 37)
+        assert re.search(r"results\.csv .*; the plot: \S*results\.png", p.stdout), p.stdout
+        assert (tmp_path / "o2" / "results.png").read_bytes().startswith(PNG)
     import csv
     with open(tmp_path / "o2" / "results.csv") as fh:
         got = list(csv.DictReader(fh))
@@ -313,3 +320,32 @@ def test_a_fit_without_matplotlib_keeps_its_values(tmp_path, monkeypatch, capsys
     assert r.values["young"] == pytest.approx(3.7e4, rel=0.01) and r.plot is None
     assert not (tmp_path / "fit.png").exists()
     assert "matplotlib not installed" in capsys.readouterr().err
+
+
+def test_a_study_plots_its_curves_beside_the_table(sequential, tmp_path):
+    # Issue 37: the study's results summarised with a plot, results.png beside results.parquet.
+    pytest.importorskip("matplotlib", reason="the plot needs the plot extra")
+    from palpate.sweep import plot as sweep_plot
+    png = sequential.path.parent / "results.png"
+    assert sequential.plot == png and png.read_bytes().startswith(PNG) and png.stat().st_size > 10_000
+    assert sweep_plot.label(sequential.rows()[1], ["young", "force"]) == "young = 2e+04 Pa, force = 40 N"
+    # Without curves: the main outcome against the first varied parameter; plot=False: none.
+    doc = dict(STUDY, parameters={"young": [2e4, 3e4, 4e4]}, loading={"kind": "probe", "steps": 40},
+               outputs={"curve": False})
+    r = ps.sweep(doc, tmp_path / "flat", workers=0)
+    assert r.plot == tmp_path / "flat" / "results.png" and r.plot.read_bytes().startswith(PNG)
+    r = ps.sweep(doc, tmp_path / "none", workers=0, plot=False)
+    assert r.plot is None and not (tmp_path / "none" / "results.png").exists()
+    assert sorted(p.name for p in (tmp_path / "none").iterdir()) == ["manifest.json", "parts", "results.csv", "results.parquet"]
+
+
+def test_a_study_without_matplotlib_keeps_its_results_and_says_so(tmp_path, monkeypatch, capsys):
+    # matplotlib is an extra (plot): the table is written, the plot is not, and a note names the extra.
+    monkeypatch.setitem(sys.modules, "matplotlib", None)   # import matplotlib -> ImportError
+    doc = dict(STUDY, parameters={"young": [2e4, 4e4]}, loading={"kind": "probe", "steps": 40})
+    r = ps.sweep(doc, tmp_path / "out", workers=0)
+    assert r.done == 2 and r.plot is None and [x["status"] for x in r.rows()] == ["ok", "ok"]
+    assert (tmp_path / "out" / "results.parquet").exists() and (tmp_path / "out" / "results.csv").exists()
+    assert not (tmp_path / "out" / "results.png").exists()
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "matplotlib not installed: no results.png" in err and "the plot extra" in err, err

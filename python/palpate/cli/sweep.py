@@ -11,13 +11,15 @@ from ._common import Usage, add_quiet, require_extra
 def add_parser(sub) -> None:
     s = sub.add_parser("sweep", help="run a batch study (a spec of parameters to vary) on Dask: one Parquet table",
                        description="Run the study SPEC (TOML: palpate.sweep.spec) as Dask tasks and write its table "
-                                   "(results.parquet, a row per scenario), its parts as they finish and a manifest to --out.")
+                                   "(results.parquet, a row per scenario; results.csv without the curves), its plot (results.png: "
+                                   "the force-depth curves; needs matplotlib), its parts as they finish and a manifest to --out.")
     s.add_argument("spec", metavar="SPEC.toml")
     s.add_argument("--out", metavar="DIR", help="output folder (default: sweep-<study name>)")
     s.add_argument("--workers", type=int, metavar="N",
                    help="local worker processes (default: one per core; 0: in this process, no Dask)")
     s.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (tcp://host:8786) instead of a local cluster")
     s.add_argument("--resume", action="store_true", help="continue the study in --out, running only scenarios without a row")
+    s.add_argument("--no-plot", action="store_true", help="write no results.png")
     s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     add_quiet(s)
     s.set_defaults(func=cmd_sweep)
@@ -36,14 +38,15 @@ def cmd_sweep(a) -> int:
     if a.scheduler is not None and a.workers is not None:
         raise Usage("palpate sweep: --workers is for the local cluster; a --scheduler has its own workers")
     r = sweep(a.spec, a.out, scheduler=a.scheduler, workers=a.workers, resume=a.resume, quiet=a.quiet or a.json,
-              log=None if a.json else print)
+              log=None if a.json else print, plot=not a.no_plot)
     if a.json:
         print(json.dumps({"study": r.manifest["study"], "scenarios": r.done, "failed": r.failed, "ran": r.ran,
-                          "table": str(r.path), "model_hash": r.manifest["model_hash"]}))
+                          "table": str(r.path), "plot": None if r.plot is None else str(r.plot), "model_hash": r.manifest["model_hash"]}))
     elif not a.quiet:
         for line in table_lines(r.rows(), list(r.manifest.get("varied") or [])):
             print(line)
-        print(f"  the table: {r.path} (all columns, curves included) and {r.path.with_suffix('.csv')} (no curves)")
+        plot = f"; the plot: {r.plot}" if r.plot is not None else ""
+        print(f"  the table: {r.path} (all columns, curves included) and {r.path.with_suffix('.csv')} (no curves){plot}")
     return 0
 
 

@@ -7,7 +7,8 @@ Parquet table.
     r.table.to_pandas()                                  # one row per scenario
 
 :mod:`~palpate.sweep.spec` says what a study file holds, :mod:`~palpate.sweep.scenario` what a
-row holds, :mod:`~palpate.sweep.runner` where it runs and what it writes, and
+row holds, :mod:`~palpate.sweep.runner` where it runs and what it writes, :mod:`~palpate.sweep.plot`
+what its plot (``results.png``) shows, and
 :mod:`~palpate.sweep.fit` how a measured curve gives a material. Needs the ``study`` extra
 (the ``study`` extra: dask[distributed], pyarrow), except ``workers=0`` runs, which
 need pyarrow only.

@@ -13,6 +13,9 @@ Output folder (``out``):
   see :mod:`palpate.sweep.scenario` for the columns);
 - ``results.csv``: the same rows without the curves, for a spreadsheet or a reader without
   pyarrow or pandas;
+- ``results.png``: the plot (:mod:`palpate.sweep.plot`: the scenarios' force-depth curves, or
+  without curves the main outcome against the first varied parameter); needs matplotlib (the
+  ``plot`` extra): without it, no plot and a note on stderr;
 - ``parts/part-NNNNNN.parquet``: the rows as they finished, a part every few seconds (what
   ``resume`` reads back: a killed study keeps everything up to its last part);
 - ``fields/NNNNNNN.npy``: the final displacement fields (``outputs.field``), (n, 3) [m];
@@ -68,6 +71,7 @@ class StudyResult:
     done: int
     failed: int
     ran: int          # scenarios run by this call (a resumed study skips the finished ones)
+    plot: Optional[Path] = None   # results.png (None: not asked for, or no matplotlib)
 
     def rows(self) -> List[Dict[str, Any]]:
         return self.table.to_pylist()
@@ -210,13 +214,14 @@ def _cell(v: Any) -> Any:
 
 def sweep(spec: Union[Spec, Dict[str, Any], str, os.PathLike], out: Union[str, os.PathLike, None] = None, *,
           client: Any = None, scheduler: Optional[str] = None, workers: Optional[int] = None, resume: bool = False,
-          quiet: bool = False, log: Optional[Callable[[str], None]] = None) -> StudyResult:
+          quiet: bool = False, log: Optional[Callable[[str], None]] = None, plot: bool = True) -> StudyResult:
     """Run the study ``spec`` (a :class:`Spec`, its dict, or the path of its TOML file) and write
     its table to ``out`` (default ``sweep-<name>`` in the current folder). See the module docs
     for where it runs; ``resume``: continue the study already in ``out`` (same spec), running only
     the scenarios without a row; without it, an ``out`` that holds a study is refused. ``log``
     gets one-line messages (the dashboard's address, the summary); a progress bar shows on a
-    terminal unless ``quiet``. Raises :class:`SweepSpecError` for a bad spec, :class:`SweepError`
+    terminal unless ``quiet``. ``plot``: draw ``results.png`` beside the table
+    (:mod:`palpate.sweep.plot`; without matplotlib, none and a note on stderr). Raises :class:`SweepSpecError` for a bad spec, :class:`SweepError`
     for an output folder that holds another study."""
     if isinstance(spec, Spec):
         sp = spec
@@ -284,8 +289,21 @@ def sweep(spec: Union[Spec, Dict[str, Any], str, os.PathLike], out: Union[str, o
             runner.run(todo, got, curve=sp.curve, field=sp.field)
     t, path, n_failed = table.finish()
     table.write_manifest(state="complete", finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), done=t.num_rows, failed=n_failed)
+    png = _plot(t, out_dir / "results.png", sp) if plot else None
     say(f"palpate sweep: {sp.name}: {t.num_rows} scenarios ({n_failed} failed) in {path}")
-    return StudyResult(table=t, path=path, manifest=table.manifest, done=t.num_rows, failed=n_failed, ran=len(todo))
+    return StudyResult(table=t, path=path, manifest=table.manifest, done=t.num_rows, failed=n_failed, ran=len(todo),
+                       plot=png)
+
+
+def _plot(t: Any, path: Path, sp: Spec) -> Optional[Path]:
+    """The study's plot at ``path``, or None (and a note on stderr) without matplotlib: the table
+    stands without it."""
+    from .plot import plot_study
+    try:
+        return plot_study(t, path, name=sp.name, kind=sp.kind, varied=sp.varied())
+    except ImportError:   # matplotlib is an extra (palpate[plot])
+        print(f"(matplotlib not installed: no {path.name}; {install_hint('plot')})", file=sys.stderr)
+        return None
 
 
 class Runner:
