@@ -66,8 +66,9 @@ def test_replay_through_the_binding_is_bit_identical(model, tmp_path):
     rep = live.stop()
     assert rep["ticks"] == 2000
     # Only a watchdog trip (this shared machine's scheduler stalling the thread 30 ms) may break
-    # bit identity live, and it is reported as a fault; offline, nothing may.
-    assert rep["n_faults"] == rep["watchdog_trips"]
+    # bit identity live; offline, nothing may. A trip is a counted fault in the single-rate loop
+    # and a logged event in the multirate one: no fault but trips.
+    assert rep["n_faults"] <= rep["watchdog_trips"]
     b = live.recorded()
     off = _p.HapticLoop(model, haptics.material(), "replay", recording=path, record_ticks=3000)
     off.run()
@@ -186,7 +187,7 @@ def test_loop_runs_while_python_sleeps_and_the_hand_follows(model):
     s2 = loop.snapshot()
     assert abs(s2["device"][2] - (k[0][2] + 0.01)) < 1e-3, s2["device"]
     r = loop.stop()
-    assert r["ticks"] >= s2["tick"] and r["n_faults"] == r["watchdog_trips"]
+    assert r["ticks"] >= s2["tick"] and r["n_faults"] <= r["watchdog_trips"]
     with pytest.raises(_p.HapticsError):
         loop.start()
 
@@ -419,7 +420,7 @@ def test_bridge_with_the_reference_client_in_a_second_process(model):
     # hand-over time (0.5 s), then it gets the tool.
     assert st["accepted"] > 100 and st["dropped"] - st["busy"] == len(corpus), st
     assert st["sessions"] == 2, st                          # this process's, then the child's
-    assert r["n_faults"] == r["watchdog_trips"]
+    assert r["n_faults"] <= r["watchdog_trips"]
 
 
 def test_a_stranger_on_another_port_cannot_take_the_tool(model):
@@ -894,7 +895,7 @@ def test_soak_and_bench_haptic_commands(capsys):
 
     assert main(["soak", "ellipsoids", "--minutes", "0.02", "--json"]) in (0, 3)
     r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert r["ticks"] == 1200 and r["n_faults"] == r["watchdog_trips"] and "energy_into_user_j" in r and r["max_force_n"] >= 0
+    assert r["ticks"] == 1200 and r["n_faults"] <= r["watchdog_trips"] and "energy_into_user_j" in r and r["max_force_n"] >= 0
     assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.5", "--rate", "2000", "--json"]) in (0, 3)
     r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     for key in haptics.BENCH_KEYS:
@@ -918,7 +919,7 @@ def test_soak_and_bench_haptic_commands(capsys):
     # --threads 2: the particle passes on two threads (the servo's and a helper); same physics.
     assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.3", "--json", "--no-idle", "--threads", "2"]) in (0, 3)
     r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
-    assert r["threads"] == 2 and r["ticks"] == 300 and r["n_faults"] == r["watchdog_trips"] and "idle" not in r
+    assert r["threads"] == 2 and r["ticks"] == 300 and r["n_faults"] <= r["watchdog_trips"] and "idle" not in r
     # --busy-wait: both runs' servo spins through its periods (same tick counts); not with --realtime.
     assert main(["bench", "haptic", "ellipsoids", "--seconds", "0.3", "--json", "--busy-wait"]) in (0, 3)
     r = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
