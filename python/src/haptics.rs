@@ -385,7 +385,8 @@ impl PyHapticLoop {
         errors::guard("HapticLoop", || {
             // Python's values into the loop's description (palpate_haptics::LoopSpec), which
             // checks and builds it; here only what is Python's: conversions, the unit checks'
-            // warnings, which model class was given.
+            // warnings, which model class was given. (Over 100 lines for that reason: one
+            // conversion per keyword of the signature, in its order; no logic of the loop.)
             for (n, v) in [
                 ("tool_radius", tool_radius),
                 ("core_contact_stiffness", core_contact_stiffness),

@@ -191,6 +191,7 @@ impl LoopSpec {
     /// Checks the settings, opens the device and compiles the physics (seconds for a large
     /// model: the hybrid runtime's set-up).
     pub fn build(self) -> Result<BuiltLoop, LoopError> {
+        self.check()?;
         let LoopSpec {
             physics,
             device,
@@ -205,72 +206,22 @@ impl LoopSpec {
             spin,
             realtime,
         } = self;
-        let c = &coupling;
-        let s = &safety;
-        for (n, v) in [
-            ("coupling_stiffness", c.stiffness),
-            ("proxy_mass", c.proxy_mass),
-            ("max_force", s.max_force),
-            ("max_rate", s.max_rate),
-            ("stall_timeout", s.stall_timeout),
-            ("silence", s.silence),
-            ("physics_rate", physics_rate_hz),
-        ] {
-            positive(n, v, false)?;
-        }
-        for (n, v) in [("coupling_damping", c.damping), ("ramp", s.ramp), ("spin", spin)] {
-            positive(n, v, true)?;
-        }
-        if let PhysicsSpec::Hybrid { threads, .. } = &physics {
-            if !(1..=palpate_core::parallel::MAX_WAYS).contains(threads) {
-                return Err(LoopError::Parameter(format!("threads = {threads}: must be 1 to {}", palpate_core::parallel::MAX_WAYS)));
-            }
-        }
-        if single_rate && physics_rate_hz.is_some() {
-            return Err(LoopError::Parameter("physics_rate and single_rate together: the single-rate loop has no physics thread".into()));
-        }
-        let idle = matches!(physics, PhysicsSpec::Idle);
         // The multirate loop by default, its physics at 1 kHz (or the servo's rate, if lower);
-        // the idle loop has no physics to run.
-        let mut physics_rate = if single_rate || idle {
+        // the idle loop has no physics to run. A replay takes its recording's rates.
+        let mut physics_rate = if single_rate || matches!(physics, PhysicsSpec::Idle) {
             None
         } else {
             Some(physics_rate_hz.unwrap_or(DEFAULT_PHYSICS_RATE_HZ.min(rate_hz)))
         };
         let replay = match &device {
-            DeviceSpec::Replay(r) => {
-                rate_hz = r.rate_hz;
-                physics_rate = r.physics_rate_hz;
-                Some(r)
-            }
+            DeviceSpec::Replay(r) => Some(r),
             _ => None,
         };
+        if let Some(r) = replay {
+            (rate_hz, physics_rate) = (r.rate_hz, r.physics_rate_hz);
+        }
         let kind = kind.unwrap_or(if matches!(device, DeviceSpec::Bridge { .. }) { DeviceKind::Bridge } else { DeviceKind::Simulated });
-        let (dc, ds) = kind.defaults();
-        let coupling = match replay {
-            Some(r) => r.coupling,
-            None => CouplingParams {
-                stiffness: c.stiffness.unwrap_or(dc.stiffness),
-                damping: c.damping.unwrap_or(dc.damping),
-                proxy_mass: c.proxy_mass.unwrap_or(dc.proxy_mass),
-            },
-        };
-        let safety = match replay {
-            Some(r) => r.safety,
-            None => SafetyParams {
-                max_force: s.max_force.unwrap_or(ds.max_force),
-                max_rate: s.max_rate.unwrap_or(ds.max_rate),
-                ramp: s.ramp.unwrap_or(ds.ramp),
-                stall_timeout: s.stall_timeout.unwrap_or(ds.stall_timeout),
-                silence: s.silence.unwrap_or(ds.silence),
-            },
-        };
-        // The device class's rated limits (a replay drives no device: its recorded limits
-        // stand); beyond them only with `unsafe_limits`, and then said.
-        let unsafe_note = match replay.map_or_else(|| check_limits(kind, &coupling, &safety).err(), |_| None) {
-            Some(why) if !s.unsafe_limits => return Err(LoopError::Parameter(format!("{why}: refused (unsafe_limits allows it, at the user's risk)"))),
-            note => note,
-        };
+        let (coupling, safety, unsafe_note) = limits(kind, &coupling, &safety, replay)?;
         let mut config = ServoConfig {
             rate_hz,
             physics_rate_hz: physics_rate,
@@ -289,59 +240,138 @@ impl LoopSpec {
             ..ServoConfig::default()
         };
         config.check().map_err(LoopError::Parameter)?;
-
         let replay_identity = replay.map(|r| r.identity.clone());
-        let (mut hand, mut bridge, mut replay_check) = (None, None, None);
-        // Ticks a finite device gives (a script's, a replay's): no recording needs more.
-        let mut device_ticks: Option<usize> = None;
-        let mut multirate_replay = None;
-        let dev: Box<dyn Device> = match device {
-            DeviceSpec::Scripted { times, knots } => {
-                let s = Scripted::new(times, knots).map_err(LoopError::Parameter)?;
-                device_ticks = Some((s.duration() * rate_hz).ceil() as usize + 1);
-                Box::new(s)
-            }
-            DeviceSpec::Replay(r) => {
-                device_ticks = Some(r.ticks.len());
-                let dev = Replay::new(&r);
-                replay_check = Some(dev.check());
-                // A multirate recording replays from its own schedule, not the device's samples.
-                if r.physics_rate_hz.is_some() {
-                    multirate_replay = Some(r);
-                }
-                Box::new(dev)
-            }
-            DeviceSpec::Hand { start } => {
-                let h = Hand::new(HandParams::default(), start);
-                hand = Some(h.target());
-                Box::new(h)
-            }
-            DeviceSpec::Bridge { address, key } => {
-                let b = Bridge::open(address, kind, BridgeOptions { key, ..Default::default() })?;
-                let addr = b.local_addr().map_err(|e| LoopError::Setup(format!("the bridge's address: {e}")))?.to_string();
-                bridge = Some((addr, b.stats()));
-                Box::new(b)
-            }
-        };
-
-        let physics: Box<dyn Physics> = match physics {
-            PhysicsSpec::Idle => Box::new(Idle::default()),
-            PhysicsSpec::Hybrid { model, material, options, threads } => Box::new(
-                HybridPhysics::new(model, material, options)?
-                    .with_threads(threads, realtime)
-                    .map_err(|e| LoopError::Setup(format!("cannot start {} helper threads: {e}", threads - 1)))?,
-            ),
-            PhysicsSpec::Fem { model, options } => Box::new(FemPhysics::new(model, options)?),
-        };
+        let opened = open_device(device, kind, rate_hz)?;
+        let physics = make_physics(physics, realtime)?;
         let identity = physics.identity();
         if let Some(recorded) = replay_identity {
             check_identity(&recorded, &identity)?;
         }
-        let record_ticks = device_ticks.map_or(record_ticks, |n| record_ticks.min(n));
-        config.record_ticks = record_ticks;
-        let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, record_ticks);
-        Ok(BuiltLoop { core, device: dev, config, hand, bridge, identity, replay: multirate_replay, replay_check, unsafe_note })
+        // No recording needs more ticks than a finite device gives.
+        config.record_ticks = opened.ticks.map_or(record_ticks, |n| record_ticks.min(n));
+        let core = HapticCore::new(physics, rate_hz, coupling, safety, config.checkpoint_every, config.record_ticks);
+        Ok(BuiltLoop {
+            core,
+            device: opened.device,
+            config,
+            hand: opened.hand,
+            bridge: opened.bridge,
+            identity,
+            replay: opened.multirate_replay,
+            replay_check: opened.replay_check,
+            unsafe_note,
+        })
     }
+
+    /// The settings' ranges and combinations (what the servo's own check does not see).
+    fn check(&self) -> Result<(), LoopError> {
+        let (c, s) = (&self.coupling, &self.safety);
+        for (n, v) in [
+            ("coupling_stiffness", c.stiffness),
+            ("proxy_mass", c.proxy_mass),
+            ("max_force", s.max_force),
+            ("max_rate", s.max_rate),
+            ("stall_timeout", s.stall_timeout),
+            ("silence", s.silence),
+            ("physics_rate", self.physics_rate_hz),
+        ] {
+            positive(n, v, false)?;
+        }
+        for (n, v) in [("coupling_damping", c.damping), ("ramp", s.ramp), ("spin", self.spin)] {
+            positive(n, v, true)?;
+        }
+        if let PhysicsSpec::Hybrid { threads, .. } = &self.physics {
+            if !(1..=palpate_core::parallel::MAX_WAYS).contains(threads) {
+                return Err(LoopError::Parameter(format!("threads = {threads}: must be 1 to {}", palpate_core::parallel::MAX_WAYS)));
+            }
+        }
+        if self.single_rate && self.physics_rate_hz.is_some() {
+            return Err(LoopError::Parameter("physics_rate and single_rate together: the single-rate loop has no physics thread".into()));
+        }
+        Ok(())
+    }
+}
+
+/// The coupling and safety limits: the given ones over the device class's defaults, or a
+/// replay's recorded ones; beyond the class's rating only with `unsafe_limits`, and then said
+/// (the third value). A replay drives no device: its recorded limits stand.
+fn limits(kind: DeviceKind, c: &CouplingSpec, s: &SafetySpec, replay: Option<&Recording>) -> Result<(CouplingParams, SafetyParams, Option<String>), LoopError> {
+    if let Some(r) = replay {
+        return Ok((r.coupling, r.safety, None));
+    }
+    let (dc, ds) = kind.defaults();
+    let coupling = CouplingParams {
+        stiffness: c.stiffness.unwrap_or(dc.stiffness),
+        damping: c.damping.unwrap_or(dc.damping),
+        proxy_mass: c.proxy_mass.unwrap_or(dc.proxy_mass),
+    };
+    let safety = SafetyParams {
+        max_force: s.max_force.unwrap_or(ds.max_force),
+        max_rate: s.max_rate.unwrap_or(ds.max_rate),
+        ramp: s.ramp.unwrap_or(ds.ramp),
+        stall_timeout: s.stall_timeout.unwrap_or(ds.stall_timeout),
+        silence: s.silence.unwrap_or(ds.silence),
+    };
+    match check_limits(kind, &coupling, &safety) {
+        Err(why) if !s.unsafe_limits => Err(LoopError::Parameter(format!("{why}: refused (unsafe_limits allows it, at the user's risk)"))),
+        result => Ok((coupling, safety, result.err())),
+    }
+}
+
+/// An opened device and what the loop keeps of it.
+struct Opened {
+    device: Box<dyn Device>,
+    /// Ticks a finite device gives (a script's, a replay's).
+    ticks: Option<usize>,
+    hand: Option<Arc<Vec3Cell>>,
+    bridge: Option<(String, Arc<BridgeStats>)>,
+    replay_check: Option<Arc<ReplayCheck>>,
+    /// A multirate recording, replayed from its own schedule rather than the device's samples.
+    multirate_replay: Option<Recording>,
+}
+
+fn open_device(device: DeviceSpec, kind: DeviceKind, rate_hz: f64) -> Result<Opened, LoopError> {
+    let (mut ticks, mut hand, mut bridge, mut replay_check, mut multirate_replay) = (None, None, None, None, None);
+    let device: Box<dyn Device> = match device {
+        DeviceSpec::Scripted { times, knots } => {
+            let s = Scripted::new(times, knots).map_err(LoopError::Parameter)?;
+            ticks = Some((s.duration() * rate_hz).ceil() as usize + 1);
+            Box::new(s)
+        }
+        DeviceSpec::Replay(r) => {
+            ticks = Some(r.ticks.len());
+            let dev = Replay::new(&r);
+            replay_check = Some(dev.check());
+            if r.physics_rate_hz.is_some() {
+                multirate_replay = Some(r);
+            }
+            Box::new(dev)
+        }
+        DeviceSpec::Hand { start } => {
+            let h = Hand::new(HandParams::default(), start);
+            hand = Some(h.target());
+            Box::new(h)
+        }
+        DeviceSpec::Bridge { address, key } => {
+            let b = Bridge::open(address, kind, BridgeOptions { key, ..Default::default() })?;
+            let addr = b.local_addr().map_err(|e| LoopError::Setup(format!("the bridge's address: {e}")))?.to_string();
+            bridge = Some((addr, b.stats()));
+            Box::new(b)
+        }
+    };
+    Ok(Opened { device, ticks, hand, bridge, replay_check, multirate_replay })
+}
+
+fn make_physics(physics: PhysicsSpec, realtime: bool) -> Result<Box<dyn Physics>, LoopError> {
+    Ok(match physics {
+        PhysicsSpec::Idle => Box::new(Idle::default()),
+        PhysicsSpec::Hybrid { model, material, options, threads } => Box::new(
+            HybridPhysics::new(model, material, options)?
+                .with_threads(threads, realtime)
+                .map_err(|e| LoopError::Setup(format!("cannot start {} helper threads: {e}", threads - 1)))?,
+        ),
+        PhysicsSpec::Fem { model, options } => Box::new(FemPhysics::new(model, options)?),
+    })
 }
 
 /// A recording replays only on the simulation it was made with.
