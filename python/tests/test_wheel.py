@@ -68,7 +68,7 @@ def test_wheel_tags_size_and_licences():
     sections = _elf_sections(ext)
     assert ".text" in sections and not {n for n in sections if n.startswith(".debug")}, sections
     assert ".symtab" not in sections, "symbols not stripped"
-    # 5.8 MB since large factorisations are faer's (linalg/supernodal.rs; about 4.5 MB before).
+    # 5.8 MB since large factorisations are faer's (linalg/supernodal.rs; under 5 MB before).
     assert len(ext) < 8e6, f"extension is {len(ext) / 1e6:.1f} MB"
     assert "License-Expression: MIT OR Apache-2.0" in meta
     requires = [l for l in meta.splitlines() if l.startswith("Requires-Dist:") and "extra ==" not in l]
