@@ -204,12 +204,7 @@ fn kind_of(name: &str) -> PyResult<DeviceKind> {
 }
 
 fn positive(name: &str, v: Option<f64>, zero_ok: bool) -> PyResult<()> {
-    match v {
-        Some(x) if !(x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0))) => {
-            Err(errors::param_error_from(format!("{name} = {x} must be {} and finite", if zero_ok { "non-negative" } else { "positive" })))
-        }
-        _ => Ok(()),
-    }
+    palpate_haptics::spec::check_positive(name, v, zero_ok).map_err(errors::param_error_from)
 }
 
 fn haptics_error(msg: impl std::fmt::Display) -> PyErr {

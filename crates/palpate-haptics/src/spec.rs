@@ -159,13 +159,19 @@ pub struct BuiltLoop {
     pub unsafe_note: Option<String>,
 }
 
-fn positive(name: &str, v: Option<f64>, zero_ok: bool) -> Result<(), LoopError> {
+/// `v`, if given, positive (or, with `zero_ok`, non-negative) and finite; else why not, naming
+/// `name`. Shared with the binding's checks of the physics' options.
+pub fn check_positive(name: &str, v: Option<f64>, zero_ok: bool) -> Result<(), String> {
     match v {
         Some(x) if !(x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0))) => {
-            Err(LoopError::Parameter(format!("{name} = {x} must be {} and finite", if zero_ok { "non-negative" } else { "positive" })))
+            Err(format!("{name} = {x} must be {} and finite", if zero_ok { "non-negative" } else { "positive" }))
         }
         _ => Ok(()),
     }
+}
+
+fn positive(name: &str, v: Option<f64>, zero_ok: bool) -> Result<(), LoopError> {
+    check_positive(name, v, zero_ok).map_err(LoopError::Parameter)
 }
 
 impl LoopSpec {
