@@ -700,6 +700,15 @@ def _abaqus_params(line: str) -> Dict[str, str]:
     return out
 
 
+def _abaqus_name(label: str) -> str:
+    """A set's label as Abaqus reads it: without the double quotes a label is written in when it
+    holds blanks or other characters (``NSET="my set"`` names the set ``my set``)."""
+    t = label.strip()
+    if len(t) >= 2 and t[0] == t[-1] == '"':
+        return t[1:-1]
+    return t
+
+
 @dataclass
 class AbaqusSetPiece:
     """One definition that adds members to an Abaqus node set (``kind`` ``"node"``) or element
@@ -707,16 +716,19 @@ class AbaqusSetPiece:
     file order. Abaqus sets are additive: a name defined again (``*NSET, NSET=BASE`` twice, or a
     ``*NODE, NSET=BASE`` and an ``*NSET, NSET=BASE``) gets the members of every definition.
 
-    ``block``: every node of the node block (``*NODE, NSET=``) or every element of element block
-    ``block`` (``*ELEMENT, ELSET=``, counted from 0 in file order, as meshio's cell blocks);
-    ``meshio_key``: the numbers an ``*NSET`` / ``*ELSET`` lists, which meshio reads (and maps to
-    indices) under that name; ``refs``: the sets its data lines name (``(name, line)``);
-    ``elset``: ``*NSET, ELSET=<name>``, the nodes of that element set's elements."""
+    ``block``: every node of node block ``block`` (``*NODE, NSET=``) or every element of element
+    block ``block`` (``*ELEMENT, ELSET=``), each counted from 0 in file order (meshio's cell
+    blocks); ``numbers``: the node / element numbers an ``*NSET`` / ``*ELSET`` lists, one array
+    per data line with the line (``GENERATE`` ranges expanded: ``generate``), which palpate maps
+    (:func:`abaqus_sets`); ``refs``: the sets its data lines name (``(name, line)``);
+    ``elset``: ``*NSET, ELSET=<name>``, the nodes of that element set's elements. Names are
+    without their quotes (:func:`_abaqus_name`)."""
     kind: str
     name: str
     line: int
     block: Optional[int] = None
-    meshio_key: Optional[str] = None
+    numbers: List[Tuple[np.ndarray, int]] = field(default_factory=list)
+    generate: bool = False
     refs: List[Tuple[str, int]] = field(default_factory=list)
     elset: Optional[str] = None
 
@@ -724,19 +736,54 @@ class AbaqusSetPiece:
 @dataclass
 class AbaqusCheck:
     """What :func:`abaqus_precheck` found: ``text``, the file's text for meshio's reader (comment
-    lines blanked, set definitions rewritten: see there); ``unknown``, ``"*<keyword> (line <n>)"``
-    for each keyword not known here (for the caller's MeshWarning); ``sets``, the set
-    definitions in file order; ``element_blocks``, the number of *ELEMENT blocks."""
+    lines blanked, the *NODE blocks gathered into the first, set definitions taken out: see
+    there); ``unknown``, ``"*<keyword> (<line n>)"`` for each keyword not known here (for the
+    caller's MeshWarning); ``sets``, the set definitions in file order; ``element_blocks``, the
+    number of *ELEMENT blocks (``element_lines``: the line of each); ``node_blocks``, the number
+    of nodes of each *NODE block, in file order (meshio reads them as one block, in that order)."""
     text: str
     unknown: List[str]
     sets: List[AbaqusSetPiece]
     element_blocks: int
+    node_blocks: List[int] = field(default_factory=list)
+    element_lines: List[int] = field(default_factory=list)
 
 
 def _abaqus_label(item: str) -> bool:
     """A data line item that names a set rather than giving a number: Abaqus labels begin with a
     letter (Abaqus/CAE's internal sets with ``_``), or are quoted."""
     return bool(item) and (item[0].isalpha() or item[0] in '_"')
+
+
+#: Keywords that open or close a part, the assembly or an instance: a *NODE block after one of
+#: these is not in the first block's part (:func:`abaqus_precheck`).
+_ABAQUS_SCOPES = ("PART", "ENDPART", "ASSEMBLY", "ENDASSEMBLY", "INSTANCE", "ENDINSTANCE")
+
+
+def _abaqus_set_numbers(name: str, i: int, piece: AbaqusSetPiece, items: List[str]) -> np.ndarray:
+    """The numbers of one data line of an *NSET / *ELSET (``items``, its set names left out), as
+    Abaqus reads them: numbers, or with ``GENERATE`` ``first, last[, increment]`` (increment 1 by
+    default; the line's members are first, first + increment, ... up to last)."""
+    what = "node" if piece.kind == "node" else "element"
+    values = []
+    for t in items:
+        try:
+            values.append(int(t))
+        except ValueError:
+            raise MeshError(f"{name}: line {i}: the {what} set {piece.name!r} lists {t[:40]!r}, which is neither a "
+                            f"{what} number nor a set name") from None
+    if not piece.generate:
+        return np.array(values, dtype=np.int64)
+    if len(values) not in (2, 3):
+        raise MeshError(f"{name}: line {i}: the {what} set {piece.name!r} has GENERATE, whose data lines give "
+                        f"'first, last, increment' (the increment 1 if left out); got {len(values)} numbers")
+    first, last, step = values[0], values[1], values[2] if len(values) == 3 else 1
+    if step <= 0 or last < first:
+        raise MeshError(f"{name}: line {i}: the {what} set {piece.name!r} has GENERATE from {first} to {last} by "
+                        f"{step}: the last number is at least the first, and the increment positive")
+    check_budget(f"line {i}: the GENERATE range {first}..{last} of the {what} set {piece.name!r}",
+                 ((last - first) // step + 1) * 8.0, name)
+    return np.arange(first, last + 1, step, dtype=np.int64)
 
 
 def abaqus_precheck(path: str) -> AbaqusCheck:
@@ -748,22 +795,30 @@ def abaqus_precheck(path: str) -> AbaqusCheck:
     - a keyword that makes, copies or moves nodes or elements, or changes how later lines read
       (:data:`_ABAQUS_REFUSED`: *NGEN, *NFILL, *NCOPY, *NMAP, *SYSTEM, *ELGEN, *ELCOPY, *INCLUDE,
       *PARAMETER, *IMPORT), any keyword with an ``INPUT=`` file, *NODE with ``SYSTEM=C`` or
-      ``S``, a second *NODE block (meshio's reader replaces the nodes at each *NODE, and the
-      elements read before would point at the new ones), more than one *INSTANCE (the part
-      placed several times, meshio reads it once), an *INSTANCE with a translation or rotation,
-      a keyword meshio reads written in a way it does not recognise (``* NODE``), and a data line
-      meshio takes for a keyword (a set named ``NODE`` on a *BOUNDARY line) are a MeshError
-      naming the file, the line and the keyword;
+      ``S``, a *NODE block in another part, in the assembly or in an instance than the first
+      block (each numbers its nodes apart), more than one *INSTANCE (the part placed several
+      times, meshio reads it once), an *INSTANCE with a translation or rotation, a keyword
+      meshio reads written in a way it does not recognise (``* NODE``), and a data line meshio
+      takes for a keyword (a set named ``NODE`` on a *BOUNDARY line) are a MeshError naming the
+      file, the line and the keyword;
     - any other keyword is read past, and named in the caller's MeshWarning.
+
+    The *NODE blocks of one part are one set of nodes, as Abaqus reads them: meshio's reader
+    replaces the nodes read before at each *NODE (the elements read before would point at the
+    new ones), so the text it reads has every node line under the first *NODE line, in file
+    order; a node number defined twice (in one block or two) is a MeshError naming the number
+    and both lines (meshio kept both nodes and mapped the number to the second: the first was
+    used by no element).
 
     The sets are palpate's to add up (:func:`abaqus_sets`), because meshio's reader gets several
     of them wrong: it ignores ``*NODE, NSET=`` (no set), maps ``*ELEMENT, ELSET=`` onto the wrong
     cell block when an element block without ELSET comes before (an IndexError, or another
     block's cells), replaces a set defined twice instead of adding to it, drops the set names an
-    *NSET data line lists and nests those of an *ELSET line, and leaves ``*NSET, ELSET=`` empty.
-    So the text meshio reads has each *NSET / *ELSET renamed to a key of its own (meshio maps the
-    numbers it lists), set names removed from their data lines, and ``ELSET=`` removed from
-    *ELEMENT lines; every definition is an :class:`AbaqusSetPiece`.
+    *NSET data line lists and nests those of an *ELSET line, leaves ``*NSET, ELSET=`` empty,
+    drops an *ELSET number that names no element and fails on an *NSET one (``KeyError``), and
+    keeps a quoted label's quotes. So *NSET and *ELSET are taken out of the text meshio reads,
+    their numbers parsed here (:func:`_abaqus_set_numbers`) and mapped by palpate, and
+    ``ELSET=`` removed from *ELEMENT lines; every definition is an :class:`AbaqusSetPiece`.
 
     Comment lines (``**``) are blanked in that text: meshio's reader ends a *NODE or *ELEMENT
     block at a comment line and skipped the lines after it as unknown keywords (the rest of the
@@ -774,8 +829,12 @@ def abaqus_precheck(path: str) -> AbaqusCheck:
     sets: List[AbaqusSetPiece] = []
     piece: Optional[AbaqusSetPiece] = None   # the *NSET / *ELSET whose data lines follow
     current: Optional[str] = None   # the keyword whose data lines follow
-    node_line = instance_line = part_line = 0
-    element_blocks = 0
+    node_line = instance_line = part_line = scope_line = 0
+    scope_kw = ""
+    element_lines: List[int] = []
+    node_blocks: List[int] = []   # nodes per *NODE block
+    node_data: List[str] = []   # every node line, in file order (meshio reads them under the first *NODE)
+    node_defined: Dict[int, int] = {}   # node number -> its line
 
     def refuse(i: int, shown: str, why: str) -> MeshError:
         return MeshError(f"{name}: line {i}: Abaqus keyword *{shown} {why}")
@@ -790,7 +849,21 @@ def abaqus_precheck(path: str) -> AbaqusCheck:
         head = line.partition(",")[0]
         meshio_kw = head.strip().replace("*", "").upper()   # what meshio's reader compares
         if not line.startswith("*"):
-            if current == "INSTANCE":
+            if current == "NODE":
+                node_data.append(line)
+                node_blocks[-1] += 1
+                lines[i - 1] = ""
+                try:
+                    number = int(head)
+                except ValueError:
+                    continue   # meshio's reader refuses it (ValueError), as before
+                if number in node_defined:
+                    raise MeshError(f"{name}: line {i}: node {number} is defined again (first at line "
+                                    f"{node_defined[number]}): a node number names one node in a part; meshio's "
+                                    "reader would keep both and map the number to the second (the first used by "
+                                    "no element)")
+                node_defined[number] = i
+            elif current == "INSTANCE":
                 try:
                     moved = any(float(t) != 0.0 for t in line.split(",") if t.strip())
                 except ValueError:
@@ -800,12 +873,17 @@ def abaqus_precheck(path: str) -> AbaqusCheck:
                                  f"{line[:60]!r}), which meshio's reader skips: the nodes would be read where the "
                                  "part defines them; write the part's nodes where the instance puts them")
             elif piece is not None:
-                # Set names on a set's data line are palpate's (abaqus_sets); meshio reads the numbers.
+                # The set's data lines are palpate's (abaqus_sets): set names and numbers.
                 items = [t.strip() for t in line.split(",")]
                 named = [t for t in items if _abaqus_label(t)]
-                if named:
-                    piece.refs.extend((t, i) for t in named)
-                    lines[i - 1] = ", ".join(t for t in items if t and not _abaqus_label(t))
+                if named and piece.generate:
+                    raise MeshError(f"{name}: line {i}: the {piece.kind} set {piece.name!r} has GENERATE, whose data "
+                                    f"lines give numbers, not set names ({named[0][:40]!r})")
+                piece.refs.extend((_abaqus_name(t), i) for t in named)
+                numbers = [t for t in items if t and not _abaqus_label(t)]
+                if numbers:
+                    piece.numbers.append((_abaqus_set_numbers(name, i, piece, numbers), i))
+                lines[i - 1] = ""
             elif current not in _ABAQUS_READ and meshio_kw in _ABAQUS_READ + ("INCLUDE",):
                 raise MeshError(f"{name}: line {i}: the data line {line[:60]!r} of *{current or '(none)'} begins "
                                 f"with {head.strip()!r}, which meshio's Abaqus reader takes for the keyword "
@@ -827,6 +905,8 @@ def abaqus_precheck(path: str) -> AbaqusCheck:
         if kw in _ABAQUS_READ + ("INCLUDE",) and meshio_kw != kw:
             raise refuse(i, shown, f"is written {head.strip()!r}, which meshio's reader does not recognise (it "
                          f"would skip the block): write it *{kw}")
+        if kw in _ABAQUS_SCOPES:
+            scope_line, scope_kw = i, shown
         if kw == "NODE":
             if node_line and part_line > node_line:
                 raise refuse(i, shown, f"opens the node block of a second part (*PART at line {part_line}; the first "
@@ -834,12 +914,18 @@ def abaqus_precheck(path: str) -> AbaqusCheck:
                              "reader keeps the last block's nodes only; palpate reads .inp files with one part, "
                              "placed by at most one *INSTANCE: export each part to a file of its own, or merge "
                              "them into one part")
-            if node_line:
-                raise refuse(i, shown, f"opens a second node block (the first at line {node_line}): meshio's "
-                             "reader replaces the nodes read before at each *NODE, and elements read before "
-                             "would point at the new ones; palpate reads .inp files with one *NODE block (one "
-                             "part): merge the blocks")
-            node_line = i
+            if node_line and scope_line > node_line:
+                raise refuse(i, shown, f"opens a node block after *{scope_kw} (line {scope_line}), outside the part "
+                             f"whose nodes begin at line {node_line}: nodes of the assembly (a reference point) or of "
+                             "an instance number apart from the part's, and would be read as the part's; palpate "
+                             "reads the nodes of one part (its *NODE blocks): leave these nodes out, or merge them "
+                             "into the part with numbers of their own")
+            if not node_line:
+                node_line = i
+                lines[i - 1] = raw.rstrip()   # every node line goes under it (below)
+            else:
+                lines[i - 1] = ""
+            node_blocks.append(0)
             system = params.get("SYSTEM", "R").upper()
             if system not in ("R", ""):
                 kind = {"C": "cylindrical", "S": "spherical"}.get(system, "non-rectangular")
@@ -847,25 +933,23 @@ def abaqus_precheck(path: str) -> AbaqusCheck:
                              "meshio's reader takes for x, y, z: write them in rectangular coordinates")
             if params.get("NSET"):
                 # The block's nodes form that set (meshio's reader ignores the parameter).
-                sets.append(AbaqusSetPiece("node", params["NSET"], i, block=0))
+                sets.append(AbaqusSetPiece("node", _abaqus_name(params["NSET"]), i, block=len(node_blocks) - 1))
         elif kw == "ELEMENT":
             if params.get("ELSET"):
                 # The block's elements form that set; taken out of meshio's text, whose reader
                 # puts it on the wrong cell block when a block without ELSET comes before.
-                sets.append(AbaqusSetPiece("element", params["ELSET"], i, block=element_blocks))
+                sets.append(AbaqusSetPiece("element", _abaqus_name(params["ELSET"]), i, block=len(element_lines)))
                 keyword, *rest = raw.split(",")
                 lines[i - 1] = ",".join([keyword] + [t for t in rest if t.partition("=")[0].strip().upper() != "ELSET"])
-            element_blocks += 1
+            element_lines.append(i)
         elif kw in ("NSET", "ELSET"):
             if not params.get(kw):
                 raise refuse(i, shown, f"has no {kw}= parameter: the set's name is given as {kw}=<name>")
-            piece = AbaqusSetPiece("node" if kw == "NSET" else "element", params[kw], i,
-                                   meshio_key=f"PALPATE_SET_{len(sets)}",
-                                   elset=(params.get("ELSET") or None) if kw == "NSET" else None)
+            elset = _abaqus_name(params["ELSET"]) if kw == "NSET" and params.get("ELSET") else None
+            piece = AbaqusSetPiece("node" if kw == "NSET" else "element", _abaqus_name(params[kw]), i,
+                                   generate="GENERATE" in params, elset=elset)
             sets.append(piece)
-            # meshio reads the numbers listed, under a name of their own (so that a set defined
-            # twice is not replaced); GENERATE is the only other parameter its reader uses.
-            lines[i - 1] = f"*{kw}, {kw}={piece.meshio_key}" + (", GENERATE" if "GENERATE" in params else "")
+            lines[i - 1] = ""   # palpate reads the set (its data lines too), not meshio
         elif kw == "PART":
             part_line = i
         elif kw == "INSTANCE":
@@ -876,22 +960,50 @@ def abaqus_precheck(path: str) -> AbaqusCheck:
             instance_line = i
         elif kw not in _ABAQUS_READ and kw not in _ABAQUS_IGNORED:
             unknown.append(f"*{shown} (line {i})")
-    return AbaqusCheck("\n".join(lines) + "\n", unknown, sets, element_blocks)
+    if node_line and node_data:
+        lines[node_line - 1] += "\n" + "\n".join(node_data)
+    return AbaqusCheck("\n".join(lines) + "\n", unknown, sets, len(element_lines), node_blocks, element_lines)
+
+
+def _abaqus_lookup(numbers: Dict[int, int]):
+    """``lookup(values) -> (indices, found)`` for the number -> index map ``numbers`` (meshio's
+    node or element numbering), vectorised: a GENERATE range may list many."""
+    keys = np.fromiter(numbers.keys(), dtype=np.int64, count=len(numbers))
+    values = np.fromiter(numbers.values(), dtype=np.int64, count=len(numbers))
+    order = np.argsort(keys, kind="stable")
+    keys, values = keys[order], values[order]
+
+    def lookup(wanted: np.ndarray):
+        if not len(keys):
+            return np.zeros(len(wanted), dtype=np.int64), np.zeros(len(wanted), dtype=bool)
+        pos = np.clip(np.searchsorted(keys, wanted), 0, len(keys) - 1)
+        return values[pos], keys[pos] == wanted
+
+    return lookup
 
 
 def abaqus_sets(name: str, check: AbaqusCheck, n_nodes: int, blocks: List[np.ndarray],
-                meshio_point_sets: Dict[str, np.ndarray], meshio_cell_sets: Dict[str, list]):
+                node_ids: Dict[int, int], element_ids: List[Dict[int, int]]):
     """The node and element sets of an Abaqus file, as meshio's ``(point_sets, cell_sets)``
     (``{name: node indices}``, ``{name: [row indices of each cell block]}``): the definitions
-    of ``check.sets`` added up in file order (:class:`AbaqusSetPiece`), the numbers they list as
-    meshio mapped them (``meshio_*_sets``, under each piece's key), over the mesh meshio read
-    (``n_nodes`` nodes, ``blocks`` the cells of each *ELEMENT block). Set names are compared in
-    upper case, as Abaqus compares labels, and kept as first written. A set named on a data line
-    that no definition before it gives is a MeshError (its members are unknown)."""
+    of ``check.sets`` added up in file order (:class:`AbaqusSetPiece`), over the mesh meshio read
+    (``n_nodes`` nodes, numbered as ``node_ids`` maps them; ``blocks`` the cells of each *ELEMENT
+    block, ``element_ids`` the element numbers of each). Set names are compared in upper case,
+    as Abaqus compares labels, and kept as first written (without quotes). A set named on a data
+    line that no definition before it gives, and a number that names no node or element, are a
+    MeshError naming the set, the number and the line (meshio dropped such an *ELSET number
+    without a word, and failed on an *NSET one with a bare ``KeyError``)."""
     empty = np.zeros(0, dtype=np.int64)
     nodes: Dict[str, np.ndarray] = {}
     elements: Dict[str, List[np.ndarray]] = {}
     spelled: Dict[Tuple[str, str], str] = {}
+    if sum(check.node_blocks) != n_nodes or len(element_ids) != len(blocks):
+        raise MeshError(f"{name}: meshio read {n_nodes} nodes and {len(blocks)} element blocks, the file's *NODE "
+                        f"blocks hold {sum(check.node_blocks)} nodes and it has {len(element_ids)} *ELEMENT blocks: "
+                        "sets not mapped")
+    starts = np.cumsum([0] + list(check.node_blocks))
+    node_lookup = _abaqus_lookup(node_ids)
+    element_lookups = [_abaqus_lookup(ids) for ids in element_ids]
 
     def defined(table: Dict, kind: str, ref: str, line: int, piece: AbaqusSetPiece):
         if ref.upper() not in table:
@@ -900,15 +1012,26 @@ def abaqus_sets(name: str, check: AbaqusCheck, n_nodes: int, blocks: List[np.nda
                             f"*{'NODE' if kind == 'node' else 'ELEMENT'} line names it): its members are unknown")
         return table[ref.upper()]
 
+    def missing(piece: AbaqusSetPiece, line: int, numbers: np.ndarray, found: np.ndarray) -> MeshError:
+        kind, keyword = (("node", "*NODE") if piece.kind == "node" else ("element", "*ELEMENT"))
+        bad = numbers[~found]
+        more = f" ({len(bad)} numbers of the line name none)" if len(bad) > 1 else ""
+        how = " (GENERATE)" if piece.generate else ""
+        return MeshError(f"{name}: line {line}: the {kind} set {piece.name!r} lists {kind} {int(bad[0])}{how}, which "
+                         f"no {keyword} line defines{more}: the set's members are unknown")
+
     for piece in check.sets:
         key = piece.name.upper()
         spelled.setdefault((piece.kind, key), piece.name)
         if piece.kind == "node":
             parts = [nodes.get(key, empty)]
             if piece.block is not None:
-                parts.append(np.arange(n_nodes, dtype=np.int64))
-            if piece.meshio_key is not None:
-                parts.append(np.asarray(meshio_point_sets.get(piece.meshio_key, empty), dtype=np.int64).ravel())
+                parts.append(np.arange(starts[piece.block], starts[piece.block + 1], dtype=np.int64))
+            for numbers, line in piece.numbers:
+                index, found = node_lookup(numbers)
+                if not found.all():
+                    raise missing(piece, line, numbers, found)
+                parts.append(index)
             parts.extend(defined(nodes, "node", ref, line, piece) for ref, line in piece.refs)
             if piece.elset:
                 rows = defined(elements, "element", piece.elset, piece.line, piece)
@@ -918,9 +1041,14 @@ def abaqus_sets(name: str, check: AbaqusCheck, n_nodes: int, blocks: List[np.nda
             per_block = [[rows] for rows in elements.get(key, [empty] * len(blocks))]
             if piece.block is not None:
                 per_block[piece.block].append(np.arange(len(blocks[piece.block]), dtype=np.int64))
-            if piece.meshio_key is not None:
-                for k, rows in enumerate(meshio_cell_sets.get(piece.meshio_key, [])[:len(blocks)]):
-                    per_block[k].append(np.asarray(rows, dtype=np.int64).ravel())
+            for numbers, line in piece.numbers:
+                anywhere = np.zeros(len(numbers), dtype=bool)
+                for k, lookup in enumerate(element_lookups):
+                    rows, found = lookup(numbers)
+                    per_block[k].append(rows[found])
+                    anywhere |= found
+                if not anywhere.all():
+                    raise missing(piece, line, numbers, anywhere)
             for ref, line in piece.refs:
                 for k, rows in enumerate(defined(elements, "element", ref, line, piece)):
                     per_block[k].append(rows)

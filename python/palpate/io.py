@@ -201,19 +201,49 @@ def _meshio_medit_text(text: str):
 
 def _meshio_abaqus(path: str, check: "_readers.AbaqusCheck"):
     """meshio's Abaqus reader on ``check.text`` (:func:`_readers.abaqus_precheck`: the file with
-    its comment lines blanked, its keywords checked, its set definitions rewritten), then the
-    sets added up by palpate (:func:`_readers.abaqus_sets`) in place of meshio's."""
+    its comment lines blanked, its keywords checked, its node blocks gathered into one, its set
+    definitions taken out), then the sets added up by palpate (:func:`_readers.abaqus_sets`) in
+    place of meshio's. The reader runs with its ``_read_nodes`` and ``_read_cells`` wrapped (a
+    swap of the module's attributes for the read's duration, as :func:`_meshio_gmsh` does) to
+    keep the node and element numbers they map, which meshio's mesh does not hold; an element
+    naming a node no *NODE line defines is a MeshError naming its *ELEMENT line (meshio's: a bare
+    ``KeyError``)."""
     import io as _io
 
     from meshio.abaqus import _abaqus
 
-    mesh = _abaqus.read_buffer(_io.StringIO(check.text))
+    name = os.path.basename(path)
+    read_nodes, read_cells = _abaqus._read_nodes, _abaqus._read_cells
+    node_ids: Dict[int, int] = {}
+    element_ids: List[Dict[int, int]] = []
+
+    def nodes(f):
+        points, point_ids, line = read_nodes(f)
+        node_ids.clear()   # one *NODE block (abaqus_precheck gathered them)
+        node_ids.update((int(k), int(v)) for k, v in point_ids.items())
+        return points, point_ids, line
+
+    def cells(f, params_map, point_ids):
+        try:
+            out = read_cells(f, params_map, point_ids)
+        except KeyError as e:
+            k = len(element_ids)
+            at = f"line {check.element_lines[k]}: " if k < len(check.element_lines) else ""
+            raise MeshError(f"{name}: {at}an element of this *ELEMENT block lists node {e.args[0]}, which no *NODE "
+                            "line defines") from None
+        element_ids.append({int(k): int(v) for k, v in out[2].items()})
+        return out
+
+    _abaqus._read_nodes, _abaqus._read_cells = nodes, cells
+    try:
+        mesh = _abaqus.read_buffer(_io.StringIO(check.text))
+    finally:
+        _abaqus._read_nodes, _abaqus._read_cells = read_nodes, read_cells
     if len(mesh.cells) != check.element_blocks:
-        raise MeshError(f"{os.path.basename(path)}: meshio read {len(mesh.cells)} element blocks, the file has "
+        raise MeshError(f"{name}: meshio read {len(mesh.cells)} element blocks, the file has "
                         f"{check.element_blocks} *ELEMENT blocks: sets not mapped")
     mesh.point_sets, mesh.cell_sets = _readers.abaqus_sets(
-        os.path.basename(path), check, len(mesh.points), [np.asarray(cb.data) for cb in mesh.cells],
-        mesh.point_sets or {}, mesh.cell_sets or {})
+        name, check, len(mesh.points), [np.asarray(cb.data) for cb in mesh.cells], node_ids, element_ids)
     return mesh
 
 
@@ -259,6 +289,45 @@ def _gmsh40_read_nodes(f, is_ascii: bool, entities: Optional[List[Tuple[int, int
     return points, tags
 
 
+def _gmsh41_read_nodes(f, is_ascii: bool, data_size, entities: Optional[List[Tuple[int, int]]] = None):
+    """meshio's MSH 4.1 ``_read_nodes`` (meshio 5.3, ``gmsh/_gmsh41.py``), the same read, which
+    also appends each node block's entity ``(dim, tag)`` to ``entities``: meshio gives the entity
+    of each node (``gmsh:dim_tags``), so a block of no nodes (gmsh writes one for a surface whose
+    nodes all lie on its curves) did not count as declaring its entity, and an element block on
+    such an entity was refused where gmsh reads it (:func:`_gmsh4_groups`). The parametric
+    coordinates of a parametric block's nodes (``u [v [w]]`` after ``x y z``, the entity's
+    dimension of them) are read past: meshio's reader refused them ('parametric nodes not
+    implemented'), where palpate's own reader (``load_mesh``) reads the file. Returns ``(points,
+    tags, dim_tags)`` as meshio's does."""
+    import functools
+
+    from meshio._exceptions import ReadError
+    from meshio.gmsh.common import _fast_forward_to_end_block
+
+    entities = [] if entities is None else entities
+    fromfile = functools.partial(np.fromfile, sep=" " if is_ascii else "")
+    c_size_t = np.dtype(f"u{data_size}")
+    n_blocks, n_nodes, _, _ = fromfile(f, c_size_t, 4)
+    points = np.empty((n_nodes, 3), dtype=float)
+    tags = np.empty(n_nodes, dtype=int)
+    dim_tags = np.empty((n_nodes, 2), dtype=int)
+    idx = 0
+    for _ in range(int(n_blocks)):
+        dim, tag, parametric = (int(x) for x in fromfile(f, np.dtype("i"), 3))
+        if parametric and not 0 <= dim <= 3:
+            raise ReadError(f"a parametric $Nodes block of entity dimension {dim}")
+        per = 3 + (dim if parametric else 0)
+        count = int(fromfile(f, c_size_t, 1)[0])
+        entities.append((dim, tag))
+        block = slice(idx, idx + count)
+        tags[block] = fromfile(f, c_size_t, count) - 1
+        points[block] = fromfile(f, np.dtype("d"), count * per).reshape((count, per))[:, :3]
+        dim_tags[block, 0], dim_tags[block, 1] = dim, tag
+        idx += count
+    _fast_forward_to_end_block(f, "Nodes")
+    return points, tags, dim_tags
+
+
 class _GmshEntities:
     """Stands in for the physical tags meshio's MSH 4.0 / 4.1 reader takes from $Entities (one
     ``{entity tag: [physical tags]}`` per dimension), while its element reader runs: that reader
@@ -279,7 +348,7 @@ class _GmshEntities:
     def __init__(self):
         self.physical: Optional[tuple] = None   # $Entities' physical tags, one dict per dimension
         self.blocks: List[Tuple[int, int]] = []   # each element block's entity (dim, tag)
-        self.node_blocks: List[Tuple[int, int]] = []   # each node block's entity (4.0)
+        self.node_blocks: List[Tuple[int, int]] = []   # each node block's entity, empty ones too
 
     def __getitem__(self, dim):
         return _GmshEntityLookup(self, int(dim))
@@ -353,7 +422,9 @@ def _meshio_gmsh(path: str):
     """meshio's gmsh reader, with a ``4`` or ``4.0`` $MeshFormat read as MSH 4.0: gmsh 4.0 writes
     ``4`` (and reads it as 4.0), where ``meshio.gmsh.read`` takes it for 4.1. Its 4.0 reader runs
     with :func:`_gmsh40_read_nodes` in place of its node reader, which failed on parametric nodes
-    (the physical groups of such a file were not read), and its MSH 4.0 and 4.1 readers with
+    (the physical groups of such a file were not read); its 4.1 reader with
+    :func:`_gmsh41_read_nodes` in place of its node reader (the entity of each node block, an
+    empty one too); and its MSH 4.0 and 4.1 readers with
     :class:`_GmshEntities` in place of the physical tags of $Entities, whose use by meshio's
     element readers failed or lost groups (see there): the physical groups of a 4.x file are
     palpate's (:func:`_gmsh4_groups`). Each is a swap of the module's attribute for the read's
@@ -388,6 +459,7 @@ def _meshio_gmsh(path: str):
     if module is _gmsh40:
         module._read_nodes = functools.partial(_gmsh40_read_nodes, entities=entities.node_blocks)
     else:
+        module._read_nodes = functools.partial(_gmsh41_read_nodes, entities=entities.node_blocks)
         module._read_elements = read_elements_41
     try:
         if module is _gmsh40:
@@ -401,13 +473,8 @@ def _meshio_gmsh(path: str):
         for attr, value in saved.items():
             setattr(module, attr, value)
     if entities.physical is not None:   # without $Entities a 4.x file has no physical groups
-        if module is _gmsh40:
-            node_entities = set(entities.node_blocks)
-        else:
-            # meshio's 4.1 node reader gives each node's entity (a node block of no nodes is missed)
-            dim_tags = np.asarray(mesh.point_data.get("gmsh:dim_tags", np.zeros((0, 2))), dtype=np.int64)
-            node_entities = {(int(d), int(t)) for d, t in dim_tags.reshape(-1, 2)}
-        _gmsh4_groups(mesh, entities, node_entities, os.path.basename(path))
+        # Each node block's entity, a block of no nodes too (it declares its entity in gmsh).
+        _gmsh4_groups(mesh, entities, set(entities.node_blocks), os.path.basename(path))
     return mesh
 
 
@@ -522,17 +589,20 @@ def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.
 
     gmsh (``.msh``): one set per physical group, named by ``$PhysicalNames`` (looked up by the
     group's dimension and tag, as gmsh does; ``"physical <tag>"`` if unnamed): its tets, and the
-    nodes of all its elements (e.g. a clamped face's triangles). In MSH 4.0 / 4.1 an element is in
-    every physical group of its entity, as ``$Entities`` gives them; elements on an entity that
-    ``$Entities`` does not declare are in none, with a :class:`palpate.MeshWarning` (gmsh reads
-    them so when ``$Nodes`` has a block on that entity), and the file is a MeshError when
-    ``$Nodes`` has no block on it either (gmsh refuses such a file).
+    nodes of all its elements (e.g. a clamped face's triangles). In MSH 2.2 a physical tag 0 is
+    no group (gmsh's ``Mesh.SaveAll`` writes it): such elements are in no set. In MSH 4.0 / 4.1
+    an element is in every physical group of its entity, as ``$Entities`` gives them; elements on
+    an entity that ``$Entities`` does not declare are in none, with a :class:`palpate.MeshWarning`
+    (gmsh reads them so when ``$Nodes`` has a block on that entity, one of no nodes too), and the
+    file is a MeshError when ``$Nodes`` has no block on it either (gmsh refuses such a file).
     Medit (``.mesh``): one set per element reference, ``"ref <k>"``, and one node set per non-zero
     vertex reference, ``"vertex ref <k>"``. Abaqus (``.inp``): its node and element sets, by name,
     from *NSET and *ELSET and the ``NSET=`` / ``ELSET=`` of a *NODE / *ELEMENT line (that
     block's nodes / elements); as in Abaqus, a set defined twice has the members of both, a
     set's data lines may name other sets, ``*NSET, ELSET=<set>`` holds the nodes of that element
-    set, and names compare in upper case (a set keeps its name as first written). Any other
+    set, and names compare in upper case (a set keeps its name as first written, without the
+    double quotes of a quoted label); a number that names no node or element is a MeshError
+    naming the set, the number and the line. Any other
     format meshio gives point / cell sets for: those, by name. The file is read by
     :func:`read_mesh_arrays` first (its errors and warnings), then by meshio for the sets. Raises
     :class:`MeshError` for an unreadable file, one that meshio would read with a loss it reports
@@ -585,6 +655,8 @@ def read_mesh_sets(path: PathLike) -> Tuple[Dict[str, np.ndarray], Dict[str, np.
         for k, values in enumerate(m.cell_data[tags]):
             values = np.asarray(values)
             for tag in np.unique(values):
+                if fmt == "gmsh" and tag == 0:
+                    continue   # physical tag 0: in no physical group (gmsh's Mesh.SaveAll writes it)
                 label = (_gmsh_group_label(m.field_data, m.cells[k].dim, int(tag)) if fmt == "gmsh"
                          else f"ref {int(tag)}")
                 add(label, k, np.flatnonzero(values == tag))

@@ -361,8 +361,10 @@ def test_abaqus_comment_inside_a_block_keeps_the_rest(tmp_path, bar):
      r"line 1: Abaqus keyword \*NODE gives its nodes in cylindrical coordinates \(SYSTEM=C\)"),
     (_INP_MESH.replace("*NODE\n", "*NODE, INPUT=nodes.txt\n"),
      r"line 1: Abaqus keyword \*NODE reads its data from the file 'nodes.txt' \(INPUT=\)"),
-    ("*NODE\n1, 0, 0, 0\n2, 1, 0, 0\n3, 0, 1, 0\n4, 0, 0, 1\n*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n*NODE\n5, 1, 1, 1\n",
-     r"line 8: Abaqus keyword \*NODE opens a second node block \(the first at line 1\): meshio's reader replaces"),
+    ("*PART, NAME=P\n" + _INP_MESH + "*END PART\n*ASSEMBLY, NAME=A\n*INSTANCE, NAME=I, PART=P\n*END INSTANCE\n"
+     "*NODE\n1, 0., 0., 2.\n*END ASSEMBLY\n",
+     r"line 15: Abaqus keyword \*NODE opens a node block after \*END INSTANCE \(line 14\), outside the part whose "
+     r"nodes begin at line 2: nodes of the assembly \(a reference point\) or of an instance number apart"),
     ("*PART, NAME=P\n" + _INP_MESH + "*END PART\n*ASSEMBLY, NAME=A\n*INSTANCE, NAME=I, PART=P\n0.5, 0., 0.\n"
      "*END INSTANCE\n*END ASSEMBLY\n",
      r"line 13: Abaqus keyword \*INSTANCE moves its part by a translation or rotation \(line 14: '0.5, 0., 0.'\)"),
@@ -378,7 +380,10 @@ def test_abaqus_keywords_that_change_the_mesh_are_refused(tmp_path, text, messag
     """Each of these loaded (or failed on an unrelated symptom) with meshio skipping the keyword:
     elements or nodes generated, copied or moved, a local or cylindrical coordinate system,
     parameters, an included file, a second node block that replaced the first, an instance moved
-    or placed twice. Each is now a MeshError naming the file, the line and the keyword."""
+    or placed twice. Each is now a MeshError naming the file, the line and the keyword. (A second
+    *NODE block of the same part, refused here before, is read: test_abaqus_node_blocks_of_a_part_are_one.)
+    A *NODE block in the assembly (a reference point, numbered apart from the part's nodes) is
+    refused, as before, with a message naming what it is."""
     path = _inp(tmp_path, "g.inp", text)
     for call in (palpate.load_mesh, palpate.read_mesh_sets):
         with pytest.raises(palpate.MeshError, match=message):
@@ -630,6 +635,196 @@ def test_gmsh41_sets_of_a_bounded_volume(tmp_path):
     set, surface tag 5 taken for a row of the 2-tet block)."""
     path = tmp_path / "b.msh"
     path.write_text(_MSH41)
+    nodes, tets = palpate.read_mesh_sets(path)
+    assert set(nodes) == {"clamp", "body"} and set(tets) == {"body"}
+    np.testing.assert_array_equal(nodes["clamp"], [0, 1, 2])
+    np.testing.assert_array_equal(tets["body"], [0, 1])
+
+
+# The readers' last leftovers of issue 35 (RELIABILITY.md, "Left:"): Abaqus set numbers that name
+# nothing, quoted labels, several *NODE blocks of one part; gmsh 2.2 physical tag 0; an MSH 4.1
+# node block of no nodes.
+
+@pytest.mark.parametrize("text, message", [
+    (_INP_MESH + "*ELSET, ELSET=E\n1, 99\n",
+     r"n.inp: line 11: the element set 'E' lists element 99, which no \*ELEMENT line defines: the set's members are "
+     r"unknown"),
+    (_INP_MESH + "*NSET, NSET=Fix\n1, 2,\n99, 98\n",
+     r"n.inp: line 12: the node set 'Fix' lists node 99, which no \*NODE line defines \(2 numbers of the line name "
+     r"none\)"),
+    (_INP_MESH + "*NSET, NSET=G, GENERATE\n1, 7, 2\n",
+     r"n.inp: line 11: the node set 'G' lists node 7 \(GENERATE\), which no \*NODE line defines"),
+    (_INP_MESH + "*ELSET, ELSET=EG, GENERATE\n1, 3\n",
+     r"n.inp: line 11: the element set 'EG' lists element 3 \(GENERATE\), which no \*ELEMENT line defines"),
+    (_INP_MESH + "*NSET, NSET=F\n1, 2.5\n",
+     r"n.inp: line 11: the node set 'F' lists '2.5', which is neither a node number nor a set name"),
+    ("*NODE\n" + _INP_NODES + "*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n2, 5, 2, 4, 99\n",
+     r"n.inp: line 7: an element of this \*ELEMENT block lists node 99, which no \*NODE line defines"),
+], ids=["elset", "nset", "nset generate", "elset generate", "not a number", "element node"])
+def test_abaqus_number_naming_no_node_or_element_is_refused(tmp_path, text, message):
+    """A number an *NSET / *ELSET lists (or a GENERATE range gives) that names no node or element:
+    meshio's reader dropped an *ELSET one without a word (main: the set 'E' = [0]) and failed on an
+    *NSET one with 'cannot read as ABAQUS (KeyError: np.int32(99))', on 2.5 with a bare ValueError,
+    on a 2-number GENERATE line (the increment left out, 1 in Abaqus) with a ReadError, and on an
+    element's undefined node with a bare KeyError. Each is a MeshError naming the file, the line,
+    the set and the number, through load_mesh and read_mesh_sets (both map the sets as they read)."""
+    path = _inp(tmp_path, "n.inp", text)
+    for call in (palpate.load_mesh, palpate.read_mesh_sets):
+        with pytest.raises(palpate.MeshError, match=message):
+            call(path)
+
+
+def test_abaqus_generate_ranges_as_abaqus_reads_them(tmp_path):
+    """GENERATE data lines give 'first, last[, increment]' (1 by default), one range a line, as
+    many lines as needed: meshio's reader took exactly three numbers in all."""
+    path = _inp(tmp_path, "g.inp", _INP_MESH + "*NSET, NSET=G, GENERATE\n1, 2\n4, 5, 1\n*ELSET, ELSET=E, GENERATE\n"
+                "2, 2, 1\n")
+    nodes, tets = palpate.read_mesh_sets(path)
+    np.testing.assert_array_equal(nodes["G"], [0, 1, 3, 4])
+    np.testing.assert_array_equal(tets["E"], [1])
+
+
+def test_abaqus_quoted_set_names_lose_their_quotes(tmp_path):
+    """A label written in double quotes (Abaqus/CAE writes a set name holding blanks so) is the
+    name without them: the sets came back named '"my set"', and a scene naming 'my set' found
+    none. Names compare in upper case, quoted or not, as palpate compared every label."""
+    text = (_INP_MESH.replace("*NODE\n", '*NODE, NSET="all nodes"\n').replace("ELSET=ALL", 'ELSET="my tets"')
+            + '*NSET, NSET="my set"\n1, 2\n*NSET, NSET="My Set"\n3\n*NSET, NSET=B\n"my set", 5\n'
+            '*NSET, NSET=T, ELSET="my tets"\n*ELSET, ELSET="both tets"\n"my tets"\n')
+    nodes, tets = palpate.read_mesh_sets(_inp(tmp_path, "q.inp", text))
+    assert set(nodes) == {"all nodes", "my tets", "my set", "B", "T", "both tets"}
+    assert set(tets) == {"my tets", "both tets"}
+    np.testing.assert_array_equal(nodes["my set"], [0, 1, 2])
+    np.testing.assert_array_equal(nodes["B"], [0, 1, 2, 4])
+    np.testing.assert_array_equal(nodes["T"], [0, 1, 2, 3, 4])
+    np.testing.assert_array_equal(tets["both tets"], [0, 1])
+
+
+def test_abaqus_node_blocks_of_a_part_are_one(tmp_path):
+    """Several *NODE blocks in one part (exporters write one per component, and elements between
+    them): refused before ('opens a second node block ... merge the blocks'); meshio's reader
+    replaces the nodes at each *NODE. They are read as one set of nodes, as Abaqus reads them,
+    an element naming a node of a later block included, with each block's NSET=. A node number
+    defined twice is a MeshError naming it and both lines (meshio kept both nodes and mapped the
+    number to the second: main's load_mesh said 'node 2 is used by no tetrahedron')."""
+    lines = _INP_NODES.splitlines(keepends=True)
+    mesh = ("*NODE, NSET=FIRST\n" + "".join(lines[:3]) + "*ELEMENT, TYPE=C3D4, ELSET=A\n1, 1, 2, 3, 4\n"
+            "*NODE, NSET=SECOND\n" + "".join(lines[3:]) + "*ELEMENT, TYPE=C3D4\n2, 5, 2, 4, 3\n*NSET, NSET=TIP\n5\n")
+    for text in (mesh, "*PART, NAME=P\n" + mesh + "*END PART\n*ASSEMBLY, NAME=A\n*INSTANCE, NAME=I, PART=P\n"
+                 "*END INSTANCE\n*END ASSEMBLY\n"):
+        path = _inp(tmp_path, "b.inp", text)
+        m = palpate.load_mesh(path)
+        np.testing.assert_array_equal(m.tets, [[0, 1, 2, 3], [4, 1, 3, 2]])
+        np.testing.assert_array_equal(m.points, [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
+        nodes, tets = palpate.read_mesh_sets(path)
+        np.testing.assert_array_equal(nodes["FIRST"], [0, 1, 2])
+        np.testing.assert_array_equal(nodes["SECOND"], [3, 4])
+        np.testing.assert_array_equal(nodes["TIP"], [4])
+        np.testing.assert_array_equal(tets["A"], [0])
+    clash = _inp(tmp_path, "clash.inp", mesh.replace("4, 0, 0, 1\n", "3, 0, 0, 1\n"))
+    for call in (palpate.load_mesh, palpate.read_mesh_sets):
+        with pytest.raises(palpate.MeshError, match=r"clash.inp: line 8: node 3 is defined again \(first at line 4\)"):
+            call(clash)
+    one = _inp(tmp_path, "one.inp", "*NODE\n" + _INP_NODES + "3, 0, 0, 1\n*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n")
+    with pytest.raises(palpate.MeshError, match=r"one.inp: line 7: node 3 is defined again \(first at line 4\)"):
+        palpate.load_mesh(one)
+
+
+_MSH22_SAVEALL = """$MeshFormat
+2.2 0 8
+$EndMeshFormat
+$PhysicalNames
+1
+3 2 "body"
+$EndPhysicalNames
+$Nodes
+5
+1 0 0 0
+2 1 0 0
+3 0 1 0
+4 0 0 1
+5 1 1 1
+$EndNodes
+$Elements
+3
+1 2 2 0 5 1 2 3
+2 4 2 2 1 1 2 3 4
+3 4 2 0 2 5 2 4 3
+$EndElements
+"""
+
+
+def test_gmsh22_physical_tag_0_is_no_group(tmp_path):
+    """In MSH 2.2 a physical tag 0 is no physical group (gmsh's Mesh.SaveAll writes every element,
+    0 for those of entities in none): main made a set 'physical 0' of them (here a triangle on
+    surface 5 and a tet of volume 2). gmsh 4.15.2 reads this file with one group, 'body', of
+    tet 2 (volume 1)."""
+    path = tmp_path / "all.msh"
+    path.write_text(_MSH22_SAVEALL)
+    assert palpate.load_mesh(path).n_tets == 2
+    nodes, tets = palpate.read_mesh_sets(path)
+    assert set(nodes) == {"body"} and set(tets) == {"body"}
+    np.testing.assert_array_equal(tets["body"], [0])
+    np.testing.assert_array_equal(nodes["body"], [0, 1, 2, 3])
+
+
+def _msh41_binary(empty_block_on=None, element_surface=5, parametric=False):
+    """The binary twin of _MSH41 (clamp on surface 5, body in volume 1), with a node block of no
+    nodes on surface ``empty_block_on``, the triangle's block on ``element_surface``, and the
+    surface's nodes parametric (``u v`` after ``x y z``) if asked."""
+    q = lambda *v: struct.pack(f"<{len(v)}Q", *v)  # noqa: E731  size_t
+    i = lambda *v: struct.pack(f"<{len(v)}i", *v)  # noqa: E731
+    d = lambda *v: struct.pack(f"<{len(v)}d", *v)  # noqa: E731
+    entities = (q(0, 0, 1, 1) + i(5) + d(0, 0, 0, 1, 1, 0) + q(1) + i(1) + q(0)
+                + i(1) + d(0, 0, 0, 1, 1, 1) + q(1) + i(2) + q(1) + i(5))
+    surface = d(0, 0, 0, 0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 1) if parametric else d(0, 0, 0, 1, 0, 0, 0, 1, 0)
+    blocks = [i(2, 5, int(parametric)) + q(3) + q(10, 20, 30) + surface]
+    if empty_block_on is not None:
+        blocks.append(i(2, empty_block_on, 0) + q(0))
+    blocks.append(i(3, 1, 0) + q(2) + q(40, 50) + d(0, 0, 1, 1, 1, 1))
+    elements = (q(2, 3, 1, 12) + i(2, element_surface, 2) + q(1) + q(1, 10, 20, 30)
+                + i(3, 1, 4) + q(2) + q(11, 10, 20, 30, 40, 12, 50, 20, 40, 30))
+    return (b"$MeshFormat\n4.1 1 8\n" + i(1) + b"\n$EndMeshFormat\n"
+            + b'$PhysicalNames\n2\n2 1 "clamp"\n3 2 "body"\n$EndPhysicalNames\n'
+            + b"$Entities\n" + entities + b"\n$EndEntities\n"
+            + b"$Nodes\n" + q(len(blocks), 5, 10, 50) + b"".join(blocks) + b"\n$EndNodes\n"
+            + b"$Elements\n" + elements + b"\n$EndElements\n")
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_gmsh41_empty_node_block_declares_its_entity(tmp_path, binary):
+    """An MSH 4.1 node block of no nodes (gmsh writes one for a surface whose nodes all lie on its
+    curves) declares its entity, as gmsh reads it: an element block on that entity, which
+    $Entities does not declare, is read in no physical group with the MeshWarning of
+    test_gmsh4_elements_on_an_undeclared_entity. main: 'MeshError: ... which neither $Entities nor
+    $Nodes declares' (meshio gives each node's entity, so an empty block was missed)."""
+    path = tmp_path / "e.msh"
+    if binary:
+        path.write_bytes(_msh41_binary(empty_block_on=6, element_surface=6))
+    else:
+        path.write_text(_MSH41.replace("$Nodes\n2 5 10 50\n", "$Nodes\n3 5 10 50\n2 6 0 0\n")
+                        .replace("\n2 5 2 1\n", "\n2 6 2 1\n"))
+    assert palpate.load_mesh(path).n_tets == 2
+    with pytest.warns(palpate.MeshWarning, match=r"e.msh: gmsh elements on entities \$Entities does not declare, in "
+                      r"no physical group: surface 6 \(dimension 2\): element block 1 \(1 triangle\)"):
+        nodes, tets = palpate.read_mesh_sets(path)
+    assert set(nodes) == {"body"} and set(tets) == {"body"}
+    np.testing.assert_array_equal(tets["body"], [0, 1])
+    np.testing.assert_array_equal(nodes["body"], [0, 1, 2, 3, 4])
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_gmsh41_parametric_nodes_sets_are_read(tmp_path, binary):
+    """MSH 4.1 with a parametric node block (``u v`` after ``x y z``): load_mesh read it;
+    read_mesh_sets failed with 'cannot read as GMSH (ReadError: parametric nodes not
+    implemented)' (meshio's 4.1 node reader), found on the way. Read past, as for 4.0."""
+    path = tmp_path / "p.msh"
+    if binary:
+        path.write_bytes(_msh41_binary(parametric=True))
+    else:
+        path.write_text(_MSH41.replace("2 5 0 3\n10\n20\n30\n0 0 0\n1 0 0\n0 1 0\n",
+                                       "2 5 1 3\n10\n20\n30\n0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n"))
+    np.testing.assert_array_equal(palpate.load_mesh(path).tets, [[0, 1, 2, 3], [4, 1, 3, 2]])
     nodes, tets = palpate.read_mesh_sets(path)
     assert set(nodes) == {"clamp", "body"} and set(tets) == {"body"}
     np.testing.assert_array_equal(nodes["clamp"], [0, 1, 2])
