@@ -9,8 +9,8 @@ shape (n, 3) in the world frame; tets are integer arrays of shape (m, 4), 0-base
 
 >>> import numpy as np, palpate
 >>> mesh = palpate.box_mesh(size=(0.1, 0.02, 0.02), cells=(10, 2, 2))
->>> body = palpate.Body(mesh, palpate.Material(young=3e4, poisson=0.4, density=1000.0),
-...                     fixed=np.flatnonzero(mesh.points[:, 0] == 0.0),
+>>> tissue = palpate.defaults.tissue_material()   # E = 30 kPa, nu = 0.4, 1060 kg/m^3 (palpate.defaults)
+>>> body = palpate.Body(mesh, tissue, fixed=np.flatnonzero(mesh.points[:, 0] == 0.0),
 ...                     integrator=palpate.BackwardEuler())
 >>> f = np.zeros((body.n_nodes, 3)); f[mesh.points[:, 0] == 0.1, 2] = -1e-3   # [N]
 >>> body.set_forces(f); _ = body.step(100, dt=1e-3)

@@ -18,10 +18,12 @@ cannot disagree::
 * :data:`particles`: :class:`palpate.ParticleBody`'s ``kernel``, ``hourglass`` and
   ``min_relative_weight`` (``palpate_core::meshfree``).
 * :data:`tissue`: the default tissue (``Material::myocardium()``: E = 30 kPa, nu = 0.4,
-  1060 kg/m^3), the tissue of ``palpate touch``, ``palpate haptic``, the demo and scene files,
-  and the hybrid builder's density; :func:`tissue_material` makes it a :class:`palpate.Material`.
-  (``palpate bench`` keeps the shared benchmark protocol's 1000 kg/m^3, to compare with its
-  peers.)
+  1060 kg/m^3), the tissue of ``palpate touch``, ``palpate haptic`` (damped), ``palpate
+  validate``, the demo's touch, a scene file's density when it gives none, and the hybrid
+  builder's density; :func:`tissue_material` makes it a :class:`palpate.Material`. (The shared
+  benchmark protocol keeps its 1000 kg/m^3, to compare with its peers: ``palpate bench``
+  protocol and particles, the demo's FEM bodies, ``palpate sweep``'s material defaults, the
+  protocol scenes in ``scenes/``.)
 
 Units are SI, as in the functions that take them.
 """

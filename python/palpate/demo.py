@@ -5,7 +5,8 @@ Builds, with the core's generators,
   * a truncated-ellipsoid left-ventricle wall (1320 tets, the size of the paper's 1352-tet
     full-FEM ventricle),
 both with the semi-axes of the shared benchmark (inner (2.0, 2.0, 3.5) cm, outer (2.6, 2.6, 4.2) cm),
-E = 30 kPa, nu = 0.4, 1000 kg/m^3. Nodes with z <= 0 are fixed (the ventricle's base; the
+and its material (:func:`palpate.bench.material`: E = 30 kPa, nu = 0.4, 1000 kg/m^3, the protocol's
+density rather than the default tissue's). Nodes with z <= 0 are fixed (the ventricle's base; the
 ellipsoid's lower half). A probe pushes 0.2 N along the inward normal at (2.29, 0, 2.0) cm on the
 outer surface, shared by the outer nodes within 5 mm (the nearest one if none), ramped over 0.1 s.
 

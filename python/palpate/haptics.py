@@ -17,6 +17,7 @@ import numpy as np
 from . import _palpate as _p
 from . import defaults as _defaults
 from .devices import canonical as device_kind  # former device names (``touch``) to today's
+from .probe import probe_frame, vertex_normals
 
 #: The material of ``palpate haptic``, the haptic benchmark and the soak [Pa, -, kg/m^3, Pa s]:
 #: the default tissue (:data:`palpate.defaults.tissue`) with the paper's damping.
@@ -42,19 +43,11 @@ def script_trajectory(model: "_p.HybridModel", script_path: str, tool_radius: fl
 
 def palpation_cycle(model: "_p.HybridModel", tool_radius: float = 0.005, depth: float = PRESS_DEPTH,
                     slide: float = PRESS_SLIDE, gap: float = 0.002) -> Tuple[np.ndarray, np.ndarray]:
-    """One scripted palpation at the probe point (:func:`palpate.touch.probe_point`): from ``gap``
+    """One scripted palpation at the probe point (:func:`palpate.probe.probe_frame`): from ``gap``
     [m] clear, a press to ``depth`` [m] in 0.5 s, a 0.2 s hold, a ``slide`` [m] along the surface
     in 0.6 s, a release in 0.5 s and 0.2 s clear: ``(times (k,) [s], knots (k, 3) [m])``."""
-    from .touch import probe_point, vertex_normals
-
-    s, tris = np.asarray(model.outer_points), np.asarray(model.outer_triangles)
-    v = probe_point(s, tris)
-    n = vertex_normals(s, tris)[v]
-    tangent = np.cross(n, [0.0, 0.0, 1.0])
-    if np.linalg.norm(tangent) < 1e-9:
-        tangent = np.cross(n, [1.0, 0.0, 0.0])
-    tangent /= np.linalg.norm(tangent)
-    c = lambda d, sl: s[v] + n * (tool_radius - d) + tangent * sl  # noqa: E731
+    _, p, n, tangent = probe_frame(model.outer_points, model.outer_triangles)
+    c = lambda d, sl: p + n * (tool_radius - d) + tangent * sl  # noqa: E731
     times = np.array([0.0, 0.5, 0.7, 1.3, 1.8, 2.0])
     knots = np.array([c(-gap, 0), c(depth, 0), c(depth, 0), c(depth, slide), c(-gap, slide), c(-gap, 0)])
     return times, knots
@@ -76,8 +69,6 @@ def random_palpation(model: "_p.HybridModel", seconds: float, seed: int = 0, too
     the upper 60 % of the model's height (above the held base) facing sideways, each from
     ``clear`` [m] out along the normal: approach in 0.3 s, press 2-6 mm in 0.3-0.8 s, hold
     0-0.3 s, slide 0-8 mm in 0.4 s, release in 0.3 s; ``(times, knots)`` [s], [m]."""
-    from .touch import vertex_normals
-
     rng = np.random.default_rng(seed)
     s, tris = np.asarray(model.outer_points), np.asarray(model.outer_triangles)
     normals = vertex_normals(s, tris)

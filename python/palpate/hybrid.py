@@ -9,7 +9,9 @@ Rust core from the surfaces of an organ wall; these helpers read the surfaces fi
   a truncated ventricle), read by :func:`palpate.read_tagged_surface`;
 - :func:`build_shape`: ``"ellipsoids"`` (the paper's concentric ellipsoids), ``"ventricle"``
   (the synthetic truncated ventricle of the benchmark protocol) or ``"rodero"`` (the real left
-  ventricle of Rodero et al., :func:`palpate.data.rodero_lv_path`).
+  ventricle of Rodero et al., :func:`palpate.data.rodero_lv_path`);
+- :func:`load_model`: a model file or a shape name, the one place that resolves what a user
+  names as a model (``palpate touch|haptic|view|soak|bench hybrid MODEL``, a study's ``hybrid``).
 
 Keyword options (``**opts``) are those of :meth:`palpate.HybridModel.build_nested`:
 ``projection``, ``core_fraction``, ``core_triangles``, ``core_layers``, ``spacing`` [m] or
@@ -171,3 +173,20 @@ def build_shape(name: str, **opts) -> HybridModel:
             points, triangles, part = read_tagged_surface(path, unit="mm")
             return HybridModel.build_tagged(points, triangles, part, **opts)
     raise ParameterError(f"unknown shape {name!r}; expected one of {', '.join(SHAPES)}")
+
+
+def load_model(spec: str) -> Tuple[str, HybridModel]:
+    """``(name, model)`` for a shape name (:data:`SHAPES`, built by :func:`build_shape` with its
+    warnings silenced) or a model file path (:meth:`HybridModel.load`; ``name`` its base name).
+    Raises :class:`palpate.ParameterError` (a ``ValueError``) for neither,
+    :class:`palpate.ModelFileError` / ``OSError`` for a bad file and :class:`palpate.data.DataError`
+    when the Rodero data cannot be fetched."""
+    if spec in SHAPES:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return spec, build_shape(spec)
+    if os.path.isfile(spec):
+        if not is_model_file(spec):
+            raise ParameterError(f"{spec} is not a palpate model file (write one with palpate build)")
+        return os.path.basename(spec), HybridModel.load(spec)
+    raise ParameterError(f"{spec!r} is neither a model file nor a shape ({', '.join(SHAPES)})")

@@ -20,7 +20,8 @@ file, and environment variables in it are expanded: ``$VAR``, ``${VAR}``, and ``
     [material]                         # young + poisson, or lame_lambda + lame_mu, or a preset
     young = 3.0e4                      # [Pa]
     poisson = 0.4
-    density = 1000.0                   # [kg/m^3]
+    density = 1000.0                   # [kg/m^3], optional: default the default tissue's
+                                       # (palpate.defaults.tissue.density, 1060); 1000: the protocol's
     # preset = "myocardium"            # or "paper_ellipsoids"; phi, psi [Pa s] optional
     # law = "neo-hookean"              # or "st-venant-kirchhoff" (default, the paper's law)
 
@@ -67,6 +68,7 @@ from typing import Any, Callable, Dict, List, Optional
 import numpy as np
 
 from . import _palpate as _p
+from . import defaults as _defaults
 from ._fields import FieldChecker
 from ._readers import read_text
 from .io import UNITS, VtuSeries, load_mesh, read_mesh_sets
@@ -243,6 +245,7 @@ def load_scene(path: os.PathLike | str, output: Optional[str] = None, steps: Opt
         material = _p.Material(lame_lambda=pre.lame_lambda, lame_mu=pre.lame_mu, density=pre.density, phi=pre.phi,
                                psi=pre.psi, law=LAWS[law])
     else:
+        kw.setdefault("density", _defaults.tissue.density)   # the default tissue's (Material::myocardium)
         try:
             material = _p.Material(**kw, law=LAWS[law])
         except _p.MaterialError as e:

@@ -7,7 +7,7 @@ of tool positions over time. All lengths in metres, times in seconds, forces in 
 TOML (``.toml``)::
 
     [probe]
-    vertex = "probe"          # the default probe point (see probe_point); or point = [x, y, z]
+    vertex = "probe"          # the default probe point (palpate.probe.probe_point); or point = [x, y, z]
     # normal = [1, 0, 0]      # optional: default the outward surface normal at the point
     # gap = 0.002             # optional: the tool starts this far clear of the surface (default 2 mm)
 
@@ -76,19 +76,18 @@ from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 import numpy as np
 
 from ._fields import FieldChecker
-from ._indices import whole_indices
 from ._palpate import PalpateError, ParameterError
 from ._readers import read_text
 from .io import remove_frames, write_pvd
+# The probe point and the surface normals live in the library (palpate.probe); imported from here
+# too, as before (palpate.touch.probe_point, palpate.touch.vertex_normals).
+from .probe import PROBE_HEIGHT, probe_point, vertex_normals  # noqa: F401
 from ._extras import install_hint
 
 PathLike = Union[str, "os.PathLike[str]"]
 
 #: The tool's default start clearance from the surface [m] (``[probe] gap``).
 DEFAULT_GAP = 0.002
-#: The default probe height, as a fraction of the outer surface's z extent: on the synthetic
-#: ventricle (z from 0 to 42 mm) the protocol's 20 mm.
-PROBE_HEIGHT = 20.0 / 42.0
 #: Frames a run writes by default (:func:`default_every`).
 TARGET_FRAMES = 80
 
@@ -117,46 +116,6 @@ class TouchFailed(PalpateError, RuntimeError):
     def __init__(self, tick: int, reason: str, summary: Dict[str, Any]):
         super().__init__(f"tick {tick} (t = {summary['t_failed_s']:.4f} s): {reason}")
         self.tick, self.reason, self.summary = tick, reason, summary
-
-
-# --------------------------------------------------------------------------------------- geometry
-
-def vertex_normals(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals (n, 3) of a triangle surface (points (n, 3) [m],
-    triangles (m, 3)), oriented outward: flipped if the surface's signed volume about its centroid
-    is negative (this holds for an open surface such as a truncated ventricle's epicardium).
-    Vertices in no triangle get a zero normal."""
-    p = np.asarray(points, dtype=np.float64)
-    t = whole_indices(triangles, "triangles", 3)
-    a, b, c = p[t[:, 0]], p[t[:, 1]], p[t[:, 2]]
-    fn = np.cross(b - a, c - a)                       # 2 x area x unit normal
-    n = np.zeros_like(p)
-    for k in range(3):
-        np.add.at(n, t[:, k], fn)
-    o = p.mean(axis=0)
-    if np.einsum("ij,ij->i", a - o, fn).sum() < 0:    # 6 x signed volume about the centroid
-        n = -n
-    ln = np.linalg.norm(n, axis=1)
-    return np.divide(n, ln[:, None], out=np.zeros_like(n), where=ln[:, None] > 0)
-
-
-def probe_point(points: np.ndarray, triangles: Optional[np.ndarray] = None) -> int:
-    """The default probe vertex (index into ``points``, the outer surface (n, 3) [m]): the one
-    nearest ``(x_max, (y_min + y_max) / 2, z_min + PROBE_HEIGHT (z_max - z_min))`` of the surface's
-    bounding box (of the vertices in ``triangles`` if given). On the synthetic ventricle (y
-    symmetric, z from 0 to 42 mm) that is the benchmark protocol's probe, the vertex nearest
-    ``(x_max, 0, 20 mm)``; on the paper's ellipsoids a point on the x side just below the equator
-    (above the held lower 30 %); on any model, a point of the +x side at mid height."""
-    p = np.asarray(points, dtype=np.float64)
-    used = p if triangles is None else p[np.unique(np.asarray(triangles))]
-    lo, hi = used.min(axis=0), used.max(axis=0)
-    target = np.array([hi[0], 0.5 * (lo[1] + hi[1]), lo[2] + PROBE_HEIGHT * (hi[2] - lo[2])])
-    d = np.linalg.norm(p - target, axis=1)
-    if triangles is not None:
-        mask = np.zeros(len(p), dtype=bool)
-        mask[np.unique(np.asarray(triangles))] = True
-        d[~mask] = np.inf
-    return int(np.argmin(d))
 
 
 # ---------------------------------------------------------------------------------------- scripts

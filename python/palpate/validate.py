@@ -48,6 +48,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from . import _palpate
+from . import defaults as _defaults
 from .hybrid import ELLIPSOIDS_INNER, ELLIPSOIDS_OUTER
 from ._extras import install_hint
 
@@ -214,9 +215,9 @@ class IndentCase:
     """
 
     shape: str = "ellipsoids"
-    young: float = 30e3
-    poisson: float = 0.4
-    density: float = 1060.0
+    young: float = _defaults.tissue.young         # [Pa]: the default tissue (palpate.defaults.tissue)
+    poisson: float = _defaults.tissue.poisson
+    density: float = _defaults.tissue.density     # [kg/m^3]
     tool_radius: float = 0.005
     point: Tuple[float, float, float] = (ELLIPSOIDS_OUTER[0], 0.0, 0.0)
     direction: Tuple[float, float, float] = (-1.0, 0.0, 0.0)
@@ -610,7 +611,8 @@ def level_size(shape: str, level: Tuple[int, int]) -> float:
 
 def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
                     depths: Sequence[float] = (0.002, 0.004, 0.006), levels: Optional[Sequence[Tuple[int, int]]] = None,
-                    coarse: Optional[Tuple[int, int]] = None, young: float = 30e3, poisson: float = 0.4,
+                    coarse: Optional[Tuple[int, int]] = None, young: float = _defaults.tissue.young,
+                    poisson: float = _defaults.tissue.poisson,
                     law: str = "neo-hookean", out_dir: Optional[str] = None, model: Optional[_palpate.HybridModel] = None,
                     reference: Optional[str] = None, verbose: bool = True,
                     implicit_exchange: bool = True, order: int = 2) -> Dict[str, Any]:
@@ -651,10 +653,10 @@ def run_indentation(shape: str = "ellipsoids", *, tool_radius: float = 0.005,
             print(f"building the hybrid model of {shape!r} ...", flush=True)
         model = build_shape(shape)
     if shape != "ellipsoids":
-        from .bench.hybrid import probe
+        from .probe import probe_frame
 
-        _, point, inward, _ = probe(model, shape)
-        case.point, case.direction = tuple(float(v) for v in point), tuple(float(v) for v in inward)
+        _, point, normal, _ = probe_frame(model.outer_points, model.outer_triangles)
+        case.point, case.direction = tuple(float(v) for v in point), tuple(float(-v) for v in normal)
     if reference is not None:
         load_reference(reference, case)  # refuse a misfit before the hybrid's minute
     hyb = hybrid_curve(model, case, verbose=verbose, implicit_exchange=implicit_exchange)

@@ -80,16 +80,26 @@ def newton_reference():
                             tolerance=defaults.newton.tolerance)
 
 
+def probe_on_ellipsoid(semi_axes, z: float):
+    """The point of the ellipsoid of ``semi_axes`` (centred at the origin) at height ``z`` on its
+    +x side (y = 0), and the inward unit normal there, in the unit of ``semi_axes``: the protocol's
+    probe point on its outer ellipsoid (:func:`probe_point` in mesh units,
+    :func:`palpate.bench.particles.probe_point` in metres). A model's probe *vertex* is
+    :func:`palpate.probe.probe_point`."""
+    a = np.asarray(semi_axes, dtype=np.float64)
+    x = a[0] * np.sqrt(1 - (z / a[2]) ** 2)
+    p = np.array([x, 0.0, z])
+    n = p / a ** 2
+    n /= np.linalg.norm(n)
+    return p, -n
+
+
 def probe_point(z: float = PROBE_Z):
     """Probe point P (mesh units) on the outer ellipsoid at height ``z`` (mesh units, on the +x
     side; the protocol's 2.0 by default) and the inward unit normal there."""
     if not 0.0 <= z < OUTER[2]:
         raise _p.ParameterError(f"probe height z = {z} mesh units must be within [0, {OUTER[2]})")
-    x = OUTER[0] * np.sqrt(1 - (z / OUTER[2]) ** 2)
-    p = np.array([x, 0.0, z])
-    n = p / OUTER ** 2
-    n /= np.linalg.norm(n)
-    return p, -n
+    return probe_on_ellipsoid(OUTER, z)
 
 
 def material():

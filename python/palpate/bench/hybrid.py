@@ -8,15 +8,14 @@ convention, the material of ``palpate haptic`` too, the core held (``hold=True``
 tool stiffness, activation margin (1 mm), linger (100 ticks) and tool
 speed cap (0.5 mm a tick). One thread (the core spawns none).
 
-The probe point (:func:`probe`). The outer (skin) vertex on the +x half of the outer surface's
-bounding box nearest (in y and z) to the +x ray from the box's centre at height ``z_ref``, i.e.
-where that ray leaves the wall; ``z_ref`` = 20 mm on the synthetic ``ventricle`` (there: the
-outer vertex nearest (x_max, 0, 20 mm), the issue's probe point, as ``tests/test_hybrid_sim.py``
-and ``bench/hybrid_hand.py`` choose it), and mid-height of the outer surface,
-``(z_min + z_max) / 2``, for any other model (the ellipsoids: the equator at +x; the Rodero
-ventricle or a model file: its +x side at mid-height, in the frame of its file). The press direction is the
-inward surface normal there (area-weighted normal of the outer triangles at the vertex, turned
-away from the outer surface's centroid); the slide runs along ``normal x z``, horizontally.
+The probe point (:func:`probe`): :func:`palpate.probe.probe_frame`, the library's one definition.
+The outer (skin) vertex nearest ``(x_max, y_mid, z_min + 20/42 (z_max - z_min))`` of the outer
+surface's bounding box: on the synthetic ``ventricle`` the outer vertex nearest (x_max, 0, 20 mm),
+the issue's probe point, as ``tests/test_hybrid_sim.py`` and ``bench/hybrid_hand.py`` choose it;
+on the ellipsoids the +x side just below the equator; on the Rodero ventricle or a model file its
++x side, in the frame of its file. The press direction is the inward surface normal there
+(area-weighted normal of the outer triangles at the vertex, turned away from the outer surface's
+centroid); the slide runs along ``normal x z``, horizontally.
 
 The script (:func:`script`), ``ticks`` ticks of 1 ms: the sphere starts touching the skin at the
 probe point (depth 0) and is pressed to :data:`DEPTH` (3 mm) over 25 % of the ticks, held 10 %,
@@ -62,13 +61,15 @@ import os
 import platform
 import re
 import time
-import warnings
 from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
 from .. import _palpate as _p
 from .. import defaults as _defaults
+# The model's name or file resolved in the library, kept importable from here (palpate.bench.hybrid.load_model).
+from ..hybrid import load_model  # noqa: F401
+from ..probe import probe_frame
 
 E = _defaults.tissue.young     # [Pa]
 NU = _defaults.tissue.poisson
@@ -91,42 +92,13 @@ def material() -> "_p.Material":
     return _p.Material(young=E, poisson=NU, density=RHO, phi=PHI, psi=PSI)
 
 
-def load_model(spec: str) -> Tuple[str, "_p.HybridModel"]:
-    """``(name, model)`` for a shape name (:data:`palpate.hybrid.SHAPES`) or a model file path.
-    Raises :class:`palpate.ParameterError` (a ``ValueError``) for neither,
-    :class:`palpate.ModelFileError` / ``OSError`` for a bad file and :class:`palpate.data.DataError`
-    when the Rodero data cannot be fetched."""
-    from ..hybrid import SHAPES, build_shape, is_model_file
-
-    if spec in SHAPES:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            return spec, build_shape(spec)
-    if os.path.isfile(spec):
-        if not is_model_file(spec):
-            raise _p.ParameterError(f"{spec} is not a palpate model file (write one with palpate build)")
-        return os.path.basename(spec), _p.HybridModel.load(spec)
-    raise _p.ParameterError(f"{spec!r} is neither a model file nor a shape ({', '.join(SHAPES)})")
-
-
 def probe(model: "_p.HybridModel", name: str = "") -> Tuple[int, np.ndarray, np.ndarray, np.ndarray]:
-    """``(vertex, point, inward normal, slide direction)`` of the probe: the vertex of
-    :func:`palpate.touch.probe_point` (the protocol's probe on the synthetic ventricle), its
-    inward area-weighted normal (:func:`palpate.touch.vertex_normals`), and the horizontal
-    tangent there. ``name`` is accepted for compatibility and not used."""
-    from ..touch import probe_point, vertex_normals
-
-    s = np.asarray(model.outer_points)
-    tris = np.asarray(model.outer_triangles)
-    v = probe_point(s, tris)
-    n = vertex_normals(s, tris)[v]
-    if np.linalg.norm(n) == 0:
-        n = s[v] - s.mean(axis=0)
-    n = n / np.linalg.norm(n)
-    t = np.cross(n, [0.0, 0.0, 1.0])
-    if np.linalg.norm(t) < 1e-6:
-        t = np.cross(n, [1.0, 0.0, 0.0])
-    return v, s[v].copy(), -n, t / np.linalg.norm(t)
+    """``(vertex, point, inward normal, slide direction)`` of the probe: the press frame of
+    :func:`palpate.probe.probe_frame` (the vertex of :func:`palpate.probe.probe_point`, the
+    protocol's probe on the synthetic ventricle; its area-weighted normal, turned inward; the
+    horizontal tangent there). ``name`` is accepted for compatibility and not used."""
+    v, point, normal, tangent = probe_frame(model.outer_points, model.outer_triangles)
+    return v, point, -normal, tangent
 
 
 def script(ticks: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:

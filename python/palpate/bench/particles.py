@@ -44,15 +44,14 @@ from typing import Dict, Optional, Tuple
 import numpy as np
 
 from .. import _palpate as _p
+from ..hybrid import ELLIPSOIDS_INNER, ELLIPSOIDS_OUTER, ELLIPSOIDS_SUBDIVISIONS
+from . import E, NU, RHO, probe_on_ellipsoid  # noqa: F401 - the shared protocol's material [Pa, -, kg/m^3]
 
 SPACING = 9e-4                 # [m]
 SUPPORT_FACTOR = 1.8           # support radius / spacing
-E = 3.0e4                      # [Pa]
-NU = 0.4
-RHO = 1000.0                   # [kg/m^3]
-INNER = (0.020, 0.020, 0.035)  # [m]
-OUTER = (0.026, 0.026, 0.042)  # [m]
-SUBDIVISIONS = 5               # 8192 triangles per ellipsoid
+INNER = ELLIPSOIDS_INNER       # [m], (0.020, 0.020, 0.035): the paper's ellipsoids, the protocol's wall
+OUTER = ELLIPSOIDS_OUTER       # [m], (0.026, 0.026, 0.042)
+SUBDIVISIONS = ELLIPSOIDS_SUBDIVISIONS  # 5: 8192 triangles per ellipsoid
 PROBE_Z = 0.020                # [m]
 PROBE_FORCE = 0.01             # [N], total
 N_PROBE = 5
@@ -83,11 +82,9 @@ def cpu_mhz() -> Optional[float]:
 
 
 def probe_point() -> Tuple[np.ndarray, np.ndarray]:
-    """Probe point P [m] on the outer ellipsoid at z = PROBE_Z, and the inward unit normal there."""
-    a = np.array(OUTER)
-    p = np.array([a[0] * np.sqrt(1.0 - (PROBE_Z / a[2]) ** 2), 0.0, PROBE_Z])
-    n = p / a ** 2
-    return p, -n / np.linalg.norm(n)
+    """Probe point P [m] on the outer ellipsoid at z = PROBE_Z, and the inward unit normal there
+    (the protocol's, :func:`palpate.bench.probe_on_ellipsoid`, in metres)."""
+    return probe_on_ellipsoid(OUTER, PROBE_Z)
 
 
 _FILLS: Dict[float, Tuple[np.ndarray, np.ndarray, float]] = {}

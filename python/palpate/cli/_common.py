@@ -265,14 +265,14 @@ def palpate_errors():
 
 
 def load_hybrid_model(model_spec: str, cmd: str):
-    """``(name, model)`` of a hybrid model file or shape name (:func:`palpate.bench.hybrid.load_model`), or a
+    """``(name, model)`` of a hybrid model file or shape name (:func:`palpate.hybrid.load_model`), or a
     :class:`Fail` naming ``palpate CMD``, its code by :data:`EXIT_CODES` (a bad name or file:
     input; data that cannot be fetched: a failed run)."""
-    from ..bench import hybrid as bh
     from ..data import DataError
+    from ..hybrid import load_model
 
     try:
-        return bh.load_model(model_spec)
+        return load_model(model_spec)
     except (ValueError, OSError) as e:
         raise Fail(f"palpate {cmd}: {e}") from None
     except DataError as e:

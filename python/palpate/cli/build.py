@@ -11,6 +11,7 @@ import numpy as np
 from .. import _palpate as _p
 from .. import _progress
 from .. import defaults
+from ..hybrid import SHAPES
 from ._common import Fail, RunFailed, Usage, add_quiet, mb, model_lines, num
 
 #: --projection: the Projection, a description and a note of each choice.
@@ -30,7 +31,7 @@ def add_parser(sub) -> None:
                    ".off, .vtk, .vtu, .vtp)")
     h.add_argument("--tagged", metavar="SURFACE", help="one closed surface with an inner / outer / base tag per "
                    "triangle (a truncated ventricle)")
-    h.add_argument("--shape", choices=["ellipsoids", "ventricle", "rodero"],
+    h.add_argument("--shape", choices=SHAPES,
                    help="ellipsoids: the paper's concentric ellipsoids; ventricle: the benchmark's truncated "
                         "ventricle; rodero: the real left ventricle of Rodero et al. (fetched on first use)")
     h.add_argument("-o", "--output", required=True, metavar="MODEL", help="model file to write")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 from .. import defaults as _defaults
+from ..hybrid import SHAPES
 from ._common import Fail, RunFailed, Usage, add_quiet, fmt_mm, num
 
 #: Material defaults [Pa, -, kg/m^3]: the default tissue (palpate.defaults.tissue:
@@ -19,7 +20,7 @@ def add_parser(sub) -> None:
                                    "following SCRIPT (.toml segments or .csv t,x,y,z; see palpate/touch.py), "
                                    "writing force.csv, force.png and a VTU series (touch.pvd) to --out.")
     t.add_argument("model", nargs="?", metavar="MODEL", help="a palpate model file (palpate build)")
-    t.add_argument("--shape", choices=["ellipsoids", "ventricle", "rodero"],
+    t.add_argument("--shape", choices=SHAPES,
                    help="build a shipped geometry instead of loading MODEL (see palpate build --shape)")
     t.add_argument("--script", required=True, metavar="SCRIPT", help="touch script: .toml or .csv")
     t.add_argument("--out", default="out/touch", metavar="DIR", help="output folder (default out/touch)")

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 from typing import List, Tuple
 
-from ._common import Fail, RunFailed, Usage
+from .. import defaults as _defaults
+from ._common import Fail, RunFailed, Usage, num
+
+#: The material's defaults [Pa, -]: the default tissue (palpate.defaults.tissue).
+YOUNG, POISSON = _defaults.tissue.young, _defaults.tissue.poisson
 
 
 def _level(text: str, shape: str) -> Tuple[int, int]:
@@ -61,8 +65,10 @@ def add_parser(sub) -> None:
                             for k, v in QUADRATIC_LEVELS.items()) + "), 1 linear tets (the levels above)")
     i.add_argument("--coarse", metavar="A:L", help="the coarse full FEM, ungraded (default 2:2 for the ellipsoids: "
                    "768 tets; 600 for rodero: 880 tets; 300:1 for the ventricle: 900 tets)")
-    i.add_argument("--young", type=float, default=30e3, metavar="E", help="Young's modulus [Pa] (default 30e3)")
-    i.add_argument("--poisson", type=float, default=0.4, metavar="NU", help="Poisson's ratio (default 0.4)")
+    i.add_argument("--young", type=float, default=YOUNG, metavar="E",
+                   help=f"Young's modulus [Pa] (default {num(YOUNG)}, the default tissue's)")
+    i.add_argument("--poisson", type=float, default=POISSON, metavar="NU",
+                   help=f"Poisson's ratio (default {num(POISSON)})")
     i.add_argument("--law", choices=["neo-hookean", "svk"], default="neo-hookean",
                    help="the references' law (default neo-hookean; St. Venant-Kirchhoff collapses under a deep "
                         "press, see palpate.validate.IndentCase)")

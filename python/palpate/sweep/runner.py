@@ -111,8 +111,8 @@ def model_payload(spec: Spec) -> Payload:
         points = np.asarray(points, dtype=np.float64)
         case = bench.setup(Path(v).stem, points, tets)      # checks it is a protocol ventricle
         return Payload("probe", Path(v).stem, mesh=case.mesh, points_mu=points, tets=np.asarray(tets))
-    from ..bench import hybrid as bench_hybrid
-    name, model = bench_hybrid.load_model(spec.model["hybrid"])
+    from ..hybrid import load_model
+    name, model = load_model(spec.model["hybrid"])
     script = None
     if spec.script is not None:
         from ..touch import parse_script

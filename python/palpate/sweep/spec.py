@@ -65,16 +65,18 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 import numpy as np
 
 from .. import _palpate as _p
+from .. import bench as _bench
 from .._fields import FieldChecker
+from ..hybrid import SHAPES as HYBRID_SHAPES  # the shape names palpate.hybrid.load_model resolves
 
 
 class SweepSpecError(_p.PalpateError, ValueError):
     """A study specification that cannot run: the message names the file and the key."""
 
 
-#: Material parameters every loading takes, with their defaults (palpate.bench's material; no
-#: damping unless asked).
-MATERIAL_DEFAULTS = {"young": 3.0e4, "poisson": 0.4, "density": 1000.0, "phi": 0.0, "psi": 0.0}
+#: Material parameters every loading takes, with their defaults: the shared benchmark protocol's
+#: material (palpate.bench: 3e4 Pa, 0.4, 1000 kg/m^3, the probe loading's case); no damping unless asked.
+MATERIAL_DEFAULTS = {"young": _bench.E, "poisson": _bench.NU, "density": _bench.RHO, "phi": 0.0, "psi": 0.0}
 
 #: Loading keys and their defaults, per kind.
 LOADING_DEFAULTS: Dict[str, Dict[str, Any]] = {
@@ -97,7 +99,6 @@ TEXT = {"integrator"}
 #: Parameters whose values are whole numbers.
 WHOLE = {"steps"}
 
-HYBRID_SHAPES = ("ventricle", "ellipsoids", "rodero")
 RANDOM_KINDS = ("uniform", "loguniform", "normal")
 
 

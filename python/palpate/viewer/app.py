@@ -146,7 +146,7 @@ class Viewer:
             raise _p.ParameterError(f"token: {e}") from None
         import viser  # noqa: F401 - fail early with ImportError when the extra is missing
 
-        from ..touch import probe_point, vertex_normals
+        from ..probe import probe_point, vertex_normals
 
         self.model, self.name = model, name
         self.rest = np.asarray(model.outer_points, dtype=np.float64)
