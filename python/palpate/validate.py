@@ -542,10 +542,12 @@ def hybrid_curve(model: _palpate.HybridModel, case: IndentCase, *, ramp_s: float
     out["hold_z"] = hold_z
     out["core_tets"] = len(sim.core_tets)
     out["core_stiffening"] = sim.options["core_stiffening"]
+    out["core_active_stiffening"] = sim.options["core_active_stiffening"]
     out["probes"] = probes
     if verbose:
         print("  hybrid: " + ", ".join(f"{f:.4f} N" for f in out["force"]) + f" ({out['wall_s']:.1f} s; "
-              f"{out['core_tets']}-tet core stiffened {out['core_stiffening']:.2f}x away from the active shell)",
+              f"{out['core_tets']}-tet core stiffened {out['core_stiffening']:.2f}x away from the active shell, "
+              f"{out['core_active_stiffening']:.2f}x under it)",
               flush=True)
     return out
 

@@ -288,11 +288,14 @@ impl PyHybridModel {
     /// The core's homogenised stiffness (``palpate_core::hybrid::homogenise``), as a dict:
     /// ``poisson`` (k,) and ``factor`` (k,) [-] (the factor by which ``HybridSim`` multiplies the
     /// core's Lame constants and viscosities, interpolated at the material's Poisson's ratio),
-    /// ``spread`` (k, 2) (the smallest and largest factor over the probe loads), ``probes``,
-    /// ``reference_tets`` (quadratic tets of the whole-wall reference), ``refinement`` (its triangles
-    /// over the core's), ``load_radius`` [m],
+    /// ``spread`` (k, 2) (the smallest and largest factor over the probe loads), ``active`` (k,)
+    /// [-] (the factor of the tissue's stiffness the core has under the active shell, where it
+    /// stands for the wall's inner part only) and ``active_spread`` (k, 2), ``probes``,
+    /// ``reference_tets`` (quadratic tets of the whole-wall reference), ``region_tets`` (of the
+    /// inner part's), ``refinement`` (their triangles over the core's), ``load_radius`` [m],
     /// ``seconds`` (build time). Empty arrays: built with ``homogenise=False`` or by a palpate
-    /// before it (model format 1).
+    /// before it (model format 1); ``active`` empty in a model of format 2 (before 2026-12-08:
+    /// the core under the active shell then has the tissue's stiffness).
     #[getter]
     fn homogenisation<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let h = &self.model.homogenisation;
@@ -301,8 +304,12 @@ impl PyHybridModel {
         d.set_item("factor", PyArray1::from_slice(py, &h.factor))?;
         let spread: Vec<f64> = h.spread.iter().flatten().copied().collect();
         d.set_item("spread", PyArray1::from_vec(py, spread).reshape([h.spread.len(), 2])?)?;
+        d.set_item("active", PyArray1::from_slice(py, &h.active))?;
+        let active_spread: Vec<f64> = h.active_spread.iter().flatten().copied().collect();
+        d.set_item("active_spread", PyArray1::from_vec(py, active_spread).reshape([h.active_spread.len(), 2])?)?;
         d.set_item("probes", h.probes)?;
         d.set_item("reference_tets", h.reference_tets)?;
+        d.set_item("region_tets", h.region_tets)?;
         d.set_item("refinement", h.refinement)?;
         d.set_item("load_radius", h.load_radius)?;
         d.set_item("seconds", h.seconds)?;
@@ -453,6 +460,11 @@ impl PyHybridModel {
         let [lo, hi] = h.poisson.iter().position(|&nu| nu == 0.4).map_or([1.0, 1.0], |k| h.spread[k]);
         d.set_item("core_stiffening_min", lo)?;
         d.set_item("core_stiffening_max", hi)?;
+        d.set_item("core_active_stiffening", h.active_factor(0.4))?;
+        let [lo, hi] = h.poisson.iter().position(|&nu| nu == 0.4).and_then(|k| h.active_spread.get(k).copied()).unwrap_or([1.0, 1.0]);
+        d.set_item("core_active_stiffening_min", lo)?;
+        d.set_item("core_active_stiffening_max", hi)?;
+        d.set_item("homogenise_region_tets", h.region_tets)?;
         d.set_item("homogenise_reference_tets", h.reference_tets)?;
         d.set_item("build_homogenise_s", h.seconds)?;
         d.set_item("particles", m.particles.len())?;

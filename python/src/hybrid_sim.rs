@@ -330,6 +330,7 @@ impl PyHybridSim {
         d.set_item("homogenise", o.homogenise)?;
         d.set_item("implicit_exchange", o.implicit_exchange)?;
         d.set_item("core_stiffening", self.sim.core_stiffening())?;
+        d.set_item("core_active_stiffening", self.sim.active_core_stiffening())?;
         d.set_item("shell_fallback", o.shell_fallback.is_some())?;
         d.set_item("shell_pause", o.shell_fallback)?;
         d.set_item("coupling_stiffness", self.sim.coupling.stiffness)?;

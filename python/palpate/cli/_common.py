@@ -322,6 +322,10 @@ def model_lines(info: dict) -> List[str]:
         lines.insert(1, f"  core stiffness: {i['core_stiffening']:.2f}x the tissue's away from the active shell (at nu = "
                         f"0.4; per probe {i['core_stiffening_min']:.2f}-{i['core_stiffening_max']:.2f}), homogenised "
                         f"against the whole wall in {i['homogenise_reference_tets']} quadratic tets")
+        if i.get("homogenise_region_tets"):
+            lines.insert(2, f"  core stiffness under the active shell: {i['core_active_stiffening']:.2f}x the tissue's (per "
+                            f"probe {i['core_active_stiffening_min']:.2f}-{i['core_active_stiffening_max']:.2f}), against the "
+                            f"wall's inner part in {i['homogenise_region_tets']} quadratic tets")
     else:
         lines.insert(1, "  core stiffness: the tissue's (not homogenised: the paper's core)")
     fb = {k: i[k] for k in ("fallback_particle_outer", "fallback_particle_core", "fallback_skin") if i.get(k)}

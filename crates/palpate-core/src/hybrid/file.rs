@@ -31,7 +31,7 @@ use crate::math::Vec3;
 /// The first 16 bytes of a palpate model file.
 pub const MAGIC: &[u8; 16] = b"PALPATE\0HYBRID\0\0";
 /// The format version this palpate writes and reads.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 
 /// The oldest format this palpate reads.
 pub const OLDEST_FORMAT_VERSION: u32 = 1;
@@ -58,7 +58,7 @@ fn unchecked(_: &HybridModel) -> Result<(), String> {
 }
 
 /// The sections of the payload, in file order.
-const SECTIONS: [Section; 10] = [
+const SECTIONS: [Section; 11] = [
     section(options::write, options::read, unchecked),
     section(model::write_wall, model::read_wall, unchecked),
     section(core::write, core::read, core::check),
@@ -69,15 +69,18 @@ const SECTIONS: [Section; 10] = [
     section(region_field::write, region_field::read, region_field::check),
     section(build::write_stats, build::read_stats, unchecked),
     section(homogenise::write, homogenise::read, homogenise::check),
+    section(homogenise::write_active, homogenise::read_active, homogenise::check),
 ];
 
 /// Sections a file of each format has: format 1 (palpate before the homogenised core) stops
-/// before the homogenisation, which then loads empty (the core stiff as the tissue).
+/// before the homogenisation, which then loads empty (the core stiff as the tissue); format 2
+/// (before 2026-12-08) before the active factor, which then loads empty (the core under the
+/// active shell stiff as the tissue).
 fn sections_of(version: u32) -> usize {
-    if version == 1 {
-        SECTIONS.len() - 1
-    } else {
-        SECTIONS.len()
+    match version {
+        1 => SECTIONS.len() - 2,
+        2 => SECTIONS.len() - 1,
+        _ => SECTIONS.len(),
     }
 }
 

@@ -1,5 +1,5 @@
 //! The homogenised core at run time: stiff as the whole wall where the shell is not simulated,
-//! stiff as the tissue under the active shell.
+//! stiff as the wall's inner part under the active shell.
 //!
 //! The build's factor `s` ([`crate::hybrid::homogenise`]) makes the coarse core, loaded through
 //! the skin, as compliant as the whole wall (P2 on a finer mesh). The core's model is compiled
@@ -7,21 +7,24 @@
 //! included). Where particles are active they carry the shell's share of the wall themselves:
 //! there the stiffened core would count the shell twice (measured on the paper's ellipsoids, a
 //! core stiffened everywhere by 2.0 rendered a 15 mm sphere 24-33% above the converged FEM). So
-//! each tick the core tets touching a core face with an active particle are brought back to the
-//! tissue's stiffness by a potential taken inside the core's implicit step,
+//! each tick the core tets touching a core face with an active particle are brought to the
+//! build's active factor `a` times the tissue's stiffness (the linear core made as compliant as
+//! the wall's inner part it stands for there; 1 for a model built without it) by a potential
+//! taken inside the core's implicit step,
 //!
 //! ```text
-//! U(x) = -(s - 1) sum_{t softened} w_t W_t(x)    (W_t: the tet's strain energy with the tissue)
+//! U(x) = -(s - a) sum_{t softened} w_t W_t(x)    (W_t: the tet's strain energy with the tissue)
 //! ```
 //!
-//! so that those tets' energy is `s W_t + U = W_t` (a border ring takes a quarter of it:
+//! so that those tets' energy is `s W_t + U = a W_t` (a border ring takes a quarter of it:
 //! [`BORDER_WEIGHT`]). The total stays a sum of per-tet energies
-//! (convex where each is; translation invariant, so linear momentum is kept). The viscous stress
-//! stays stiffened there (the incremental potential's viscous term needs the step's start, which a
-//! caller's potential does not see): a damped material's core under the active shell is `s` times
-//! as viscous as the tissue.
+//! (convex where each is, `a > 0`; translation invariant, so linear momentum is kept). The viscous
+//! stress stays stiffened there (the incremental potential's viscous term needs the step's start,
+//! which a caller's potential does not see): a damped material's core under the active shell is
+//! `s` times as viscous as the tissue.
 
 use super::sim::Sim;
+use super::skin::SkinLift;
 use crate::fem::tet4;
 use crate::integrate::CorePotential;
 use crate::math::Vec3;
@@ -36,12 +39,26 @@ use crate::math::Vec3;
 /// -2 / -10%; 1/2: +1 / -4 / -12%; 1: -7 / -11 / -17%. 1/4 is the least that held the press.
 pub const BORDER_WEIGHT: f64 = 0.25;
 
-/// The core tets to soften this tick, with their weights, into `soft`: those with a node on a
-/// core face under an active particle (weight 1), then the border ring ([`BORDER_WEIGHT`])
-/// (`stamp`: this tick's mark in `marks`, one per core node, and `tet_marks`).
-pub(crate) fn softened_tets(sim: &Sim, active: &[usize], marks: &mut [u64], tet_marks: &mut [u64], stamp: u64, soft: &mut Vec<(usize, f64)>) {
+/// The core tets to soften at tick `tick`, with their weights, into `soft`: those with a node on
+/// a core face under an active particle (weight 1), then those under the skin a shed shell left
+/// lifted, while it fades (weight `lift.scale(tick)`: the shell's share leaves the core's
+/// stiffness over the same 50 ms as its skin, where at once the force jumped as the core under
+/// the tool stiffened from the active factor to the wall's, 3.5x on the synthetic ventricle),
+/// then the border ring ([`BORDER_WEIGHT`] of its neighbour's weight) (`stamp`: this tick's mark
+/// in `marks`, one per core node, and `tet_marks`).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn softened_tets(
+    sim: &Sim,
+    active: &[usize],
+    lift: &SkinLift,
+    tick: u64,
+    marks: &mut [u64],
+    tet_marks: &mut [u64],
+    stamp: u64,
+    soft: &mut Vec<(usize, f64)>,
+) {
     soft.clear();
-    if sim.stiffening == 1.0 {
+    if sim.stiffening == sim.active_stiffening {
         return;
     }
     // Node `a` marked, and its tets not yet marked added with `weight`.
@@ -63,10 +80,19 @@ pub(crate) fn softened_tets(sim: &Sim, active: &[usize], marks: &mut [u64], tet_
             add_tets_of(a, 1.0, soft);
         }
     }
-    // The border: the tets sharing a node with those, softened by BORDER_WEIGHT.
+    let fade = lift.scale(tick);
+    if fade > 0.0 {
+        for &v in &lift.list {
+            for &a in &sim.hybrid.core_faces[sim.hybrid.skin_face[v as usize] as usize] {
+                add_tets_of(a, fade, soft);
+            }
+        }
+    }
+    // The border: the tets sharing a node with those, softened by BORDER_WEIGHT of theirs.
     for k in 0..soft.len() {
-        for &a in &sim.core.mesh().tets()[soft[k].0] {
-            add_tets_of(a, BORDER_WEIGHT, soft);
+        let (t, weight) = soft[k];
+        for &a in &sim.core.mesh().tets()[t] {
+            add_tets_of(a, BORDER_WEIGHT * weight, soft);
         }
     }
 }
@@ -80,7 +106,7 @@ pub(crate) struct Softening<'a> {
 impl CorePotential for Softening<'_> {
     fn energy_forces(&self, x: &[Vec3], f: &mut [Vec3]) -> f64 {
         let (model, tissue) = (&self.sim.core, self.sim.material());
-        let c = self.sim.stiffening - 1.0;
+        let c = self.sim.stiffening - self.sim.active_stiffening;
         let mut u = 0.0;
         for &(t, weight) in self.tets {
             let n = model.mesh().tets()[t];
@@ -146,7 +172,7 @@ mod tests {
         let s = Softening { sim: &sim, tets: &tets };
         let mut f = vec![Vec3::zeros(); n];
         let u = s.energy_forces(&x, &mut f);
-        // Softened tets' energy: the stiffened core's plus U is the tissue's.
+        // Softened tets' energy: the stiffened core's plus U is the tissue's times the active factor.
         let core_w: f64 = tets
             .iter()
             .map(|&(t, _)| {
@@ -161,7 +187,9 @@ mod tests {
                 tet4::strain_energy(&q.map(|i| x[i]), &sim.core.rest()[t], &tissue)
             })
             .sum();
-        assert!(tissue_w > 0.0 && ((core_w + u) / tissue_w - 1.0).abs() < 1e-10, "{core_w} + {u} vs {tissue_w}");
+        let a = sim.active_stiffening;
+        assert!(a < 1.0, "active factor {a}");
+        assert!(tissue_w > 0.0 && ((core_w + u) / (a * tissue_w) - 1.0).abs() < 1e-10, "{core_w} + {u} vs {a} x {tissue_w}");
         let h = 1e-7;
         let mut worst: f64 = 0.0;
         let scale = f.iter().map(|v| v.norm()).fold(0.0, f64::max);

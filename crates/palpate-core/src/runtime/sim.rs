@@ -232,6 +232,10 @@ pub struct Sim {
     /// The factor the core's material is stiffened by (1: not homogenised; see
     /// [`SimOptions::homogenise`] and `runtime/homogenised_core.rs`).
     pub stiffening: f64,
+    /// The factor of the tissue's stiffness the core tets under the active shell are brought to
+    /// (the build's active factor, [`crate::hybrid::Homogenisation::active_factor`]; 1: the
+    /// tissue's, without one).
+    pub active_stiffening: f64,
     /// Per core node, its tets (where the core is brought back to the tissue's stiffness under
     /// the active shell).
     pub node_tets: Buckets,
@@ -350,6 +354,9 @@ impl Sim {
         // The core stands for the whole wall where no particle is active: its material is the
         // tissue's, stiffened by the build's homogenisation (`crate::hybrid::homogenise`).
         let stiffening = if options.homogenise { hybrid.homogenisation.factor(material.poisson()) } else { 1.0 };
+        // Under the active shell it stands for the wall's inner part only (the build's active
+        // factor; 1, the tissue's, for a model without one).
+        let active_stiffening = if options.homogenise { hybrid.homogenisation.active_factor(material.poisson()) } else { 1.0 };
         let core_material = material.stiffened(stiffening)?;
         let core = ModelBuilder::new(mesh, core_material)
             .fixed_nodes(fixed)
@@ -418,6 +425,7 @@ impl Sim {
             tool,
             skin_area,
             stiffening,
+            active_stiffening,
             node_tets,
         })
     }
@@ -426,6 +434,12 @@ impl Sim {
     /// [`SimOptions::homogenise`]).
     pub fn core_stiffening(&self) -> f64 {
         self.stiffening
+    }
+
+    /// The factor of the tissue's stiffness the core has under the active shell (1 when not
+    /// homogenised or built before the active factor; see `runtime/homogenised_core.rs`).
+    pub fn active_core_stiffening(&self) -> f64 {
+        self.active_stiffening
     }
 
     /// The tissue's material, as given to [`Sim::new`] (the shell's; the core's is it stiffened

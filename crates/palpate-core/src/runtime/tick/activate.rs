@@ -13,10 +13,10 @@ use crate::runtime::state::{SimState, SimWorkspace};
 /// returns to its tie. The margin makes regions enter before the tool reaches them, so the
 /// particles under the tool are already simulated when it arrives (no force jump). Skipped while
 /// the shell is off after a failed shell step ([`crate::runtime::SimOptions::shell_fallback`]).
-/// Then the core under the active shell is brought back to the tissue's stiffness
+/// Then the core under the active shell is brought to the build's active factor
 /// ([`homogenised_core`]).
 pub(super) fn activate(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, tool: Vec3, report: &mut TickReport) {
-    let SimState { core, particles, skin, activation, ticks, is_active, live, dt, .. } = state;
+    let SimState { core, particles, skin, activation, ticks, is_active, live, dt, lift, .. } = state;
     let (frames, rates) = (&ws.frames, &ws.rates);
     let (tie, o) = (&sim.particle_tie, &sim.options);
     activation.set_linger(crate::runtime::sim::ticks_in(o.linger, *dt));
@@ -37,9 +37,10 @@ pub(super) fn activate(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, t
     (report.active, report.entered, report.left) = (sets.active.len(), sets.entered.len(), sets.left.len());
     particles.active.clear();
     particles.active.extend_from_slice(sets.active);
-    // The core under the active shell back to the tissue's stiffness (homogenised_core.rs).
+    // The core under the active shell (and a shed shell's fading skin) at the build's active
+    // factor (homogenised_core.rs).
     ws.epoch += 1;
-    homogenised_core::softened_tets(sim, &particles.active, &mut ws.node_marks, &mut ws.tet_marks, ws.epoch, &mut ws.soft_tets);
+    homogenised_core::softened_tets(sim, &particles.active, lift, *ticks, &mut ws.node_marks, &mut ws.tet_marks, ws.epoch, &mut ws.soft_tets);
 }
 
 /// Stage 2, the ring follows the core: the inactive neighbours of the active particles are put at

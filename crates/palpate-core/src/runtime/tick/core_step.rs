@@ -144,7 +144,7 @@ pub(super) fn owed(sim: &Sim, state: &mut SimState, ws: &mut SimWorkspace, dt: f
     // The softened tets of the active set the tick left (recomputed: a state restored
     // between the tick and this step brings its own).
     ws.epoch += 1;
-    homogenised_core::softened_tets(sim, &state.particles.active, &mut ws.node_marks, &mut ws.tet_marks, ws.epoch, &mut ws.soft_tets);
+    homogenised_core::softened_tets(sim, &state.particles.active, &state.lift, state.ticks, &mut ws.node_marks, &mut ws.tet_marks, ws.epoch, &mut ws.soft_tets);
     // The shell's reactions (in `f_ext`) with their implicit share (super::exchange).
     let reaction = ShellReaction::new(sim, &state.particles.active, &state.core.x, &state.core.v, dt, &mut ws.predicted);
     let stepped = match (ws.soft_tets.is_empty(), reaction.is_empty()) {
