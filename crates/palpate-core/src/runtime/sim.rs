@@ -236,7 +236,7 @@ pub struct Sim {
     /// (the build's active factor, [`crate::hybrid::Homogenisation::active_factor`]; 1: the
     /// tissue's, without one).
     pub active_stiffening: f64,
-    /// Per core node, its tets (where the core is brought back to the tissue's stiffness under
+    /// Per core node, its tets (where the core is brought to the build's active factor under
     /// the active shell).
     pub node_tets: Buckets,
 }

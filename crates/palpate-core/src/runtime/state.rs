@@ -399,7 +399,7 @@ pub struct SimWorkspace {
     /// Per outer vertex, the stamp of the last tick it was over an active triangle.
     pub(crate) over: Vec<u64>,
     pub(crate) skin_to_core: Vec<Vec3>,
-    /// The core tets brought back to the tissue's stiffness this tick (`homogenised_core.rs`),
+    /// The core tets brought to the build's active factor this tick (`homogenised_core.rs`),
     /// and the tick's marks on core nodes and tets.
     pub(crate) soft_tets: Vec<(usize, f64)>,
     /// The core's predicted positions `x0 + dt v0` of the shell's implicit reactions

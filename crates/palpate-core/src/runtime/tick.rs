@@ -2,7 +2,7 @@
 //! orchestrates; each stage is a function in its own file:
 //!
 //! 1. **Activation** (`activate::activate`, §6): the regions the tool touches, their particles
-//!    in and out of the active set, the core under them back to the tissue's stiffness.
+//!    in and out of the active set, the core under them at the build's active factor.
 //! 2. **The ring follows the core** (`activate::follow_core`): the inactive neighbours of the
 //!    active particles at their ties; they bound the active region and take its reactions.
 //! 3. **Particle sub-steps** (`shell::step`): Verlet, as many as the shell's stability needs,
