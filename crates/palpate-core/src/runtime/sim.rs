@@ -375,30 +375,7 @@ impl Sim {
         let depth = options.coupling_depth_spacings * h;
         let coupled: Vec<bool> = particle_tie.offsets().iter().zip(particles.fixed()).map(|(o, &held)| o.norm() <= depth && !held).collect();
         let mean_mass = hybrid.particle_mass.iter().sum::<f64>() / hybrid.particle_mass.len().max(1) as f64;
-        let coupling = options.coupling.unwrap_or_else(|| {
-            let c = Coupling::for_tissue(material.young(), h, mean_mass, 0.5);
-            if options.implicit_exchange {
-                // As stiff as the tissue: the core takes the reactions with their implicit share
-                // (super::exchange), stable at any stiffness up to its time.
-                return c;
-            }
-            // The core takes the springs' reactions explicitly, once a tick: the springs on a
-            // core node, `k sum_p w_p`, must stay below its mass over dt^2 (half of it, at the
-            // 1 ms haptic tick) or the exchange diverges; within that, as stiff as the tissue.
-            let mut weight = vec![0.0; core.n_nodes()];
-            for p in (0..coupled.len()).filter(|&p| coupled[p]) {
-                particle_tie.spread_scalar(p, 1.0, &mut weight);
-            }
-            let limit = (0..core.n_nodes())
-                .filter(|&a| weight[a] > 0.0 && !core.fixed()[a])
-                .map(|a| 0.5 * core.masses()[a] / (TICK * TICK * weight[a]))
-                .fold(f64::INFINITY, f64::min);
-            if c.stiffness > limit {
-                Coupling::for_tissue(limit / h, h, mean_mass, 0.5)
-            } else {
-                c
-            }
-        });
+        let coupling = options.coupling.unwrap_or_else(|| tissue_coupling(&options, &material, h, mean_mass, &core, &coupled, &particle_tie));
         let confinement = Confinement::new(options.confinement_stiffness.unwrap_or(material.young() * h));
         let shell = Shell::new(&particles, &coupled, &coupling, &confinement);
         let mut core_surface: Vec<usize> = hybrid.core_faces.iter().flatten().copied().collect();
@@ -499,6 +476,35 @@ fn lowest_nodes(points: &[Vec3], fraction: f64) -> Vec<usize> {
 /// of 14 squared spacings bounced. A damping near critical for the mass a vertex carries
 /// (`1 / sum(w_p^2 / m_p)`) would let coarse skins be as stiff as fine ones: not yet tried.
 pub const SKIN_AREA_CAP_SPACINGS2: f64 = 2.5;
+
+/// The coupling springs' default (`SimOptions::coupling` not given): the tissue's
+/// ([`Coupling::for_tissue`] at lattice spacing `h` \[m\] and mean particle mass \[kg\]), capped by
+/// the explicit exchange's stability when the core takes the reactions once a tick
+/// (`implicit_exchange` off).
+fn tissue_coupling(options: &SimOptions, material: &Material, h: f64, mean_mass: f64, core: &Model, coupled: &[bool], particle_tie: &Embedding) -> Coupling {
+    let c = Coupling::for_tissue(material.young(), h, mean_mass, 0.5);
+    if options.implicit_exchange {
+        // As stiff as the tissue: the core takes the reactions with their implicit share
+        // (super::exchange), stable at any stiffness up to its time.
+        return c;
+    }
+    // The core takes the springs' reactions explicitly, once a tick: the springs on a
+    // core node, `k sum_p w_p`, must stay below its mass over dt^2 (half of it, at the
+    // 1 ms haptic tick) or the exchange diverges; within that, as stiff as the tissue.
+    let mut weight = vec![0.0; core.n_nodes()];
+    for p in (0..coupled.len()).filter(|&p| coupled[p]) {
+        particle_tie.spread_scalar(p, 1.0, &mut weight);
+    }
+    let limit = (0..core.n_nodes())
+        .filter(|&a| weight[a] > 0.0 && !core.fixed()[a])
+        .map(|a| 0.5 * core.masses()[a] / (TICK * TICK * weight[a]))
+        .fold(f64::INFINITY, f64::min);
+    if c.stiffness > limit {
+        Coupling::for_tissue(limit / h, h, mean_mass, 0.5)
+    } else {
+        c
+    }
+}
 
 /// A third of each vertex's triangles' areas \[m^2\] `(n_points)`, at most `cap`.
 fn skin_areas(points: &[Vec3], tris: &[[usize; 3]], cap: f64) -> Vec<f64> {
